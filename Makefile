@@ -1,0 +1,31 @@
+# `make demo` and `make test` create .venv when missing and install fourd with what it needs.
+PYTHON ?= python3
+VENV ?= .venv
+PY := $(VENV)/bin/python
+STAMP := $(VENV)/.installed-stamp
+
+.PHONY: demo test bench bench-quick lint clean
+
+$(STAMP): pyproject.toml
+	test -x $(PY) || $(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install -q --upgrade pip
+	$(PY) -m pip install -q -e ".[dev,usd,fast]"
+	touch $(STAMP)
+
+demo: $(STAMP)
+	$(VENV)/bin/fourd demo
+
+test: $(STAMP)
+	$(PY) -m pytest -q
+
+bench: $(STAMP)
+	$(VENV)/bin/fourd bench
+
+bench-quick: $(STAMP)
+	$(VENV)/bin/fourd bench --quick -o benchmarks/out/BENCHMARKS-quick.md
+
+lint: $(STAMP)
+	$(VENV)/bin/ruff check src tests
+
+clean:
+	rm -rf demo-out benchmarks/out .pytest_cache

@@ -1,0 +1,64 @@
+"""fourd: animated meshes from time-varying point clouds.
+
+>>> import fourd
+>>> truth = fourd.synth.scene("bending-arm", frames=6)          # doctest: +SKIP
+>>> scans = fourd.synth.scan(truth, cameras=3, noise=0.002)      # doctest: +SKIP
+>>> anim = fourd.reconstruct(scans, method="kinematic")          # doctest: +SKIP
+>>> report = fourd.evaluate(anim, truth)                         # doctest: +SKIP
+>>> fourd.save(anim, "bend.glb")                                 # doctest: +SKIP
+"""
+
+from __future__ import annotations
+
+from fourd import synth
+from fourd.animation import AnimatedMesh, MeshSequence
+from fourd.errors import InputError
+from fourd.methods import available_methods, reconstruct
+from fourd.sequence import Frame, PointCloudSequence
+
+__version__ = "0.1.0"
+
+
+def load_sequence(path) -> PointCloudSequence:
+    """Read a folder of frame files (or one ``.npz`` with ``points [T, P, 3]``); see the README."""
+    from fourd.io.readers import load_sequence as _load
+
+    return _load(path)
+
+
+def save(result, path) -> None:
+    """Write an :class:`AnimatedMesh` or :class:`MeshSequence`; the format follows the extension
+    (``.npz``, ``.glb``, ``.usd/.usda/.usdc``, ``.pc2``, or a folder)."""
+    from fourd.io.writers import save as _save
+
+    _save(result, path)
+
+
+def load_result(path):
+    """Read a result written by :func:`save` (``.npz``, or a folder of per-frame meshes)."""
+    from fourd.io.writers import load_result as _load
+
+    return _load(path)
+
+
+def evaluate(result, truth, **options) -> dict:
+    """Metrics of ``result`` against the ground-truth :class:`AnimatedMesh` ``truth``."""
+    from fourd.evaluate.metrics import evaluate as _evaluate
+
+    return _evaluate(result, truth, **options)
+
+
+__all__ = [
+    "AnimatedMesh",
+    "Frame",
+    "InputError",
+    "MeshSequence",
+    "PointCloudSequence",
+    "available_methods",
+    "evaluate",
+    "load_result",
+    "load_sequence",
+    "reconstruct",
+    "save",
+    "synth",
+]
