@@ -1,0 +1,5 @@
+import sys
+
+from fourd.cli import main
+
+sys.exit(main())

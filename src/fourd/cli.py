@@ -1,0 +1,274 @@
+"""The ``fourd`` command. See DESIGN.md "Command line" (a contract scripts depend on)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import os
+import sys
+import time
+import tomllib
+from pathlib import Path
+
+from fourd.errors import InputError
+
+log = logging.getLogger("fourd.cli")
+
+EXIT_BAD_INPUT = 2
+
+
+def _frames_slice(text: str | None) -> slice:
+    """Parse ``A:B:S`` (any part may be empty) into a slice."""
+    if not text:
+        return slice(None)
+    parts = text.split(":")
+    if len(parts) > 3:
+        raise InputError(f"--frames expects A:B:S, got {text!r}")
+    try:
+        values = [int(p) if p.strip() else None for p in parts]
+    except ValueError:
+        raise InputError(f"--frames expects integers A:B:S, got {text!r}") from None
+    values += [None] * (3 - len(values))
+    if values[2] is not None and values[2] <= 0:
+        raise InputError(f"--frames step must be positive, got {values[2]}")
+    return slice(*values)
+
+
+def _read_config(path: str | None) -> tuple[str | None, dict]:
+    """Method name and options from a TOML file: ``method = "..."`` and an ``[options]`` table
+    (or a table named after the method)."""
+    if not path:
+        return None, {}
+    try:
+        with open(path, "rb") as handle:
+            config = tomllib.load(handle)
+    except FileNotFoundError:
+        raise InputError("config file does not exist", path) from None
+    except (OSError, tomllib.TOMLDecodeError) as error:
+        raise InputError(f"cannot read config ({error})", path) from None
+    method = config.get("method")
+    options = dict(config.get("options", {}))
+    if method and isinstance(config.get(method), dict):
+        options.update(config[method])
+    return method, options
+
+
+def _configure_logging(quiet: bool, verbose: bool = False) -> None:
+    level = logging.WARNING if quiet else (logging.DEBUG if verbose else logging.INFO)
+    logger = logging.getLogger("fourd")
+    logger.setLevel(level)
+    if not logger.handlers:
+        handler = logging.StreamHandler(sys.stderr)
+        handler.setFormatter(logging.Formatter("%(message)s"))
+        logger.addHandler(handler)
+    logger.propagate = False
+
+
+def _check_output_writable(path: Path) -> None:
+    parent = path.parent if str(path.parent) else Path(".")
+    if not parent.exists():
+        raise InputError("the output folder does not exist", parent)
+    if not os.access(parent, os.W_OK):
+        raise InputError("the output folder is not writable", parent)
+
+
+def cmd_reconstruct(args) -> int:
+    from fourd.io.readers import load_sequence
+    from fourd.io.writers import save
+    from fourd.methods import DEFAULT_METHOD, method_options, reconstruct
+    from fourd.options import parse_assignments
+
+    output = Path(args.output)
+    _check_output_writable(output)
+    config_method, values = _read_config(args.config)
+    values.update(parse_assignments(args.set or []))
+    method = args.method or config_method or DEFAULT_METHOD
+    if args.times:
+        import dataclasses
+
+        from fourd.methods import method_module
+
+        if "times" not in {f.name for f in dataclasses.fields(method_module(method).Options)}:
+            raise InputError(f"--times: method {method!r} writes one frame per input frame only")
+        values["times"] = args.times
+    options = method_options(method, values)
+    seq = load_sequence(args.input)
+    seq = seq[_frames_slice(args.frames)]
+    if len(seq) == 0:
+        raise InputError(f"--frames {args.frames} selects no frames", args.input)
+    log.info("%s: %d frames, %d to %d points per frame", args.input, len(seq),
+             min(len(f) for f in seq), max(len(f) for f in seq))
+    start = time.perf_counter()
+    result = reconstruct(seq, method, options)
+    elapsed = time.perf_counter() - start
+    save(result, output)
+    log.info("wrote %s (%d frames, %.2f s, %.2f s/frame)", output, result.frame_count, elapsed,
+             elapsed / max(len(seq), 1))
+    return 0
+
+
+def cmd_synth(args) -> int:
+    from fourd import synth
+    from fourd.synth.write import write_synth
+
+    truth = synth.scene(args.scene, frames=args.frames, seed=args.seed)
+    scans = synth.scan(truth, cameras=args.cameras, noise=args.noise, outliers=args.outliers,
+                       resolution=args.resolution, seed=args.seed)
+    write_synth(truth, scans, args.outdir)
+    log.info("wrote %d scanned frames and the truth to %s", len(scans), args.outdir)
+    return 0
+
+
+def cmd_evaluate(args) -> int:
+    from fourd.evaluate.metrics import evaluate_files, format_report
+
+    report = evaluate_files(args.result, args.truth)
+    if args.json:
+        print(json.dumps(report, indent=2, default=_json_default))
+    else:
+        print(format_report(report))
+    return 0
+
+
+def _json_default(value):
+    import numpy as np
+
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, np.generic):
+        return value.item()
+    return str(value)
+
+
+def cmd_bench(args) -> int:
+    from fourd.evaluate.bench import run_bench
+
+    run_bench(methods=args.methods, scenes=args.scenes, quick=args.quick, repeats=args.repeats,
+              output=args.output, baselines=args.baselines, seed=args.seed)
+    log.info("wrote %s", args.output)
+    return 0
+
+
+def cmd_demo(args) -> int:
+    from fourd.demo import run_demo
+
+    paths = run_demo(args.outdir, method=args.method)
+    for label, path in paths.items():
+        print(f"{label}: {path}")
+    return 0
+
+
+def cmd_view(args) -> int:
+    from fourd.viz.viewer import write_viewer
+
+    outdir = Path(args.output) if args.output else Path(str(Path(args.result).with_suffix("")) + "-view")
+    page = write_viewer(args.result, outdir, truth=args.truth, scans=args.input)
+    print(page)
+    if args.open:
+        import webbrowser
+
+        webbrowser.open(page.resolve().as_uri())
+    return 0
+
+
+def cmd_info(args) -> int:
+    from fourd.info import describe
+
+    print(describe(args.path))
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="fourd",
+        description="Animated meshes from time-varying point clouds (4D scans).",
+    )
+    parser.add_argument("--version", action="version", version=f"fourd {_version()}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    sub.required = True
+
+    def add(name, help_text, func):
+        p = sub.add_parser(name, help=help_text, description=help_text)
+        p.add_argument("--quiet", "-q", action="store_true", help="no progress bars or messages")
+        p.add_argument("--verbose", "-v", action="store_true", help="debug messages")
+        p.set_defaults(func=func)
+        return p
+
+    p = add("reconstruct", "reconstruct an animated mesh from a folder of scans", cmd_reconstruct)
+    p.add_argument("input", help="folder of frame files (ply/obj/xyz/pts/npy/npz) or one .npz")
+    p.add_argument("-o", "--output", required=True,
+                   help="result: .npz, .glb, .usd/.usda/.usdc, .pc2 (+ .obj), or a folder")
+    p.add_argument("--method", help="reconstruction method (default: the project's default)")
+    p.add_argument("--config", help="TOML file with `method = ...` and an [options] table")
+    p.add_argument("--set", action="append", metavar="KEY=VALUE", help="set a method option")
+    p.add_argument("--frames", metavar="A:B:S", help="use input frames A:B:S (Python slice)")
+    p.add_argument("--times", help="output times, comma separated (methods that support it)")
+
+    p = add("synth", "synthesize a ground-truth scene and scan it with virtual depth cameras", cmd_synth)
+    p.add_argument("scene")
+    p.add_argument("outdir")
+    p.add_argument("--frames", type=int, default=None)
+    p.add_argument("--cameras", type=int, default=3)
+    p.add_argument("--noise", type=float, default=0.002, help="fraction of the bounding-box diagonal")
+    p.add_argument("--outliers", type=float, default=0.02, help="fraction of points")
+    p.add_argument("--resolution", type=int, default=256, help="rays per camera side")
+    p.add_argument("--seed", type=int, default=0)
+
+    p = add("evaluate", "metrics of a result against ground truth", cmd_evaluate)
+    p.add_argument("result")
+    p.add_argument("truth")
+    p.add_argument("--json", action="store_true", help="print all metrics as JSON")
+
+    p = add("bench", "run methods x scenes and write benchmarks/BENCHMARKS.md", cmd_bench)
+    p.add_argument("--methods", nargs="+")
+    p.add_argument("--scenes", nargs="+")
+    p.add_argument("-o", "--output", default="benchmarks/BENCHMARKS.md")
+    p.add_argument("--quick", action="store_true", help="a tiny run that exercises the whole path")
+    p.add_argument("--repeats", type=int, default=1, help="timing repeats (median reported)")
+    p.add_argument("--baselines", action="store_true",
+                   help="add the peers of BASELINES.md (needs the `baselines` extra: open3d)")
+    p.add_argument("--seed", type=int, default=0)
+
+    p = add("demo", "synthesize, reconstruct, evaluate and render the embedded default scene", cmd_demo)
+    p.add_argument("outdir", nargs="?", default="demo-out")
+    p.add_argument("--method", help="method to use (default: the project's default)")
+
+    p = add("view", "write a self-contained HTML viewer for a result", cmd_view)
+    p.add_argument("result")
+    p.add_argument("--truth", help="ground truth (.npz) for error colouring")
+    p.add_argument("--input", help="the scans (folder) to show as points")
+    p.add_argument("-o", "--output", help="folder for the page (default: RESULT-view/)")
+    p.add_argument("--open", action="store_true", help="open the page in a browser")
+
+    p = add("info", "describe an input folder or a result", cmd_info)
+    p.add_argument("path")
+    return parser
+
+
+def _version() -> str:
+    from fourd import __version__
+
+    return __version__
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    _configure_logging(args.quiet, args.verbose)
+    try:
+        return args.func(args)
+    except InputError as error:
+        print(f"fourd: error: {error}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except (FileNotFoundError, PermissionError, IsADirectoryError, NotADirectoryError) as error:
+        name = error.filename or ""
+        print(f"fourd: error: {name}: {error.strerror}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except KeyboardInterrupt:
+        print("fourd: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

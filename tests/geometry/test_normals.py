@@ -1,0 +1,43 @@
+import numpy as np
+
+from fourd.geometry.neighbors import knn, point_spacing
+from fourd.geometry.normals import estimate_normals, pca_normals
+
+
+def _sphere(count, seed=0, noise=0.0):
+    rng = np.random.default_rng(seed)
+    points = rng.normal(size=(count, 3))
+    points /= np.linalg.norm(points, axis=1, keepdims=True)
+    return points + rng.normal(size=points.shape) * noise
+
+
+def test_pca_normals_of_a_plane_are_its_normal():
+    rng = np.random.default_rng(1)
+    points = np.c_[rng.uniform(size=(500, 2)), np.zeros(500)]
+    normals, flatness = pca_normals(points, 12)
+    assert np.all(np.abs(normals[:, 2]) > 0.999)
+    assert np.all(flatness > 0.99)
+
+
+def test_propagation_orients_a_closed_surface_outwards():
+    points = _sphere(3000, noise=0.002)
+    normals = estimate_normals(points).normals
+    assert np.mean(np.einsum("ij,ij->i", normals, points) > 0.9) > 0.99
+
+
+def test_sensor_orientation_on_visible_points():
+    points = _sphere(20000, seed=2)
+    angles = 0.3 + np.arange(3) * 2 * np.pi / 3
+    sensors = np.c_[4 * np.cos(angles), np.full(3, 1.0), 4 * np.sin(angles)]
+    visible = (np.einsum("pkj,pj->pk", sensors[None] - points[:, None], points) > 0.1).any(axis=1)
+    points = points[visible] + np.random.default_rng(3).normal(size=(visible.sum(), 3)) * 0.003
+    normals = estimate_normals(points, sensors=sensors).normals
+    assert np.mean(np.einsum("ij,ij->i", normals, points) > 0) > 0.995
+
+
+def test_spacing_and_knn_scale_with_the_data():
+    points = _sphere(2000, seed=4)
+    assert np.isclose(point_spacing(points * 10), 10 * point_spacing(points), rtol=1e-9)
+    distances, indices = knn(points, 5)
+    assert distances.shape == (2000, 5) and np.all(indices != np.arange(2000)[:, None])
+    assert np.all(np.diff(distances, axis=1) >= 0)
