@@ -26,12 +26,13 @@ def load_sequence(path) -> PointCloudSequence:
     return _load(path)
 
 
-def save(result, path) -> None:
+def save(result, path, **options):
     """Write an :class:`AnimatedMesh` or :class:`MeshSequence`; the format follows the extension
-    (``.npz``, ``.glb``, ``.usd/.usda/.usdc``, ``.pc2``, or a folder)."""
+    (``.npz``, ``.glb``, ``.usd/.usda/.usdc``, ``.pc2``, or a folder). Options go to
+    :func:`fourd.io.writers.save` (``mesh_format``, ``fps``, ``interpolation``)."""
     from fourd.io.writers import save as _save
 
-    _save(result, path)
+    return _save(result, path, **options)
 
 
 def load_result(path):

@@ -54,23 +54,29 @@ def _read_config(path: str | None) -> tuple[str | None, dict]:
     return method, options
 
 
+class _StderrHandler(logging.StreamHandler):
+    """Writes to whatever ``sys.stderr`` is at the time of each message."""
+
+    @property
+    def stream(self):
+        return sys.stderr
+
+    @stream.setter
+    def stream(self, value):
+        pass
+
+
 def _configure_logging(quiet: bool, verbose: bool = False) -> None:
     level = logging.WARNING if quiet else (logging.DEBUG if verbose else logging.INFO)
     logger = logging.getLogger("fourd")
     logger.setLevel(level)
-    if not logger.handlers:
-        handler = logging.StreamHandler(sys.stderr)
+    if not any(isinstance(h, _StderrHandler) for h in logger.handlers):
+        handler = _StderrHandler()
         handler.setFormatter(logging.Formatter("%(message)s"))
         logger.addHandler(handler)
     logger.propagate = False
 
 
-def _check_output_writable(path: Path) -> None:
-    parent = path.parent if str(path.parent) else Path(".")
-    if not parent.exists():
-        raise InputError("the output folder does not exist", parent)
-    if not os.access(parent, os.W_OK):
-        raise InputError("the output folder is not writable", parent)
 
 
 def cmd_reconstruct(args) -> int:
@@ -79,8 +85,10 @@ def cmd_reconstruct(args) -> int:
     from fourd.methods import DEFAULT_METHOD, method_options, reconstruct
     from fourd.options import parse_assignments
 
+    from fourd.io.writers import check_output
+
+    check_output(args.output)
     output = Path(args.output)
-    _check_output_writable(output)
     config_method, values = _read_config(args.config)
     values.update(parse_assignments(args.set or []))
     method = args.method or config_method or DEFAULT_METHOD
@@ -102,7 +110,7 @@ def cmd_reconstruct(args) -> int:
     start = time.perf_counter()
     result = reconstruct(seq, method, options)
     elapsed = time.perf_counter() - start
-    save(result, output)
+    save(result, args.output)
     log.info("wrote %s (%d frames, %.2f s, %.2f s/frame)", output, result.frame_count, elapsed,
              elapsed / max(len(seq), 1))
     return 0

@@ -25,6 +25,8 @@ def as_points(array, name: str, *, width: int = 3, allow_empty: bool = False) ->
         raise InputError(f"{name} must have shape [N, {width}], got {list(values.shape)}")
     if len(values) == 0 and not allow_empty:
         raise InputError(f"{name} is empty (zero points)")
+    if np.isfinite(values).all():
+        return values
     bad = ~np.isfinite(values).all(axis=1)
     if bad.any():
         raise InputError(

@@ -11,6 +11,13 @@ from pathlib import Path
 from fourd.errors import InputError
 
 
+def _permissions(path: Path, mode: int) -> None:
+    """Give a temporary output the permissions a normally created file would have."""
+    umask = os.umask(0)
+    os.umask(umask)
+    os.chmod(path, mode & ~umask)
+
+
 def _check_parent(path: Path) -> None:
     parent = path.parent if str(path.parent) else Path(".")
     if not parent.exists():
@@ -33,6 +40,7 @@ def atomic_path(path: str | os.PathLike, *, suffix: str | None = None):
     os.close(fd)
     try:
         yield Path(tmp)
+        _permissions(Path(tmp), 0o666)
         os.replace(tmp, path)
     except BaseException:
         with contextlib.suppress(OSError):
@@ -51,6 +59,7 @@ def atomic_dir(path: str | os.PathLike):
     tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".part", dir=path.parent or "."))
     try:
         yield tmp
+        _permissions(tmp, 0o777)
         if path.exists():
             old = path.with_name(f".{path.name}.old")
             shutil.rmtree(old, ignore_errors=True)

@@ -1,0 +1,311 @@
+"""glTF 2.0 binary (``.glb``) export of animations.
+
+An :class:`~fourd.animation.AnimatedMesh` becomes one mesh whose base is frame 0 (POSITION and
+NORMAL) and whose morph targets are the other frames (POSITION and NORMAL deltas from frame
+0); one animation drives the morph ``weights`` over ``times`` with one-hot keys (frame ``k``
+has weight 1 on target ``k - 1``), so LINEAR interpolation blends consecutive frames and STEP
+shows them as they are. Blender's glTF importer turns the targets into shape keys; three.js
+plays the clip with an ``AnimationMixer``.
+
+A :class:`~fourd.animation.MeshSequence` becomes one node per frame, each with its own mesh,
+and an animation of the nodes' ``scale`` (1 while the frame is current, 0 otherwise, STEP).
+
+References
+----------
+Khronos Group, "glTF 2.0 Specification", sections 3.7.2.2 (morph targets) and 3.11 (animations).
+"""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+
+from fourd.animation import AnimatedMesh, MeshSequence
+from fourd.errors import InputError
+from fourd.io.atomic import atomic_path
+
+ARRAY_BUFFER = 34962
+ELEMENT_ARRAY_BUFFER = 34963
+FLOAT = 5126
+UNSIGNED_SHORT = 5123
+UNSIGNED_INT = 5125
+_CHUNK = 20_000_000  # floats per block when accumulating normals over many frames
+
+
+def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """Area-weighted vertex normals.
+
+    Parameters
+    ----------
+    vertices : array [N, 3] or [T, N, 3]
+    faces : int array [F, 3]
+
+    Returns
+    -------
+    ndarray, float64, same shape as ``vertices``
+        Unit normals: the sum of the (unnormalised, hence area-weighted) normals of the faces
+        around each vertex. Vertices without faces, or whose faces cancel, get ``(0, 0, 1)``.
+    """
+    vertices = np.asarray(vertices, dtype=np.float64)
+    single = vertices.ndim == 2
+    frames = vertices[None] if single else vertices
+    faces = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
+    count, n = frames.shape[0], frames.shape[1]
+    out = np.zeros_like(frames)
+    if len(faces):
+        import scipy.sparse as sp
+
+        corners = faces.ravel()
+        incidence = sp.csr_matrix(
+            (np.ones(len(corners)), (corners, np.repeat(np.arange(len(faces)), 3))),
+            shape=(n, len(faces)),
+        )
+        step = max(1, _CHUNK // max(1, 3 * len(faces)))
+        for start in range(0, count, step):
+            block = frames[start : start + step]
+            a, b, c = block[:, faces[:, 0]], block[:, faces[:, 1]], block[:, faces[:, 2]]
+            face_normals = np.cross(b - a, c - a)  # [t, F, 3], length = twice the area
+            stacked = face_normals.transpose(1, 0, 2).reshape(len(faces), -1)
+            out[start : start + step] = (incidence @ stacked).reshape(n, -1, 3).transpose(1, 0, 2)
+    lengths = np.linalg.norm(out, axis=-1, keepdims=True)
+    tiny = lengths[..., 0] <= 1e-300
+    out = np.divide(out, lengths, out=np.zeros_like(out), where=lengths > 1e-300)
+    out[tiny] = (0.0, 0.0, 1.0)
+    return out[0] if single else out
+
+
+class _Blob:
+    """Accumulates accessors over one binary buffer (4-byte aligned views)."""
+
+    def __init__(self, gltf):
+        self.gltf = gltf
+        self.parts: list[bytes] = []
+        self.length = 0
+
+    def add(
+        self, array: np.ndarray, kind: str, *, target: int | None = None, bounds: bool = False
+    ) -> int:
+        from pygltflib import Accessor, BufferView
+
+        array = np.ascontiguousarray(array)
+        component = {
+            np.dtype("float32"): FLOAT,
+            np.dtype("uint16"): UNSIGNED_SHORT,
+            np.dtype("uint32"): UNSIGNED_INT,
+        }[array.dtype]
+        data = array.tobytes()
+        self.gltf.bufferViews.append(
+            BufferView(buffer=0, byteOffset=self.length, byteLength=len(data), target=target)
+        )
+        self.parts.append(data)
+        self.length += len(data)
+        padding = (-self.length) % 4
+        if padding:
+            self.parts.append(b"\0" * padding)
+            self.length += padding
+        width = {"SCALAR": 1, "VEC3": 3}[kind]
+        flat = array.reshape(-1, width)
+        accessor = Accessor(
+            bufferView=len(self.gltf.bufferViews) - 1,
+            byteOffset=0,
+            componentType=component,
+            count=len(flat),
+            type=kind,
+        )
+        if bounds:
+            accessor.min = [float(v) for v in flat.min(axis=0)]
+            accessor.max = [float(v) for v in flat.max(axis=0)]
+        self.gltf.accessors.append(accessor)
+        return len(self.gltf.accessors) - 1
+
+    def finish(self) -> bytes:
+        from pygltflib import Buffer
+
+        blob = b"".join(self.parts)
+        self.gltf.buffers.append(Buffer(byteLength=len(blob)))
+        return blob
+
+
+def _indices(blob: _Blob, faces: np.ndarray, vertex_count: int) -> int:
+    dtype = np.uint16 if vertex_count < 65535 else np.uint32
+    return blob.add(faces.astype(dtype).ravel(), "SCALAR", target=ELEMENT_ARRAY_BUFFER, bounds=True)
+
+
+def _new_gltf():
+    from pygltflib import GLTF2, Asset, Material, PbrMetallicRoughness, Scene
+
+    gltf = GLTF2(asset=Asset(version="2.0", generator="fourd"))
+    gltf.scenes.append(Scene(nodes=[]))
+    gltf.scene = 0
+    gltf.materials.append(
+        Material(
+            name="fourd",
+            doubleSided=True,
+            pbrMetallicRoughness=PbrMetallicRoughness(
+                baseColorFactor=[0.8, 0.8, 0.82, 1.0], metallicFactor=0.0, roughnessFactor=0.7
+            ),
+        )
+    )
+    return gltf
+
+
+def _seconds(times: np.ndarray, fps: float | None) -> np.ndarray:
+    seconds = np.asarray(times, dtype=np.float64) / (fps if fps else 1.0)
+    if seconds[0] < 0:  # glTF keyframe times must be non-negative
+        seconds = seconds - seconds[0]
+    return seconds.astype(np.float32)
+
+
+def _animated(gltf, blob: _Blob, anim: AnimatedMesh, *, fps, interpolation) -> None:
+    from pygltflib import (
+        Animation,
+        AnimationChannel,
+        AnimationChannelTarget,
+        AnimationSampler,
+        Attributes,
+        Mesh,
+        Node,
+        Primitive,
+    )
+
+    vertices = anim.vertices
+    count = len(vertices)
+    points_only = len(anim.faces) == 0
+    base = vertices[0].astype(np.float32)
+    attributes = Attributes(POSITION=blob.add(base, "VEC3", target=ARRAY_BUFFER, bounds=True))
+    normals = None
+    if not points_only:
+        normals = vertex_normals(vertices, anim.faces).astype(np.float32)
+        attributes.NORMAL = blob.add(normals[0], "VEC3", target=ARRAY_BUFFER)
+    targets = []
+    for k in range(1, count):
+        target = Attributes(
+            POSITION=blob.add(
+                vertices[k].astype(np.float32) - base, "VEC3", target=ARRAY_BUFFER, bounds=True
+            )
+        )
+        if normals is not None:
+            target.NORMAL = blob.add(normals[k] - normals[0], "VEC3", target=ARRAY_BUFFER)
+        targets.append(target)
+    primitive = Primitive(
+        attributes=attributes, mode=0 if points_only else 4, material=0, targets=targets or None
+    )
+    if not points_only:
+        primitive.indices = _indices(blob, anim.faces, vertices.shape[1])
+    mesh = Mesh(name="fourd", primitives=[primitive])
+    if targets:
+        mesh.weights = [0.0] * len(targets)
+        mesh.extras = {"targetNames": [f"frame_{k}" for k in range(1, count)]}
+    gltf.meshes.append(mesh)
+    gltf.nodes.append(Node(name="fourd", mesh=0))
+    gltf.scenes[0].nodes.append(0)
+    if not targets:
+        return
+    weights = np.zeros((count, count - 1), dtype=np.float32)
+    weights[np.arange(1, count), np.arange(count - 1)] = 1.0
+    sampler = AnimationSampler(
+        input=blob.add(_seconds(anim.times, fps), "SCALAR", bounds=True),
+        output=blob.add(weights.ravel(), "SCALAR"),
+        interpolation=interpolation,
+    )
+    gltf.animations.append(
+        Animation(
+            name="fourd",
+            samplers=[sampler],
+            channels=[
+                AnimationChannel(sampler=0, target=AnimationChannelTarget(node=0, path="weights"))
+            ],
+        )
+    )
+
+
+def _sequence(gltf, blob: _Blob, seq: MeshSequence, *, fps) -> None:
+    from pygltflib import (
+        Animation,
+        AnimationChannel,
+        AnimationChannelTarget,
+        AnimationSampler,
+        Attributes,
+        Mesh,
+        Node,
+        Primitive,
+    )
+
+    count = len(seq.meshes)
+    channels, samplers = [], []
+    time_accessor = blob.add(_seconds(seq.times, fps), "SCALAR", bounds=True) if count > 1 else None
+    for k, (vertices, faces) in enumerate(seq.meshes):
+        node = Node(name=f"frame_{k}", scale=[1.0, 1.0, 1.0] if k == 0 else [0.0, 0.0, 0.0])
+        if len(vertices):
+            attributes = Attributes(
+                POSITION=blob.add(
+                    vertices.astype(np.float32), "VEC3", target=ARRAY_BUFFER, bounds=True
+                )
+            )
+            if len(faces):
+                attributes.NORMAL = blob.add(
+                    vertex_normals(vertices, faces).astype(np.float32), "VEC3", target=ARRAY_BUFFER
+                )
+            primitive = Primitive(attributes=attributes, mode=4 if len(faces) else 0, material=0)
+            if len(faces):
+                primitive.indices = _indices(blob, faces, len(vertices))
+            gltf.meshes.append(Mesh(name=f"frame_{k}", primitives=[primitive]))
+            node.mesh = len(gltf.meshes) - 1
+        gltf.nodes.append(node)
+        gltf.scenes[0].nodes.append(len(gltf.nodes) - 1)
+        if time_accessor is not None:
+            scale = np.zeros((count, 3), dtype=np.float32)
+            scale[k] = 1.0
+            samplers.append(
+                AnimationSampler(
+                    input=time_accessor, output=blob.add(scale, "VEC3"), interpolation="STEP"
+                )
+            )
+            channels.append(
+                AnimationChannel(
+                    sampler=len(samplers) - 1,
+                    target=AnimationChannelTarget(node=len(gltf.nodes) - 1, path="scale"),
+                )
+            )
+    if samplers:
+        gltf.animations.append(Animation(name="fourd", samplers=samplers, channels=channels))
+
+
+def write_glb(
+    path: str | os.PathLike,
+    result: AnimatedMesh | MeshSequence,
+    *,
+    fps: float | None = None,
+    interpolation: str = "LINEAR",
+) -> None:
+    """Write ``result`` as a glTF 2.0 binary file, atomically.
+
+    Parameters
+    ----------
+    path : path-like
+    result : AnimatedMesh or MeshSequence
+    fps : float, optional
+        When given, ``times`` are frame numbers at this rate (keyframe time = time / fps);
+        by default ``times`` are seconds (shifted to start at 0 if negative).
+    interpolation : {"LINEAR", "STEP"}
+        Between frames of an AnimatedMesh: blend (LINEAR) or hold (STEP).
+    """
+    try:
+        import pygltflib  # noqa: F401
+    except ImportError:  # pragma: no cover - a core dependency
+        raise InputError("writing .glb needs pygltflib: pip install pygltflib", path) from None
+    interpolation = interpolation.upper()
+    if interpolation not in ("LINEAR", "STEP"):
+        raise InputError(f"interpolation must be LINEAR or STEP, got {interpolation!r}", path)
+    gltf = _new_gltf()
+    blob = _Blob(gltf)
+    if isinstance(result, AnimatedMesh):
+        _animated(gltf, blob, result, fps=fps, interpolation=interpolation)
+    elif isinstance(result, MeshSequence):
+        _sequence(gltf, blob, result, fps=fps)
+    else:
+        raise InputError(f"cannot write a {type(result).__name__} as .glb", path)
+    gltf.set_binary_blob(blob.finish())
+    with atomic_path(path, suffix=".glb") as tmp:
+        gltf.save_binary(str(tmp))

@@ -1,0 +1,556 @@
+"""Reading frames and sequences of frames; writing scan folders.
+
+An input sequence is a folder of frame files, one per time step, ordered by the natural sort
+of their names (``frame_2.ply`` before ``frame_10.ply``), with optional ``sensors.json`` and
+``times.txt`` beside them; or a single ``.npz`` holding ``points [T, P, 3]``; or a single frame
+file. Every problem raises :class:`fourd.errors.InputError` naming the file.
+
+Frame formats (by extension, case-insensitive):
+
+========  ==============================================================================
+``.ply``  ASCII or binary (either byte order), float or double; ``x y z``, optional
+          ``nx ny nz`` and ``red green blue``; other properties and faces are ignored.
+``.obj``  ``v`` lines (an optional colour ``v x y z r g b`` is kept); faces are ignored.
+``.xyz``  text rows ``x y z`` or ``x y z nx ny nz``.
+``.pts``  like ``.xyz``, optionally with a point-count first line, or Leica-style rows
+          ``x y z intensity [r g b]``.
+``.npy``  ``[P, 3]`` or ``[P, 6]`` (points and normals).
+``.npz``  ``points [P, 3]`` with optional ``normals`` and ``colors``.
+========  ==============================================================================
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+import re
+import zipfile
+from pathlib import Path
+from typing import NamedTuple
+
+import numpy as np
+
+from fourd.errors import InputError
+from fourd.io.atomic import atomic_dir
+from fourd.io.meshfiles import read_obj, read_xyz, write_xyz
+from fourd.io.ply import PlyMesh, read_ply, write_ply
+from fourd.sequence import Frame, PointCloudSequence
+
+log = logging.getLogger("fourd.io.readers")
+
+#: Extensions of frame files, lower case.
+FRAME_SUFFIXES: tuple[str, ...] = (".ply", ".obj", ".xyz", ".pts", ".npy", ".npz")
+#: Files beside the frames that are not frames.
+SIDECARS: tuple[str, ...] = ("sensors.json", "times.txt")
+
+__all__ = [
+    "FRAME_SUFFIXES",
+    "PlyMesh",
+    "load_sequence",
+    "natural_key",
+    "read_frame",
+    "read_ply",
+    "read_sensors",
+    "read_times",
+    "write_frames",
+    "write_ply",
+]
+
+
+class _Raw(NamedTuple):
+    points: np.ndarray
+    normals: np.ndarray | None
+    colors: np.ndarray | None
+    columns: int | None  # raw table width for array/text formats (compared across a folder)
+
+
+def natural_key(name: str) -> tuple:
+    """Sort key under which ``frame_2`` precedes ``frame_10`` (digit runs compare as numbers)."""
+    parts = re.split(r"(\d+)", name)
+    return tuple((0, int(p), p) if p.isdigit() else (1, 0, p.lower()) for p in parts)
+
+
+def _load_npz(path: Path) -> dict:
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            return {key: data[key] for key in data.files}
+    except FileNotFoundError:
+        raise InputError("does not exist", path) from None
+    except PermissionError as error:
+        raise InputError(f"cannot be read ({error.strerror})", path) from None
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile, KeyError) as error:
+        raise InputError(f"is not a readable .npz archive ({error})", path) from None
+
+
+def _load_npy(path: Path) -> np.ndarray:
+    try:
+        return np.load(path, allow_pickle=False)
+    except FileNotFoundError:
+        raise InputError("does not exist", path) from None
+    except PermissionError as error:
+        raise InputError(f"cannot be read ({error.strerror})", path) from None
+    except (OSError, ValueError, EOFError) as error:
+        raise InputError(f"is not a readable .npy array ({error})", path) from None
+
+
+def _table(array, path: Path, name: str) -> np.ndarray:
+    array = np.asarray(array)
+    if not (np.issubdtype(array.dtype, np.number) or array.dtype == bool):
+        raise InputError(f"{name} holds {array.dtype} values, not numbers", path)
+    if array.ndim != 2:
+        raise InputError(f"{name} must be a 2-D table [P, 3], got shape {list(array.shape)}", path)
+    return array.astype(np.float64)
+
+
+def _read_raw(path: Path) -> _Raw:
+    suffix = path.suffix.lower()
+    if suffix == ".ply":
+        ply = read_ply(path, faces=False)
+        return _Raw(ply.vertices, ply.normals, ply.colors, None)
+    if suffix == ".obj":
+        obj = read_obj(path, faces=False)
+        return _Raw(obj.vertices, None, obj.colors, None)
+    if suffix in (".xyz", ".pts"):
+        table = read_xyz(path)
+        return _Raw(table.points, table.normals, table.colors, table.columns)
+    if suffix == ".npy":
+        table = _table(_load_npy(path), path, "the array")
+        if table.shape[1] not in (3, 6):
+            raise InputError(
+                f"the array has shape {list(table.shape)}; expected [P, 3] (points) or [P, 6] (points and normals)",
+                path,
+            )
+        return _Raw(
+            table[:, :3], table[:, 3:] if table.shape[1] == 6 else None, None, table.shape[1]
+        )
+    if suffix == ".npz":
+        data = _load_npz(path)
+        if "points" not in data:
+            raise InputError(
+                f"has no 'points' array (found: {', '.join(sorted(data)) or 'nothing'})", path
+            )
+        points = np.asarray(data["points"])
+        if points.ndim == 3 and len(points) == 1:
+            points = points[0]
+            data = {k: (v[0] if np.ndim(v) == 3 else v) for k, v in data.items()}
+        if points.ndim == 3:
+            raise InputError(
+                f"holds a sequence of {len(points)} frames (points {list(points.shape)}); give it on its own, not inside a folder of frames",
+                path,
+            )
+        points = _table(points, path, "points")
+        if points.shape[1] != 3:
+            raise InputError(f"points must have shape [P, 3], got {list(points.shape)}", path)
+        extra = {}
+        for key in ("normals", "colors"):
+            if key in data:
+                value = _table(data[key], path, key)
+                if value.shape != points.shape:
+                    raise InputError(
+                        f"{key} has shape {list(value.shape)} but points has {list(points.shape)}",
+                        path,
+                    )
+                extra[key] = value
+        return _Raw(points, extra.get("normals"), extra.get("colors"), None)
+    raise InputError(
+        f"unknown file type {suffix or '(no extension)'!r}; frames must be one of {', '.join(FRAME_SUFFIXES)}",
+        path,
+    )
+
+
+def _unit_normals(normals: np.ndarray | None, path) -> np.ndarray | None:
+    """Normalise normals; drop them (with a warning) when some have zero length or are not finite."""
+    if normals is None:
+        return None
+    lengths = np.sqrt(np.einsum("ij,ij->i", normals, normals))
+    bad = ~np.isfinite(lengths) | (lengths <= 1e-12)
+    if bad.any():
+        log.warning(
+            "%s: %d normals have zero length or are not finite; ignoring this frame's normals",
+            path,
+            int(bad.sum()),
+        )
+        return None
+    return normals / lengths[:, None]
+
+
+def _make_frame(path, points, normals, colors, sensors, time) -> Frame:
+    if len(points) == 0:
+        raise InputError("the frame has zero points", path)
+    if not np.isfinite(points).all():  # (a flat test first: per-row reductions are slow)
+        bad = ~np.isfinite(points).all(axis=1)
+        raise InputError(
+            f"{int(bad.sum())} points have NaN or infinite coordinates (first at point {int(np.argmax(bad))})",
+            path,
+        )
+    if colors is not None and not np.isfinite(colors).all():
+        log.warning("%s: colours with NaN or infinite values; ignoring them", path)
+        colors = None
+    try:
+        return Frame(
+            points=points,
+            normals=_unit_normals(normals, path),
+            colors=colors,
+            sensors=sensors,
+            time=time,
+        )
+    except InputError as error:
+        raise InputError(error.problem, path) from None
+
+
+def read_frame(
+    path: str | os.PathLike, *, time: float = 0.0, sensors: np.ndarray | None = None
+) -> Frame:
+    """Read one frame file.
+
+    Parameters
+    ----------
+    path : path-like
+        A ``.ply``, ``.obj``, ``.xyz``, ``.pts``, ``.npy`` or ``.npz`` file (see the module
+        docstring for the layouts).
+    time : float
+        The frame's time stamp.
+    sensors : array [K, 3], optional
+        Positions of the scanners that saw the frame.
+
+    Returns
+    -------
+    Frame
+        Normals (when the file has them) are normalised; normals of zero length make the frame
+        have none (a warning is logged).
+
+    Raises
+    ------
+    InputError
+        Missing or unreadable file, unknown extension, malformed or truncated content, zero
+        points, NaN or infinite coordinates, a table that is not ``[P, 3]`` or ``[P, 6]``.
+    """
+    path = Path(path)
+    raw = _read_guarded(path)
+    return _make_frame(path, raw.points, raw.normals, raw.colors, sensors, time)
+
+
+def _read_guarded(path: Path) -> _Raw:
+    if not path.exists():
+        raise InputError("does not exist", path)
+    if path.is_dir():
+        raise InputError("is a folder, not a frame file", path)
+    try:
+        return _read_raw(path)
+    except InputError:
+        raise
+    except MemoryError:
+        raise InputError("is too large to read into memory", path) from None
+    except Exception as error:  # a parser failure we did not foresee: still one clear line
+        raise InputError(
+            f"cannot be read as a {path.suffix.lower() or 'frame'} file ({type(error).__name__}: {error})",
+            path,
+        ) from None
+
+
+# ----------------------------------------------------------------------------- sequences
+
+
+def _frame_files(folder: Path) -> list[Path]:
+    try:
+        entries = list(folder.iterdir())
+    except PermissionError as error:
+        raise InputError(f"cannot be listed ({error.strerror})", folder) from None
+    except OSError as error:
+        raise InputError(f"cannot be listed ({error})", folder) from None
+    files = []
+    for entry in entries:
+        name = entry.name
+        if (
+            name.startswith(".")
+            or name in SIDECARS
+            or entry.stem.lower() == "truth"
+            or name.lower() == "truth"
+        ):
+            continue
+        if entry.is_dir():
+            log.debug("%s: ignoring sub-folder", entry)
+            continue
+        if entry.suffix.lower() not in FRAME_SUFFIXES:
+            raise InputError(
+                f"unknown file type {entry.suffix.lower() or '(no extension)'!r} in the frame folder; "
+                f"frames must be one of {', '.join(FRAME_SUFFIXES)}",
+                entry,
+            )
+        files.append(entry)
+    files.sort(key=lambda p: natural_key(p.name))
+    return files
+
+
+def read_times(path: str | os.PathLike, count: int | None = None) -> np.ndarray:
+    """Read ``times.txt``: one number per frame (whitespace separated; ``#`` starts a comment).
+
+    Raises InputError when a value is not a finite number, when the count differs from
+    ``count``, or when the times do not increase strictly.
+    """
+    path = Path(path)
+    from fourd.io.meshfiles import read_text
+
+    values = []
+    for line in read_text(path).splitlines():
+        values.extend(line.split("#", 1)[0].split())
+    try:
+        times = np.array(values, dtype=np.float64)
+    except ValueError:
+        bad = next(v for v in values if not _is_number(v))
+        raise InputError(f"{bad!r} is not a number", path) from None
+    if not np.isfinite(times).all():
+        raise InputError("times must be finite numbers", path)
+    if count is not None and len(times) != count:
+        raise InputError(f"has {len(times)} times but there are {count} frames", path)
+    steps = np.diff(times)
+    if np.any(steps <= 0):
+        i = int(np.argmax(steps <= 0))
+        raise InputError(
+            f"times must increase strictly: time {i + 2} ({times[i + 1]}) follows {times[i]}", path
+        )
+    return times
+
+
+def _is_number(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
+
+
+def _sensor_table(value, path: Path, where: str) -> np.ndarray | None:
+    try:
+        table = np.array(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise InputError(f"{where} must be a list of [x, y, z] positions", path) from None
+    if table.size == 0:
+        return None
+    if table.ndim != 2 or table.shape[1] != 3:
+        raise InputError(
+            f"{where} must be a list of [x, y, z] positions, got shape {list(table.shape)}", path
+        )
+    if not np.isfinite(table).all():
+        raise InputError(f"{where} holds NaN or infinite positions", path)
+    return table
+
+
+def read_sensors(path: str | os.PathLike, count: int) -> list[np.ndarray | None]:
+    """Read ``sensors.json``: ``{"sensors": [[x,y,z], ...]}`` (the same scanners for every
+    frame) or ``{"frames": [[[x,y,z], ...], ...]}`` (one list per frame; an empty list means
+    unknown for that frame). Returns one ``[K, 3]`` array (or None) per frame."""
+    path = Path(path)
+    from fourd.io.meshfiles import read_text
+
+    try:
+        data = json.loads(read_text(path))
+    except json.JSONDecodeError as error:
+        raise InputError(f"is not valid JSON ({error.msg} at line {error.lineno})", path) from None
+    if not isinstance(data, dict) or not ({"sensors", "frames"} & set(data)):
+        raise InputError(
+            'expected {"sensors": [[x, y, z], ...]} or {"frames": [[[x, y, z], ...], ...]}', path
+        )
+    if "frames" in data:
+        frames = data["frames"]
+        if not isinstance(frames, list) or len(frames) != count:
+            have = len(frames) if isinstance(frames, list) else "no list of"
+            raise InputError(f'"frames" has {have} entries but there are {count} frames', path)
+        return [_sensor_table(item, path, f'"frames"[{i}]') for i, item in enumerate(frames)]
+    table = _sensor_table(data["sensors"], path, '"sensors"')
+    return [table] * count
+
+
+def _npz_sequence(path: Path) -> PointCloudSequence:
+    data = _load_npz(path)
+    if "points" not in data:
+        raise InputError(
+            f"has no 'points' array (found: {', '.join(sorted(data)) or 'nothing'})", path
+        )
+    points = np.asarray(data["points"])
+    if points.ndim == 2:
+        return PointCloudSequence((read_frame(path),), (path.name,))
+    if points.ndim != 3 or points.shape[2] != 3:
+        raise InputError(
+            f"points must have shape [T, P, 3] (or [P, 3]), got {list(points.shape)}", path
+        )
+    points = _table(points.reshape(-1, 3), path, "points").reshape(points.shape)
+    if "loc" in data and "scale" in data:  # normalised data (e.g. ../shared/data): original units
+        try:
+            scale = np.asarray(data["scale"], dtype=np.float64)
+            loc = np.asarray(data["loc"], dtype=np.float64)
+            points = points * scale + loc
+        except (TypeError, ValueError):
+            raise InputError(
+                f"'loc' {list(np.shape(data['loc']))} and 'scale' {list(np.shape(data['scale']))} do not apply to points",
+                path,
+            ) from None
+    count = len(points)
+    if count == 0:
+        raise InputError("holds zero frames", path)
+    extra = {}
+    for key in ("normals", "colors"):
+        if key in data:
+            value = np.asarray(data[key])
+            if value.shape != points.shape:
+                raise InputError(
+                    f"{key} has shape {list(value.shape)} but points has {list(points.shape)}", path
+                )
+            extra[key] = value.astype(np.float64)
+    times = np.arange(count, dtype=np.float64)
+    if "times" in data:
+        times = np.asarray(data["times"], dtype=np.float64).ravel()
+        if len(times) != count:
+            raise InputError(f"has {len(times)} times but {count} frames", path)
+        if not np.isfinite(times).all() or np.any(np.diff(times) <= 0):
+            raise InputError("times must be finite and increase strictly", path)
+    sensors: list = [None] * count
+    if "sensors" in data:
+        value = np.asarray(data["sensors"], dtype=np.float64)
+        if value.ndim == 2:
+            sensors = [_sensor_table(value, path, "sensors")] * count
+        elif value.ndim == 3 and len(value) == count:
+            sensors = [_sensor_table(v, path, f"sensors[{i}]") for i, v in enumerate(value)]
+        else:
+            raise InputError(
+                f"sensors must have shape [K, 3] or [{count}, K, 3], got {list(value.shape)}", path
+            )
+    frames, names = [], []
+    for t in range(count):
+        name = f"{path.name}[{t}]"
+        frames.append(
+            _make_frame(
+                f"{path}[frame {t}]",
+                points[t],
+                extra["normals"][t] if "normals" in extra else None,
+                extra["colors"][t] if "colors" in extra else None,
+                sensors[t],
+                times[t],
+            )
+        )
+        names.append(name)
+    return PointCloudSequence(tuple(frames), tuple(names))
+
+
+def load_sequence(path: str | os.PathLike) -> PointCloudSequence:
+    """Read a sequence of frames.
+
+    Parameters
+    ----------
+    path : path-like
+        A folder of frame files (natural sort order; hidden files, ``sensors.json``,
+        ``times.txt`` and anything named ``truth`` are not frames), a single ``.npz`` with
+        ``points [T, P, 3]`` (optional ``times [T]``, ``normals [T, P, 3]``, ``colors``,
+        ``sensors [K, 3]`` or ``[T, K, 3]``, and ``loc``/``scale``: points are then
+        ``points * scale + loc``, as in ``../shared/data``), or one frame file (a one-frame
+        sequence).
+
+    Returns
+    -------
+    PointCloudSequence
+        Frame names are the file names; times come from ``times.txt`` (default 0, 1, 2, ...);
+        sensors from ``sensors.json`` when present.
+
+    Raises
+    ------
+    InputError
+        Naming the file: missing path, no frame files, unknown extension, any bad frame (see
+        :func:`read_frame`), frames with different table widths, a wrong ``times.txt`` or
+        ``sensors.json``.
+
+    Examples
+    --------
+    >>> seq = load_sequence("scans/")            # doctest: +SKIP
+    >>> len(seq), seq.times[:3]                  # doctest: +SKIP
+    (40, array([0., 1., 2.]))
+    """
+    path = Path(path)
+    if not path.exists():
+        raise InputError("does not exist", path)
+    if not path.is_dir():
+        if path.suffix.lower() == ".npz":
+            return _npz_sequence(path)
+        return PointCloudSequence((read_frame(path),), (path.name,))
+    files = _frame_files(path)
+    if not files:
+        raise InputError(f"the folder holds no frame files ({', '.join(FRAME_SUFFIXES)})", path)
+    count = len(files)
+    times = np.arange(count, dtype=np.float64)
+    if (path / "times.txt").exists():
+        times = read_times(path / "times.txt", count)
+    sensors: list = [None] * count
+    if (path / "sensors.json").exists():
+        sensors = read_sensors(path / "sensors.json", count)
+    frames = []
+    first_columns: tuple[int, Path] | None = None
+    for i, file in enumerate(files):
+        raw = _read_guarded(file)
+        if raw.columns is not None:
+            if first_columns is None:
+                first_columns = (raw.columns, file)
+            elif raw.columns != first_columns[0]:
+                raise InputError(
+                    f"mixed point dimensions: this frame has {raw.columns} columns but "
+                    f"{first_columns[1].name} has {first_columns[0]}",
+                    file,
+                )
+        frames.append(_make_frame(file, raw.points, raw.normals, raw.colors, sensors[i], times[i]))
+    with_normals = sum(f.normals is not None for f in frames)
+    if 0 < with_normals < len(frames):
+        log.warning("%s: %d of %d frames have normals", path, with_normals, len(frames))
+    return PointCloudSequence(tuple(frames), tuple(f.name for f in files))
+
+
+# ------------------------------------------------------------------------------- writing
+
+
+def write_frames(
+    seq: PointCloudSequence, folder: str | os.PathLike, *, format: str = "ply"
+) -> None:
+    """Write ``seq`` as a scan folder that :func:`load_sequence` reads back.
+
+    One file per frame (``frame_0000.ply`` ...; binary little-endian PLY with normals and
+    colours when present, or ``npy`` ``[P, 3|6]``, or ``xyz`` text), ``times.txt`` and, when
+    the frames carry sensors, ``sensors.json`` (the fixed form when every frame has the same
+    scanners). The folder is assembled under a temporary name and renamed into place: an
+    existing folder of that name is replaced as a whole.
+
+    Parameters
+    ----------
+    seq : PointCloudSequence
+    folder : path-like
+    format : {"ply", "npy", "xyz"}
+    """
+    format = format.lower().lstrip(".")
+    if format not in ("ply", "npy", "xyz"):
+        raise InputError(f"unknown frame format {format!r} (use ply, npy or xyz)")
+    width = max(4, len(str(len(seq) - 1)))
+    with atomic_dir(folder) as tmp:
+        for i, frame in enumerate(seq.frames):
+            target = tmp / f"frame_{i:0{width}d}.{format}"
+            if format == "ply":
+                write_ply(target, frame.points, normals=frame.normals, colors=frame.colors)
+            elif format == "xyz":
+                write_xyz(target, frame.points, frame.normals)
+            else:
+                table = (
+                    frame.points
+                    if frame.normals is None
+                    else np.concatenate([frame.points, frame.normals], axis=1)
+                )
+                with open(target, "wb") as stream:
+                    np.save(stream, table)
+        (tmp / "times.txt").write_text("".join(f"{t!r}\n" for t in seq.times.tolist()))
+        sensors = [f.sensors for f in seq.frames]
+        if any(s is not None for s in sensors):
+            first = sensors[0]
+            fixed = all(
+                s is not None and s.shape == first.shape and np.array_equal(s, first)
+                for s in sensors
+            )
+            if fixed:
+                data = {"sensors": first.tolist()}
+            else:
+                data = {"frames": [[] if s is None else s.tolist() for s in sensors]}
+            (tmp / "sensors.json").write_text(json.dumps(data))

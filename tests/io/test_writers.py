@@ -1,0 +1,398 @@
+"""Result writers, each checked with an independent reader; atomicity; load_result."""
+
+from __future__ import annotations
+
+import struct
+
+import numpy as np
+import pytest
+import trimesh
+
+from fourd.animation import AnimatedMesh, MeshSequence
+from fourd.errors import InputError
+from fourd.io import writers
+from fourd.io.atomic import atomic_path
+from fourd.io.glb import vertex_normals
+from fourd.io.pc2 import read_pc2
+from fourd.io.writers import load_result, output_kind, save
+
+
+def _animation(frames=5, subdivisions=2, seed=0) -> AnimatedMesh:
+    """A sphere that swells, shears and travels: every frame distinct."""
+    sphere = trimesh.creation.icosphere(subdivisions=subdivisions)
+    base = sphere.vertices
+    rng = np.random.default_rng(seed)
+    vertices = []
+    for t in range(frames):
+        shear = np.eye(3) + 0.1 * t * np.array([[0, 1, 0], [0, 0, 0], [0, 0, 0]])
+        vertices.append(
+            (base * (1 + 0.05 * t)) @ shear.T + [0.2 * t, 0, 0] + 0.01 * rng.normal(size=base.shape)
+        )
+    observed = np.ones((frames, len(base)), bool)
+    observed[1, :10] = False
+    return AnimatedMesh(
+        sphere.faces,
+        np.stack(vertices),
+        times=0.5 * np.arange(frames) + 1.0,
+        observed=observed,
+        rest=base,
+    )
+
+
+def _sequence() -> MeshSequence:
+    a = trimesh.creation.icosphere(subdivisions=1)
+    b = trimesh.creation.box()
+    c = trimesh.creation.cylinder(radius=0.5, height=1.0, sections=12)
+    return MeshSequence(
+        ((a.vertices, a.faces), (b.vertices, b.faces), (c.vertices, c.faces)), times=[0.0, 0.5, 2.0]
+    )
+
+
+# ------------------------------------------------------------------------------------ npz
+
+
+def test_npz_contract_keys(tmp_path):
+    anim = _animation()
+    save(anim, tmp_path / "walk.npz")
+    with np.load(tmp_path / "walk.npz") as data:
+        assert (
+            data["vertices"].dtype == np.float32 and data["vertices"].shape == anim.vertices.shape
+        )
+        assert data["faces"].dtype == np.int32 and np.array_equal(data["faces"], anim.faces)
+        assert np.array_equal(data["times"], anim.times)
+        assert data["observed"].dtype == bool and np.array_equal(data["observed"], anim.observed)
+        assert np.abs(data["rest"] - anim.rest).max() <= 1e-6
+        assert np.abs(data["vertices"] - anim.vertices).max() <= 1e-6
+    back = load_result(tmp_path / "walk.npz")
+    assert isinstance(back, AnimatedMesh)
+    assert np.array_equal(back.observed, anim.observed)
+    assert np.abs(back.vertices - anim.vertices).max() <= 1e-6
+
+
+def test_npz_mesh_sequence(tmp_path):
+    seq = _sequence()
+    save(seq, tmp_path / "seq.npz")
+    with np.load(tmp_path / "seq.npz") as data:
+        assert str(data["kind"]) == "meshes"
+        assert np.array_equal(data["times"], seq.times)
+        for t, (v, f) in enumerate(seq.meshes):
+            assert np.abs(data[f"vertices_{t}"] - v).max() <= 1e-6
+            assert np.array_equal(data[f"faces_{t}"], f)
+    back = load_result(tmp_path / "seq.npz")
+    assert isinstance(back, MeshSequence) and len(back) == 3
+    assert np.array_equal(back.meshes[1][1], seq.meshes[1][1])
+
+
+# ------------------------------------------------------------------------------------ glb
+
+
+def _accessor(gltf, blob, index):
+    accessor = gltf.accessors[index]
+    view = gltf.bufferViews[accessor.bufferView]
+    dtype = {5126: np.float32, 5125: np.uint32, 5123: np.uint16}[accessor.componentType]
+    width = {"SCALAR": 1, "VEC3": 3}[accessor.type]
+    start = (view.byteOffset or 0) + (accessor.byteOffset or 0)
+    values = np.frombuffer(blob, dtype, accessor.count * width, start)
+    return values.reshape(accessor.count, width) if width > 1 else values
+
+
+def test_glb_morph_targets_and_animation(tmp_path):
+    import pygltflib
+
+    anim = _animation(frames=6)
+    save(anim, tmp_path / "walk.glb")
+    gltf = pygltflib.GLTF2.load(tmp_path / "walk.glb")
+    blob = gltf.binary_blob()
+    assert gltf.asset.version == "2.0"
+    primitive = gltf.meshes[0].primitives[0]
+    assert len(primitive.targets) == anim.frame_count - 1
+    assert len(gltf.meshes[0].weights) == anim.frame_count - 1
+    count = anim.vertex_count
+    position = _accessor(gltf, blob, primitive.attributes.POSITION)
+    assert gltf.accessors[primitive.attributes.POSITION].count == count
+    assert gltf.accessors[primitive.attributes.NORMAL].count == count
+    indices = _accessor(gltf, blob, primitive.indices).reshape(-1, 3)
+    assert np.array_equal(indices, anim.faces)
+    for k in range(anim.frame_count):
+        decoded = position.astype(np.float64)
+        if k:
+            target = primitive.targets[k - 1]
+            delta = _accessor(gltf, blob, target["POSITION"])  # loaded targets are plain dicts
+            assert gltf.accessors[target["POSITION"]].count == count
+            assert gltf.accessors[target["NORMAL"]].count == count
+            decoded = decoded + delta
+        assert np.abs(decoded - anim.vertices[k]).max() <= 1e-5
+    for index in [primitive.attributes.POSITION] + [t["POSITION"] for t in primitive.targets]:
+        values = _accessor(gltf, blob, index)
+        accessor = gltf.accessors[index]
+        assert np.allclose(accessor.min, values.min(axis=0)) and np.allclose(
+            accessor.max, values.max(axis=0)
+        )
+    sampler = gltf.animations[0].samplers[0]
+    channel = gltf.animations[0].channels[0]
+    assert channel.target.path == "weights" and channel.target.node == 0
+    assert sampler.interpolation == "LINEAR"
+    times = _accessor(gltf, blob, sampler.input)
+    assert np.allclose(times, anim.times)
+    assert gltf.accessors[sampler.input].min == [pytest.approx(anim.times[0])]
+    assert gltf.accessors[sampler.input].max == [pytest.approx(anim.times[-1])]
+    weights = _accessor(gltf, blob, sampler.output).reshape(anim.frame_count, anim.frame_count - 1)
+    assert np.array_equal(weights[0], np.zeros(anim.frame_count - 1))
+    assert np.array_equal(weights[1:], np.eye(anim.frame_count - 1))
+    normals = _accessor(gltf, blob, primitive.attributes.NORMAL)
+    assert np.allclose(np.linalg.norm(normals, axis=1), 1.0, atol=1e-5)
+
+
+def test_glb_loads_in_trimesh(tmp_path):
+    anim = _animation(frames=3)
+    save(anim, tmp_path / "walk.glb", interpolation="STEP")
+    scene = trimesh.load(tmp_path / "walk.glb")
+    geometry = list(scene.geometry.values())
+    assert len(geometry) == 1 and len(geometry[0].faces) == len(anim.faces)
+
+
+def test_glb_mesh_sequence_one_node_per_frame(tmp_path):
+    import pygltflib
+
+    seq = _sequence()
+    save(seq, tmp_path / "seq.glb")
+    gltf = pygltflib.GLTF2.load(tmp_path / "seq.glb")
+    blob = gltf.binary_blob()
+    assert len(gltf.nodes) == 3 and len(gltf.meshes) == 3
+    animation = gltf.animations[0]
+    assert {c.target.path for c in animation.channels} == {"scale"}
+    for k, channel in enumerate(animation.channels):
+        sampler = animation.samplers[channel.sampler]
+        assert np.allclose(_accessor(gltf, blob, sampler.input), seq.times)
+        scales = _accessor(gltf, blob, sampler.output)
+        assert np.array_equal(scales[:, 0] > 0, np.arange(3) == k)
+        mesh = gltf.meshes[gltf.nodes[channel.target.node].mesh]
+        position = _accessor(gltf, blob, mesh.primitives[0].attributes.POSITION)
+        assert np.abs(position - seq.meshes[k][0]).max() <= 1e-6
+
+
+def test_glb_point_animation_without_faces(tmp_path):
+    import pygltflib
+
+    rng = np.random.default_rng(4)
+    anim = AnimatedMesh(np.zeros((0, 3), int), rng.normal(size=(3, 50, 3)))
+    save(anim, tmp_path / "points.glb")
+    gltf = pygltflib.GLTF2.load(tmp_path / "points.glb")
+    primitive = gltf.meshes[0].primitives[0]
+    assert primitive.mode == 0 and primitive.indices is None
+    assert len(primitive.targets) == 2
+
+
+def test_vertex_normals_area_weighted():
+    sphere = trimesh.creation.icosphere(subdivisions=3)
+    normals = vertex_normals(sphere.vertices, sphere.faces)
+    assert (
+        np.min(np.sum(normals * sphere.vertices, axis=1)) >= 0.999
+    )  # outward radial on a unit sphere
+    # one big and one tiny triangle sharing vertex 0: the big one dominates
+    vertices = np.array([[0, 0, 0], [10, 0, 0], [0, 10, 0], [0, 0, 0.1], [0.1, 0, 0.0]], float)
+    faces = np.array([[0, 1, 2], [0, 3, 4]])
+    n = vertex_normals(vertices, faces)
+    assert n[0, 2] > 0.99
+    stacked = vertex_normals(np.stack([sphere.vertices, 2 * sphere.vertices]), sphere.faces)
+    assert np.allclose(stacked[0], normals) and np.allclose(stacked[1], normals)
+
+
+# ------------------------------------------------------------------------------------ usd
+
+
+@pytest.mark.parametrize("suffix", [".usda", ".usdc", ".usd"])
+def test_usd_time_sampled_points(tmp_path, suffix):
+    pxr = pytest.importorskip("pxr", reason="usd-core (the fourd[usd] extra) is not installed")
+    from pxr import Usd, UsdGeom
+
+    anim = _animation(frames=4)
+    save(anim, tmp_path / f"walk{suffix}", fps=24)
+    assert pxr is not None
+    stage = Usd.Stage.Open(str(tmp_path / f"walk{suffix}"))
+    assert stage.GetStartTimeCode() == anim.times[0] and stage.GetEndTimeCode() == anim.times[-1]
+    assert stage.GetTimeCodesPerSecond() == 24
+    mesh = UsdGeom.Mesh(stage.GetPrimAtPath("/Root/Mesh"))
+    assert list(mesh.GetFaceVertexCountsAttr().Get()) == [3] * len(anim.faces)
+    assert np.array_equal(
+        np.array(mesh.GetFaceVertexIndicesAttr().Get()).reshape(-1, 3), anim.faces
+    )
+    points = mesh.GetPointsAttr()
+    assert points.GetTimeSamples() == pytest.approx(list(anim.times))
+    for k, t in enumerate(anim.times):
+        assert np.abs(np.array(points.Get(Usd.TimeCode(t))) - anim.vertices[k]).max() <= 1e-5
+
+
+def test_usd_missing_pxr_says_what_to_install(tmp_path, monkeypatch):
+    import builtins
+
+    real_import = builtins.__import__
+
+    def no_pxr(name, *args, **kwargs):
+        if name == "pxr" or name.startswith("pxr."):
+            raise ImportError("No module named 'pxr'")
+        return real_import(name, *args, **kwargs)
+
+    monkeypatch.setattr(builtins, "__import__", no_pxr)
+    with pytest.raises(InputError, match=r'pip install "fourd\[usd\]"') as info:
+        save(_animation(frames=2), tmp_path / "walk.usda")
+    assert "walk.usda" in str(info.value)
+    assert not (tmp_path / "walk.usda").exists()
+
+
+# ------------------------------------------------------------------------------------ pc2
+
+
+def test_pc2_bytes_and_topology(tmp_path):
+    anim = _animation(frames=4)
+    anim = AnimatedMesh(anim.faces, anim.vertices, times=[3.0, 4.0, 5.0, 6.0])
+    save(anim, tmp_path / "walk.pc2")
+    data = (tmp_path / "walk.pc2").read_bytes()
+    assert data[:12] == b"POINTCACHE2\0"
+    version, points, start, rate, samples = struct.unpack_from("<iiffi", data, 12)
+    assert (version, points, start, rate, samples) == (1, anim.vertex_count, 3.0, 1.0, 4)
+    assert len(data) == 32 + 4 * 3 * points * samples
+    positions = np.frombuffer(data, "<f4", offset=32).reshape(samples, points, 3)
+    assert np.abs(positions - anim.vertices).max() <= 1e-5
+    topology = trimesh.load(tmp_path / "walk.obj", process=False)
+    assert np.array_equal(topology.faces, anim.faces)
+    assert np.abs(topology.vertices - anim.vertices[0]).max() <= 1e-6
+    assert np.abs(read_pc2(tmp_path / "walk.pc2").vertices - anim.vertices).max() <= 1e-5
+
+
+def test_pc2_refuses_a_mesh_sequence(tmp_path):
+    with pytest.raises(InputError, match="walk.pc2"):
+        save(_sequence(), tmp_path / "walk.pc2")
+    assert not (tmp_path / "walk.pc2").exists()
+
+
+# ---------------------------------------------------------------------------- per frame
+
+
+@pytest.mark.parametrize("mesh_format", ["obj", "ply"])
+def test_folder_of_meshes(tmp_path, mesh_format):
+    anim = _animation(frames=3)
+    save(anim, str(tmp_path / "out") + "/", mesh_format=mesh_format)
+    files = sorted((tmp_path / "out").glob(f"frame_*.{mesh_format}"))
+    assert [f.name for f in files] == [f"frame_{k:04d}.{mesh_format}" for k in range(3)]
+    for k, file in enumerate(files):
+        mesh = trimesh.load(file, process=False)
+        assert np.array_equal(mesh.faces, anim.faces)
+        assert np.abs(mesh.vertices - anim.vertices[k]).max() <= 1e-6
+    back = load_result(tmp_path / "out")
+    assert isinstance(back, AnimatedMesh)
+    assert np.allclose(back.times, anim.times)
+    assert np.abs(back.vertices - anim.vertices).max() <= 1e-6
+
+
+def test_folder_of_a_mesh_sequence_and_existing_folder(tmp_path):
+    seq = _sequence()
+    (tmp_path / "out").mkdir()
+    (tmp_path / "out" / "stale.obj").write_text("v 0 0 0\n")
+    save(seq, tmp_path / "out")
+    assert not (tmp_path / "out" / "stale.obj").exists()
+    back = load_result(tmp_path / "out")
+    assert isinstance(back, MeshSequence)
+    for (v, f), (v2, f2) in zip(seq.meshes, back.meshes, strict=True):
+        assert np.array_equal(f, f2) and np.abs(v - v2).max() <= 1e-6
+    save(seq, tmp_path / "noext")
+    assert (tmp_path / "noext" / "frame_0002.obj").is_file()
+
+
+# ------------------------------------------------------------------------- bad outputs
+
+
+def test_output_kinds(tmp_path):
+    assert (
+        output_kind("a.NPZ") == "npz"
+        and output_kind("a.usdc") == "usd"
+        and output_kind("a/") == "folder"
+    )
+    assert output_kind(tmp_path) == "folder" and output_kind(tmp_path / "new") == "folder"
+
+
+def test_unknown_extension(tmp_path):
+    with pytest.raises(InputError, match=r"walk\.fbx.*unknown output format"):
+        save(_animation(frames=2), tmp_path / "walk.fbx")
+
+
+@pytest.mark.parametrize("name", ["walk.npz", "walk.glb", "walk.pc2", "walk_dir/"])
+def test_missing_or_unwritable_output_folder(tmp_path, monkeypatch, name):
+    with pytest.raises(InputError, match="does not exist"):
+        save(_animation(frames=2), str(tmp_path / "missing" / name))
+    import fourd.io.atomic as atomic
+
+    monkeypatch.setattr(atomic.os, "access", lambda path, mode: False)
+    with pytest.raises(InputError, match="not writable") as info:
+        save(_animation(frames=2), str(tmp_path / name))
+    assert str(tmp_path) in str(info.value)
+
+
+@pytest.mark.parametrize("name", ["walk.npz", "walk.glb", "walk.pc2", "walk.usda", "walk_dir"])
+def test_interrupted_write_leaves_nothing(tmp_path, monkeypatch, name):
+    """Make the lowest-level write fail midway: no file under the target name, no debris."""
+    if name.endswith(".usda"):
+        pytest.importorskip("pxr")
+
+    def explode(*args, **kwargs):
+        raise KeyboardInterrupt("interrupted")
+
+    monkeypatch.setattr(writers, "write_obj", explode)  # folder of meshes
+    monkeypatch.setattr(np, "savez", explode)
+    monkeypatch.setattr("pygltflib.GLTF2.save_binary", explode)
+    monkeypatch.setattr("fourd.io.pc2.open", explode, raising=False)  # the point cache body
+    if name.endswith(".usda"):
+        from pxr import Sdf
+
+        monkeypatch.setattr(Sdf.Layer, "Save", explode)
+    with pytest.raises(KeyboardInterrupt):
+        save(_animation(frames=2), tmp_path / name)
+    assert not (tmp_path / name).exists()
+    assert [p.name for p in tmp_path.iterdir()] == []
+
+
+def test_atomic_path_keeps_the_old_file_on_failure(tmp_path):
+    target = tmp_path / "walk.npz"
+    save(_animation(frames=2), target)
+    before = target.read_bytes()
+    with pytest.raises(RuntimeError):
+        with atomic_path(target) as tmp:
+            tmp.write_bytes(b"half")
+            raise RuntimeError("crash")
+    assert target.read_bytes() == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["walk.npz"]
+
+
+def test_load_result_problems(tmp_path):
+    with pytest.raises(InputError, match="nothing.npz"):
+        load_result(tmp_path / "nothing.npz")
+    np.savez(tmp_path / "other.npz", points=np.ones((3, 3)))
+    with pytest.raises(InputError, match="other.npz.*not a fourd result"):
+        load_result(tmp_path / "other.npz")
+    np.savez(tmp_path / "bad.npz", vertices=np.ones((2, 3, 3)), faces=[[0, 1, 5]])
+    with pytest.raises(InputError, match="bad.npz"):
+        load_result(tmp_path / "bad.npz")
+    (tmp_path / "junk.npz").write_bytes(b"junk")
+    with pytest.raises(InputError, match="junk.npz"):
+        load_result(tmp_path / "junk.npz")
+    (tmp_path / "empty").mkdir()
+    with pytest.raises(InputError, match="empty"):
+        load_result(tmp_path / "empty")
+    save(_animation(frames=2), tmp_path / "walk.glb")
+    with pytest.raises(InputError, match="walk.glb"):
+        load_result(tmp_path / "walk.glb")
+
+
+def test_check_output_before_computing(tmp_path):
+    from fourd.io.writers import check_output
+
+    assert check_output(tmp_path / "walk.glb") == "glb"
+    assert check_output(str(tmp_path / "frames") + "/") == "folder"
+    with pytest.raises(InputError, match=r"walk\.abc"):
+        check_output(tmp_path / "walk.abc")
+    with pytest.raises(InputError, match="does not exist"):
+        check_output(tmp_path / "missing" / "walk.npz")
+    (tmp_path / "plain").write_text("x")
+    with pytest.raises(InputError, match="not a folder"):
+        check_output(tmp_path / "plain")
+    assert not list(tmp_path.glob("walk*"))

@@ -1,0 +1,162 @@
+"""The command line: exit status 2 and one line naming the file for every kind of bad input."""
+
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from fourd.cli import main
+from fourd.methods import METHODS, method_module
+
+
+def _ply(path: Path, points: np.ndarray) -> Path:
+    header = f"ply\nformat ascii 1.0\nelement vertex {len(points)}\nproperty float x\nproperty float y\nproperty float z\nend_header\n"
+    path.write_text(header + "\n".join(" ".join(f"{v:.6f}" for v in p) for p in points) + "\n")
+    return path
+
+
+def _sphere_points(count=400, seed=0, shift=0.0):
+    rng = np.random.default_rng(seed)
+    p = rng.normal(size=(count, 3))
+    return p / np.linalg.norm(p, axis=1, keepdims=True) + shift
+
+
+def _folder(tmp_path: Path, frames=2) -> Path:
+    folder = tmp_path / "scans"
+    folder.mkdir()
+    for i in range(frames):
+        _ply(folder / f"frame_{i}.ply", _sphere_points(seed=i, shift=0.05 * i))
+    return folder
+
+
+def _run_bad(capsys, argv, *needles):
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip()
+    errors = [line for line in err.splitlines() if line.startswith("fourd: error:")]
+    assert len(errors) == 1 and err.splitlines()[-1] == errors[0], err
+    for needle in needles:
+        assert needle in errors[0], (needle, errors[0])
+    assert "Traceback" not in err
+
+
+def _sequence_method():
+    for name in METHODS:
+        try:
+            module = method_module(name)
+        except Exception:
+            continue
+        if getattr(module, "MIN_FRAMES", 1) >= 2:
+            return name
+    pytest.skip("no sequence method (MIN_FRAMES >= 2) is registered yet")
+
+
+def test_missing_folder(tmp_path, capsys):
+    _run_bad(capsys, ["reconstruct", str(tmp_path / "nope"), "-o", str(tmp_path / "o.npz")], "nope")
+
+
+def test_empty_folder(tmp_path, capsys):
+    (tmp_path / "empty").mkdir()
+    _run_bad(capsys, ["reconstruct", str(tmp_path / "empty"), "-o", str(tmp_path / "o.npz")], "empty")
+
+
+def test_frame_with_zero_points(tmp_path, capsys):
+    folder = _folder(tmp_path)
+    _ply(folder / "frame_2.ply", np.zeros((0, 3)))
+    _run_bad(capsys, ["reconstruct", str(folder), "-o", str(tmp_path / "o.npz")], "frame_2.ply")
+
+
+def test_nan_coordinates(tmp_path, capsys):
+    folder = _folder(tmp_path)
+    points = _sphere_points(seed=5)
+    points[7, 1] = np.nan
+    np.save(folder / "frame_2.npy", points)
+    _run_bad(capsys, ["reconstruct", str(folder), "-o", str(tmp_path / "o.npz")], "frame_2.npy", "NaN")
+
+
+def test_truncated_ply(tmp_path, capsys):
+    folder = _folder(tmp_path)
+    text = (folder / "frame_1.ply").read_text().splitlines()
+    (folder / "frame_1.ply").write_text("\n".join(text[: len(text) // 2]))
+    _run_bad(capsys, ["reconstruct", str(folder), "-o", str(tmp_path / "o.npz")], "frame_1.ply")
+
+
+def test_malformed_ply_header(tmp_path, capsys):
+    folder = _folder(tmp_path)
+    (folder / "frame_1.ply").write_text("ply\nformat banana 1.0\nend_header\n")
+    _run_bad(capsys, ["reconstruct", str(folder), "-o", str(tmp_path / "o.npz")], "frame_1.ply")
+
+
+def test_unknown_extension(tmp_path, capsys):
+    folder = _folder(tmp_path)
+    (folder / "frame_2.stl").write_text("solid x\nendsolid x\n")
+    _run_bad(capsys, ["reconstruct", str(folder), "-o", str(tmp_path / "o.npz")], "frame_2.stl")
+
+
+def test_mixed_point_dimensions(tmp_path, capsys):
+    folder = tmp_path / "mixed"
+    folder.mkdir()
+    np.save(folder / "a_0.npy", _sphere_points())
+    np.save(folder / "a_1.npy", np.c_[_sphere_points(), np.zeros(400)])
+    _run_bad(capsys, ["reconstruct", str(folder), "-o", str(tmp_path / "o.npz")], "a_1.npy")
+
+
+def test_too_few_frames_for_a_sequence_method(tmp_path, capsys):
+    method = _sequence_method()
+    folder = _folder(tmp_path, frames=1)
+    _run_bad(capsys, ["reconstruct", str(folder), "-o", str(tmp_path / "o.npz"), "--method", method],
+             "at least 2 frames")
+
+
+def test_unwritable_output(tmp_path, capsys):
+    folder = _folder(tmp_path)
+    _run_bad(capsys, ["reconstruct", str(folder), "-o", str(tmp_path / "no" / "such" / "o.npz")], "does not exist")
+    if os.geteuid() != 0:
+        locked = tmp_path / "locked"
+        locked.mkdir()
+        locked.chmod(0o500)
+        _run_bad(capsys, ["reconstruct", str(folder), "-o", str(locked / "o.npz")], "not writable")
+
+
+def test_unknown_output_extension(tmp_path, capsys):
+    folder = _folder(tmp_path)
+    _run_bad(capsys, ["reconstruct", str(folder), "-o", str(tmp_path / "o.xyz3"), "--method", "perframe"], "o.xyz3")
+
+
+def test_unknown_method_and_option(tmp_path, capsys):
+    folder = _folder(tmp_path)
+    _run_bad(capsys, ["reconstruct", str(folder), "-o", str(tmp_path / "o.npz"), "--method", "magic"], "magic", "perframe")
+    _run_bad(capsys, ["reconstruct", str(folder), "-o", str(tmp_path / "o.npz"), "--method", "perframe",
+                      "--set", "no_such_option=1"], "no_such_option", "valid keys")
+
+
+def test_bad_frames_and_config(tmp_path, capsys):
+    folder = _folder(tmp_path)
+    _run_bad(capsys, ["reconstruct", str(folder), "-o", str(tmp_path / "o.npz"), "--frames", "a:b"], "--frames")
+    config = tmp_path / "bad.toml"
+    config.write_text("method = [")
+    _run_bad(capsys, ["reconstruct", str(folder), "-o", str(tmp_path / "o.npz"), "--config", str(config)], "bad.toml")
+
+
+def test_reconstruct_perframe_to_npz_and_folder(tmp_path, capsys):
+    folder = _folder(tmp_path, frames=2)
+    config = tmp_path / "c.toml"
+    config.write_text('method = "perframe"\n[options]\n')
+    out = tmp_path / "o.npz"
+    assert main(["reconstruct", str(folder), "-o", str(out), "--config", str(config), "--quiet"]) == 0
+    with np.load(out) as data:
+        assert data["times"].tolist() == [0.0, 1.0]
+    outdir = tmp_path / "meshes"
+    assert main(["reconstruct", str(folder), "-o", str(outdir), "--method", "perframe", "--quiet", "--frames", "1:"]) == 0
+    meshes = sorted(p.name for p in outdir.iterdir() if p.suffix in (".obj", ".ply"))
+    assert len(meshes) == 1
+    assert main(["info", str(folder)]) == 0
+    assert "2 frames" in capsys.readouterr().out
+
+
+def test_every_subcommand_has_help(capsys):
+    for command in ["reconstruct", "synth", "evaluate", "bench", "demo", "view", "info"]:
+        with pytest.raises(SystemExit) as exit_info:
+            main([command, "--help"])
+        assert exit_info.value.code == 0
+        assert "usage: fourd " + command in capsys.readouterr().out
