@@ -1,0 +1,162 @@
+"""Writing a synthetic capture to disk: the scan folder plus its ground truth.
+
+Layout of ``OUTDIR`` (what ``fourd synth SCENE OUTDIR`` produces)::
+
+    OUTDIR/
+      frame_0000.ply ...   binary PLY scans, one per kept frame (fourd.io.readers.write_frames)
+      times.txt            one time per frame
+      sensors.json         the fixed camera positions {"sensors": [[x, y, z], ...]}
+      truth.npz            the ground truth (AnimatedMesh: vertices, faces, times, observed[, rest];
+                           MeshSequence: kind="meshes", vertices_<t>, faces_<t>, times)
+      truth.json           what was generated (scene, frames, seed, scan options), when given
+
+``fourd.load_sequence(OUTDIR)`` reads the scans (files named ``truth.*`` are not frames) and
+``fourd.load_result(OUTDIR / "truth.npz")`` the truth. The folder is assembled under a temporary
+name and renamed into place, so it is either complete or absent.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+from dataclasses import asdict
+from pathlib import Path
+
+import numpy as np
+
+from fourd.animation import AnimatedMesh, MeshSequence
+from fourd.errors import InputError
+from fourd.io.atomic import atomic_dir, atomic_path
+from fourd.sequence import PointCloudSequence
+
+logger = logging.getLogger("fourd.synth.write")
+
+TRUTH_FILE = "truth.npz"
+INFO_FILE = "truth.json"
+
+
+def _truth_arrays(truth) -> dict[str, np.ndarray]:
+    """The ``.npz`` keys of a result (the layout of ``fourd.save``)."""
+    if isinstance(truth, AnimatedMesh):
+        arrays = {
+            "vertices": truth.vertices.astype(np.float32),
+            "faces": truth.faces.astype(np.int32),
+            "times": truth.times,
+            "observed": truth.observed,
+        }
+        if truth.rest is not None:
+            arrays["rest"] = truth.rest.astype(np.float32)
+        return arrays
+    if isinstance(truth, MeshSequence):
+        arrays = {"kind": np.array("meshes"), "times": truth.times}
+        for t, (vertices, faces) in enumerate(truth.meshes):
+            arrays[f"vertices_{t}"] = vertices.astype(np.float32)
+            arrays[f"faces_{t}"] = faces.astype(np.int32)
+        return arrays
+    raise InputError(
+        f"the truth must be an AnimatedMesh or a MeshSequence, got {type(truth).__name__}"
+    )
+
+
+def save_truth(truth, path: str | os.PathLike) -> None:
+    """Write a ground truth as ``.npz`` (through ``fourd.io.writers.save`` when available)."""
+    try:
+        from fourd.io.writers import save
+    except ImportError:
+        save = None
+    if save is not None:
+        save(truth, path)
+        return
+    arrays = _truth_arrays(truth)
+    with atomic_path(path) as tmp, open(tmp, "wb") as stream:
+        np.savez_compressed(stream, **arrays)
+
+
+def _jsonable(value):
+    if isinstance(value, dict):
+        return {str(k): _jsonable(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_jsonable(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, np.generic):
+        return value.item()
+    if hasattr(value, "__dataclass_fields__"):
+        return _jsonable(asdict(value))
+    return value
+
+
+def write_synth(
+    truth, scans: PointCloudSequence, outdir: str | os.PathLike, *, info: dict | None = None
+) -> Path:
+    """Write the scans of a ground truth and the truth itself into ``outdir``.
+
+    Parameters
+    ----------
+    truth : AnimatedMesh or MeshSequence
+    scans : PointCloudSequence
+        E.g. :func:`fourd.synth.scan` of ``truth``.
+    outdir : path-like
+        Folder to create (replaced as a whole if it exists; its parent must exist).
+    info : dict, optional
+        JSON-able description (scene name, seed, options) written to ``truth.json``.
+
+    Returns
+    -------
+    pathlib.Path
+        ``outdir``.
+    """
+    from fourd.io.readers import write_frames
+
+    if not isinstance(scans, PointCloudSequence):
+        raise InputError(f"scans must be a PointCloudSequence, got {type(scans).__name__}")
+    _truth_arrays(truth)  # validates the type before anything is written
+    outdir = Path(outdir)
+    with atomic_dir(outdir) as tmp:
+        write_frames(scans, tmp)
+        save_truth(truth, tmp / TRUTH_FILE)
+        if info is not None:
+            (tmp / INFO_FILE).write_text(json.dumps(_jsonable(info), indent=1) + "\n")
+    logger.info("wrote %d scanned frames and the truth to %s", len(scans), outdir)
+    return outdir
+
+
+def synthesize(
+    name: str,
+    outdir: str | os.PathLike,
+    *,
+    frames: int | None = None,
+    seed: int = 0,
+    scene_options: dict | None = None,
+    **scan_options,
+):
+    """Build scene ``name``, scan it and write both to ``outdir`` (``fourd synth``).
+
+    ``scan_options`` are :class:`~fourd.synth.scanner.ScanOptions` fields (``cameras``,
+    ``noise``, ``outliers`` ...); the scan uses ``seed`` unless ``scan_options`` gives one.
+
+    Returns
+    -------
+    (truth, scans) : (AnimatedMesh or MeshSequence, PointCloudSequence)
+    """
+    from fourd.synth.scanner import scan_options as make_scan_options
+    from fourd.synth.scenes import scene
+
+    truth = scene(name, frames=frames, seed=seed, **(scene_options or {}))
+    scan_options.setdefault("seed", seed)
+    options = make_scan_options(None, **scan_options)
+    from fourd.synth.scanner import scan
+
+    scans = scan(truth, options)
+    info = {
+        "scene": name,
+        "frames": truth.frame_count,
+        "seed": seed,
+        "scene_options": scene_options or {},
+        "scan": options,
+        "diagonal": truth.diagonal(),
+        "kind": "meshes" if isinstance(truth, MeshSequence) else "animated",
+    }
+    write_synth(truth, scans, outdir, info=info)
+    return truth, scans
