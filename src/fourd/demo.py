@@ -63,7 +63,9 @@ def run_demo(
 
     with atomic_path(paths["metrics"]) as tmp:
         tmp.write_text(json.dumps(metrics, indent=2, default=_plain))
-    paths["picture"] = contact_sheet(result, outdir / "frames.png", truth=truth if isinstance(result, AnimatedMesh) else None)
+    paths["contact sheet"] = contact_sheet(
+        result, outdir / "contact-sheet.png", truth=truth if isinstance(result, AnimatedMesh) else None, input=scans
+    )
     paths["viewer"] = write_viewer(result, outdir / "view", truth=truth, scans=scans, metrics=metrics)
     log.info("demo finished in %.1f s (reconstruction %.2f s/frame)", time.perf_counter() - started,
              seconds / len(scans))
