@@ -77,3 +77,13 @@ def test_mesh_sequence_validation():
     assert seq.frame_count == 2 and seq.diagonal() > 0
     with pytest.raises(InputError, match="mesh 1 faces"):
         MeshSequence(((v, f), (v, np.array([[0, 1, 3]]))))
+
+
+def test_fourd_evaluate_stays_a_function_after_the_metrics_module_is_imported():
+    import importlib
+
+    import fourd
+
+    importlib.import_module("fourd.evaluate.metrics")
+    importlib.import_module("fourd.evaluate.bench")
+    assert callable(fourd.evaluate) and fourd.evaluate.__module__ == "fourd"

@@ -41,3 +41,24 @@ def test_spacing_and_knn_scale_with_the_data():
     distances, indices = knn(points, 5)
     assert distances.shape == (2000, 5) and np.all(indices != np.arange(2000)[:, None])
     assert np.all(np.diff(distances, axis=1) >= 0)
+
+
+def test_scanned_crane_normals_agree_with_the_truth():
+    import pytest
+    import trimesh
+    from scipy.spatial import cKDTree
+
+    from fourd.synth import scene
+    from fourd.synth.data import shared_data_dir
+    from fourd.synth.scanner import SURFACE, camera_rig, scan_frame
+
+    if shared_data_dir() is None:
+        pytest.skip("../shared/data is not available")
+    truth = scene("crane", frames=6)
+    scan = scan_frame(truth, 5)
+    points = scan.points[scan.label == SURFACE]
+    mesh = trimesh.Trimesh(truth.vertices[5], truth.faces, process=False)
+    true_normals = mesh.vertex_normals[cKDTree(mesh.vertices).query(points)[1]]
+    sensors = camera_rig(truth.bounds(), 3).positions
+    normals = estimate_normals(points, sensors=sensors).normals
+    assert np.mean(np.einsum("ij,ij->i", normals, true_normals) > 0) > 0.99
