@@ -1,0 +1,76 @@
+"""The benchmark runner: the quick path end to end, failures recorded, the report format."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from fourd.errors import InputError
+from fourd.evaluate import bench
+from fourd.methods import available_methods
+
+
+@pytest.mark.slow
+@pytest.mark.skipif("perframe" not in available_methods(), reason="the perframe method is not there yet")
+def test_quick_bench_writes_markdown_json_and_plots(tmp_path):
+    output = tmp_path / "BENCHMARKS.md"
+    report = bench.run_bench(quick=True, scenes=["squash-ball"], output=output)
+    text = output.read_text()
+    assert "## squash-ball" in text and "| floor (truth vs itself) |" in text and "| perframe |" in text
+    assert "cores" in text and "commit" in text
+    data = json.loads(output.with_suffix(".json").read_text())
+    row = data["scenes"]["squash-ball"]["rows"]["perframe"]
+    floor = data["scenes"]["squash-ball"]["floor"]
+    assert "error" not in row, row.get("error")
+    metrics = row["metrics"]
+    # A reconstruction from noisy partial scans cannot beat the truth scored against itself.
+    assert metrics["chamfer"] >= 0.95 * floor["chamfer"]
+    assert metrics["chamfer"] < 0.05  # and the quick path produces a sensible surface
+    assert metrics["timing"]["seconds_per_frame"] > 0 and metrics["timing"]["peak_memory_mb"] > 10
+    plot = tmp_path / "plots" / "squash-ball.png"
+    assert plot.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert report["paths"]["plots"] == [str(plot)]
+
+
+@pytest.mark.slow
+def test_a_failing_method_is_recorded_and_the_run_goes_on(tmp_path, monkeypatch):
+    calls = []
+
+    def broken(kind, name, scans, log_level):
+        calls.append(name)
+        raise RuntimeError("no surface today")
+
+    monkeypatch.setattr(bench, "_reconstruct", broken)
+    output = tmp_path / "quick.md"
+    report = bench.run_bench(quick=True, methods=["perframe"], output=output, isolate=False)
+    assert calls == ["perframe", "perframe"]  # both quick scenes were attempted
+    for entry in report["scenes"].values():
+        assert entry["rows"]["perframe"]["error"] == "RuntimeError: no surface today"
+        assert entry["floor"]["chamfer"] > 0
+    text = output.read_text()
+    assert text.count("failed: RuntimeError: no surface today") == 2
+    assert (tmp_path / "quick.json").exists()
+    assert len(list((tmp_path / "quick-plots").glob("*.png"))) == 2
+
+
+def test_an_unknown_peer_is_an_error_row_not_a_crash():
+    from fourd import synth
+
+    scans = synth.scan(synth.scene("squash-ball", frames=2), resolution=48)
+    case = bench.run_case("baseline", "no_such_peer", scans, isolate=False)
+    assert "AttributeError" in case["error"]
+
+
+def test_bad_selections_are_input_errors(tmp_path):
+    with pytest.raises(InputError, match="scene"):
+        bench.run_bench(scenes=["no-such-scene"], output=tmp_path / "b.md")
+    with pytest.raises(InputError, match="method"):
+        bench.run_bench(methods=["no-such-method"], output=tmp_path / "b.md")
+    with pytest.raises(InputError, match="repeats"):
+        bench.run_bench(repeats=0, output=tmp_path / "b.md")
+
+
+def test_machine_info_names_the_machine():
+    info = bench.machine_info()
+    assert info["cores"] >= 1 and info["cpu"] and info["date"].endswith("UTC")
