@@ -30,6 +30,8 @@ from dataclasses import asdict, dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
 
+import numpy as np
+
 from fourd.errors import InputError
 from fourd.evaluate.metrics import evaluate, metric_floor
 from fourd.io.atomic import atomic_path
@@ -100,6 +102,10 @@ COLUMNS = (
 
 # --------------------------------------------------------------------------------------------
 # one case in a child process
+
+
+#: Frames shown in each bench contact sheet (evenly spaced, first and last included).
+SHEET_FRAMES = 4
 
 
 def _reconstruct(kind: str, name: str, scans, log_level: int):
@@ -336,7 +342,8 @@ def run_bench(
     bar = progress(total=len(cases), desc="bench", unit="case")
     for bench_scene in chosen_scenes:
         entry = _run_scene(bench_scene, chosen_methods, peers, samples=samples, seed=seed,
-                           repeats=repeats, timeout=timeout, isolate=isolate, bar=bar)
+                           repeats=repeats, timeout=timeout, isolate=isolate, bar=bar,
+                           sheets=_plots_dir(output))
         report["scenes"][bench_scene.name] = entry
     bar.close()
     report["wall_seconds"] = time.perf_counter() - started
@@ -344,7 +351,8 @@ def run_bench(
     return report
 
 
-def _run_scene(bench_scene: BenchScene, methods, peers, *, samples, seed, repeats, timeout, isolate, bar) -> dict:
+def _run_scene(bench_scene: BenchScene, methods, peers, *, samples, seed, repeats, timeout, isolate, bar,
+               sheets: Path | None = None) -> dict:
     from fourd import synth
 
     entry = {"settings": asdict(bench_scene), "rows": {}}
@@ -376,8 +384,26 @@ def _run_scene(bench_scene: BenchScene, methods, peers, *, samples, seed, repeat
                 entry["rows"][label] = {"metrics": metrics}
             except Exception as error:  # noqa: BLE001
                 entry["rows"][label] = {"error": f"evaluation failed: {type(error).__name__}: {error}"}
+            if sheets is not None:
+                entry["rows"][label]["sheet"] = _contact_sheet(case["result"], truth, sheets, bench_scene.name, label)
         bar.update(1)
     return entry
+
+
+def _contact_sheet(result, truth, folder: Path, scene: str, label: str) -> str | None:
+    """The (scene, method) contact sheet with the first-frame checker; its path, or None."""
+    from fourd.viz.render import bench_sheet
+
+    folder.mkdir(parents=True, exist_ok=True)
+    path = folder / f"{scene}-{label}.png"
+    try:
+        count = len(result.meshes) if hasattr(result, "meshes") else result.frame_count
+        frames = sorted({int(round(i)) for i in np.linspace(0, count - 1, SHEET_FRAMES)})
+        bench_sheet(result, truth, path, title=f"{scene} / {label}", frames=frames)
+    except Exception as error:  # noqa: BLE001 - a picture must not cost the numbers
+        log.warning("bench: no contact sheet for %s on %s: %s", label, scene, error)
+        return None
+    return str(path)
 
 
 # --------------------------------------------------------------------------------------------
@@ -469,6 +495,11 @@ def format_markdown(report: dict, plots: dict[str, Path] | None = None, base: Pa
         if plots and name in plots:
             relative = os.path.relpath(plots[name], base) if base else plots[name]
             lines += ["", f"![{name}: accuracy, completeness and correspondence error per frame]({relative})"]
+        for label, row in entry["rows"].items():
+            if row.get("sheet"):
+                relative = os.path.relpath(row["sheet"], base) if base else row["sheet"]
+                lines += ["", f"{label}, checker painted on the first frame (drift swims, filled-in regions blue):",
+                          "", f"![{name} / {label}]({relative})"]
     return "\n".join(lines) + "\n"
 
 
