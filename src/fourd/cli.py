@@ -150,10 +150,14 @@ def _json_default(value):
 
 
 def cmd_bench(args) -> int:
-    from fourd.evaluate.bench import run_bench
+    from fourd.evaluate.bench import merge_reports, run_bench
 
+    if args.merge:
+        merge_reports(args.merge, args.output)
+        log.info("wrote %s", args.output)
+        return 0
     run_bench(methods=args.methods, scenes=args.scenes, quick=args.quick, repeats=args.repeats,
-              output=args.output, baselines=args.baselines, seed=args.seed)
+              output=args.output, baselines=args.baselines, seed=args.seed, timeout=args.timeout)
     log.info("wrote %s", args.output)
     return 0
 
@@ -237,6 +241,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--baselines", action="store_true",
                    help="add the peers of BASELINES.md (needs the `baselines` extra: open3d)")
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--timeout", type=float, default=None, help="seconds one reconstruction may take")
+    p.add_argument("--merge", nargs="+", metavar="JSON",
+                   help="merge the .json reports of separate runs into OUTPUT instead of running")
 
     p = add("demo", "synthesize, reconstruct, evaluate and render the embedded default scene", cmd_demo)
     p.add_argument("outdir", nargs="?", default="demo-out")

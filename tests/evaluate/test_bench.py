@@ -74,3 +74,17 @@ def test_bad_selections_are_input_errors(tmp_path):
 def test_machine_info_names_the_machine():
     info = bench.machine_info()
     assert info["cores"] >= 1 and info["cpu"] and info["date"].endswith("UTC")
+
+
+@pytest.mark.slow
+def test_runs_made_side_by_side_merge_into_one_report(tmp_path):
+    from fourd.evaluate.bench import merge_reports, run_bench
+
+    first = run_bench(quick=True, scenes=["squash-ball"], output=tmp_path / "a" / "a.md")
+    second = run_bench(quick=True, scenes=["waving-sheet"], output=tmp_path / "b" / "b.md")
+    merged = merge_reports([first["paths"]["json"], second["paths"]["json"]], tmp_path / "m" / "BENCHMARKS.md")
+    assert list(merged["scenes"]) == ["squash-ball", "waving-sheet"]
+    text = (tmp_path / "m" / "BENCHMARKS.md").read_text()
+    assert "## squash-ball" in text and "## waving-sheet" in text
+    sheets = sorted(p.name for p in (tmp_path / "m" / "plots").glob("*-perframe.png"))
+    assert sheets == ["squash-ball-perframe.png", "waving-sheet-perframe.png"]

@@ -571,3 +571,41 @@ def write_report(report: dict, output: str | os.PathLike) -> dict[str, str]:
     with atomic_path(output) as tmp:
         tmp.write_text(format_markdown(report, plots, output.parent))
     return paths
+
+
+def merge_reports(parts: list[str | os.PathLike], output: str | os.PathLike) -> dict:
+    """Merge the ``.json`` reports of several bench runs (e.g. one per scene, run side by side)
+    into one report at ``output``; contact sheets are copied beside it. Later parts win for a
+    scene present in several. Returns the merged report."""
+    import shutil
+
+    output = Path(output)
+    output.parent.mkdir(parents=True, exist_ok=True)
+    merged = None
+    for part in parts:
+        try:
+            report = json.loads(Path(part).read_text())
+        except (OSError, ValueError) as error:
+            raise InputError(f"cannot read bench report ({error})", part) from None
+        if merged is None:
+            merged = {**report, "scenes": {}, "notes": list(report.get("notes", [])), "wall_seconds": 0.0}
+            merged["settings"] = {**report["settings"], "methods": [], "scenes": []}
+        settings = merged["settings"]
+        settings["methods"] += [m for m in report["settings"]["methods"] if m not in settings["methods"]]
+        settings["scenes"] += report["settings"]["scenes"]
+        merged["notes"] += [n for n in report.get("notes", []) if n not in merged["notes"]]
+        merged["wall_seconds"] += report.get("wall_seconds", 0.0)
+        for name, entry in report["scenes"].items():
+            for row in entry.get("rows", {}).values():
+                if row.get("sheet") and Path(row["sheet"]).exists():
+                    target = _plots_dir(output) / Path(row["sheet"]).name
+                    target.parent.mkdir(parents=True, exist_ok=True)
+                    if Path(row["sheet"]).resolve() != target.resolve():
+                        shutil.copyfile(row["sheet"], target)
+                    row["sheet"] = str(target)
+            merged["scenes"][name] = entry
+    if merged is None:
+        raise InputError("no bench reports to merge")
+    merged["notes"].append(f"Merged from {len(parts)} runs made side by side; total wall time is their sum.")
+    merged["paths"] = write_report(merged, output)
+    return merged
