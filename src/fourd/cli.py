@@ -81,11 +81,9 @@ def _configure_logging(quiet: bool, verbose: bool = False) -> None:
 
 def cmd_reconstruct(args) -> int:
     from fourd.io.readers import load_sequence
-    from fourd.io.writers import save
+    from fourd.io.writers import check_output, save
     from fourd.methods import DEFAULT_METHOD, method_options, reconstruct
     from fourd.options import parse_assignments
-
-    from fourd.io.writers import check_output
 
     check_output(args.output)
     output = Path(args.output)

@@ -263,3 +263,14 @@ def load_result(path: str | os.PathLike) -> AnimatedMesh | MeshSequence:
     if path.suffix.lower() == ".npz":
         return _load_npz(path)
     raise InputError("can read back results in .npz or a folder of .obj/.ply meshes", path)
+
+
+def as_result(result) -> AnimatedMesh | MeshSequence:
+    """``result`` itself when it is an AnimatedMesh or MeshSequence, else read it from a path."""
+    if isinstance(result, (AnimatedMesh, MeshSequence)):
+        return result
+    if isinstance(result, (str, os.PathLike)):
+        return load_result(result)
+    raise InputError(
+        f"expected an AnimatedMesh, MeshSequence or a result file, got {type(result).__name__}"
+    )

@@ -27,7 +27,7 @@ import numpy as np
 
 from fourd.animation import AnimatedMesh, MeshSequence
 from fourd.errors import InputError
-from fourd.io.atomic import atomic_dir, atomic_path
+from fourd.io.atomic import atomic_dir
 from fourd.sequence import PointCloudSequence
 
 logger = logging.getLogger("fourd.synth.write")
@@ -36,41 +36,11 @@ TRUTH_FILE = "truth.npz"
 INFO_FILE = "truth.json"
 
 
-def _truth_arrays(truth) -> dict[str, np.ndarray]:
-    """The ``.npz`` keys of a result (the layout of ``fourd.save``)."""
-    if isinstance(truth, AnimatedMesh):
-        arrays = {
-            "vertices": truth.vertices.astype(np.float32),
-            "faces": truth.faces.astype(np.int32),
-            "times": truth.times,
-            "observed": truth.observed,
-        }
-        if truth.rest is not None:
-            arrays["rest"] = truth.rest.astype(np.float32)
-        return arrays
-    if isinstance(truth, MeshSequence):
-        arrays = {"kind": np.array("meshes"), "times": truth.times}
-        for t, (vertices, faces) in enumerate(truth.meshes):
-            arrays[f"vertices_{t}"] = vertices.astype(np.float32)
-            arrays[f"faces_{t}"] = faces.astype(np.int32)
-        return arrays
-    raise InputError(
-        f"the truth must be an AnimatedMesh or a MeshSequence, got {type(truth).__name__}"
-    )
-
-
 def save_truth(truth, path: str | os.PathLike) -> None:
-    """Write a ground truth as ``.npz`` (through ``fourd.io.writers.save`` when available)."""
-    try:
-        from fourd.io.writers import save
-    except ImportError:
-        save = None
-    if save is not None:
-        save(truth, path)
-        return
-    arrays = _truth_arrays(truth)
-    with atomic_path(path) as tmp, open(tmp, "wb") as stream:
-        np.savez_compressed(stream, **arrays)
+    """Write a ground truth as ``.npz`` (the layout of :func:`fourd.save`)."""
+    from fourd.io.writers import save
+
+    save(truth, path)
 
 
 def _jsonable(value):
@@ -111,7 +81,10 @@ def write_synth(
 
     if not isinstance(scans, PointCloudSequence):
         raise InputError(f"scans must be a PointCloudSequence, got {type(scans).__name__}")
-    _truth_arrays(truth)  # validates the type before anything is written
+    if not isinstance(truth, (AnimatedMesh, MeshSequence)):
+        raise InputError(
+            f"the truth must be an AnimatedMesh or a MeshSequence, got {type(truth).__name__}"
+        )
     outdir = Path(outdir)
     with atomic_dir(outdir) as tmp:
         write_frames(scans, tmp)

@@ -31,9 +31,10 @@ from pathlib import Path
 import numpy as np
 from numba import njit
 
-from fourd.animation import AnimatedMesh, MeshSequence
+from fourd.animation import AnimatedMesh
 from fourd.errors import InputError
 from fourd.io.atomic import atomic_path
+from fourd.io.writers import as_result
 from fourd.viz import texture as tex
 
 log = logging.getLogger("fourd.viz.render")
@@ -523,18 +524,6 @@ def render_points(
 # --------------------------------------------------------------------------- sequences
 
 
-def _as_result(result):
-    if isinstance(result, (AnimatedMesh, MeshSequence)):
-        return result
-    if isinstance(result, (str, os.PathLike)):
-        from fourd import load_result
-
-        return load_result(result)
-    raise InputError(
-        f"expected an AnimatedMesh, MeshSequence or a result file, got {type(result).__name__}"
-    )
-
-
 def _sequence_bounds(result, truth=None, input=None) -> np.ndarray:
     boxes = [result.bounds()]
     if truth is not None:
@@ -773,7 +762,7 @@ def contact_sheet(
     Path
         ``path``.
     """
-    result = _as_result(result)
+    result = as_result(result)
     if columns < 1:
         raise InputError(f"columns must be at least 1, got {columns}")
     picked = pick_frames(result.frame_count, frames)
@@ -795,7 +784,7 @@ def bench_sheet(result, truth, path, *, title: str | None = None, frames=None) -
 
     ``truth`` is accepted for a future error row and to fit the camera to both; it may be None.
     """
-    result = _as_result(result)
+    result = as_result(result)
     camera = fit_camera(_sequence_bounds(result, truth))
     return contact_sheet(
         result,
@@ -827,7 +816,7 @@ def turntable(
 
     A ``.gif`` path writes an animation; any other image extension a grid of the views.
     """
-    result = _as_result(result)
+    result = as_result(result)
     if views < 1:
         raise InputError(f"views must be at least 1, got {views}")
     (frame,) = pick_frames(result.frame_count, [frame])
@@ -878,7 +867,7 @@ def animation(
 ) -> Path:
     """The whole sequence (or ``frames``) as an animated ``.gif`` (Pillow) or ``.mp4``
     (needs the ``imageio-ffmpeg`` package; an InputError says so when it is missing)."""
-    result = _as_result(result)
+    result = as_result(result)
     path = Path(path)
     suffix = path.suffix.lower()
     if suffix not in (".gif", ".mp4"):

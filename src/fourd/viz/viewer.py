@@ -26,9 +26,10 @@ from pathlib import Path
 
 import numpy as np
 
-from fourd.animation import AnimatedMesh, MeshSequence
+from fourd.animation import AnimatedMesh
 from fourd.errors import InputError
 from fourd.io.atomic import atomic_path
+from fourd.io.writers import as_result
 from fourd.viz import texture as tex
 
 log = logging.getLogger("fourd.viz.viewer")
@@ -50,18 +51,6 @@ def _static(name: str) -> str:
 
 def _b64(array, dtype) -> str:
     return base64.b64encode(np.ascontiguousarray(array, dtype=dtype).tobytes()).decode("ascii")
-
-
-def _load_result(result):
-    if isinstance(result, (AnimatedMesh, MeshSequence)):
-        return result
-    if isinstance(result, (str, os.PathLike)):
-        from fourd import load_result
-
-        return load_result(result)
-    raise InputError(
-        f"expected an AnimatedMesh, MeshSequence or a result file, got {type(result).__name__}"
-    )
 
 
 def _load_scans(scans):
@@ -138,7 +127,7 @@ def viewer_data(
 ) -> dict:
     """The page's data (``window.FOURD_DATA``) as a JSON-ready dict; arrays are base64 of
     little-endian float32 / uint32 / uint8."""
-    result = _load_result(result)
+    result = as_result(result)
     animated = isinstance(result, AnimatedMesh)
     frames0 = result.frame(0)[0]
     box = np.stack([frames0.min(axis=0), frames0.max(axis=0)]) if len(frames0) else result.bounds()
@@ -179,7 +168,7 @@ def viewer_data(
             {"positions": _b64(v, "<f4"), "faces": _b64(f, "<u4")} for v, f in result.meshes
         ]
     if truth is not None:
-        truth = _load_result(truth)
+        truth = as_result(truth)
         errors = tex.vertex_errors(result, truth)
         data["errorScale"] = tex.error_scale(errors)
         data["hasErrors"] = True
@@ -278,7 +267,7 @@ def write_viewer(
     Path
         ``outdir/index.html``.
     """
-    result = _load_result(result)
+    result = as_result(result)
     outdir = Path(outdir)
     if outdir.exists() and not outdir.is_dir():
         raise InputError("exists and is not a folder", outdir)
