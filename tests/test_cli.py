@@ -160,3 +160,28 @@ def test_every_subcommand_has_help(capsys):
             main([command, "--help"])
         assert exit_info.value.code == 0
         assert "usage: fourd " + command in capsys.readouterr().out
+
+
+def test_an_interrupted_run_resumes_from_its_cache(tmp_path, monkeypatch):
+    from fourd.methods import perframe
+
+    folder = _folder(tmp_path, frames=3)
+    cache = tmp_path / "cache"
+    calls = []
+    original = perframe.reconstruct_frame
+
+    def fail_on_third(frame, options):
+        calls.append(frame.time)
+        if len(calls) == 3:
+            raise KeyboardInterrupt
+        return original(frame, options)
+
+    monkeypatch.setattr(perframe, "reconstruct_frame", fail_on_third)
+    out = tmp_path / "o.npz"
+    argv = ["reconstruct", str(folder), "-o", str(out), "--method", "perframe", "--cache", str(cache), "--quiet"]
+    assert main(argv) == 130
+    assert not out.exists() and len(list(cache.glob("perframe-*.npz"))) == 2
+    calls.clear()
+    monkeypatch.setattr(perframe, "reconstruct_frame", lambda frame, options: (calls.append(frame.time), original(frame, options))[1])
+    assert main(argv) == 0
+    assert calls == [2.0] and out.exists()

@@ -98,6 +98,14 @@ def cmd_reconstruct(args) -> int:
         if "times" not in {f.name for f in dataclasses.fields(method_module(method).Options)}:
             raise InputError(f"--times: method {method!r} writes one frame per input frame only")
         values["times"] = args.times
+    if args.cache:
+        import dataclasses
+
+        from fourd.methods import method_module
+
+        if "cache_dir" not in {f.name for f in dataclasses.fields(method_module(method).Options)}:
+            raise InputError(f"--cache: method {method!r} cannot resume from a cache yet")
+        values["cache_dir"] = args.cache
     options = method_options(method, values)
     seq = load_sequence(args.input)
     seq = seq[_frames_slice(args.frames)]
@@ -214,6 +222,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--set", action="append", metavar="KEY=VALUE", help="set a method option")
     p.add_argument("--frames", metavar="A:B:S", help="use input frames A:B:S (Python slice)")
     p.add_argument("--times", help="output times, comma separated (methods that support it)")
+    p.add_argument("--cache", metavar="DIR",
+                   help="keep finished stages in DIR; rerunning the same command resumes from them")
 
     p = add("synth", "synthesize a ground-truth scene and scan it with virtual depth cameras", cmd_synth)
     p.add_argument("scene")

@@ -31,6 +31,7 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from fourd.animation import MeshSequence
+from fourd.cache import StageCache, stage_key
 from fourd.geometry.grid import fit_grid
 from fourd.geometry.implicit import imls_grid
 from fourd.geometry.marching import compact, marching_cubes
@@ -97,6 +98,9 @@ class Options:
         Override the measured point spacing (input units).
     seed : int
         Seed of the point subsample used to measure the spacing.
+    cache_dir : str or None
+        Folder where each finished frame is kept (keyed by the frame's data and these
+        options); a rerun after an interruption reuses them (``fourd reconstruct --cache``).
     """
 
     outlier_k: int = 16
@@ -116,6 +120,7 @@ class Options:
     smoothing_iterations: int = 0
     spacing: float | None = None
     seed: int = 0
+    cache_dir: str | None = None
 
     def __post_init__(self):
         for name in ("outlier_k", "normal_k"):
@@ -388,8 +393,15 @@ def reconstruct(seq: PointCloudSequence, options: Options | None = None) -> Mesh
     """Mesh every frame of ``seq`` independently; one mesh per input frame, same times."""
     options = Options() if options is None else options
     log.info("per-frame meshing of %d frames", len(seq.frames))
-    meshes = [
-        reconstruct_frame(frame, options)
-        for frame in progress(seq.frames, desc="perframe", total=len(seq.frames))
-    ]
+    cache = StageCache(options.cache_dir)
+    meshes = []
+    for frame in progress(seq.frames, desc="perframe", total=len(seq.frames)):
+        key = stage_key(frame.points, frame.normals, frame.sensors, options)
+        stored = cache.load("perframe", key)
+        if stored is None:
+            vertices, faces = reconstruct_frame(frame, options)
+            cache.save("perframe", key, {"vertices": vertices, "faces": faces})
+        else:
+            vertices, faces = stored["vertices"], stored["faces"]
+        meshes.append((vertices, faces))
     return MeshSequence(tuple(meshes), seq.times)
