@@ -575,8 +575,9 @@ def write_report(report: dict, output: str | os.PathLike) -> dict[str, str]:
 
 def merge_reports(parts: list[str | os.PathLike], output: str | os.PathLike) -> dict:
     """Merge the ``.json`` reports of several bench runs (e.g. one per scene, run side by side)
-    into one report at ``output``; contact sheets are copied beside it. Later parts win for a
-    scene present in several. Returns the merged report."""
+    into one report at ``output``; contact sheets are copied beside it. Rows of a scene that
+    several parts ran (e.g. one method each) are combined; for the same method the later part
+    wins. Returns the merged report."""
     import shutil
 
     output = Path(output)
@@ -592,7 +593,7 @@ def merge_reports(parts: list[str | os.PathLike], output: str | os.PathLike) -> 
             merged["settings"] = {**report["settings"], "methods": [], "scenes": []}
         settings = merged["settings"]
         settings["methods"] += [m for m in report["settings"]["methods"] if m not in settings["methods"]]
-        settings["scenes"] += report["settings"]["scenes"]
+        settings["scenes"] += [x for x in report["settings"]["scenes"] if x not in settings["scenes"]]
         merged["notes"] += [n for n in report.get("notes", []) if n not in merged["notes"]]
         merged["wall_seconds"] += report.get("wall_seconds", 0.0)
         for name, entry in report["scenes"].items():
@@ -603,7 +604,10 @@ def merge_reports(parts: list[str | os.PathLike], output: str | os.PathLike) -> 
                     if Path(row["sheet"]).resolve() != target.resolve():
                         shutil.copyfile(row["sheet"], target)
                     row["sheet"] = str(target)
-            merged["scenes"][name] = entry
+            if name in merged["scenes"] and "rows" in merged["scenes"][name] and "rows" in entry:
+                merged["scenes"][name]["rows"].update(entry["rows"])
+            else:
+                merged["scenes"][name] = entry
     if merged is None:
         raise InputError("no bench reports to merge")
     merged["notes"].append(f"Merged from {len(parts)} runs made side by side; total wall time is their sum.")
