@@ -1,0 +1,176 @@
+"""The space-time point cloud (000_00387fefe94cc850.txt section 2) and the 4D MPU wrapped as a
+:class:`fourd.geometry.field.Field4D` in real time units, optionally over sliding windows of
+frames (bounded memory on long sequences)."""
+
+from __future__ import annotations
+
+import logging
+from collections import OrderedDict
+from collections.abc import Callable, Sequence
+from typing import NamedTuple
+
+import numpy as np
+
+from fourd.methods.kinematic.mpu4d import MPU4D, MPUOptions, fit_mpu4d
+
+log = logging.getLogger("fourd.methods.kinematic.field")
+
+
+class SpaceTimePoints(NamedTuple):
+    """Oriented 4D points ``(x, y, z, delta * (t - t0) / dt)`` with normals ``(n, 0)``."""
+
+    points: np.ndarray  # [P, 4]
+    normals: np.ndarray  # [P, 4]
+    frame: np.ndarray  # [P] frame index of every point
+
+
+def space_time_points(
+    points: Sequence[np.ndarray],
+    normals: Sequence[np.ndarray],
+    times: np.ndarray,
+    *,
+    delta: float,
+    time_origin: float,
+    time_unit: float,
+) -> SpaceTimePoints:
+    """Stack per-frame points into the paper's 4D point cloud.
+
+    ``w = delta * (t - time_origin) / time_unit``: with ``time_unit`` the typical frame step,
+    consecutive frames are ``delta`` apart in ``w`` as in the paper (``w = delta * frame
+    index``), and arbitrary time stamps keep their spacing.
+    """
+    w = delta * (np.asarray(times, dtype=np.float64) - time_origin) / time_unit
+    xyz = np.concatenate([np.asarray(p, float).reshape(-1, 3) for p in points])
+    nrm = np.concatenate([np.asarray(n, float).reshape(-1, 3) for n in normals])
+    counts = [len(p) for p in points]
+    frame = np.repeat(np.arange(len(points)), counts)
+    X = np.c_[xyz, w[frame]]
+    N = np.c_[nrm, np.zeros(len(nrm))]
+    return SpaceTimePoints(X, N, frame)
+
+
+class Segment(NamedTuple):
+    """One fitted window: valid for times in ``[start, stop]``."""
+
+    start: float
+    stop: float
+    mpu: MPU4D
+
+
+class SpaceTimeField:
+    """A :class:`~fourd.geometry.field.Field4D` over one or several 4D MPU fits.
+
+    Parameters
+    ----------
+    windows : list of (start, stop)
+        Time intervals covered by each fit (consecutive, touching).
+    build : callable(index) -> MPU4D
+        Fits window ``index`` (called lazily; at most ``cache`` fits are kept in memory).
+    time_origin, time_scale : float
+        ``w = time_scale * (t - time_origin)``.
+    """
+
+    def __init__(
+        self,
+        windows: Sequence[tuple[float, float]],
+        build: Callable[[int], MPU4D],
+        *,
+        time_origin: float,
+        time_scale: float,
+        cache: int = 2,
+    ):
+        self.windows = [(float(a), float(b)) for a, b in windows]
+        self._build = build
+        self._cache: OrderedDict[int, MPU4D] = OrderedDict()
+        self._cache_size = max(1, cache)
+        self.time_origin = float(time_origin)
+        self.time_scale = float(time_scale)
+        self.fits = 0
+
+    @classmethod
+    def single(cls, mpu: MPU4D, *, time_origin: float, time_scale: float) -> SpaceTimeField:
+        return cls(
+            [(-np.inf, np.inf)], lambda index: mpu, time_origin=time_origin, time_scale=time_scale
+        )
+
+    def mpu(self, index: int) -> MPU4D:
+        if index in self._cache:
+            self._cache.move_to_end(index)
+            return self._cache[index]
+        fitted = self._build(index)
+        self.fits += 1
+        self._cache[index] = fitted
+        while len(self._cache) > self._cache_size:
+            self._cache.popitem(last=False)
+        return fitted
+
+    def _window_of(self, times: np.ndarray) -> np.ndarray:
+        stops = np.array([b for _, b in self.windows])
+        return np.minimum(np.searchsorted(stops, times, side="left"), len(self.windows) - 1)
+
+    def _evaluate(self, points, times, gradient: bool):
+        points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+        times = np.broadcast_to(np.asarray(times, dtype=np.float64), (len(points),))
+        q = np.c_[points, self.time_scale * (times - self.time_origin)]
+        values = np.empty(len(points))
+        grads = np.empty((len(points), 4)) if gradient else None
+        which = self._window_of(times)
+        for index in np.unique(which):
+            sel = which == index
+            v, g = self.mpu(int(index)).evaluate(q[sel], gradient=gradient)
+            values[sel] = v
+            if gradient:
+                grads[sel] = g
+        if gradient:
+            grads[:, 3] *= self.time_scale
+        return values, grads
+
+    def value(self, points: np.ndarray, times) -> np.ndarray:
+        """``f`` at ``points`` [M, 3] and ``times`` (scalar or [M]); negative inside."""
+        return self._evaluate(points, times, False)[0]
+
+    def value_and_gradient(self, points: np.ndarray, times) -> tuple[np.ndarray, np.ndarray]:
+        """Both in one tree traversal."""
+        return self._evaluate(points, times, True)
+
+    def gradient(self, points: np.ndarray, times) -> np.ndarray:
+        """``(df/dx, df/dy, df/dz, df/dt)`` [M, 4], ``t`` in the sequence's time units."""
+        return self._evaluate(points, times, True)[1]
+
+
+def fit_windows(
+    stp: SpaceTimePoints,
+    times: np.ndarray,
+    *,
+    mpu_options: MPUOptions,
+    window: int,
+    overlap: int,
+    time_origin: float,
+    time_scale: float,
+) -> SpaceTimeField:
+    """A :class:`SpaceTimeField` over all frames (``window = 0``) or over windows of
+    ``window`` frames, each fitted with ``overlap`` extra frames on both sides so that the
+    function is continuous enough across the window boundary."""
+    count = len(times)
+    if window <= 0 or window >= count:
+        mpu = fit_mpu4d(stp.points, stp.normals, options=mpu_options)
+        return SpaceTimeField.single(mpu, time_origin=time_origin, time_scale=time_scale)
+    starts = list(range(0, count, window))
+    windows = []
+    for k, a in enumerate(starts):
+        b = min(a + window, count) - 1
+        lo = times[a] if k > 0 else -np.inf
+        hi = 0.5 * (times[b] + times[b + 1]) if b + 1 < count else np.inf
+        if k > 0:
+            lo = windows[-1][1]
+        windows.append((lo, hi))
+
+    def build(index: int) -> MPU4D:
+        a = starts[index]
+        b = min(a + window, count) - 1
+        lo, hi = max(0, a - overlap), min(count - 1, b + overlap)
+        sel = (stp.frame >= lo) & (stp.frame <= hi)
+        log.debug("fitting window %d: frames %d-%d (%d points)", index, lo, hi, int(sel.sum()))
+        return fit_mpu4d(stp.points[sel], stp.normals[sel], options=mpu_options)
+
+    return SpaceTimeField(windows, build, time_origin=time_origin, time_scale=time_scale)

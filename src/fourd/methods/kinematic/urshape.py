@@ -1,0 +1,152 @@
+"""The urshape: the template mesh extracted from a space-time implicit at one time.
+
+000_00387fefe94cc850.txt section 4: sample ``f`` at the first time on a regular grid, run
+marching cubes only in cells that have an input point inside their circumsphere (so open
+scans stay open), smooth the result with a few Laplacian steps and project it back onto
+``f = 0`` (the projection of section 5.1).
+"""
+
+from __future__ import annotations
+
+import itertools
+import logging
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import connected_components
+
+from fourd.geometry.field import Field4D
+from fourd.geometry.laplacian import laplacian_smooth
+from fourd.geometry.marching import compact, marching_cubes
+
+log = logging.getLogger("fourd.methods.kinematic.urshape")
+
+
+def data_cell_mask(points: np.ndarray, origin: np.ndarray, cell_size: float, shape) -> np.ndarray:
+    """Cells (``shape`` = cells per axis) with at least one of ``points`` inside their
+    circumsphere (radius ``sqrt(3)/2 * cell_size`` around the cell centre)."""
+    shape = np.asarray(shape, dtype=np.int64)
+    mask = np.zeros(tuple(shape), dtype=bool)
+    points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    if len(points) == 0:
+        return mask
+    local = (points - origin) / cell_size
+    base = np.floor(local).astype(np.int64)
+    radius2 = 0.75  # (sqrt(3)/2)^2 in cell units
+    for offset in itertools.product((-1, 0, 1), repeat=3):
+        cell = base + np.array(offset)
+        centre = cell + 0.5
+        d2 = np.einsum("ij,ij->i", local - centre, local - centre)
+        ok = (d2 <= radius2) & np.all(cell >= 0, axis=1) & np.all(cell < shape, axis=1)
+        c = cell[ok]
+        mask[c[:, 0], c[:, 1], c[:, 2]] = True
+    return mask
+
+
+def remove_small_components(vertices, faces, min_faces: int):
+    """Drop connected components with fewer than ``min_faces`` triangles."""
+    if min_faces <= 1 or len(faces) == 0:
+        return vertices, faces
+    n = len(vertices)
+    i = faces.ravel()
+    j = np.roll(faces, 1, axis=1).ravel()
+    graph = sp.csr_matrix((np.ones(len(i)), (i, j)), shape=(n, n))
+    _, labels = connected_components(graph, directed=False)
+    face_label = labels[faces[:, 0]]
+    sizes = np.bincount(face_label)
+    keep = sizes[face_label] >= min_faces
+    if keep.all():
+        return vertices, faces
+    return compact(vertices, faces[keep])
+
+
+def extract_template(
+    field: Field4D,
+    time: float,
+    *,
+    bounds: np.ndarray,
+    cell_size: float,
+    data_points: np.ndarray | None = None,
+    smoothing_iterations: int = 5,
+    projection_iterations: int = 8,
+    min_component_faces: int = 0,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Urshape extraction (000_00387fefe94cc850.txt section 4).
+
+    Parameters
+    ----------
+    field : Field4D
+        Space-time implicit, negative inside.
+    time : float
+        Time at which to extract.
+    bounds : ndarray [2, 3]
+        Box to sample (padded by two cells on every side).
+    cell_size : float
+        Marching-cubes cell edge length, input units.
+    data_points : ndarray [P, 3], optional
+        Input points at ``time``: only cells with one of them inside their circumsphere are
+        polygonised (and ``f`` is only evaluated at the corners of those cells).
+    smoothing_iterations : int
+        Umbrella smoothing steps (step 0.5) before the projection back onto ``f = 0``.
+    projection_iterations : int
+        Newton steps of that projection.
+    min_component_faces : int
+        Connected pieces with fewer triangles are dropped (0: keep all).
+
+    Returns
+    -------
+    vertices : ndarray [N, 3]
+    faces : ndarray int64 [F, 3] (outward wound; empty when ``f`` has no zero crossing)
+    """
+    from fourd.methods.kinematic.sliding import project_to_surface
+
+    bounds = np.asarray(bounds, dtype=np.float64)
+    if bounds.shape != (2, 3) or np.any(bounds[1] < bounds[0]):
+        raise ValueError(f"bounds must be [[min x, y, z], [max x, y, z]], got {bounds.tolist()}")
+    if not (cell_size > 0):
+        raise ValueError(f"cell_size must be positive, got {cell_size}")
+    origin = bounds[0] - 2.0 * cell_size
+    cells = np.ceil((bounds[1] - bounds[0]) / cell_size).astype(np.int64) + 4
+    if np.prod(cells + 1) > 400_000_000:
+        raise ValueError(f"grid of {cells.tolist()} cells is too large; raise cell_size")
+    shape = cells + 1
+    if data_points is not None:
+        mask = data_cell_mask(data_points, origin, cell_size, cells)
+        needed = np.zeros(tuple(shape), dtype=bool)
+        for offset in itertools.product((0, 1), repeat=3):
+            needed[
+                offset[0] : offset[0] + cells[0],
+                offset[1] : offset[1] + cells[1],
+                offset[2] : offset[2] + cells[2],
+            ] |= mask
+        index = np.argwhere(needed)
+    else:
+        mask = None
+        index = np.indices(tuple(shape)).reshape(3, -1).T
+    values = np.full(tuple(shape), np.nan)
+    if len(index):
+        points = origin + cell_size * index
+        f = field.value(points, np.full(len(points), float(time)))
+        values[index[:, 0], index[:, 1], index[:, 2]] = f
+    if not np.isfinite(values).any():
+        return np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64)
+    # unsampled corners are never part of a kept cell; give them the value of "outside"
+    finite = np.isfinite(values)
+    fill = float(np.nanmax(np.abs(values))) + 1.0
+    values = np.where(finite, values, fill)
+    vertices, faces = marching_cubes(values, origin=origin, spacing=cell_size, cell_mask=mask)
+    if len(faces) == 0:
+        return vertices, faces
+    # drop degenerate triangles (marching cubes makes some with repeated corners)
+    good = (
+        (faces[:, 0] != faces[:, 1]) & (faces[:, 1] != faces[:, 2]) & (faces[:, 0] != faces[:, 2])
+    )
+    vertices, faces = compact(vertices, faces[good])
+    vertices, faces = remove_small_components(vertices, faces, min_component_faces)
+    if smoothing_iterations > 0:
+        vertices = laplacian_smooth(vertices, faces, iterations=smoothing_iterations)
+        vertices = project_to_surface(
+            field, vertices, float(time), iterations=projection_iterations, max_step=cell_size
+        )
+    log.debug("urshape: %d vertices, %d faces", len(vertices), len(faces))
+    return vertices, faces

@@ -1,0 +1,42 @@
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from fourd.geometry.rotations import best_rotations, procrustes
+
+
+def test_best_rotations_recovers_known_rotations_batched():
+    rng = np.random.default_rng(0)
+    R = Rotation.random(50, random_state=1).as_matrix()
+    P = rng.normal(size=(50, 12, 3))
+    Q = np.einsum("nab,nkb->nka", R, P)
+    S = np.einsum("nka,nkb->nab", P, Q)  # sum p q^T
+    found = best_rotations(S)
+    assert np.abs(found - R).max() < 1e-9
+
+
+def test_best_rotations_never_reflects():
+    rng = np.random.default_rng(3)
+    S = rng.normal(size=(200, 3, 3))
+    S[:100] *= -1.0  # many with negative determinant
+    R = best_rotations(S)
+    assert np.abs(np.linalg.det(R) - 1.0).max() < 1e-9
+    assert np.abs(np.einsum("nab,nac->nbc", R, R) - np.eye(3)).max() < 1e-9
+    # optimality against the SVD answer
+    U, _, Vt = np.linalg.svd(S)
+    D = np.ones((200, 3))
+    D[:, 2] = np.sign(np.linalg.det(np.einsum("nji,nkj->nik", Vt, U)))
+    reference = np.einsum("nji,nj,nkj->nik", Vt, D, U)
+    assert np.abs(R - reference).max() < 1e-8
+
+
+def test_single_matrix_and_procrustes():
+    R = Rotation.from_rotvec([0.3, -0.2, 0.9]).as_matrix()
+    X = np.random.default_rng(5).normal(size=(30, 3))
+    Y = 1.7 * X @ R.T + np.array([1.0, 2.0, -3.0])
+    fit = procrustes(X, Y, with_scale=True)
+    assert np.abs(fit.rotation - R).max() < 1e-9
+    assert abs(fit.scale - 1.7) < 1e-9 and fit.rms < 1e-9
+    assert best_rotations(np.eye(3)).shape == (3, 3)
+    with pytest.raises(ValueError):
+        procrustes(X[:2], Y[:2])

@@ -1,0 +1,228 @@
+"""Method ``kinematic`` (000_00387fefe94cc850.txt): urshape, sliding, the whole pipeline."""
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from fourd.animation import AnimatedMesh
+from fourd.errors import InputError
+from fourd.methods import kinematic as K
+from fourd.methods import reconstruct
+from fourd.sequence import Frame, PointCloudSequence
+
+
+class MovingBlob:
+    """Analytic Field4D: a bumpy blob moving rigidly, ``x(t) = R(t) x0 + c(t)``."""
+
+    def __init__(self, speed=(0.05, 0.0, 0.0), spin=(0.0, 0.08, 0.03)):
+        self.speed = np.asarray(speed, float)
+        self.spin = np.asarray(spin, float)
+
+    def motion(self, t):
+        return Rotation.from_rotvec(self.spin * t).as_matrix(), self.speed * t
+
+    def shape(self, y):
+        r = np.linalg.norm(y, axis=1)
+        d = y / np.maximum(r, 1e-12)[:, None]
+        return r - (1.0 + 0.15 * np.sin(3 * d[:, 0]) * np.cos(2 * d[:, 1]) + 0.1 * d[:, 2] ** 2)
+
+    def _local(self, points, times):
+        times = np.broadcast_to(np.asarray(times, float), (len(points),))
+        out = np.empty_like(points)
+        for t in np.unique(times):
+            R, c = self.motion(t)
+            sel = times == t
+            out[sel] = (points[sel] - c) @ R
+        return out
+
+    def value(self, points, times):
+        return self.shape(self._local(np.asarray(points, float), times))
+
+    def gradient(self, points, times):
+        points = np.asarray(points, float)
+        times = np.broadcast_to(np.asarray(times, float), (len(points),))
+        h = 1e-6
+        g = np.empty((len(points), 4))
+        for a in range(3):
+            e = np.zeros(3)
+            e[a] = h
+            g[:, a] = (self.value(points + e, times) - self.value(points - e, times)) / (2 * h)
+        g[:, 3] = (self.value(points, times + h) - self.value(points, times - h)) / (2 * h)
+        return g
+
+    def surface(self, count, t, seed):
+        rng = np.random.default_rng(seed)
+        d = rng.normal(size=(count, 3))
+        d /= np.linalg.norm(d, axis=1, keepdims=True)
+        x = d.copy()
+        for _ in range(30):  # radial Newton onto the rest shape
+            x -= (self.shape(x) / 1.0)[:, None] * d
+        R, c = self.motion(t)
+        return x @ R.T + c
+
+
+def _sphere_template(blob, resolution=0.12):
+    lo, hi = np.full(3, -1.4), np.full(3, 1.4)
+    return K.extract_template(blob, 0.0, bounds=np.array([lo, hi]), cell_size=resolution)
+
+
+def test_extract_template_lies_on_the_surface_and_is_closed():
+    blob = MovingBlob()
+    V, F = _sphere_template(blob)
+    assert len(F) > 500
+    assert np.abs(blob.value(V, 0.0)).max() < 1e-3
+    edges = np.sort(np.r_[F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]], axis=1)
+    _, counts = np.unique(edges, axis=0, return_counts=True)
+    assert np.all(counts == 2)  # closed 2-manifold edges
+    # outward orientation: positive enclosed volume
+    volume = np.einsum("ij,ij->i", V[F[:, 0]], np.cross(V[F[:, 1]], V[F[:, 2]])).sum() / 6
+    assert volume > 3.0
+
+
+def test_a_rigidly_moving_shape_is_tracked_with_near_zero_arap_energy():
+    blob = MovingBlob()
+    V, F = _sphere_template(blob)
+    times = np.arange(6, dtype=float)
+    result = K.slide(V, F, blob, times, options=K.SlideOptions(iterations=4), return_steps=True)
+    anim = result.animation
+    pre = K.slide_precompute(V, F)
+    for t in times:
+        R, c = blob.motion(t)
+        expected = V @ R.T + c
+        error = np.linalg.norm(anim.vertices[int(t)] - expected, axis=1)
+        assert error.mean() < 0.01  # the blob's diameter is about 2.2
+        assert K.arap_energy(pre, anim.vertices[int(t)]) < 1e-3
+        assert np.abs(blob.value(anim.vertices[int(t)], t)).max() < 1e-3
+    assert anim.observed.all()
+    assert np.allclose(anim.vertices[0], V) and np.allclose(anim.rest, V)
+
+
+def test_vertices_without_data_are_unconstrained_and_not_observed():
+    blob = MovingBlob()
+    V, F = _sphere_template(blob)
+    data = [blob.surface(3000, t, t) for t in range(3)]
+    data = [d[d[:, 1] < 0.3] for d in data]  # the top is never seen
+    anim = K.slide(V, F, blob, np.arange(3.0), data=data)
+    top = V[:, 1] > 0.6
+    assert not anim.observed[1:, top].any()
+    bottom = V[:, 1] < 0.0
+    assert anim.observed[1:, bottom].mean() > 0.95
+    # unconstrained vertices still move along as rigidly as possible
+    R, c = blob.motion(2.0)
+    assert np.linalg.norm(anim.vertices[2][top] - (V[top] @ R.T + c), axis=1).mean() < 0.05
+
+
+def test_slide_rejects_bad_input():
+    blob = MovingBlob()
+    V, F = _sphere_template(blob, resolution=0.3)
+    with pytest.raises(ValueError):
+        K.slide(V, F, blob, [0.0, 0.0])
+    with pytest.raises(ValueError):
+        K.slide(V, F, blob, [0.0, 1.0], data=[V])
+    with pytest.raises(ValueError):
+        K.SlideOptions(iterations=0)
+
+
+def _blob_sequence(frames=4, count=2500, noise=0.003, seed=0):
+    blob = MovingBlob(speed=(0.04, 0.0, 0.0), spin=(0.0, 0.04, 0.0))
+    rng = np.random.default_rng(seed)
+    out = []
+    for t in range(frames):
+        p = blob.surface(count, t, seed + t) + noise * rng.normal(size=(count, 3))
+        out.append(Frame(points=p, time=float(t)))
+    return blob, PointCloudSequence(out)
+
+
+@pytest.mark.slow
+def test_reconstruct_tracks_a_rigid_scan_at_the_noise_level():
+    blob, seq = _blob_sequence()
+    anim = reconstruct(seq, "kinematic", template_vertices=3000)
+    assert isinstance(anim, AnimatedMesh) and anim.rest is not None
+    assert anim.vertices.shape[0] == len(seq)
+    for t in range(len(seq)):
+        R, c = blob.motion(t)
+        R0, c0 = blob.motion(0)
+        expected = (anim.rest - c0) @ R0 @ R.T + c
+        assert np.linalg.norm(anim.vertices[t] - expected, axis=1).mean() < 0.02
+        assert np.abs(blob.value(anim.vertices[t], t)).mean() < 0.01
+    assert anim.observed.mean() > 0.9
+
+
+@pytest.mark.slow
+def test_output_at_fractional_times_lies_between_the_neighbouring_frames():
+    blob, seq = _blob_sequence(frames=3)
+    anim = reconstruct(seq, "kinematic", template_vertices=2000, times=(0.0, 0.5, 1.0, 1.5, 2.0))
+    assert np.allclose(anim.times, [0, 0.5, 1, 1.5, 2])
+    x = anim.vertices[..., 0].mean(axis=1)  # the blob moves along +x
+    assert x[0] < x[1] < x[2] < x[3] < x[4]
+    assert abs(x[1] - 0.5 * (x[0] + x[2])) < 0.25 * (x[2] - x[0])
+
+
+@pytest.mark.slow
+def test_an_open_sheet_stays_open():
+    rng = np.random.default_rng(7)
+    frames = []
+    for t in range(3):
+        uv = rng.uniform(-1, 1, size=(3000, 2))
+        z = 0.1 * np.sin(2 * uv[:, 0] + 0.3 * t)
+        frames.append(
+            Frame(points=np.c_[uv, z], time=float(t), sensors=np.array([[0.0, 0.0, 5.0]]))
+        )
+    anim = reconstruct(PointCloudSequence(frames), "kinematic", template_vertices=1500)
+    F = anim.faces
+    edges = np.sort(np.r_[F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]], axis=1)
+    _, counts = np.unique(edges, axis=0, return_counts=True)
+    assert np.sum(counts == 1) > 20  # a boundary exists: the sheet was not closed up
+    extent = anim.vertices[-1].max(axis=0) - anim.vertices[-1].min(axis=0)
+    assert extent[2] < 0.5 and extent[0] > 1.5 and extent[1] > 1.5
+
+
+def test_options_are_validated():
+    with pytest.raises(ValueError):
+        K.Options(iterations=0)
+    with pytest.raises(ValueError):
+        K.Options(time_scale=0.0)
+    with pytest.raises(InputError):
+        reconstruct(PointCloudSequence([Frame(points=np.zeros((5, 3)))]), "kinematic")
+    assert K.MIN_FRAMES == 2
+
+
+def test_reduced_solver_gives_the_solution_of_the_saddle_system_5():
+    import scipy.sparse as sp
+    import scipy.sparse.linalg as spla
+
+    from fourd.methods.kinematic.sliding import ConstrainedSolver
+
+    blob = MovingBlob()
+    V, F = _sphere_template(blob, resolution=0.3)
+    pre = K.slide_precompute(V, F)
+    n = len(V)
+    rng = np.random.default_rng(9)
+    normals = V / np.linalg.norm(V, axis=1, keepdims=True) + 0.1 * rng.normal(size=(n, 3))
+    offsets = rng.normal(scale=0.1, size=n)
+    constrained = rng.uniform(size=n) > 0.2
+    rhs = rng.normal(size=(n, 3))
+    reference = V + 0.01 * rng.normal(size=(n, 3))
+    solver = ConstrainedSolver(pre, normals, offsets, constrained, 1e-4)
+    P = solver.solve(rhs, reference)
+    # the 4n x 4n system (5): [L3 + mu, C^T; C, 0] [p; lambda] = [b + mu p_ref; c], lambda_i = 0 rows
+    L3 = solver.L3
+    rows = np.repeat(np.arange(n), 3)
+    C = sp.csr_matrix((normals.ravel(), (rows, np.arange(3 * n))), shape=(n, 3 * n))
+    C = sp.diags(constrained.astype(float)) @ C
+    Z = sp.diags((~constrained).astype(float))
+    saddle = sp.bmat([[L3, C.T], [C, Z]], format="csc")
+    right = np.r_[rhs.ravel() + solver.mu * reference.ravel(), np.where(constrained, offsets, 0.0)]
+    solution = spla.spsolve(saddle, right)
+    assert np.abs(solution[: 3 * n].reshape(n, 3) - P).max() < 1e-8
+    assert np.abs(np.einsum("ij,ij->i", normals, P) - offsets)[constrained].max() < 1e-9
+
+
+@pytest.mark.slow
+def test_output_before_and_beyond_the_input_times():
+    blob, seq = _blob_sequence(frames=3)
+    anim = reconstruct(seq, "kinematic", template_vertices=2000, times=(-0.5, 0.0, 1.0, 2.5))
+    x = anim.vertices[..., 0].mean(axis=1)
+    speed = blob.speed[0]
+    assert abs((x[1] - x[0]) - 0.5 * speed) < 0.3 * speed
+    assert abs((x[3] - x[2]) - 1.5 * speed) < 0.3 * speed
