@@ -15,6 +15,7 @@ import subprocess
 import sys
 import tempfile
 import threading
+import time
 from pathlib import Path
 
 from fourd.evaluate.bench import STANDARD_SCENES
@@ -31,6 +32,8 @@ def main() -> int:
     parser.add_argument("--scenes", nargs="+", default=[s.name for s in STANDARD_SCENES])
     parser.add_argument("--timeout", type=float, default=None)
     parser.add_argument("--slots", type=int, default=max(1, (os.cpu_count() or 2) // 2))
+    parser.add_argument("--deadline", type=float, default=None,
+                        help="seconds after which no new case is started (the report says which were not run)")
     args = parser.parse_args()
     work = Path(tempfile.mkdtemp(prefix="fourd-bench-"))
     cases = sorted(
@@ -39,6 +42,8 @@ def main() -> int:
     )
     queue = list(cases)
     lock = threading.Lock()
+    started = time.monotonic()
+    skipped = []
 
     def slot(index: int) -> None:
         cores = f"{2 * index},{2 * index + 1}"
@@ -47,6 +52,9 @@ def main() -> int:
                 if not queue:
                     return
                 scene, method = queue.pop(0)
+                if args.deadline and time.monotonic() - started > args.deadline:
+                    skipped.append(f"{scene} / {method}")
+                    continue
             part = work / f"{scene}--{method}"
             command = ["taskset", "-c", cores, sys.executable, "-m", "fourd", "bench", "--quiet",
                        "--scenes", scene, "--methods", method, "-o", str(part / "r.md")]
@@ -62,6 +70,8 @@ def main() -> int:
     for thread in threads:
         thread.join()
     parts = sorted(str(p) for p in work.glob("*/r.json"))
+    if skipped:
+        print(f"not run (deadline): {', '.join(skipped)}", file=sys.stderr)
     return subprocess.call([sys.executable, "-m", "fourd", "bench", "--merge", *parts, "-o", args.output])
 
 
