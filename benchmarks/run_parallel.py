@@ -32,12 +32,15 @@ def main() -> int:
     parser.add_argument("--scenes", nargs="+", default=[s.name for s in STANDARD_SCENES])
     parser.add_argument("--timeout", type=float, default=None)
     parser.add_argument("--slots", type=int, default=max(1, (os.cpu_count() or 2) // 2))
+    parser.add_argument("--skip", nargs="+", default=[], metavar="SCENE/METHOD",
+                        help="cases not to run, e.g. elephant-gallop/flow")
     parser.add_argument("--deadline", type=float, default=None,
                         help="seconds after which no new case is started (the report says which were not run)")
     args = parser.parse_args()
     work = Path(tempfile.mkdtemp(prefix="fourd-bench-"))
     cases = sorted(
-        ((scene, method) for scene in args.scenes for method in args.methods),
+        ((scene, method) for scene in args.scenes for method in args.methods
+         if f"{scene}/{method}" not in args.skip),
         key=lambda case: -FRAMES.get(case[0], 20) * METHOD_COST.get(case[1], 4.0),
     )
     queue = list(cases)
