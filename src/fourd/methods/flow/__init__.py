@@ -1,0 +1,469 @@
+"""Method ``flow``: space-time reconstruction with incompressible flow.
+
+The object is a 4D solid on a space-time grid; its characteristic function ``x`` and a flow
+``v`` of material between temporally adjacent cells of consecutive time slices are solved for
+together, so that material is conserved (incompressibility), moves smoothly (momentum), and
+the function is piecewise constant in space (continuity with a sub-linear norm, by IRLS). A
+Laplace solve turns the result into a 4D implicit function and marching cubes gives a closed,
+manifold mesh per frame, also for frames without any data.
+
+Pipeline (modules of this package):
+
+1. :mod:`.grid` -- space-time grid, outlier filter, visual hull from the sensors, inside seeds;
+   :mod:`.fit` -- low-resolution smooth 4D implicit fit (improves labels, orients normals);
+2. :mod:`.system` -- the constrained quadratic (continuity, momentum, regulariser,
+   incompressibility constraints);
+3. :mod:`.irls` -- reweighting, bootstrapping and clamping until 90-95% of cells are decided;
+4. :mod:`.solver` -- MINRES with the block-diagonal preconditioner;
+5. :mod:`.post` -- refinement near the surface, Laplace solve, :class:`FlowField`, marching cubes.
+
+References
+----------
+Sharf, Alcantara, Greif, Lewiner, Sheffer, Amenta, Cohen-Or: Space-time surface reconstruction
+using incompressible flow. ACM Transactions on Graphics 27(5), SIGGRAPH Asia 2008
+(``002_382acf333feb7a6e.txt``).
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass
+from typing import Literal, NamedTuple
+
+import numpy as np
+
+from fourd.animation import AnimatedMesh, MeshSequence
+from fourd.errors import InputError
+from fourd.geometry.neighbors import point_spacing
+from fourd.geometry.normals import pca_normals
+from fourd.methods.flow.fit import fit_gradient, fit_implicit, fit_labels
+from fourd.methods.flow.grid import (
+    SpaceTimeGrid,
+    build_grid,
+    carve_by_distance,
+    carve_visual_hull,
+    data_cells,
+    inside_seeds,
+    remove_outliers,
+    unsigned_distance,
+)
+from fourd.methods.flow.irls import IRLSResult, run_irls
+from fourd.methods.flow.post import FlowField, extract_mesh, implicit_function
+from fourd.methods.flow.solver import SaddleSolution, solve_saddle
+from fourd.methods.flow.system import neighbourhood
+from fourd.progress import progress
+from fourd.sequence import PointCloudSequence
+
+log = logging.getLogger("fourd.methods.flow")
+
+MIN_FRAMES = 2
+
+__all__ = [
+    "MIN_FRAMES",
+    "FlowField",
+    "FlowResult",
+    "Options",
+    "SaddleSolution",
+    "mass_conservation_error",
+    "reconstruct",
+    "run",
+    "solve_saddle",
+]
+
+
+@dataclass(frozen=True)
+class Options:
+    """Options of the flow method (defaults follow the paper where it gives a value).
+
+    Attributes
+    ----------
+    resolution : int
+        Flow grid cells along the longest side of the data's bounding box (64 in the paper;
+        32 by default here, because the Python solve costs about 8 s per frame at 32 and
+        14 s at 48 on crane, and more at 64).
+    neighbourhood : int
+        Temporally adjacent cells a cell's material may flow to: 27 (the paper's Figure 2) or
+        7 (the cell and its face neighbours; faster, motion only along axes per step).
+    time_substeps : int
+        Solution slices per frame interval (1: one slice per frame; 2: one empty slice
+        between frames, the paper's solution grid finer than the data, halving the speed bound).
+    missing_frames : tuple of int
+        Frames whose points are ignored (reconstructed from the flow only, Figure 6).
+    alpha : float
+        Weight of spatial continuity against flow momentum (1/3 in 3D x time).
+    regularization : float
+        Weight of the regulariser F_r (0.0025).
+    exponent : float
+        Norm exponent of the continuity functional (0.8).
+    weight_floor, weight_scale : float
+        IRLS weights are ``|dx|^(exponent-2)`` with ``|dx| >= weight_floor`` (0.001), scaled
+        into ``(0, weight_scale]`` (10).
+    clamp : float
+        Free cells within ``clamp`` of 0 or 1 after a solve become hard constraints.
+    stop_fraction : float
+        Stop the IRLS once this fraction of the hull's cells is decided (0.9-0.95).
+    max_iterations : int
+        Upper bound on IRLS iterations.
+    gamma : float
+        Preconditioner parameter (1).
+    softness : float
+        ``eps`` of the (2,2) block ``-eps I`` (0 in the paper; see :mod:`.solver`).
+    outer_rtol, inner_rtol : float
+        MINRES tolerance (1e-3..1e-5) and inner CG tolerance (1e-6).
+    inner : str
+        Inner solver: ``"cg-amg"`` (CG + classical AMG to ``inner_rtol``, the paper's exact
+        inner solve), ``"cg-ilu"`` (CG + incomplete factorisation, drop tolerance 0.01; slow
+        set-up in scipy), ``"amg"`` (one V-cycle; the default, for speed).
+    max_outer : int
+        MINRES iteration limit per solve (60 by default: an inexact, warm-started solve per
+        IRLS iteration; raise it with ``inner="cg-amg"`` for the paper's tolerances).
+    outward_cosine : float
+        A face of a data cell is an outward boundary face (first-iteration weight 0) when the
+        cell's mean normal makes a cosine above this with the face direction.
+    fit_level : float
+        Local extrema of the implicit fit beyond +-``fit_level`` relabel cells (fit values are
+        +1 on carved cells, -1 targets at seeds).
+    outlier_factor : float
+        Statistical outlier filter: drop points whose 8th-neighbour distance exceeds this
+        multiple of the median.
+    refine : int
+        Refinement factor of the postprocessing band (fine spacing ``h / refine``).
+    band : float
+        Half-width of the refined band around the flow surface, in flow cells.
+    smoothness : float
+        Weight of the Laplace term of the postprocessing.
+    min_component : float
+        Closed components with volume below this fraction of the frame's largest are dropped.
+    coherent : bool
+        Slide a template from the first frame along the 4D function (the kinematic method's
+        ``extract_template`` and ``slide``) and return an :class:`~fourd.AnimatedMesh`.
+    """
+
+    resolution: int = 32
+    neighbourhood: int = 7
+    time_substeps: int = 1
+    missing_frames: tuple[int, ...] = ()
+    alpha: float = 1.0 / 3.0
+    regularization: float = 0.0025
+    exponent: float = 0.8
+    weight_floor: float = 0.001
+    weight_scale: float = 10.0
+    clamp: float = 0.05
+    stop_fraction: float = 0.93
+    max_iterations: int = 12
+    gamma: float = 1.0
+    softness: float = 1e-3
+    outer_rtol: float = 1e-3
+    inner_rtol: float = 1e-6
+    inner: Literal["cg-amg", "cg-ilu", "amg"] = "amg"
+    max_outer: int = 60
+    outward_cosine: float = 0.5
+    fit_level: float = 0.5
+    outlier_factor: float = 3.0
+    refine: int = 2
+    band: float = 2.0
+    smoothness: float = 0.5
+    min_component: float = 0.02
+    coherent: bool = False
+
+    def __post_init__(self):
+        if self.resolution < 4:
+            raise ValueError(f"resolution must be at least 4, got {self.resolution}")
+        if self.neighbourhood not in (7, 27):
+            raise ValueError(f"neighbourhood must be 7 or 27, got {self.neighbourhood}")
+        if self.time_substeps < 1:
+            raise ValueError(f"time_substeps must be at least 1, got {self.time_substeps}")
+        if not 0 < self.alpha < 1:
+            raise ValueError(f"alpha must be in (0, 1), got {self.alpha}")
+        if not 0 < self.stop_fraction <= 1:
+            raise ValueError(f"stop_fraction must be in (0, 1], got {self.stop_fraction}")
+        if not 0 <= self.clamp < 0.5:
+            raise ValueError(f"clamp must be in [0, 0.5), got {self.clamp}")
+        if self.refine < 1:
+            raise ValueError(f"refine must be at least 1, got {self.refine}")
+        if self.inner not in ("cg-amg", "cg-ilu", "amg"):
+            raise ValueError(f"inner must be cg-amg, cg-ilu or amg, got {self.inner!r}")
+        for name in ("regularization", "softness", "band", "smoothness", "gamma"):
+            if getattr(self, name) < 0 or (name in ("band", "gamma") and getattr(self, name) == 0):
+                raise ValueError(f"{name} must be positive, got {getattr(self, name)}")
+        object.__setattr__(self, "missing_frames", tuple(int(i) for i in self.missing_frames))
+
+
+class FlowResult(NamedTuple):
+    """Everything :func:`run` computes.
+
+    meshes : MeshSequence, one closed mesh per input frame.
+    animation : AnimatedMesh or None (``coherent=True``).
+    field : FlowField, the 4D implicit function (a ``Field4D``).
+    grid : SpaceTimeGrid of the flow solution.
+    x : float64 [S, X, Y, Z], the flow solution (characteristic function).
+    mass : float64 [T], total mass (cell volume units) at each input frame.
+    mass_error : float, :func:`mass_conservation_error` of ``mass``.
+    history : list of dict, one per IRLS iteration.
+    seconds : dict, wall time per stage.
+    """
+
+    meshes: MeshSequence
+    animation: AnimatedMesh | None
+    field: FlowField
+    grid: SpaceTimeGrid
+    x: np.ndarray
+    mass: np.ndarray
+    mass_error: float
+    history: list
+    seconds: dict
+
+
+def mass_conservation_error(mass) -> float:
+    """The paper's mass conservation error: standard deviation of the total mass over frames
+    relative to its mean (section 6: below 2% in 3D).
+
+    Parameters
+    ----------
+    mass : array [T] of per-frame totals, or [T, ...] per-frame values to be summed.
+
+    Examples
+    --------
+    >>> round(mass_conservation_error([1.0, 1.02, 0.98]), 4)
+    0.0163
+    """
+    mass = np.asarray(mass, float)
+    totals = mass.reshape(len(mass), -1).sum(axis=1)
+    mean = float(totals.mean())
+    if mean == 0:
+        return 0.0
+    return float(np.sqrt(totals.var()) / abs(mean))
+
+
+def _frame_points(seq: PointCloudSequence, options: Options) -> list[np.ndarray | None]:
+    missing = set(options.missing_frames)
+    bad = [i for i in missing if not 0 <= i < len(seq)]
+    if bad:
+        raise InputError(
+            f"missing_frames {sorted(bad)} are outside the sequence's {len(seq)} frames"
+        )
+    kept = []
+    for i, frame in enumerate(seq.frames):
+        if i in missing:
+            kept.append(None)
+            continue
+        mask = remove_outliers(frame.points, factor=options.outlier_factor)
+        kept.append(frame.points[mask])
+    if all(p is None or len(p) < 4 for p in kept):
+        raise InputError("no frame has data (all frames missing or nearly empty)")
+    return kept
+
+
+def _outward_weights(grid: SpaceTimeGrid, slice_points, slice_normals, cosine: float) -> np.ndarray:
+    """First-iteration continuity weights: 0 on outward boundary faces of data cells, else 1."""
+    weights = np.ones((3, *grid.shape4))
+    for s, (pts, nrm) in enumerate(zip(slice_points, slice_normals, strict=True)):
+        if pts is None:
+            continue
+        cell = grid.cell_of(pts)
+        key = (cell[:, 0] * grid.shape[1] + cell[:, 1]) * grid.shape[2] + cell[:, 2]
+        mean = np.zeros((int(np.prod(grid.shape)), 3))
+        np.add.at(mean, key, nrm)
+        norm = np.linalg.norm(mean, axis=1)
+        has = norm > 0
+        mean[has] /= norm[has, None]
+        mean = mean.reshape(*grid.shape, 3)
+        for axis in range(3):
+            plus = has.reshape(grid.shape) & (mean[..., axis] > cosine)
+            minus = has.reshape(grid.shape) & (-mean[..., axis] > cosine)
+            weights[axis, s][plus] = 0.0
+            shifted = np.zeros(grid.shape, dtype=bool)
+            index = [slice(None)] * 3
+            source = [slice(None)] * 3
+            index[axis] = slice(0, -1)
+            source[axis] = slice(1, None)
+            shifted[tuple(index)] = minus[tuple(source)]
+            weights[axis, s][shifted] = 0.0
+    return weights
+
+
+def run(seq: PointCloudSequence, options: Options | None = None) -> FlowResult:
+    """Reconstruct ``seq`` and return every intermediate result (see :class:`FlowResult`)."""
+    options = Options() if options is None else options
+    seconds = {}
+    clock = time.perf_counter()
+    offsets = neighbourhood(options.neighbourhood)
+    frame_points = _frame_points(seq, options)
+    present = [p for p in frame_points if p is not None and len(p)]
+    bounds = np.stack(
+        [
+            np.min([p.min(axis=0) for p in present], axis=0),
+            np.max([p.max(axis=0) for p in present], axis=0),
+        ]
+    )
+    grid = build_grid(
+        bounds, seq.times, resolution=options.resolution, substeps=options.time_substeps
+    )
+    S = grid.slices
+    slice_points: list[np.ndarray | None] = [None] * S
+    slice_sensors: list[np.ndarray | None] = [None] * S
+    for i, pts in enumerate(frame_points):
+        if pts is not None and len(pts) >= 4:
+            slice_points[grid.frame_slice[i]] = pts
+            slice_sensors[grid.frame_slice[i]] = seq.frames[i].sensors
+
+    # (1) preprocessing: hull, data cells, seeds
+    outside = np.zeros(grid.shape4, dtype=bool)
+    data = np.zeros(grid.shape4, dtype=bool)
+    seeds = np.zeros(grid.shape4, dtype=bool)
+    h = grid.h
+    for s in progress(range(S), desc="flow: visual hull", total=S):
+        pts = slice_points[s]
+        if pts is None:
+            continue
+        spacing = point_spacing(pts)
+        if slice_sensors[s] is not None:
+            carved = carve_visual_hull(grid, pts, slice_sensors[s], spacing=spacing, margin=1.5 * h)
+        else:
+            carved = carve_by_distance(grid, pts, distance=3.0 * h)
+        cells = data_cells(grid, pts)
+        carved &= ~cells
+        outside[s] = carved
+        data[s] = cells
+        distance = unsigned_distance(grid, pts)
+        seeds[s] = inside_seeds(distance, carved | cells, minimum=1.5 * h)
+    seconds["hull"] = time.perf_counter() - clock
+
+    # low-resolution 4D implicit fit: improves labels, orients normals
+    clock = time.perf_counter()
+    fit = fit_implicit(grid, slice_points, outside, seeds & ~data)
+    fit_inside, fit_outside = fit_labels(fit.values, outside | data, level=options.fit_level)
+    slice_normals: list[np.ndarray | None] = [None] * S
+    for s, pts in enumerate(slice_points):
+        if pts is None:
+            continue
+        normals = pca_normals(pts, 16).normals
+        gradient = fit_gradient(grid, fit.values[s], pts)
+        flip = np.einsum("ij,ij->i", normals, gradient) < 0
+        normals[flip] *= -1
+        slice_normals[s] = normals
+    seconds["fit"] = time.perf_counter() - clock
+
+    # initial labels
+    value = np.full(grid.shape4, np.nan)
+    value[outside | fit_outside] = 0.0
+    value[data | seeds | fit_inside] = 1.0
+    region = ~outside
+    weights = _outward_weights(grid, slice_points, slice_normals, options.outward_cosine)
+    log.info(
+        "flow grid %s x %d slices, cell %.4g; %.1f%% of cells labelled outside, %d data cells, "
+        "%d inside seeds",
+        grid.shape,
+        S,
+        h,
+        100 * (value == 0).mean(),
+        int(data.sum()),
+        int((seeds | fit_inside).sum()),
+    )
+
+    # (3)+(4) IRLS with the saddle-point solver
+    clock = time.perf_counter()
+    solver_options = {
+        "gamma": options.gamma,
+        "softness": options.softness,
+        "rtol": options.outer_rtol,
+        "inner": options.inner,
+        "inner_rtol": options.inner_rtol,
+        "maxiter": options.max_outer,
+    }
+    bar = progress(total=options.max_iterations, desc="flow: IRLS", unit="iteration")
+    try:
+        irls: IRLSResult = run_irls(
+            value,
+            weights,
+            offsets,
+            region,
+            alpha=options.alpha,
+            reg=options.regularization,
+            exponent=options.exponent,
+            floor=options.weight_floor,
+            scale=options.weight_scale,
+            clamp=options.clamp,
+            stop_fraction=options.stop_fraction,
+            max_iterations=options.max_iterations,
+            solver_options=solver_options,
+            guess=(fit.values < 0).astype(float),
+            progress=bar,
+        )
+    finally:
+        bar.close()
+    seconds["flow"] = time.perf_counter() - clock
+
+    # (5) postprocessing
+    clock = time.perf_counter()
+    field = implicit_function(
+        grid,
+        irls.x,
+        slice_points,
+        slice_normals,
+        refine=options.refine,
+        band=options.band,
+        smoothness=options.smoothness,
+    )
+    meshes = []
+    for i in range(len(seq)):
+        meshes.append(
+            extract_mesh(field, int(grid.frame_slice[i]), min_component=options.min_component)
+        )
+    result_meshes = MeshSequence(tuple(meshes), seq.times)
+    seconds["post"] = time.perf_counter() - clock
+
+    mass = irls.x[grid.frame_slice].reshape(len(seq), -1).sum(axis=1) * h**3
+    error = mass_conservation_error(mass)
+    log.info(
+        "flow: mass conservation error %.2f%% over %d frames (%d IRLS iterations); %s",
+        100 * error,
+        len(seq),
+        irls.iterations,
+        ", ".join(f"{k} {v:.1f}s" for k, v in seconds.items()),
+    )
+    animation = None
+    if options.coherent:
+        clock = time.perf_counter()
+        animation = coherent_animation(field, seq, grid, frame_points)
+        seconds["coherent"] = time.perf_counter() - clock
+    return FlowResult(
+        result_meshes, animation, field, grid, irls.x, mass, error, irls.history, seconds
+    )
+
+
+def coherent_animation(
+    field: FlowField, seq: PointCloudSequence, grid: SpaceTimeGrid, frame_points
+) -> AnimatedMesh:
+    """Slide a template of the first frame along ``field`` with the kinematic method's public
+    functions (``extract_template``, ``slide``); an :class:`~fourd.AnimatedMesh`."""
+    try:
+        from fourd.methods.kinematic import extract_template, slide
+    except ImportError as error:
+        raise InputError(
+            f"coherent=true needs the kinematic method's extract_template and slide ({error})"
+        ) from None
+    first = next(i for i, p in enumerate(frame_points) if p is not None)
+    bounds = field.bounds()
+    vertices, faces = extract_template(
+        field,
+        float(seq.times[first]),
+        bounds=bounds,
+        cell_size=field.spacing,
+        data_points=frame_points[first],
+    )
+    data = [np.zeros((0, 3)) if p is None else p for p in frame_points]
+    return slide(vertices, faces, field, seq.times, data=data)
+
+
+def reconstruct(
+    seq: PointCloudSequence, options: Options | None = None
+) -> MeshSequence | AnimatedMesh:
+    """Closed, manifold meshes per frame (an :class:`~fourd.AnimatedMesh` with ``coherent``).
+
+    The mass conservation error is logged at info level; :func:`run` returns it with every
+    other intermediate result.
+    """
+    result = run(seq, options)
+    return result.animation if result.animation is not None else result.meshes

@@ -1,0 +1,233 @@
+"""The constrained quadratic of one IRLS iteration (paper 002, sections 3 and 4(b)).
+
+Unknowns are the cell values ``x`` that are not yet decided and the flow variables ``v`` from
+every living cell of slice ``t`` to the living cells of slice ``t + 1`` in its neighbourhood
+(7 or 27 cells, Figure 2). Decided cells (data, labels, clamped values) are back-substituted;
+flows into or out of a zero cell do not exist.
+
+Energy (weights ``alpha``, ``1 - alpha`` and ``reg``)::
+
+    F   = alpha F_c' + (1 - alpha) F_m + reg F_r
+    F_c' = sum_t sum_{space faces (i, j)} w_ij (x_i - x_j)^2          (5)
+    F_m  = sum (v_{i->j}^t - v_{j->j+(j-i)}^{t+1})^2                    (4)
+    F_r  = sum x^2 + sum v^2
+
+Constraints (incompressibility, (1) and (2))::
+
+    x_c^t = sum_j v_{j->c}^{t-1}     (t > 0)
+    x_c^t = sum_j v_{c->j}^{t}       (t < S - 1)
+
+giving the saddle-point system ``[[A, B^T], [B, 0]] [u; lambda] = [f; g]`` of section 5
+(``A`` is the Hessian of ``F`` / 2, so ``A u = f`` at the unconstrained optimum).
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+import scipy.sparse as sp
+
+
+def neighbourhood(size: int) -> np.ndarray:
+    """Offsets ``[K, 3]`` of the temporally adjacent cells: ``size`` 7 (faces) or 27 (all)."""
+    if size == 7:
+        return np.array(
+            [[0, 0, 0], [1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]]
+        )
+    if size == 27:
+        return np.array([[i, j, k] for i in (-1, 0, 1) for j in (-1, 0, 1) for k in (-1, 0, 1)])
+    raise ValueError(f"neighbourhood must be 7 or 27, got {size}")
+
+
+class Flows(NamedTuple):
+    """The flow variables of the current set of living cells.
+
+    source, target : int64 [V], flat 4D cell indices (target is in the next slice).
+    offset : int64 [V], index into the neighbourhood offsets.
+    """
+
+    source: np.ndarray
+    target: np.ndarray
+    offset: np.ndarray
+
+
+def enumerate_flows(alive: np.ndarray, offsets: np.ndarray) -> Flows:
+    """All flows between living cells of consecutive slices (``alive`` [S, X, Y, Z] bool)."""
+    S, X, Y, Z = alive.shape
+    strides = np.array([X * Y * Z, Y * Z, Z, 1], dtype=np.int64)
+    sources, targets, kinds = [], [], []
+    for k, (dx, dy, dz) in enumerate(offsets):
+        xs = slice(max(0, -dx), X - max(0, dx))
+        ys = slice(max(0, -dy), Y - max(0, dy))
+        zs = slice(max(0, -dz), Z - max(0, dz))
+        xt = slice(xs.start + dx, xs.stop + dx)
+        yt = slice(ys.start + dy, ys.stop + dy)
+        zt = slice(zs.start + dz, zs.stop + dz)
+        mask = np.zeros(alive.shape, dtype=bool)
+        mask[:-1, xs, ys, zs] = alive[:-1, xs, ys, zs] & alive[1:, xt, yt, zt]
+        src = np.flatnonzero(mask)
+        sources.append(src)
+        targets.append(src + strides[0] + dx * strides[1] + dy * strides[2] + dz * strides[3])
+        kinds.append(np.full(len(src), k, dtype=np.int64))
+    return Flows(np.concatenate(sources), np.concatenate(targets), np.concatenate(kinds))
+
+
+def flow_lookup(flows: Flows, sources: np.ndarray, offsets: np.ndarray) -> np.ndarray:
+    """Index of the flow ``(source, offset)`` for each query, ``-1`` where there is none."""
+    if len(flows.source) == 0:
+        return np.full(len(sources), -1, dtype=np.int64)
+    key = flows.offset * (1 << 40) + flows.source
+    order = np.argsort(key, kind="stable")
+    sorted_key = key[order]
+    query = offsets * (1 << 40) + sources
+    pos = np.clip(np.searchsorted(sorted_key, query), 0, len(sorted_key) - 1)
+    return np.where(sorted_key[pos] == query, order[pos], -1)
+
+
+class System(NamedTuple):
+    """One saddle-point system ``[[A, B^T], [B, 0]] [u; lambda] = [f; g]``.
+
+    A : csr [n, n], SPD (thanks to the regulariser).
+    B : csr [m, n], the incompressibility constraints (rows without unknowns dropped).
+    f : [n]; g : [m].
+    free : int64 [n_x], flat cell index of each free value (the first ``n_x`` unknowns).
+    flows : Flows (the remaining ``n - n_x`` unknowns).
+    infeasible : int, constraints of fixed cells that have no flow at all (dropped).
+    """
+
+    A: sp.csr_matrix
+    B: sp.csr_matrix
+    f: np.ndarray
+    g: np.ndarray
+    free: np.ndarray
+    flows: Flows
+    infeasible: int
+
+
+def build_system(
+    value: np.ndarray,
+    weights: np.ndarray,
+    offsets: np.ndarray,
+    *,
+    alpha: float,
+    reg: float,
+) -> System:
+    """Assemble the system for the current cell values.
+
+    Parameters
+    ----------
+    value : float64 [S, X, Y, Z]
+        ``nan`` for free cells, else the fixed value (0 outside / dead, 1 inside).
+    weights : float64 [3, S, X, Y, Z]
+        Continuity weight of the face between a cell and its ``+axis`` neighbour.
+    offsets : int [K, 3]
+    alpha, reg : float
+        Weight of continuity against momentum, and of the regulariser ``F_r``.
+    """
+    shape4 = value.shape
+    S = shape4[0]
+    n_cells = value.size
+    flat_value = value.ravel()
+    free_mask = np.isnan(flat_value)
+    alive = free_mask | (flat_value != 0)
+    free = np.flatnonzero(free_mask)
+    n_x = len(free)
+    xcol = np.full(n_cells, -1, dtype=np.int64)
+    xcol[free] = np.arange(n_x)
+    flows = enumerate_flows(alive.reshape(shape4), offsets)
+    n_v = len(flows.source)
+    n = n_x + n_v
+    fixed_value = np.where(free_mask, 0.0, flat_value)
+
+    rows, cols, vals = [], [], []
+    f = np.zeros(n)
+
+    # continuity (5): faces with at least one free cell
+    strides = np.array([np.prod(shape4[a + 1 :]) for a in range(4)], dtype=np.int64)
+    flat = np.arange(n_cells).reshape(shape4)
+    for axis in range(3):
+        a = np.take(flat, np.arange(shape4[axis + 1] - 1), axis=axis + 1).ravel()
+        b = a + strides[axis + 1]
+        keep = free_mask[a] | free_mask[b]
+        a, b = a[keep], b[keep]
+        w = alpha * weights[axis].ravel()[a]
+        fa, fb = free_mask[a], free_mask[b]
+        ca, cb = xcol[a], xcol[b]
+        both = fa & fb
+        rows += [ca[both], cb[both], ca[both], cb[both]]
+        cols += [ca[both], cb[both], cb[both], ca[both]]
+        vals += [w[both], w[both], -w[both], -w[both]]
+        only_a = fa & ~fb
+        rows.append(ca[only_a])
+        cols.append(ca[only_a])
+        vals.append(w[only_a])
+        np.add.at(f, ca[only_a], w[only_a] * fixed_value[b[only_a]])
+        only_b = fb & ~fa
+        rows.append(cb[only_b])
+        cols.append(cb[only_b])
+        vals.append(w[only_b])
+        np.add.at(f, cb[only_b], w[only_b] * fixed_value[a[only_b]])
+
+    # momentum (4): (v_a - v_b)^2 for each flow and its successor in the same direction;
+    # a missing partner is a zero flow.
+    mom = 1.0 - alpha
+    if n_v:
+        d = offsets[flows.offset]
+        shift = strides[0] + d[:, 0] * strides[1] + d[:, 1] * strides[2] + d[:, 2] * strides[3]
+        t_src = flows.source // strides[0]
+        successor = flow_lookup(flows, flows.target, flows.offset)
+        has_next_slice = t_src < S - 2
+        pair = has_next_slice & (successor >= 0)
+        va = n_x + np.flatnonzero(pair)
+        vb = n_x + successor[pair]
+        rows += [va, vb, va, vb]
+        cols += [va, vb, vb, va]
+        vals += [np.full(len(va), mom)] * 2 + [np.full(len(va), -mom)] * 2
+        lonely_out = has_next_slice & (successor < 0)
+        predecessor = flow_lookup(flows, flows.source - shift, flows.offset)
+        lonely_in = (t_src >= 1) & (predecessor < 0)
+        single = n_x + np.concatenate([np.flatnonzero(lonely_out), np.flatnonzero(lonely_in)])
+        rows.append(single)
+        cols.append(single)
+        vals.append(np.full(len(single), mom))
+
+    # regulariser F_r
+    rows.append(np.arange(n))
+    cols.append(np.arange(n))
+    vals.append(np.full(n, reg))
+    A = sp.csr_matrix(
+        (np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(n, n)
+    )
+
+    # incompressibility: out rows (t < S-1) and in rows (t > 0) for every living cell
+    alive_cells = np.flatnonzero(alive)
+    t_cell = alive_cells // strides[0]
+    out_cells = alive_cells[t_cell < S - 1]
+    in_cells = alive_cells[t_cell > 0]
+    row_of_out = np.full(n_cells, -1, dtype=np.int64)
+    row_of_out[out_cells] = np.arange(len(out_cells))
+    row_of_in = np.full(n_cells, -1, dtype=np.int64)
+    row_of_in[in_cells] = len(out_cells) + np.arange(len(in_cells))
+    m_all = len(out_cells) + len(in_cells)
+    vcols = n_x + np.arange(n_v)
+    brows = [row_of_out[flows.source], row_of_in[flows.target]]
+    bcols = [vcols, vcols]
+    bvals = [np.ones(n_v), np.ones(n_v)]
+    cells = np.concatenate([out_cells, in_cells])
+    cell_rows = np.arange(m_all)
+    is_free = free_mask[cells]
+    brows.append(cell_rows[is_free])
+    bcols.append(xcol[cells[is_free]])
+    bvals.append(-np.ones(int(is_free.sum())))
+    g_all = np.where(is_free, 0.0, fixed_value[cells])
+    B = sp.csr_matrix(
+        (np.concatenate(bvals), (np.concatenate(brows), np.concatenate(bcols))), shape=(m_all, n)
+    )
+    flow_count = np.bincount(np.concatenate(brows[:2]), minlength=m_all)
+    has_flow = flow_count > 0
+    infeasible = int((~has_flow & ~is_free).sum())
+    keep = has_flow | is_free
+    B = B[keep]
+    g = g_all[keep]
+    return System(A, B, f, g, free, flows, infeasible)
