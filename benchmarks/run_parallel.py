@@ -75,7 +75,14 @@ def main() -> int:
     parts = sorted(str(p) for p in work.glob("*/r.json"))
     if skipped:
         print(f"not run (deadline): {', '.join(skipped)}", file=sys.stderr)
-    return subprocess.call([sys.executable, "-m", "fourd", "bench", "--merge", *parts, "-o", args.output])
+    notes = [f"Run by benchmarks/run_parallel.py: each (scene, method) case in its own process pinned to "
+             f"2 cores, {args.slots} cases at a time."]
+    if skipped or args.skip:
+        notes.append(f"Not run: {', '.join(list(args.skip) + skipped)}.")
+    command = [sys.executable, "-m", "fourd", "bench", "--merge", *parts, "-o", args.output]
+    for note in notes:
+        command += ["--note", note]
+    return subprocess.call(command)
 
 
 if __name__ == "__main__":

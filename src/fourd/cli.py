@@ -159,7 +159,7 @@ def cmd_bench(args) -> int:
     from fourd.evaluate.bench import merge_reports, run_bench
 
     if args.merge:
-        merge_reports(args.merge, args.output)
+        merge_reports(args.merge, args.output, notes=args.note or [])
         log.info("wrote %s", args.output)
         return 0
     run_bench(methods=args.methods, scenes=args.scenes, quick=args.quick, repeats=args.repeats,
@@ -252,6 +252,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--timeout", type=float, default=None, help="seconds one reconstruction may take")
     p.add_argument("--merge", nargs="+", metavar="JSON",
                    help="merge the .json reports of separate runs into OUTPUT instead of running")
+    p.add_argument("--note", action="append", help="a line for the report's notes (with --merge)")
 
     p = add("demo", "synthesize, reconstruct, evaluate and render the embedded default scene", cmd_demo)
     p.add_argument("outdir", nargs="?", default="demo-out")

@@ -573,7 +573,7 @@ def write_report(report: dict, output: str | os.PathLike) -> dict[str, str]:
     return paths
 
 
-def merge_reports(parts: list[str | os.PathLike], output: str | os.PathLike) -> dict:
+def merge_reports(parts: list[str | os.PathLike], output: str | os.PathLike, *, notes=()) -> dict:
     """Merge the ``.json`` reports of several bench runs (e.g. one per scene, run side by side)
     into one report at ``output``; contact sheets are copied beside it. Rows of a scene that
     several parts ran (e.g. one method each) are combined; for the same method the later part
@@ -611,5 +611,6 @@ def merge_reports(parts: list[str | os.PathLike], output: str | os.PathLike) -> 
     if merged is None:
         raise InputError("no bench reports to merge")
     merged["notes"].append(f"Merged from {len(parts)} runs made side by side; total wall time is their sum.")
+    merged["notes"] += list(notes)
     merged["paths"] = write_report(merged, output)
     return merged
