@@ -601,7 +601,11 @@ def merge_reports(parts: list[str | os.PathLike], output: str | os.PathLike, *, 
         merged["wall_seconds"] += report.get("wall_seconds", 0.0)
         for name, entry in report["scenes"].items():
             for row in entry.get("rows", {}).values():
-                if row.get("sheet") and Path(row["sheet"]).exists():
+                if row.get("sheet") and not Path(row["sheet"]).exists():
+                    # The part was moved (e.g. copied from another machine): look beside it.
+                    beside = _plots_dir(Path(part)) / Path(row["sheet"]).name
+                    row["sheet"] = str(beside) if beside.exists() else None
+                if row.get("sheet"):
                     target = _plots_dir(output) / Path(row["sheet"]).name
                     target.parent.mkdir(parents=True, exist_ok=True)
                     if Path(row["sheet"]).resolve() != target.resolve():
