@@ -12,6 +12,7 @@ import tomllib
 from pathlib import Path
 
 from fourd.errors import InputError
+from fourd.jsonable import jsonable
 
 log = logging.getLogger("fourd.cli")
 
@@ -139,20 +140,10 @@ def cmd_evaluate(args) -> int:
 
     report = evaluate_files(args.result, args.truth)
     if args.json:
-        print(json.dumps(report, indent=2, default=_json_default))
+        print(json.dumps(jsonable(report), indent=2))
     else:
         print(format_report(report))
     return 0
-
-
-def _json_default(value):
-    import numpy as np
-
-    if isinstance(value, np.ndarray):
-        return value.tolist()
-    if isinstance(value, np.generic):
-        return value.item()
-    return str(value)
 
 
 def cmd_bench(args) -> int:

@@ -15,6 +15,7 @@ from pathlib import Path
 from fourd import synth
 from fourd.animation import AnimatedMesh
 from fourd.io.writers import save
+from fourd.jsonable import jsonable
 from fourd.methods import DEFAULT_METHOD, reconstruct
 
 log = logging.getLogger("fourd.demo")
@@ -62,7 +63,7 @@ def run_demo(
     from fourd.io.atomic import atomic_path
 
     with atomic_path(paths["metrics"]) as tmp:
-        tmp.write_text(json.dumps(metrics, indent=2, default=_plain))
+        tmp.write_text(json.dumps(jsonable(metrics), indent=2))
     paths["contact sheet"] = contact_sheet(
         result, outdir / "contact-sheet.png", truth=truth if isinstance(result, AnimatedMesh) else None, input=scans
     )
@@ -75,11 +76,3 @@ def run_demo(
     return paths
 
 
-def _plain(value):
-    import numpy as np
-
-    if isinstance(value, np.ndarray):
-        return value.tolist()
-    if isinstance(value, np.generic):
-        return value.item()
-    return str(value)

@@ -77,7 +77,7 @@ def test_write_viewer_animated_mesh(tmp_path):
     )  # a vertex is this far from its scaled self
     assert data["hasErrors"] and np.all(errors <= bound + 1e-6) and errors.mean() > 0
     assert len(data["points"]) == 4
-    assert json.loads((out / "metrics.json").read_text()) == {"chamfer": 0.01, "nan": "nan"}
+    assert json.loads((out / "metrics.json").read_text()) == {"chamfer": 0.01, "nan": None}
 
     page = index.read_text()
     # self-contained: scripts inline, nothing fetched from a network or a sibling file

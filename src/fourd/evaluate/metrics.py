@@ -52,7 +52,6 @@ True
 from __future__ import annotations
 
 import logging
-import math
 import os
 from pathlib import Path
 from typing import NamedTuple
@@ -65,6 +64,7 @@ from scipy.spatial import cKDTree
 from fourd.animation import AnimatedMesh, MeshSequence
 from fourd.errors import InputError
 from fourd.evaluate.sampling import bind_to_surface, bound_positions, sample_surface
+from fourd.jsonable import jsonable
 
 log = logging.getLogger("fourd.evaluate.metrics")
 
@@ -146,21 +146,6 @@ def _summary(values) -> float | None:
     values = np.asarray([np.nan if v is None else v for v in values], dtype=float)
     values = values[np.isfinite(values)]
     return float(values.mean()) if len(values) else None
-
-
-def _plain(value):
-    """Floats (NaN -> None), ints, bools and lists: JSON-ready."""
-    if isinstance(value, dict):
-        return {k: _plain(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple, np.ndarray)):
-        return [_plain(v) for v in value]
-    if isinstance(value, (bool, np.bool_)):
-        return bool(value)
-    if isinstance(value, (int, np.integer)):
-        return int(value)
-    if isinstance(value, (float, np.floating)):
-        return float(value) if math.isfinite(value) else None
-    return value
 
 
 def _topologies(mesh) -> list[Topology]:
@@ -322,7 +307,7 @@ def evaluate(result, truth, *, samples: int = 60000, seed: int = 0, timing: dict
         "closed_manifold": [topo.closed_manifold for topo in topologies],
     }
     report["timing"] = dict(timing) if timing is not None else None
-    return _plain(report)
+    return jsonable(report)
 
 
 def _no_correspondence() -> dict:

@@ -20,14 +20,12 @@ from __future__ import annotations
 import json
 import logging
 import os
-from dataclasses import asdict
 from pathlib import Path
-
-import numpy as np
 
 from fourd.animation import AnimatedMesh, MeshSequence
 from fourd.errors import InputError
 from fourd.io.atomic import atomic_dir
+from fourd.jsonable import jsonable
 from fourd.sequence import PointCloudSequence
 
 logger = logging.getLogger("fourd.synth.write")
@@ -41,20 +39,6 @@ def save_truth(truth, path: str | os.PathLike) -> None:
     from fourd.io.writers import save
 
     save(truth, path)
-
-
-def _jsonable(value):
-    if isinstance(value, dict):
-        return {str(k): _jsonable(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_jsonable(v) for v in value]
-    if isinstance(value, np.ndarray):
-        return value.tolist()
-    if isinstance(value, np.generic):
-        return value.item()
-    if hasattr(value, "__dataclass_fields__"):
-        return _jsonable(asdict(value))
-    return value
 
 
 def write_synth(
@@ -90,7 +74,7 @@ def write_synth(
         write_frames(scans, tmp)
         save_truth(truth, tmp / TRUTH_FILE)
         if info is not None:
-            (tmp / INFO_FILE).write_text(json.dumps(_jsonable(info), indent=1) + "\n")
+            (tmp / INFO_FILE).write_text(json.dumps(jsonable(info), indent=1) + "\n")
     logger.info("wrote %d scanned frames and the truth to %s", len(scans), outdir)
     return outdir
 

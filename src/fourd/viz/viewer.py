@@ -18,7 +18,6 @@ from __future__ import annotations
 import base64
 import json
 import logging
-import math
 import os
 import re
 from importlib import resources
@@ -30,6 +29,7 @@ from fourd.animation import AnimatedMesh
 from fourd.errors import InputError
 from fourd.io.atomic import atomic_path
 from fourd.io.writers import as_result
+from fourd.jsonable import jsonable
 from fourd.viz import texture as tex
 
 log = logging.getLogger("fourd.viz.viewer")
@@ -69,23 +69,6 @@ def _load_metrics(metrics):
         return json.loads(path.read_text(encoding="utf-8"))
     except (OSError, ValueError) as exc:
         raise InputError(f"cannot read the metrics JSON ({exc})", path) from exc
-
-
-def _jsonable(value):
-    """Metrics as plain JSON (numpy scalars and arrays converted, NaN/inf as strings)."""
-    if isinstance(value, dict):
-        return {str(k): _jsonable(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_jsonable(v) for v in value]
-    if isinstance(value, np.ndarray):
-        return _jsonable(value.tolist())
-    if isinstance(value, np.generic):
-        value = value.item()
-    if isinstance(value, float) and not math.isfinite(value):
-        return str(value)
-    if value is None or isinstance(value, (bool, int, float, str)):
-        return value
-    return str(value)
 
 
 def _subsample(points: np.ndarray, limit: int, seed: int) -> np.ndarray:
@@ -148,7 +131,7 @@ def viewer_data(
         },
         "colormap": tex.colormap(np.linspace(0.0, 1.0, 64), 1.0).round(4).tolist(),
         "fps": float(fps) if fps else 10.0,
-        "metrics": _jsonable(metrics) if metrics is not None else {},
+        "metrics": jsonable(metrics) if metrics is not None else {},
         "hasErrors": False,
     }
     if animated:
@@ -298,7 +281,7 @@ def write_viewer(
     for name in STATIC_FILES:
         _write_text(outdir / name, _static(name))
     if metrics is not None:
-        _write_text(outdir / "metrics.json", json.dumps(_jsonable(metrics), indent=2) + "\n")
+        _write_text(outdir / "metrics.json", json.dumps(jsonable(metrics), indent=2) + "\n")
 
     page = _static("index.template.html")
     title_text = (
