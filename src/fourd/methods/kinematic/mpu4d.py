@@ -771,6 +771,90 @@ def _evaluate(
 # --------------------------------------------------------------------------------------------
 
 
+@numba.njit(cache=True, parallel=True)
+def _child_counts(X, indptr, indices, parents, centres, child_half, radius, counts, inside):
+    """Per child (16 per parent, ``_CORNERS`` order): points of the parent's list within
+    ``radius`` of the child centre (``counts``) and within its box (``inside``, max norm)."""
+    r2 = radius * radius
+    for i in numba.prange(len(parents)):
+        p = parents[i]
+        c0 = centres[p, 0]
+        c1 = centres[p, 1]
+        c2 = centres[p, 2]
+        c3 = centres[p, 3]
+        for j in range(indptr[p], indptr[p + 1]):
+            x = X[indices[j]]
+            # per axis: squared distance to the child centre at -half (0) and +half (1)
+            e0m = x[0] - (c0 - child_half)
+            e0p = x[0] - (c0 + child_half)
+            e1m = x[1] - (c1 - child_half)
+            e1p = x[1] - (c1 + child_half)
+            e2m = x[2] - (c2 - child_half)
+            e2p = x[2] - (c2 + child_half)
+            e3m = x[3] - (c3 - child_half)
+            e3p = x[3] - (c3 + child_half)
+            for ch in range(16):
+                b0 = (ch >> 3) & 1
+                b1 = (ch >> 2) & 1
+                b2 = (ch >> 1) & 1
+                b3 = ch & 1
+                d0 = e0p if b0 else e0m
+                d1 = e1p if b1 else e1m
+                d2 = e2p if b2 else e2m
+                d3 = e3p if b3 else e3m
+                if d0 * d0 + d1 * d1 + d2 * d2 + d3 * d3 <= r2:
+                    counts[i * 16 + ch] += 1
+                    if (
+                        abs(d0) <= child_half
+                        and abs(d1) <= child_half
+                        and abs(d2) <= child_half
+                        and abs(d3) <= child_half
+                    ):
+                        inside[i * 16 + ch] += 1
+
+
+@numba.njit(cache=True, parallel=True)
+def _child_fill(X, indptr, indices, parents, centres, child_half, radius, keep, out_ptr, out):
+    """Point lists of the kept children (``keep`` [parents * 16] the output slot or -1) into
+    the CSR ``out_ptr`` / ``out``; each list keeps the parent's order."""
+    r2 = radius * radius
+    for i in numba.prange(len(parents)):
+        p = parents[i]
+        pos = np.empty(16, dtype=np.int64)
+        for ch in range(16):
+            slot = keep[i * 16 + ch]
+            pos[ch] = out_ptr[slot] if slot >= 0 else -1
+        c0 = centres[p, 0]
+        c1 = centres[p, 1]
+        c2 = centres[p, 2]
+        c3 = centres[p, 3]
+        for j in range(indptr[p], indptr[p + 1]):
+            point = indices[j]
+            x = X[point]
+            e0m = x[0] - (c0 - child_half)
+            e0p = x[0] - (c0 + child_half)
+            e1m = x[1] - (c1 - child_half)
+            e1p = x[1] - (c1 + child_half)
+            e2m = x[2] - (c2 - child_half)
+            e2p = x[2] - (c2 + child_half)
+            e3m = x[3] - (c3 - child_half)
+            e3p = x[3] - (c3 + child_half)
+            for ch in range(16):
+                if pos[ch] < 0:
+                    continue
+                b0 = (ch >> 3) & 1
+                b1 = (ch >> 2) & 1
+                b2 = (ch >> 1) & 1
+                b3 = ch & 1
+                d0 = e0p if b0 else e0m
+                d1 = e1p if b1 else e1m
+                d2 = e2p if b2 else e2m
+                d3 = e3p if b3 else e3m
+                if d0 * d0 + d1 * d1 + d2 * d2 + d3 * d3 <= r2:
+                    out[pos[ch]] = point
+                    pos[ch] += 1
+
+
 def _ball_csr(
     tree: cKDTree, centres: np.ndarray, radii: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -904,32 +988,47 @@ def fit_mpu4d(points: np.ndarray, normals: np.ndarray, *, options: MPUOptions) -
     depth = 0
     total_cells = 0
     parent_global = level_parent
+    # point lists of the cells' supports of the level radius R0 (CSR) and counts of points in
+    # the cells' boxes; children's lists are filtered from their parent's list (a child's
+    # support lies inside its parent's support since alpha >= 0.5) instead of tree queries
+    base_ptr, base_idx = _ball_csr(tree, level_centres, np.array([4.0 * options.alpha * half0]))
+    base_idx = np.sort(base_idx)
+    base_inside = np.diff(base_ptr)
     while len(level_centres):
         half = half0 / 2.0**depth
         R0 = 4.0 * options.alpha * half
-        counts = tree.query_ball_point(level_centres, R0, return_length=True)
+        counts = np.diff(base_ptr)
         sparse = counts < options.min_points
         if sparse.any() and depth > 0:
             # a sparse cell with no point in its own box only grazes the data with its support:
             # its neighbours cover that data, and a grown support would fit a poor function
-            inside = tree.query_ball_point(
-                level_centres[sparse], half, p=np.inf, return_length=True
-            )
-            drop = np.flatnonzero(sparse)[inside == 0]
+            drop = np.flatnonzero(sparse & (base_inside == 0))
             if len(drop):
                 keep = np.ones(len(level_centres), dtype=bool)
                 keep[drop] = False
+                base_idx = base_idx[np.repeat(keep, counts)]
                 level_centres = level_centres[keep]
                 parent_global = parent_global[keep]
                 counts = counts[keep]
                 sparse = sparse[keep]
+                base_ptr = np.zeros(len(counts) + 1, dtype=np.int64)
+                np.cumsum(counts, out=base_ptr[1:])
         cells = len(level_centres)
         radii = np.full(cells, R0)
+        indptr, indices = base_ptr, base_idx
         if sparse.any():
             k = options.min_points
             dist, _ = tree.query(level_centres[sparse], k=k)
             radii[sparse] = np.maximum(dist[:, -1] * 1.0001, R0)
-        indptr, indices = _ball_csr(tree, level_centres, radii)
+            sp_ptr, sp_idx = _ball_csr(tree, level_centres[sparse], radii[sparse])
+            lengths = counts.copy()
+            lengths[sparse] = np.diff(sp_ptr)
+            starts = base_ptr[:-1].copy()
+            starts[sparse] = len(base_idx) + sp_ptr[:-1]
+            indptr = np.zeros(cells + 1, dtype=np.int64)
+            np.cumsum(lengths, out=indptr[1:])
+            gather = np.repeat(starts - indptr[:-1], lengths) + np.arange(int(indptr[-1]))
+            indices = np.concatenate([base_idx, sp_idx])[gather]
         M = np.zeros((cells, MAX_PIECES, 4, 4))
         g = np.zeros((cells, MAX_PIECES, 4))
         c = np.zeros((cells, MAX_PIECES))
@@ -966,16 +1065,24 @@ def fit_mpu4d(points: np.ndarray, normals: np.ndarray, *, options: MPUOptions) -
         # children of split cells that have data in their support; a split cell none of whose
         # children holds data stays a leaf
         child_half = half / 2.0
+        child_radius = 4.0 * options.alpha * child_half
         parents = np.flatnonzero(split)
         children = (level_centres[parents][:, None, :] + child_half * _CORNERS[None]).reshape(-1, 4)
-        has_data = np.zeros(len(children), dtype=bool)
+        child_counts = np.zeros(len(children), dtype=np.int64)
+        child_inside = np.zeros(len(children), dtype=np.int64)
         if len(children):
-            has_data = (
-                tree.query_ball_point(
-                    children, 4.0 * options.alpha * child_half, return_length=True
-                )
-                > 0
+            _child_counts(
+                X,
+                indptr,
+                indices,
+                parents,
+                level_centres,
+                child_half,
+                child_radius,
+                child_counts,
+                child_inside,
             )
+        has_data = child_counts > 0
         barren = ~has_data.reshape(-1, 16).any(axis=1)
         split[parents[barren]] = False
         keep_child = (has_data.reshape(-1, 16) & ~barren[:, None]).ravel()
@@ -1005,6 +1112,24 @@ def fit_mpu4d(points: np.ndarray, normals: np.ndarray, *, options: MPUOptions) -
         if not keep_child.any():
             break
         node_offset += cells
+        slot = np.full(len(children), -1, dtype=np.int64)
+        slot[keep_child] = np.arange(int(keep_child.sum()))
+        base_ptr = np.zeros(int(keep_child.sum()) + 1, dtype=np.int64)
+        np.cumsum(child_counts[keep_child], out=base_ptr[1:])
+        base_idx = np.empty(int(base_ptr[-1]), dtype=np.int64)
+        _child_fill(
+            X,
+            indptr,
+            indices,
+            parents,
+            level_centres,
+            child_half,
+            child_radius,
+            slot,
+            base_ptr,
+            base_idx,
+        )
+        base_inside = child_inside[keep_child]
         level_centres = children[keep_child]
         parent_global = child_parent[keep_child]
         depth += 1

@@ -305,7 +305,10 @@ def project_to_surface(
         too_long = length > max_step
         step[too_long] *= (max_step / length[too_long])[:, None]
         x[active] += step
-        keep = ok & (np.abs(values) > tolerance)
+        # converged once the Newton step (~ the distance to the surface) is below the
+        # tolerance: Newton's quadratic convergence leaves it far closer than that, and this
+        # saves the evaluation that would only confirm it
+        keep = ok & (np.abs(values) > tolerance) & (length > tolerance)
         active = active[keep]
     return x
 
