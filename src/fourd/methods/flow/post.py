@@ -268,11 +268,39 @@ def _drop_small_components(vertices, faces, fraction):
     return compact(vertices, faces)
 
 
+def enclosed_volume(values: np.ndarray, spacing: float, level: float = 0.0) -> float:
+    """Volume (input units) of ``{f < level}`` of one slice ``values`` [nx, ny, nz] of a
+    distance-like field: each node counts for the fraction ``clip(0.5 - (f - level) / h)`` of
+    its ``h^3`` cell (exact for a planar distance field between nodes)."""
+    fraction = np.clip(0.5 - (values - level) / spacing, 0.0, 1.0)
+    return float(fraction.sum(dtype=np.float64)) * spacing**3
+
+
+def mass_level(
+    values: np.ndarray, spacing: float, target: float, *, limit: float, iterations: int = 40
+) -> float:
+    """Iso-level ``c`` with :func:`enclosed_volume` ``(values, spacing, c) == target``
+    (bisection; monotone in ``c``), clamped to ``[-limit, limit]``."""
+    lo, hi = -float(limit), float(limit)
+    if enclosed_volume(values, spacing, lo) >= target:
+        return lo
+    if enclosed_volume(values, spacing, hi) <= target:
+        return hi
+    for _ in range(iterations):
+        mid = 0.5 * (lo + hi)
+        if enclosed_volume(values, spacing, mid) < target:
+            lo = mid
+        else:
+            hi = mid
+    return 0.5 * (lo + hi)
+
+
 def extract_mesh(
-    field: FlowField, slice_index: int, *, min_component: float = 0.0
+    field: FlowField, slice_index: int, *, min_component: float = 0.0, level: float = 0.0
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Closed mesh of the zero set of one time slice (marching cubes on the padded slice)."""
-    values = field.values[slice_index].astype(np.float64)
+    """Closed mesh of the ``level`` set of one time slice (marching cubes on the padded
+    slice)."""
+    values = field.values[slice_index].astype(np.float64) - level
     values = np.pad(
         values, 1, mode="constant", constant_values=max(float(values.max()), field.spacing)
     )
