@@ -192,7 +192,7 @@ def test_splitting_blob_components():
 
     truth = scene("splitting-blob", frames=8)
     scans = scan(truth, cameras=3, noise=0.002, outliers=0.02)  # the standard scan
-    result = reconstruct(scans, Options(resolution=24, max_iterations=8))
+    result = reconstruct(scans, Options(resolution=24, max_iterations=8, mass_levels=True))
     counts = []
     for v, f in result.meshes:
         mesh = _check_closed_manifold(v, f)
@@ -214,7 +214,7 @@ def squash_scene_volumes():
 
     truth = scene("squash-ball", frames=5)
     scans = scan(truth, cameras=3, resolution=96, noise=0.002, outliers=0.02)
-    result = reconstruct(scans, Options(resolution=24, max_iterations=8))
+    result = reconstruct(scans, Options(resolution=24, max_iterations=8, mass_levels=True))
     return np.array([_check_closed_manifold(v, f).volume for v, f in result.meshes])
 
 
