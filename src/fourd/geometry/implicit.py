@@ -70,6 +70,18 @@ def _validate(points, normals, bandwidth, support):
     return points, normals, float(bandwidth), support
 
 
+@numba.njit(cache=True, inline="always")
+def _support_box(px, py, pz, support, origin, h, nx, ny, nz):
+    """Index range of the grid points within ``support`` of a point, clipped to the grid."""
+    i0 = max(int(np.ceil((px - support - origin[0]) / h)), 0)
+    i1 = min(int(np.floor((px + support - origin[0]) / h)), nx - 1)
+    j0 = max(int(np.ceil((py - support - origin[1]) / h)), 0)
+    j1 = min(int(np.floor((py + support - origin[1]) / h)), ny - 1)
+    k0 = max(int(np.ceil((pz - support - origin[2]) / h)), 0)
+    k1 = min(int(np.floor((pz + support - origin[2]) / h)), nz - 1)
+    return i0, i1, j0, j1, k0, k1
+
+
 @numba.njit(cache=True)
 def _nearest_on_grid(points, origin, h, shape, support):
     nx, ny, nz = shape
@@ -78,12 +90,7 @@ def _nearest_on_grid(points, origin, h, shape, support):
     s2 = support * support
     for i in range(points.shape[0]):
         px, py, pz = points[i, 0], points[i, 1], points[i, 2]
-        i0 = max(int(np.ceil((px - support - origin[0]) / h)), 0)
-        i1 = min(int(np.floor((px + support - origin[0]) / h)), nx - 1)
-        j0 = max(int(np.ceil((py - support - origin[1]) / h)), 0)
-        j1 = min(int(np.floor((py + support - origin[1]) / h)), ny - 1)
-        k0 = max(int(np.ceil((pz - support - origin[2]) / h)), 0)
-        k1 = min(int(np.floor((pz + support - origin[2]) / h)), nz - 1)
+        i0, i1, j0, j1, k0, k1 = _support_box(px, py, pz, support, origin, h, nx, ny, nz)
         for a in range(i0, i1 + 1):
             dx = origin[0] + a * h - px
             for b in range(j0, j1 + 1):
@@ -111,12 +118,7 @@ def _accumulate_on_grid(points, normals, origin, h, shape, bandwidth, support, o
     for i in range(points.shape[0]):
         px, py, pz = points[i, 0], points[i, 1], points[i, 2]
         qx, qy, qz = normals[i, 0], normals[i, 1], normals[i, 2]
-        i0 = max(int(np.ceil((px - support - origin[0]) / h)), 0)
-        i1 = min(int(np.floor((px + support - origin[0]) / h)), nx - 1)
-        j0 = max(int(np.ceil((py - support - origin[1]) / h)), 0)
-        j1 = min(int(np.floor((py + support - origin[1]) / h)), ny - 1)
-        k0 = max(int(np.ceil((pz - support - origin[2]) / h)), 0)
-        k1 = min(int(np.floor((pz + support - origin[2]) / h)), nz - 1)
+        i0, i1, j0, j1, k0, k1 = _support_box(px, py, pz, support, origin, h, nx, ny, nz)
         for a in range(i0, i1 + 1):
             dx = origin[0] + a * h - px
             for b in range(j0, j1 + 1):
