@@ -13,7 +13,7 @@ from typing import NamedTuple
 import numba
 import numpy as np
 import scipy.sparse as sp
-from scipy.sparse.csgraph import breadth_first_order, connected_components, minimum_spanning_tree
+from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from fourd.geometry.neighbors import knn
@@ -31,6 +31,76 @@ class Normals(NamedTuple):
     flatness: np.ndarray
 
 
+@numba.njit(cache=True)
+def _smallest_eigenpair(C, out):
+    """Smallest eigenvalue of the symmetric 3x3 ``C`` (returned) and its unit eigenvector
+    (written to ``out``): eigenvalues in closed form (Smith 1961), the vector as the largest
+    cross product of two rows of ``C - lambda I``; LAPACK when that is degenerate."""
+    q = (C[0, 0] + C[1, 1] + C[2, 2]) / 3.0
+    p1 = C[0, 1] ** 2 + C[0, 2] ** 2 + C[1, 2] ** 2
+    p2 = (C[0, 0] - q) ** 2 + (C[1, 1] - q) ** 2 + (C[2, 2] - q) ** 2 + 2.0 * p1
+    if p2 <= 1e-300:
+        out[0], out[1], out[2] = 0.0, 0.0, 1.0
+        return q
+    pp = np.sqrt(p2 / 6.0)
+    B = (C - q * np.eye(3)) / pp
+    r = (
+        B[0, 0] * (B[1, 1] * B[2, 2] - B[1, 2] * B[2, 1])
+        - B[0, 1] * (B[1, 0] * B[2, 2] - B[1, 2] * B[2, 0])
+        + B[0, 2] * (B[1, 0] * B[2, 1] - B[1, 1] * B[2, 0])
+    ) / 2.0
+    r = min(max(r, -1.0), 1.0)
+    phi = np.arccos(r) / 3.0
+    smallest = q + 2.0 * pp * np.cos(phi + 2.0 * np.pi / 3.0)
+    M = C - smallest * np.eye(3)
+    best = 0.0
+    for a, b in ((0, 1), (0, 2), (1, 2)):
+        c0 = M[a, 1] * M[b, 2] - M[a, 2] * M[b, 1]
+        c1 = M[a, 2] * M[b, 0] - M[a, 0] * M[b, 2]
+        c2 = M[a, 0] * M[b, 1] - M[a, 1] * M[b, 0]
+        length = c0 * c0 + c1 * c1 + c2 * c2
+        if length > best:
+            best = length
+            out[0], out[1], out[2] = c0, c1, c2
+    if best <= 1e-24 * p2 * p2:
+        values, vectors = np.linalg.eigh(C)
+        out[:] = vectors[:, 0]
+        return values[0]
+    scale = 1.0 / np.sqrt(best)
+    out[0] *= scale
+    out[1] *= scale
+    out[2] *= scale
+    return smallest
+
+
+@numba.njit(cache=True, parallel=True)
+def _pca_kernel(points, indices, normals, flatness):
+    for p in numba.prange(len(points)):
+        k = indices.shape[1]
+        mean = points[p].copy()
+        for a in range(k):
+            mean += points[indices[p, a]]
+        mean /= k + 1
+        C = np.zeros((3, 3))
+        for a in range(-1, k):
+            q = points[p] if a < 0 else points[indices[p, a]]
+            d0 = q[0] - mean[0]
+            d1 = q[1] - mean[1]
+            d2 = q[2] - mean[2]
+            C[0, 0] += d0 * d0
+            C[0, 1] += d0 * d1
+            C[0, 2] += d0 * d2
+            C[1, 1] += d1 * d1
+            C[1, 2] += d1 * d2
+            C[2, 2] += d2 * d2
+        C[1, 0] = C[0, 1]
+        C[2, 0] = C[0, 2]
+        C[2, 1] = C[1, 2]
+        smallest = _smallest_eigenpair(C, normals[p])
+        total = max(C[0, 0] + C[1, 1] + C[2, 2], 1e-300)
+        flatness[p] = min(max(1.0 - 3.0 * smallest / total, 0.0), 1.0)
+
+
 def pca_normals(points: np.ndarray, k: int = 16, *, indices: np.ndarray | None = None) -> Normals:
     """Unoriented PCA normals from the ``k`` nearest neighbours (the point itself included).
 
@@ -41,36 +111,127 @@ def pca_normals(points: np.ndarray, k: int = 16, *, indices: np.ndarray | None =
     indices : ndarray int [P, k], optional
         Precomputed neighbour indices (self excluded).
     """
-    points = np.asarray(points, dtype=np.float64)
+    points = np.ascontiguousarray(points, dtype=np.float64)
     if indices is None:
         _, indices = knn(points, k)
-    neighbourhood = np.concatenate([points[:, None, :], points[indices]], axis=1)
-    centred = neighbourhood - neighbourhood.mean(axis=1, keepdims=True)
-    covariance = np.einsum("pki,pkj->pij", centred, centred)
-    eigenvalues, eigenvectors = np.linalg.eigh(covariance)
-    normals = eigenvectors[:, :, 0]
-    total = np.maximum(eigenvalues.sum(axis=1), 1e-300)
-    flatness = np.clip(1.0 - 3.0 * eigenvalues[:, 0] / total, 0.0, 1.0)
-    return Normals(normals / np.linalg.norm(normals, axis=1, keepdims=True), flatness)
+    normals = np.empty_like(points)
+    flatness = np.empty(len(points))
+    _pca_kernel(points, np.ascontiguousarray(indices, dtype=np.int64), normals, flatness)
+    return Normals(normals, flatness)
 
 
 @numba.njit(cache=True)
-def _propagate_signs(order, predecessors, edge_sign):
-    signs = np.ones(len(predecessors), dtype=np.float64)
-    for node in order:
-        parent = predecessors[node]
-        if parent >= 0:
-            signs[node] = signs[parent] * edge_sign[node]
-    return signs
-
-
-def _neighbour_graph(normals: np.ndarray, indices: np.ndarray) -> sp.csr_matrix:
+def _reverse_adjacency(indices):
+    """CSR lists of the points that have each point among their neighbours."""
     count, k = indices.shape
-    rows = np.repeat(np.arange(count), k)
-    cols = indices.ravel()
-    weight = 1.0 - np.abs(np.einsum("ij,ij->i", normals[rows], normals[cols])) + 1e-6
-    graph = sp.csr_matrix((weight, (rows, cols)), shape=(count, count))
-    return graph.maximum(graph.T)
+    pointer = np.zeros(count + 1, dtype=np.int64)
+    for p in range(count):
+        for a in range(k):
+            pointer[indices[p, a] + 1] += 1
+    for p in range(count):
+        pointer[p + 1] += pointer[p]
+    fill = pointer[:-1].copy()
+    members = np.empty(count * k, dtype=np.int64)
+    for p in range(count):
+        for a in range(k):
+            q = indices[p, a]
+            members[fill[q]] = p
+            fill[q] += 1
+    return pointer, members
+
+
+@numba.njit(cache=True)
+def _heap_push(keys, nodes, parents, size, key, node, parent):
+    i = size
+    while i > 0:
+        up = (i - 1) >> 1
+        if keys[up] <= key:
+            break
+        keys[i] = keys[up]
+        nodes[i] = nodes[up]
+        parents[i] = parents[up]
+        i = up
+    keys[i] = key
+    nodes[i] = node
+    parents[i] = parent
+    return size + 1
+
+
+@numba.njit(cache=True)
+def _heap_pop(keys, nodes, parents, size):
+    """Removes the smallest entry (returned as node, parent); the caller passes the old size."""
+    node = nodes[0]
+    parent = parents[0]
+    size -= 1
+    key = keys[size]
+    last_node = nodes[size]
+    last_parent = parents[size]
+    i = 0
+    while True:
+        child = 2 * i + 1
+        if child >= size:
+            break
+        if child + 1 < size and keys[child + 1] < keys[child]:
+            child += 1
+        if key <= keys[child]:
+            break
+        keys[i] = keys[child]
+        nodes[i] = nodes[child]
+        parents[i] = parents[child]
+        i = child
+    keys[i] = key
+    nodes[i] = last_node
+    parents[i] = last_parent
+    return node, parent
+
+
+@numba.njit(cache=True)
+def _propagate_over_spanning_tree(normals, indices, pointer, members, signs, labels):
+    """Prim's minimum spanning tree of the symmetric neighbour graph (weights
+    ``1 - |n_i . n_j|``), grown from every not yet reached point in turn; each point takes the
+    sign that makes its normal agree with its tree parent's. ``labels`` gets the part index."""
+    count, k = indices.shape
+    capacity = 2 * count * k + 1
+    keys = np.empty(capacity)
+    nodes = np.empty(capacity, dtype=np.int64)
+    parents = np.empty(capacity, dtype=np.int64)
+    reached = np.zeros(count, dtype=np.bool_)
+    best = np.full(count, np.inf)
+    part = 0
+    for seed in range(count):
+        if reached[seed]:
+            continue
+        size = _heap_push(keys, nodes, parents, 0, 0.0, seed, seed)
+        while size > 0:
+            node, parent = _heap_pop(keys, nodes, parents, size)
+            size -= 1
+            if reached[node]:
+                continue
+            reached[node] = True
+            labels[node] = part
+            if node == parent:
+                signs[node] = 1.0
+            else:
+                d = (
+                    normals[node, 0] * normals[parent, 0]
+                    + normals[node, 1] * normals[parent, 1]
+                    + normals[node, 2] * normals[parent, 2]
+                )
+                signs[node] = signs[parent] if d >= 0 else -signs[parent]
+            for a in range(k + pointer[node + 1] - pointer[node]):
+                j = indices[node, a] if a < k else members[pointer[node] + a - k]
+                if not reached[j]:
+                    d = (
+                        normals[node, 0] * normals[j, 0]
+                        + normals[node, 1] * normals[j, 1]
+                        + normals[node, 2] * normals[j, 2]
+                    )
+                    weight = 1.0 - abs(d)
+                    if weight < best[j]:
+                        best[j] = weight
+                        size = _heap_push(keys, nodes, parents, size, weight, j, node)
+        part += 1
+    return part
 
 
 def orient_by_propagation(points: np.ndarray, normals: np.ndarray, indices: np.ndarray) -> np.ndarray:
@@ -80,28 +241,28 @@ def orient_by_propagation(points: np.ndarray, normals: np.ndarray, indices: np.n
 
     Returns the re-oriented normals, [P, 3].
     """
-    graph = _neighbour_graph(normals, indices)
-    tree = minimum_spanning_tree(graph)
-    tree = tree + tree.T
-    parts, labels = connected_components(tree, directed=False)
-    oriented = normals.copy()
-    for part in range(parts):
-        members = np.flatnonzero(labels == part)
-        centroid = points[members].mean(axis=0)
-        offsets = points[members] - centroid
-        root = members[int(np.argmax(np.einsum("ij,ij->i", offsets, offsets)))]
-        order, predecessors = breadth_first_order(tree, root, directed=False, return_predecessors=True)
-        parent = predecessors[order]
-        parent_safe = np.where(parent >= 0, parent, order)
-        step_sign = np.sign(np.einsum("ij,ij->i", normals[order], normals[parent_safe]))
-        step_sign[step_sign == 0] = 1.0
-        edge_sign = np.ones(len(points))
-        edge_sign[order] = step_sign
-        signs = _propagate_signs(order, predecessors, edge_sign)[order]
-        oriented[order] = normals[order] * signs[:, None]
-        if np.dot(oriented[root], points[root] - centroid) < 0:
-            oriented[order] *= -1.0
-    return oriented
+    points = np.asarray(points, dtype=np.float64)
+    normals = np.ascontiguousarray(normals, dtype=np.float64)
+    indices = np.ascontiguousarray(indices, dtype=np.int64)
+    count = len(points)
+    if count == 0:
+        return normals.copy()
+    pointer, members = _reverse_adjacency(indices)
+    signs = np.ones(count)
+    labels = np.empty(count, dtype=np.int64)
+    parts = _propagate_over_spanning_tree(normals, indices, pointer, members, signs, labels)
+    oriented = normals * signs[:, None]
+    sizes = np.bincount(labels, minlength=parts)
+    centroids = np.stack(
+        [np.bincount(labels, weights=points[:, c], minlength=parts) for c in range(3)], axis=1
+    ) / sizes[:, None]
+    offsets = points - centroids[labels]
+    reach = np.einsum("ij,ij->i", offsets, offsets)
+    # the furthest point of every part: last of each part when sorted by (part, reach)
+    order = np.lexsort((reach, labels))
+    roots = order[np.cumsum(sizes) - 1]
+    outward = np.einsum("ij,ij->i", oriented[roots], offsets[roots]) >= 0
+    return np.where(outward[labels][:, None], oriented, -oriented)
 
 
 def orient_to_sensors(
