@@ -250,15 +250,25 @@ def reconstruct(seq: PointCloudSequence, options: Options | None = None) -> Anim
     cell = options.cell_size or template_cell_size(points[0], spacing, options.template_vertices)
     lo = points[0].min(axis=0)
     hi = points[0].max(axis=0)
-    vertices, faces = extract_template(
-        field,
-        times[0],
-        bounds=np.array([lo, hi]),
-        cell_size=cell,
-        data_points=points[0],
-        smoothing_iterations=options.smoothing_iterations,
-        min_component_faces=20,
-    )
+
+    def urshape_at(cell_size):
+        return extract_template(
+            field,
+            times[0],
+            bounds=np.array([lo, hi]),
+            cell_size=cell_size,
+            data_points=points[0],
+            smoothing_iterations=options.smoothing_iterations,
+            min_component_faces=20,
+        )
+
+    vertices, faces = urshape_at(cell)
+    ratio = len(vertices) / options.template_vertices
+    if not options.cell_size and len(faces) and not (0.8 <= ratio <= 1.25):
+        # the area estimate is rough on curved or thin shapes (dfaust-hopping: 1.7x the
+        # target): one more extraction at the corrected cell size, since sliding costs grow
+        # with the vertex count
+        vertices, faces = urshape_at(cell * np.sqrt(ratio))
     if len(faces) == 0:
         raise InputError("the 4D implicit has no surface at the first frame (too few points?)")
     urshape = _time.perf_counter()

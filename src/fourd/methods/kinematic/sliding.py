@@ -80,7 +80,12 @@ class SlideOptions:
     substeps : int
         Sub-steps per step between consecutive output times (1: the paper).
     projection_iterations : int
-        Gradient steps of each projection onto ``f = 0``.
+        Gradient steps of the projection of the initial guess and of the output onto ``f = 0``.
+    reprojection_iterations : int
+        Gradient steps of the re-projections between iterations.
+    projection_tolerance : float
+        A vertex stops projecting once its Newton step is below this fraction of the median
+        edge length.
     max_step : float
         Largest move of one projection step (0: 4x the median edge length), so that a vertex
         never jumps across a thin gap in one step.
@@ -114,6 +119,8 @@ class SlideOptions:
     epsilon: float = 0.0
     substeps: int = 1
     projection_iterations: int = 6
+    reprojection_iterations: int = 2
+    projection_tolerance: float = 1e-2
     max_step: float = 0.0
     residual_correction: bool = True
     project_output: bool = True
@@ -562,7 +569,7 @@ def slide_step(
         for _ in range(options.rigid_iterations):
             values_next, grad_next = value_and_gradient(field, start, _field_times(next_time, n))
             start = rigid_prediction(start, grad_next[:, :3], values_next, groups=patches)
-    tolerance = 1e-3 * pre.edge_length
+    tolerance = options.projection_tolerance * pre.edge_length
     guess = project_to_surface(
         field,
         start,
@@ -593,7 +600,7 @@ def slide_step(
                 field,
                 solved[mask],
                 next_time,
-                iterations=min(2, options.projection_iterations),
+                iterations=options.reprojection_iterations,
                 max_step=max_step,
                 tolerance=tolerance,
             )
