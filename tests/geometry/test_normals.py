@@ -62,3 +62,38 @@ def test_scanned_crane_normals_agree_with_the_truth():
     sensors = camera_rig(truth.bounds(), 3).positions
     normals = estimate_normals(points, sensors=sensors).normals
     assert np.mean(np.einsum("ij,ij->i", normals, true_normals) > 0) > 0.99
+
+
+def test_closed_form_smallest_eigenvector_matches_lapack():
+    from fourd.geometry.normals import _smallest_eigenpair
+
+    rng = np.random.default_rng(5)
+    cases = [a @ a.T for a in rng.normal(size=(200, 3, 3))]
+    cases += [np.diag([1.0, 1.0, 1e-9]), np.diag([2.0, 1e-12, 2.0]), np.eye(3), np.zeros((3, 3))]
+    flat = rng.normal(size=(50, 3)) * [1.0, 1.0, 1e-6]  # a plane: repeated large eigenvalues
+    cases.append(flat.T @ flat)
+    for C in cases:
+        out = np.empty(3)
+        value = _smallest_eigenpair(np.ascontiguousarray(C), out)
+        values, vectors = np.linalg.eigh(C)
+        assert np.isclose(value, values[0], atol=1e-9 * max(values[-1], 1.0))
+        assert np.isclose(np.linalg.norm(out), 1.0)
+        if values[1] - values[0] > 1e-6 * max(values[-1], 1e-300):
+            assert abs(out @ vectors[:, 0]) > 1 - 1e-8
+        else:
+            # degenerate smallest eigenvalue: any unit vector of that eigenspace
+            assert np.linalg.norm(C @ out - values[0] * out) < 1e-6 * max(values[-1], 1.0)
+
+
+def test_propagation_orients_every_separate_part_outwards():
+    from fourd.geometry.normals import orient_by_propagation
+
+    a, b = _sphere(2000, seed=6), _sphere(1500, seed=7) * 0.5
+    points = np.concatenate([a, b + [5.0, 0.0, 0.0]])
+    outward = np.concatenate([a, b / 0.5])
+    _, indices = knn(points, 12)
+    unoriented = pca_normals(points, 12, indices=indices).normals
+    flips = np.where(np.random.default_rng(8).random(len(points)) < 0.5, -1.0, 1.0)
+    normals = orient_by_propagation(points, unoriented * flips[:, None], indices)
+    facing = np.einsum("ij,ij->i", normals, outward)
+    assert np.mean(facing[:2000] > 0.9) > 0.99 and np.mean(facing[2000:] > 0.9) > 0.99

@@ -136,7 +136,7 @@ def _blob_sequence(frames=4, count=2500, noise=0.003, seed=0):
 @pytest.mark.slow
 def test_reconstruct_tracks_a_rigid_scan_at_the_noise_level():
     blob, seq = _blob_sequence()
-    anim = reconstruct(seq, "kinematic", template_vertices=3000)
+    anim = reconstruct(seq, "kinematic", template_vertices=7000)
     assert isinstance(anim, AnimatedMesh) and anim.rest is not None
     assert anim.vertices.shape[0] == len(seq)
     for t in range(len(seq)):

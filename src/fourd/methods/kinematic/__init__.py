@@ -109,7 +109,8 @@ class Options:
     substeps : int
         Sliding sub-steps between consecutive output times (1: the paper).
     epsilon : float
-        Radius of the data ball of section 5.4; 0: ``2 *`` the urshape's median edge.
+        Radius of the data ball of section 5.4; 0: ``2 *`` the urshape's median edge, at least
+        ``3 * s``.
     rigid_guess : bool
         Rigid (point-to-plane on the implicit) prediction before the projection of 5.1
         (beyond the paper; see :class:`SlideOptions`).
@@ -280,7 +281,9 @@ def reconstruct(seq: PointCloudSequence, options: Options | None = None) -> Anim
     data = [points[k] for k in nearest]
     slide_options = SlideOptions(
         iterations=options.iterations,
-        epsilon=options.epsilon,
+        # a vertex is observed when an input point lies within 2 edges, or within 3 point
+        # spacings when the urshape is finer than the data
+        epsilon=options.epsilon or max(2.0 * _median_edge(vertices, faces), 3.0 * spacing),
         substeps=options.substeps,
         rigid_guess=options.rigid_guess,
         rigid_neighbours=options.rigid_neighbours,
@@ -328,6 +331,11 @@ def reconstruct(seq: PointCloudSequence, options: Options | None = None) -> Anim
         finished - urshape,
     )
     return result
+
+
+def _median_edge(vertices: np.ndarray, faces: np.ndarray) -> float:
+    lengths = np.linalg.norm(vertices[faces[:, [1, 2, 0]]] - vertices[faces], axis=2)
+    return float(np.median(lengths))
 
 
 def _slide_monotone(vertices, faces, field, times, options, data):
