@@ -53,6 +53,7 @@ from fourd.methods.kinematic.mpu4d import MPU4D, MPUOptions, fit_mpu4d
 from fourd.methods.kinematic.sliding import (
     SlideOptions,
     arap_energy,
+    median_edge_length,
     project_to_surface,
     slide,
     slide_precompute,
@@ -292,7 +293,7 @@ def reconstruct(seq: PointCloudSequence, options: Options | None = None) -> Anim
         iterations=options.iterations,
         # a vertex is observed when an input point lies within 2 edges, or within 3 point
         # spacings when the urshape is finer than the data
-        epsilon=options.epsilon or max(2.0 * _median_edge(vertices, faces), 3.0 * spacing),
+        epsilon=options.epsilon or max(2.0 * median_edge_length(vertices, faces), 3.0 * spacing),
         substeps=options.substeps,
         rigid_guess=options.rigid_guess,
         rigid_neighbours=options.rigid_neighbours,
@@ -340,11 +341,6 @@ def reconstruct(seq: PointCloudSequence, options: Options | None = None) -> Anim
         finished - urshape,
     )
     return result
-
-
-def _median_edge(vertices: np.ndarray, faces: np.ndarray) -> float:
-    lengths = np.linalg.norm(vertices[faces[:, [1, 2, 0]]] - vertices[faces], axis=2)
-    return float(np.median(lengths))
 
 
 def _slide_monotone(vertices, faces, field, times, options, data):

@@ -335,6 +335,13 @@ class SlidePrecompute(NamedTuple):
     indptr: np.ndarray
 
 
+def median_edge_length(vertices: np.ndarray, faces: np.ndarray) -> float:
+    """Median length of the edges of ``faces`` [F, 3] over ``vertices`` [N, 3]."""
+    faces = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
+    lengths = np.linalg.norm(vertices[faces[:, [1, 2, 0]]] - vertices[faces], axis=2)
+    return float(np.median(lengths))
+
+
 def slide_precompute(rest_vertices: np.ndarray, faces: np.ndarray) -> SlidePrecompute:
     """Cotangent weights (clamped at zero), Laplacian ``L`` and directed edge lists of the
     template."""
@@ -347,8 +354,7 @@ def slide_precompute(rest_vertices: np.ndarray, faces: np.ndarray) -> SlidePreco
     laplacian = weights_laplacian(W)
     rest_edges = np.ascontiguousarray(rest[W.row] - rest[W.col])
     faces = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
-    lengths = np.linalg.norm(rest[faces[:, [1, 2, 0]]] - rest[faces], axis=2)
-    edge_length = float(np.median(lengths)) if lengths.size else 1.0
+    edge_length = median_edge_length(rest, faces) if len(faces) else 1.0
     return SlidePrecompute(
         rest,
         W.row.astype(np.int64),
