@@ -226,3 +226,80 @@ def test_output_before_and_beyond_the_input_times():
     speed = blob.speed[0]
     assert abs((x[1] - x[0]) - 0.5 * speed) < 0.3 * speed
     assert abs((x[3] - x[2]) - 1.5 * speed) < 0.3 * speed
+
+
+def test_frame_surface_is_the_signed_distance_near_its_points():
+    rng = np.random.default_rng(3)
+    d = rng.normal(size=(20000, 3))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    surface = K.FrameSurface(d, d, bandwidth=0.05)  # unit sphere, outward normals
+    q = rng.normal(size=(500, 3))
+    q /= np.linalg.norm(q, axis=1, keepdims=True)
+    for offset in (-0.02, 0.0, 0.03):
+        value, gradient, coverage = surface.evaluate(q * (1.0 + offset))
+        assert np.abs(value - offset).max() < 0.004
+        assert np.einsum("ij,ij->i", gradient, q).min() > 0.98
+        assert coverage.min() == 1.0
+    value, gradient, coverage = surface.evaluate(q * 2.0)  # far from every point
+    assert np.all(coverage == 0) and np.all(value == 0) and np.all(gradient == 0)
+
+
+def test_frame_surface_ignores_the_far_side_of_a_thin_part():
+    rng = np.random.default_rng(4)
+    uv = rng.uniform(-1, 1, size=(20000, 2))
+    gap = 0.04  # a slab thinner than the kernel (bandwidth 0.03, cut at 0.075)
+    top = np.c_[uv[:10000], np.full(10000, gap / 2)]
+    bottom = np.c_[uv[10000:], np.full(10000, -gap / 2)]
+    normals = np.r_[np.tile([0, 0, 1.0], (10000, 1)), np.tile([0, 0, -1.0], (10000, 1))]
+    surface = K.FrameSurface(np.r_[top, bottom], normals, bandwidth=0.03)
+    q = np.c_[rng.uniform(-0.5, 0.5, size=(200, 2)), np.full(200, gap / 2 + 0.005)]
+    value, gradient, _ = surface.evaluate(q)
+    assert np.abs(value - 0.005).max() < 0.002
+    assert gradient[:, 2].min() > 0.99
+
+
+def test_smooth_trajectories_keeps_linear_motion_and_the_end_frames():
+    times = np.array([0.0, 1.0, 1.5, 3.0, 4.0])
+    rng = np.random.default_rng(5)
+    start, velocity = rng.normal(size=(50, 3)), rng.normal(size=(50, 3))
+    linear = start[None] + times[:, None, None] * velocity[None]
+    assert np.allclose(K.smooth_trajectories(linear, times, 2), linear)
+    noisy = linear + 0.1 * rng.normal(size=linear.shape)
+    smoothed = K.smooth_trajectories(noisy, times, 1)
+    assert np.array_equal(smoothed[[0, -1]], noisy[[0, -1]])
+    inner = slice(1, -1)
+    assert (
+        np.abs(smoothed[inner] - linear[inner]).mean() < np.abs(noisy[inner] - linear[inner]).mean()
+    )
+    assert np.array_equal(K.smooth_trajectories(noisy, times, 0), noisy)
+
+
+def _lagging_field_and_frames(frames=5, lag=0.7):
+    """A blob turning about y, its 4D field lagging behind (posed at ``lag * t``), and frame
+    surfaces of the true positions: the data term must pull the sliding onto the data."""
+    truth = MovingBlob(speed=(0.0, 0.0, 0.0), spin=(0.0, 0.12, 0.0))
+    lagging = MovingBlob(speed=(0.0, 0.0, 0.0), spin=(0.0, 0.12 * lag, 0.0))
+    surfaces, data = [], []
+    for t in range(frames):
+        p = truth.surface(6000, t, t)
+        g = truth.gradient(p, float(t))[:, :3]
+        surfaces.append(K.FrameSurface(p, g / np.linalg.norm(g, axis=1, keepdims=True), 0.06))
+        data.append(p)
+    return truth, lagging, surfaces, data
+
+
+def test_the_data_term_removes_the_pose_bias_of_the_implicit():
+    truth, lagging, surfaces, data = _lagging_field_and_frames()
+    V, F = _sphere_template(truth)
+    times = np.arange(len(data), dtype=float)
+    with_data = K.slide(V, F, lagging, times, data=data, surfaces=[None] + surfaces[1:])
+    without = K.slide(V, F, lagging, times, data=data)
+    for t in times[1:]:
+        R, c = truth.motion(t)
+        expected = V @ R.T + c
+        error = np.linalg.norm(with_data.vertices[int(t)] - expected, axis=1).mean()
+        lagged = np.linalg.norm(without.vertices[int(t)] - expected, axis=1).mean()
+        assert error < 0.01  # the blob's diameter is about 2.2
+        assert lagged > 5 * error  # the lagging implicit alone is posed off the data
+    with pytest.raises(ValueError):
+        K.slide(V, F, lagging, times, surfaces=surfaces[:2])

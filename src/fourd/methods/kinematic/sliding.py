@@ -107,6 +107,9 @@ class SlideOptions:
     rigid_iterations : int
         Gauss-Newton steps of that rigid prediction against ``f(., t')`` itself (point-to-
         plane ICP on the implicit) after the first, linearised one.
+    data_rigid_iterations : int
+        Gauss-Newton steps of the rigid prediction against an input frame's own points when
+        the step has a data term (see :func:`slide_step`).
     linearize_at : "previous" or "guess"
         Where constraint (2) is linearised: at the previous positions ``p^t`` with the 4D
         normal there (the paper), or at the initial guess on ``f(., t') = 0`` (the first-order
@@ -129,6 +132,7 @@ class SlideOptions:
     rigid_guess: bool = True
     rigid_neighbours: int = 48
     rigid_iterations: int = 2
+    data_rigid_iterations: int = 6
     linearize_at: Literal["previous", "guess"] = "guess"
 
     def __post_init__(self):
@@ -153,9 +157,10 @@ def value_and_gradient(field: Field4D, points: np.ndarray, times) -> tuple[np.nd
 
 
 @numba.njit(cache=True, parallel=True)
-def _patch_systems(positions, normals, residuals, groups, A, b, centroids, sizes):
-    """Per group: centroid, RMS size and the 6x6 normal equations of the linearised
-    point-to-plane rigid motion (rotation part made unitless by the size)."""
+def _patch_systems(positions, normals, residuals, weights, groups, A, b, centroids, sizes, traces):
+    """Per group: centroid, RMS size, the 6x6 weighted normal equations of the linearised
+    point-to-plane rigid motion (rotation part made unitless by the size) and the trace of
+    the unweighted ones."""
     for g in numba.prange(groups.shape[0]):
         K = groups.shape[1]
         c0 = 0.0
@@ -179,6 +184,7 @@ def _patch_systems(positions, normals, residuals, groups, A, b, centroids, sizes
             )
         size = np.sqrt(ss / K) + 1e-300
         J = np.empty(6)
+        trace = 0.0
         for i in range(6):
             b[g, i] = 0.0
             for j in range(6):
@@ -198,10 +204,12 @@ def _patch_systems(positions, normals, residuals, groups, A, b, centroids, sizes
             J[4] = n1
             J[5] = n2
             r = residuals[v]
+            wv = weights[v]
             for i in range(6):
-                b[g, i] -= J[i] * r
+                trace += J[i] * J[i]
+                b[g, i] -= wv * J[i] * r
                 for j in range(i, 6):
-                    A[g, i, j] += J[i] * J[j]
+                    A[g, i, j] += wv * J[i] * J[j]
         for i in range(6):
             for j in range(i):
                 A[g, i, j] = A[g, j, i]
@@ -209,29 +217,36 @@ def _patch_systems(positions, normals, residuals, groups, A, b, centroids, sizes
         centroids[g, 1] = c1
         centroids[g, 2] = c2
         sizes[g] = size
+        traces[g] = trace
 
 
-def _rigid_increments(positions, normals, residuals, groups, regularization):
+def _rigid_increments(positions, normals, residuals, groups, regularization, weights=None):
     """Linearised point-to-plane rigid motions: for every group of vertices (rows of
     ``groups`` [G, K] indexing ``positions``) the ``(omega, c)`` minimising
-    ``sum_k (n_k . (omega x q_k + c) + r_k)^2 + reg |(omega, c)|^2`` with ``q_k`` the offsets
-    from the group's centroid. Returns ``omega [G, 3], c [G, 3], centroids [G, 3]``."""
+    ``sum_k w_k (n_k . (omega x q_k + c) + r_k)^2 + reg |(omega, c)|^2`` with ``q_k`` the
+    offsets from the group's centroid and ``reg`` relative to the unweighted system (a group
+    with little weight is held near no motion). Returns ``omega [G, 3], c [G, 3],
+    centroids [G, 3]``."""
     G = len(groups)
     A = np.empty((G, 6, 6))
     b = np.empty((G, 6))
     centroids = np.empty((G, 3))
     sizes = np.empty(G)
+    traces = np.empty(G)
+    weights = np.ones(len(positions)) if weights is None else weights
     _patch_systems(
         np.ascontiguousarray(positions, dtype=np.float64),
         np.ascontiguousarray(normals, dtype=np.float64),
         np.ascontiguousarray(residuals, dtype=np.float64),
+        np.ascontiguousarray(weights, dtype=np.float64),
         np.ascontiguousarray(groups, dtype=np.int64),
         A,
         b,
         centroids,
         sizes,
+        traces,
     )
-    scale = np.trace(A, axis1=1, axis2=2) / 6.0
+    scale = traces / 6.0
     A += (regularization * scale + 1e-300)[:, None, None] * np.eye(6)
     x = np.linalg.solve(A, b[..., None])[..., 0]
     return x[:, :3] / sizes[:, None], x[:, 3:], centroids
@@ -258,26 +273,28 @@ def rigid_prediction(
     neighbours: int = 0,
     regularization: float = 1e-3,
     groups: np.ndarray | None = None,
+    weights: np.ndarray | None = None,
 ):
     """Predicted positions from the first-order space-time constraint: a global linearised
     rigid motion, refined by local ones over the ``neighbours`` nearest vertices (beyond the
     paper: the projection of 5.1 alone only moves vertices along the normals).
 
-    ``residuals`` are ``dt * df/dt + f`` at the vertices, ``normals`` the spatial gradients.
+    ``residuals`` are ``dt * df/dt + f`` at the vertices, ``normals`` the spatial gradients,
+    ``weights`` [N] (optional) the vertices' weights in the fits.
     """
     norm = np.linalg.norm(normals, axis=1)
     ok = norm > 1e-12
     unit = np.where(ok[:, None], normals / np.maximum(norm, 1e-300)[:, None], 0.0)
     res = np.where(ok, residuals / np.maximum(norm, 1e-300), 0.0)
     omega, c, centroid = _rigid_increments(
-        positions, unit, res, np.arange(len(positions))[None], regularization
+        positions, unit, res, np.arange(len(positions))[None], regularization, weights
     )
     moved = centroid[0] + _rotate(positions - centroid[0], omega[0]) + c[0]
     if groups is not None or (neighbours > 1 and len(positions) > neighbours):
         res = res + np.einsum("ij,ij->i", unit, moved - positions)
         if groups is None:
             _, groups = cKDTree(moved).query(moved, k=neighbours, workers=-1)
-        omega, c, centroid = _rigid_increments(moved, unit, res, groups, regularization)
+        omega, c, centroid = _rigid_increments(moved, unit, res, groups, regularization, weights)
         moved = centroid + _rotate(moved - centroid, omega) + c
     return moved
 
@@ -290,20 +307,62 @@ def project_to_surface(
     iterations: int = 8,
     max_step: float = np.inf,
     tolerance: float = 0.0,
+    surface=None,
 ) -> np.ndarray:
     """Project ``points`` [M, 3] onto ``f(., time) = 0`` by Newton steps along the spatial
     gradient (the time component of the gradient set to zero, 000_00387fefe94cc850.txt 5.1).
 
-    Points where the spatial gradient vanishes (no support) stay where they are.
+    With ``surface`` (a :class:`~fourd.methods.kinematic.framesurface.FrameSurface` of the
+    input frame at ``time``) the target is that frame's surface where it has points and ``f``
+    elsewhere. Points where the gradient vanishes (no support) stay where they are.
     """
+    target = (
+        _implicit_target(field, time) if surface is None else _data_target(field, surface, time)
+    )
+    return _project(target, points, iterations, max_step=max_step, tolerance=tolerance)
+
+
+def _implicit_target(field: Field4D, time: float):
+    """``x [M, 3] -> (f [M], grad_x f [M, 3], None)`` at ``time``: the 4D implicit only."""
+
+    def evaluate(x):
+        values, grads = value_and_gradient(field, x, _field_times(time, len(x)))
+        return values, grads[:, :3], None
+
+    return evaluate
+
+
+def _data_target(field: Field4D, surface, time: float, full_coverage: float = 0.99):
+    """``x [M, 3] -> (f [M], grad [M, 3], weights [M])``: the frame's own surface
+    (:class:`~fourd.methods.kinematic.framesurface.FrameSurface`) where it has points, blended
+    into the 4D implicit (as a distance: ``f / |grad_x f|``) where it has fewer; ``weights`` is
+    1 where the frame's points alone define the surface, else 0."""
+
+    def evaluate(x):
+        values, grads, coverage = surface.evaluate(x)
+        partial = np.flatnonzero(coverage < 1.0)
+        if len(partial):
+            f4, g4 = value_and_gradient(field, x[partial], _field_times(time, len(partial)))
+            norm = np.maximum(np.linalg.norm(g4[:, :3], axis=1), 1e-12)
+            b = coverage[partial]
+            values[partial] = b * values[partial] + (1.0 - b) * f4 / norm
+            grads[partial] = b[:, None] * grads[partial] + (1.0 - b)[:, None] * (
+                g4[:, :3] / norm[:, None]
+            )
+        return values, grads, (coverage >= full_coverage).astype(np.float64)
+
+    return evaluate
+
+
+def _project(evaluate, points, iterations, *, max_step=np.inf, tolerance=0.0):
+    """Newton steps of ``points`` [M, 3] onto the zero set of ``evaluate`` (a target of
+    :func:`_implicit_target` or :func:`_data_target`)."""
     x = np.array(points, dtype=np.float64, copy=True)
     active = np.arange(len(x))
     for _ in range(iterations):
         if len(active) == 0:
             break
-        times = _field_times(time, len(active))
-        values, grads = value_and_gradient(field, x[active], times)
-        grads = grads[:, :3]
+        values, grads, _ = evaluate(x[active])
         norm2 = np.einsum("ij,ij->i", grads, grads)
         ok = norm2 > 1e-20
         step = np.zeros_like(grads)
@@ -547,12 +606,19 @@ def slide_step(
     velocity: np.ndarray | None = None,
     diagnostics: bool = False,
     patches: np.ndarray | None = None,
+    surface=None,
 ) -> tuple[np.ndarray, np.ndarray, SlideStep]:
     """One step of section 5: ``vertices`` at ``time`` -> positions at ``next_time``.
 
     ``velocity`` [N, 3] (optional): the previous step's vertex velocities; the projection of
     the initial guess then starts from ``vertices + dt * velocity`` (constant-velocity
     prediction, beyond the paper) instead of ``vertices``.
+
+    ``surface`` (optional): the :class:`~fourd.methods.kinematic.framesurface.FrameSurface`
+    of the input frame at ``next_time`` (the data term): the rigid prediction is then one
+    global motion iterated ``data_rigid_iterations`` times against the frame's points (the
+    vertices near them weighted 1, the others 0), and the projections and constraint (2) use
+    the frame's surface where it has points and ``f(., next_time)`` elsewhere.
 
     Returns ``(positions [N, 3], constrained [N] bool, diagnostics)``.
     """
@@ -567,28 +633,29 @@ def slide_step(
     if options.residual_correction:
         offsets -= values
     start = vertices if velocity is None else vertices + dt * velocity
+    if surface is None:
+        target = _implicit_target(field, next_time)
+        rigid_iterations, groups = options.rigid_iterations, patches
+    else:
+        target = _data_target(field, surface, next_time)
+        rigid_iterations, groups = options.data_rigid_iterations, None
     if options.rigid_guess:
         # constraint residual of the start positions, to first order
         residual = np.einsum("ij,ij->i", normals, start) - offsets
         start = rigid_prediction(start, normals, residual, neighbours=0)
-        # Gauss-Newton on f(., next_time) itself: point-to-plane ICP against the implicit
-        for _ in range(options.rigid_iterations):
-            values_next, grad_next = value_and_gradient(field, start, _field_times(next_time, n))
-            start = rigid_prediction(start, grad_next[:, :3], values_next, groups=patches)
+        # Gauss-Newton on the target itself: point-to-plane ICP against the implicit (or the
+        # frame's points)
+        for _ in range(rigid_iterations):
+            values_next, grad_next, weights = target(start)
+            start = rigid_prediction(start, grad_next, values_next, groups=groups, weights=weights)
     tolerance = options.projection_tolerance * pre.edge_length
-    guess = project_to_surface(
-        field,
-        start,
-        next_time,
-        iterations=options.projection_iterations,
-        max_step=max_step,
-        tolerance=tolerance,
+    guess = _project(
+        target, start, options.projection_iterations, max_step=max_step, tolerance=tolerance
     )
     if options.linearize_at == "guess":
         # the same tangential-motion constraint, linearised at the initial guess on
         # f(., t') = 0 instead of at p^t: n' . (p' - g) + f(g, t') = 0 with n' = grad_x f(g, t')
-        values_g, grad_g = value_and_gradient(field, guess, _field_times(next_time, n))
-        normals = grad_g[:, :3]
+        values_g, normals, _ = target(guess)
         offsets = np.einsum("ij,ij->i", normals, guess) - values_g
     constrained = np.ones(n, dtype=bool)
     if data_tree is not None:
@@ -602,11 +669,10 @@ def slide_step(
         if iteration < options.iterations - 1:
             current = solved.copy()
             mask = solver.constrained
-            current[mask] = project_to_surface(
-                field,
+            current[mask] = _project(
+                target,
                 solved[mask],
-                next_time,
-                iterations=options.reprojection_iterations,
+                options.reprojection_iterations,
                 max_step=max_step,
                 tolerance=tolerance,
             )
@@ -616,11 +682,10 @@ def slide_step(
     if options.project_output:
         mask = solver.constrained
         current = current.copy()
-        current[mask] = project_to_surface(
-            field,
+        current[mask] = _project(
+            target,
             current[mask],
-            next_time,
-            iterations=options.projection_iterations,
+            options.projection_iterations,
             max_step=max_step,
             tolerance=tolerance,
         )
@@ -647,6 +712,7 @@ def slide(
     options: SlideOptions = SlideOptions(),
     data: Sequence[np.ndarray] | None = None,
     return_steps: bool = False,
+    surfaces: Sequence | None = None,
 ):
     """Slide a template along ``field = 0`` through ``times``, as rigidly as possible.
 
@@ -667,6 +733,10 @@ def slide(
         observed (5.4). Without data every vertex is constrained and observed.
     return_steps : bool
         Also return the per-step diagnostics (a :class:`SlideResult`).
+    surfaces : sequence of T FrameSurface or None, optional
+        The data term: per output time, the surface of the input frame at exactly that time
+        (None where there is none); the last sub-step into that time registers, projects and
+        constrains observed vertices against it (see :func:`slide_step`).
 
     Returns
     -------
@@ -686,6 +756,10 @@ def slide(
         raise ValueError("times must be non-empty and strictly increasing")
     if data is not None and len(data) != len(times):
         raise ValueError(f"data must hold one point array per time ({len(times)}), got {len(data)}")
+    if surfaces is not None and len(surfaces) != len(times):
+        raise ValueError(
+            f"surfaces must hold one entry per time ({len(times)}), got {len(surfaces)}"
+        )
     pre = slide_precompute(rest, faces)
     epsilon = options.epsilon or 2.0 * pre.edge_length
     trees = None
@@ -732,6 +806,9 @@ def slide(
                 velocity=velocity,
                 diagnostics=return_steps,
                 patches=patches,
+                surface=(
+                    surfaces[k] if surfaces is not None and s == options.substeps - 1 else None
+                ),
             )
             if options.extrapolate:
                 velocity = (current - previous) / (sub[s + 1] - sub[s])
