@@ -42,6 +42,9 @@ Beyond the paper (documented options, defaults on):
   five steps without it, not at all with it).
 * ``linearize_at = "guess"``: constraint (2) linearised at the initial guess on
   ``f(., t') = 0`` rather than at ``p^t``; still one factorisation per time step.
+* the data term (``surfaces``): at an input time, the rigid prediction, the projections and
+  constraint (2) use that frame's own points (an IMLS surface) where it has points, so the
+  pose bias of a space-time fit that blends neighbouring frames does not enter the tracking.
 """
 
 from __future__ import annotations
