@@ -27,31 +27,40 @@ CUTOFF = 2.5
 MAX_CELLS = 8_000_000
 
 
+@numba.njit(cache=True)
+def _neighbour_cells(xq, origin, cell, dims, out):
+    """Ids of the (at most 27) grid cells around ``xq`` [3] that lie in the grid; returns
+    how many were written to ``out``."""
+    ci = np.empty(3, np.int64)
+    for a in range(3):
+        ci[a] = np.int64(np.floor((xq[a] - origin[a]) / cell))
+    count = 0
+    for i in range(max(ci[0] - 1, 0), min(ci[0] + 2, dims[0])):
+        for j in range(max(ci[1] - 1, 0), min(ci[1] + 2, dims[1])):
+            for k in range(max(ci[2] - 1, 0), min(ci[2] + 2, dims[2])):
+                out[count] = (i * dims[1] + j) * dims[2] + k
+                count += 1
+    return count
+
+
 @numba.njit(cache=True, parallel=True)
 def _imls(x, points, normals, starts, origin, cell, dims, h, out_v, out_g, out_w):
     cutoff2 = (CUTOFF * h) ** 2
     inv_h2 = 1.0 / (h * h)
     for q in numba.prange(x.shape[0]):
-        ci = np.empty(3, np.int64)
-        for a in range(3):
-            ci[a] = np.int64(np.floor((x[q, a] - origin[a]) / cell))
+        cells = np.empty(27, np.int64)
+        count = _neighbour_cells(x[q], origin, cell, dims, cells)
         # pass 1: the nearest point's normal (the reference orientation)
         best = -1
         best_d2 = cutoff2
-        for di in range(-1, 2):
-            for dj in range(-1, 2):
-                for dk in range(-1, 2):
-                    i, j, k = ci[0] + di, ci[1] + dj, ci[2] + dk
-                    if i < 0 or j < 0 or k < 0 or i >= dims[0] or j >= dims[1] or k >= dims[2]:
-                        continue
-                    c = (i * dims[1] + j) * dims[2] + k
-                    for p in range(starts[c], starts[c + 1]):
-                        d2 = 0.0
-                        for a in range(3):
-                            d2 += (x[q, a] - points[p, a]) ** 2
-                        if d2 < best_d2:
-                            best_d2 = d2
-                            best = p
+        for c in cells[:count]:
+            for p in range(starts[c], starts[c + 1]):
+                d2 = 0.0
+                for a in range(3):
+                    d2 += (x[q, a] - points[p, a]) ** 2
+                if d2 < best_d2:
+                    best_d2 = d2
+                    best = p
         out_v[q] = 0.0
         out_g[q, 0] = 0.0
         out_g[q, 1] = 0.0
@@ -65,34 +74,25 @@ def _imls(x, points, normals, starts, origin, cell, dims, h, out_v, out_g, out_w
         g0 = 0.0
         g1 = 0.0
         g2 = 0.0
-        for di in range(-1, 2):
-            for dj in range(-1, 2):
-                for dk in range(-1, 2):
-                    i, j, k = ci[0] + di, ci[1] + dj, ci[2] + dk
-                    if i < 0 or j < 0 or k < 0 or i >= dims[0] or j >= dims[1] or k >= dims[2]:
-                        continue
-                    c = (i * dims[1] + j) * dims[2] + k
-                    for p in range(starts[c], starts[c + 1]):
-                        d0 = x[q, 0] - points[p, 0]
-                        d1 = x[q, 1] - points[p, 1]
-                        d2_ = x[q, 2] - points[p, 2]
-                        d2 = d0 * d0 + d1 * d1 + d2_ * d2_
-                        if d2 >= cutoff2:
-                            continue
-                        n0 = normals[p, 0]
-                        n1 = normals[p, 1]
-                        n2 = normals[p, 2]
-                        if (
-                            n0 * normals[best, 0] + n1 * normals[best, 1] + n2 * normals[best, 2]
-                            <= 0
-                        ):
-                            continue
-                        w = np.exp(-d2 * inv_h2)
-                        total += w
-                        value += w * (n0 * d0 + n1 * d1 + n2 * d2_)
-                        g0 += w * n0
-                        g1 += w * n1
-                        g2 += w * n2
+        for c in cells[:count]:
+            for p in range(starts[c], starts[c + 1]):
+                d0 = x[q, 0] - points[p, 0]
+                d1 = x[q, 1] - points[p, 1]
+                d2_ = x[q, 2] - points[p, 2]
+                d2 = d0 * d0 + d1 * d1 + d2_ * d2_
+                if d2 >= cutoff2:
+                    continue
+                n0 = normals[p, 0]
+                n1 = normals[p, 1]
+                n2 = normals[p, 2]
+                if n0 * normals[best, 0] + n1 * normals[best, 1] + n2 * normals[best, 2] <= 0:
+                    continue
+                w = np.exp(-d2 * inv_h2)
+                total += w
+                value += w * (n0 * d0 + n1 * d1 + n2 * d2_)
+                g0 += w * n0
+                g1 += w * n1
+                g2 += w * n2
         if total > 1e-300:
             out_v[q] = value / total
             out_g[q, 0] = g0 / total
