@@ -47,6 +47,7 @@ from __future__ import annotations
 
 import logging
 import time as _time
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -328,15 +329,13 @@ def reconstruct(seq: PointCloudSequence, options: Options | None = None) -> Anim
     out_times = np.unique(out_times)
     nearest = np.abs(out_times[:, None] - times[None, :]).argmin(axis=1)
     data = [points[k] for k in nearest]
-    surfaces: list = [None] * len(out_times)
-    if options.data_term:
-        exact = np.abs(out_times - times[nearest]) <= 1e-9 * time_unit
-        frame_surfaces = {}
-        for i in np.flatnonzero(exact):
-            k = int(nearest[i])
-            if k not in frame_surfaces:
-                frame_surfaces[k] = FrameSurface(points[k], normals[k], bandwidth)
-            surfaces[i] = frame_surfaces[k]
+    # per output time, the input frame whose surface is the data term there (-1: none)
+    exact = np.abs(out_times - times[nearest]) <= 1e-9 * time_unit
+    surface_frames = list(np.where(exact & options.data_term, nearest, -1))
+
+    def surfaces(frames):
+        return _FrameSurfaces(frames, points, normals, bandwidth)
+
     slide_options = SlideOptions(
         iterations=options.iterations,
         # a vertex is observed when an input point lies within 2 edges, or within 3 point
@@ -359,20 +358,20 @@ def reconstruct(seq: PointCloudSequence, options: Options | None = None) -> Anim
             back_times,
             slide_options,
             [points[0]] + data[:count][::-1],
-            [None] + surfaces[:count][::-1],
+            surfaces([-1] + surface_frames[:count][::-1]),
         )
         parts_v.append(back[0][1:][::-1])
         parts_o.append(back[1][1:][::-1])
     fwd_times = out_times[forward]
     fwd_data = [data[i] for i in np.flatnonzero(forward)]
-    fwd_surfaces = [surfaces[i] for i in np.flatnonzero(forward)]
+    fwd_surfaces = [surface_frames[i] for i in np.flatnonzero(forward)]
     prepend = len(fwd_times) == 0 or fwd_times[0] > t0
     if prepend:
         fwd_times = np.r_[t0, fwd_times]
         fwd_data = [points[0]] + fwd_data
-        fwd_surfaces = [None] + fwd_surfaces
+        fwd_surfaces = [-1] + fwd_surfaces
     fv, fo = _slide_monotone(
-        vertices, faces, field, fwd_times, slide_options, fwd_data, fwd_surfaces
+        vertices, faces, field, fwd_times, slide_options, fwd_data, surfaces(fwd_surfaces)
     )
     if prepend:
         fv, fo = fv[1:], fo[1:]
@@ -411,6 +410,21 @@ def smooth_trajectories(vertices: np.ndarray, times: np.ndarray, passes: int) ->
     for _ in range(passes):
         x[1:-1] = 0.5 * x[1:-1] + 0.5 * (a * x[:-2] + (1.0 - a) * x[2:])
     return x
+
+
+class _FrameSurfaces(Sequence):
+    """Per sliding time, the :class:`FrameSurface` of input frame ``frames[i]`` (None where
+    it is -1), built when the sliding asks for it: one frame's grid in memory at a time."""
+
+    def __init__(self, frames, points, normals, bandwidth):
+        self.frames, self.points, self.normals, self.bandwidth = frames, points, normals, bandwidth
+
+    def __len__(self):
+        return len(self.frames)
+
+    def __getitem__(self, i):
+        k = int(self.frames[i])
+        return None if k < 0 else FrameSurface(self.points[k], self.normals[k], self.bandwidth)
 
 
 def _slide_monotone(vertices, faces, field, times, options, data, surfaces):
