@@ -771,45 +771,35 @@ def _evaluate(
 # --------------------------------------------------------------------------------------------
 
 
+@numba.njit(cache=True, inline="always")
+def _child_offset(x, centre, child_half, ch):
+    """Squared distance from 4D point ``x`` to the centre of child ``ch`` (``_CORNERS``
+    order: bit 3 - axis 0 ... bit 0 - axis 3, set = +half) of the cell at ``centre``, and
+    whether ``x`` lies in that child's box (max norm)."""
+    d2 = 0.0
+    in_box = True
+    for a in range(4):
+        side = child_half if (ch >> (3 - a)) & 1 else -child_half
+        d = x[a] - (centre[a] + side)
+        d2 += d * d
+        in_box = in_box and abs(d) <= child_half
+    return d2, in_box
+
+
 @numba.njit(cache=True, parallel=True)
 def _child_counts(X, indptr, indices, parents, centres, child_half, radius, counts, inside):
     """Per child (16 per parent, ``_CORNERS`` order): points of the parent's list within
     ``radius`` of the child centre (``counts``) and within its box (``inside``, max norm)."""
     r2 = radius * radius
     for i in numba.prange(len(parents)):
-        p = parents[i]
-        c0 = centres[p, 0]
-        c1 = centres[p, 1]
-        c2 = centres[p, 2]
-        c3 = centres[p, 3]
-        for j in range(indptr[p], indptr[p + 1]):
+        centre = centres[parents[i]]
+        for j in range(indptr[parents[i]], indptr[parents[i] + 1]):
             x = X[indices[j]]
-            # per axis: squared distance to the child centre at -half (0) and +half (1)
-            e0m = x[0] - (c0 - child_half)
-            e0p = x[0] - (c0 + child_half)
-            e1m = x[1] - (c1 - child_half)
-            e1p = x[1] - (c1 + child_half)
-            e2m = x[2] - (c2 - child_half)
-            e2p = x[2] - (c2 + child_half)
-            e3m = x[3] - (c3 - child_half)
-            e3p = x[3] - (c3 + child_half)
             for ch in range(16):
-                b0 = (ch >> 3) & 1
-                b1 = (ch >> 2) & 1
-                b2 = (ch >> 1) & 1
-                b3 = ch & 1
-                d0 = e0p if b0 else e0m
-                d1 = e1p if b1 else e1m
-                d2 = e2p if b2 else e2m
-                d3 = e3p if b3 else e3m
-                if d0 * d0 + d1 * d1 + d2 * d2 + d3 * d3 <= r2:
+                d2, in_box = _child_offset(x, centre, child_half, ch)
+                if d2 <= r2:
                     counts[i * 16 + ch] += 1
-                    if (
-                        abs(d0) <= child_half
-                        and abs(d1) <= child_half
-                        and abs(d2) <= child_half
-                        and abs(d3) <= child_half
-                    ):
+                    if in_box:
                         inside[i * 16 + ch] += 1
 
 
@@ -819,38 +809,15 @@ def _child_fill(X, indptr, indices, parents, centres, child_half, radius, keep, 
     the CSR ``out_ptr`` / ``out``; each list keeps the parent's order."""
     r2 = radius * radius
     for i in numba.prange(len(parents)):
-        p = parents[i]
         pos = np.empty(16, dtype=np.int64)
         for ch in range(16):
             slot = keep[i * 16 + ch]
             pos[ch] = out_ptr[slot] if slot >= 0 else -1
-        c0 = centres[p, 0]
-        c1 = centres[p, 1]
-        c2 = centres[p, 2]
-        c3 = centres[p, 3]
-        for j in range(indptr[p], indptr[p + 1]):
+        centre = centres[parents[i]]
+        for j in range(indptr[parents[i]], indptr[parents[i] + 1]):
             point = indices[j]
-            x = X[point]
-            e0m = x[0] - (c0 - child_half)
-            e0p = x[0] - (c0 + child_half)
-            e1m = x[1] - (c1 - child_half)
-            e1p = x[1] - (c1 + child_half)
-            e2m = x[2] - (c2 - child_half)
-            e2p = x[2] - (c2 + child_half)
-            e3m = x[3] - (c3 - child_half)
-            e3p = x[3] - (c3 + child_half)
             for ch in range(16):
-                if pos[ch] < 0:
-                    continue
-                b0 = (ch >> 3) & 1
-                b1 = (ch >> 2) & 1
-                b2 = (ch >> 1) & 1
-                b3 = ch & 1
-                d0 = e0p if b0 else e0m
-                d1 = e1p if b1 else e1m
-                d2 = e2p if b2 else e2m
-                d3 = e3p if b3 else e3m
-                if d0 * d0 + d1 * d1 + d2 * d2 + d3 * d3 <= r2:
+                if pos[ch] >= 0 and _child_offset(X[point], centre, child_half, ch)[0] <= r2:
                     out[pos[ch]] = point
                     pos[ch] += 1
 
