@@ -96,15 +96,14 @@ class FlowField:
 
     def value(self, points: np.ndarray, times) -> np.ndarray:
         """``f`` at ``points`` [M, 3] and ``times`` (scalar or [M]); [M]."""
-        points = np.asarray(points, float).reshape(-1, 3)
-        times = np.broadcast_to(np.asarray(times, float), (len(points),))
-        s0, s1, w = self._time_weights(times)
-        v0, _ = self._sample(points, s0)
-        v1, _ = self._sample(points, s1)
-        return (1 - w) * v0 + w * v1
+        return self.value_and_gradient(points, times)[0]
 
     def gradient(self, points: np.ndarray, times) -> np.ndarray:
         """``(df/dx, df/dy, df/dz, df/dt)`` at ``points`` [M, 3], ``times``; [M, 4]."""
+        return self.value_and_gradient(points, times)[1]
+
+    def value_and_gradient(self, points: np.ndarray, times) -> tuple[np.ndarray, np.ndarray]:
+        """``f`` [M] and its gradient [M, 4] from one sampling of the two nearest slices."""
         points = np.asarray(points, float).reshape(-1, 3)
         times = np.broadcast_to(np.asarray(times, float), (len(points),))
         s0, s1, w = self._time_weights(times)
@@ -118,7 +117,7 @@ class FlowField:
         out = np.empty((len(points), 4))
         out[:, :3] = (1 - w)[:, None] * g0 + w[:, None] * g1
         out[:, 3] = np.where(s1 > s0, (v1 - v0) / dt, 0.0)
-        return out
+        return (1 - w) * v0 + w * v1, out
 
 
 def flow_signed_distance(x: np.ndarray, h: float) -> np.ndarray:
