@@ -1,7 +1,12 @@
 import numpy as np
 import pytest
 
-from fourd.geometry.outliers import remove_outliers, small_clusters, statistical_outliers
+from fourd.geometry.outliers import (
+    distance_ratio_inliers,
+    remove_outliers,
+    small_clusters,
+    statistical_outliers,
+)
 
 
 def _fibonacci_sphere(count, radius=1.0):
@@ -82,3 +87,17 @@ def test_scale_invariance():
     b = remove_outliers(points * 10.0)
     assert np.array_equal(a.inliers, b.inliers)
     assert b.threshold == pytest.approx(10.0 * a.threshold)
+
+
+def test_distance_ratio_inliers_drops_sparse_points_with_either_statistic():
+    rng = np.random.default_rng(2)
+    sphere = rng.normal(size=(4000, 3))
+    sphere /= np.linalg.norm(sphere, axis=1, keepdims=True)
+    points = np.concatenate([sphere, rng.uniform(-2, 2, size=(80, 3))])
+    for statistic in ("kth", "mean"):
+        keep = distance_ratio_inliers(points, k=8, factor=3.0, statistic=statistic)
+        assert keep[:4000].mean() > 0.99 and keep[4000:].mean() < 0.2
+    assert distance_ratio_inliers(points, factor=0.0).all()
+    assert distance_ratio_inliers(points[:9], k=8).all()
+    with pytest.raises(ValueError):
+        distance_ratio_inliers(points, statistic="max")

@@ -37,6 +37,7 @@ from fourd.animation import AnimatedMesh, MeshSequence
 from fourd.errors import InputError
 from fourd.geometry.neighbors import point_spacing
 from fourd.geometry.normals import pca_normals
+from fourd.geometry.outliers import distance_ratio_inliers
 from fourd.methods.flow.fit import fit_gradient, fit_implicit, fit_labels
 from fourd.methods.flow.grid import (
     SpaceTimeGrid,
@@ -45,7 +46,6 @@ from fourd.methods.flow.grid import (
     carve_visual_hull,
     data_cells,
     inside_seeds,
-    remove_outliers,
     unsigned_distance,
 )
 from fourd.methods.flow.irls import IRLSResult, run_irls
@@ -266,7 +266,7 @@ def _frame_points(seq: PointCloudSequence, options: Options) -> list[np.ndarray 
         if i in missing:
             kept.append(None)
             continue
-        mask = remove_outliers(frame.points, factor=options.outlier_factor)
+        mask = distance_ratio_inliers(frame.points, factor=options.outlier_factor)
         kept.append(frame.points[mask])
     if all(p is None or len(p) < 4 for p in kept):
         raise InputError("no frame has data (all frames missing or nearly empty)")

@@ -100,16 +100,6 @@ def build_grid(
     return SpaceTimeGrid(origin, h, tuple(int(c) for c in cells), times, frame_slice)
 
 
-def remove_outliers(points: np.ndarray, *, k: int = 8, factor: float = 3.0) -> np.ndarray:
-    """Boolean mask of points kept by a statistical outlier filter: a point is dropped when the
-    distance to its ``k``-th neighbour exceeds ``factor`` times the median of that distance."""
-    if len(points) <= k + 1:
-        return np.ones(len(points), dtype=bool)
-    distances, _ = cKDTree(points).query(points, k=k + 1, workers=-1)
-    kth = distances[:, -1]
-    return kth <= factor * max(float(np.median(kth)), 1e-12)
-
-
 def _basis(axis: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     helper = np.array([1.0, 0.0, 0.0]) if abs(axis[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
     e1 = np.cross(axis, helper)

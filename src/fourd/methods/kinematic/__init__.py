@@ -54,8 +54,9 @@ import numpy as np
 
 from fourd.animation import AnimatedMesh
 from fourd.errors import InputError
-from fourd.geometry.neighbors import knn, point_spacing
+from fourd.geometry.neighbors import point_spacing
 from fourd.geometry.normals import estimate_normals
+from fourd.geometry.outliers import distance_ratio_inliers
 from fourd.methods.kinematic.field import SpaceTimeField, fit_windows, space_time_points
 from fourd.methods.kinematic.framesurface import FrameSurface
 from fourd.methods.kinematic.mpu4d import MPU4D, MPUOptions, fit_mpu4d
@@ -209,14 +210,6 @@ class Options:
         object.__setattr__(self, "times", tuple(float(t) for t in self.times))
 
 
-def _remove_outliers(points: np.ndarray, factor: float) -> np.ndarray:
-    if factor <= 0 or len(points) < 20:
-        return np.ones(len(points), dtype=bool)
-    distances, _ = knn(points, 8)
-    mean = distances.mean(axis=1)
-    return mean <= factor * np.median(mean)
-
-
 def template_cell_size(points: np.ndarray, spacing: float, vertices: int) -> float:
     """Marching-cubes cell size giving about ``vertices`` urshape vertices.
 
@@ -234,7 +227,7 @@ def prepare_frames(seq: PointCloudSequence, options: Options):
     """Per-frame cleaning and normals: returns ``(points, normals)`` lists (pure per frame)."""
     points, normals = [], []
     for frame in seq.frames:
-        keep = _remove_outliers(frame.points, options.outlier_factor)
+        keep = distance_ratio_inliers(frame.points, factor=options.outlier_factor, statistic="mean")
         p = frame.points[keep]
         if frame.normals is not None:
             n = frame.normals[keep]
