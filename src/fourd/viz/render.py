@@ -34,6 +34,7 @@ from numba import njit
 from fourd.animation import AnimatedMesh
 from fourd.errors import InputError
 from fourd.io.atomic import atomic_path
+from fourd.io.glb import vertex_normals
 from fourd.io.writers import as_result
 from fourd.viz import texture as tex
 
@@ -222,19 +223,6 @@ def _splat(xy, depth, radius, bias, point_id, inv_depth):  # pragma: no cover - 
 
 
 # --------------------------------------------------------------------------- shading
-
-
-def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    """Area-weighted unit vertex normals ``[N, 3]`` (zero for unreferenced vertices)."""
-    normals = np.zeros_like(vertices)
-    if len(faces):
-        tri = vertices[faces]
-        fn = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-        for k in range(3):
-            for c in range(3):
-                normals[:, c] += np.bincount(faces[:, k], weights=fn[:, c], minlength=len(vertices))
-    length = np.linalg.norm(normals, axis=1, keepdims=True)
-    return normals / np.where(length > 0, length, 1.0)
 
 
 def _light_direction(camera: Camera, light) -> np.ndarray:
