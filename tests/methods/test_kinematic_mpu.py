@@ -165,14 +165,15 @@ def test_child_point_lists_filtered_from_the_parent_match_a_brute_force_ball_que
     parents = np.array([0, 1], dtype=np.int64)
     counts = np.zeros(32, dtype=np.int64)
     inside = np.zeros(32, dtype=np.int64)
-    _child_counts(X, indptr, indices, parents, centres, child_half, child_r, counts, inside)
+    masks = np.zeros(len(indices), dtype=np.uint16)
+    _child_counts(X, indptr, indices, parents, centres, child_half, child_r, counts, inside, masks)
     slot = np.arange(32, dtype=np.int64)
     slot[7] = -1  # a dropped child
     kept = slot >= 0
     out_ptr = np.r_[0, np.cumsum(counts[kept])].astype(np.int64)
     out = np.empty(int(out_ptr[-1]), dtype=np.int64)
     slot[kept] = np.arange(int(kept.sum()))
-    _child_fill(X, indptr, indices, parents, centres, child_half, child_r, slot, out_ptr, out)
+    _child_fill(indptr, indices, parents, masks, slot, out_ptr, out)
     children = (centres[:, None, :] + child_half * _CORNERS[None]).reshape(-1, 4)
     for k, child in enumerate(children):
         d = X - child

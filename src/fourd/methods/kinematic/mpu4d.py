@@ -772,54 +772,85 @@ def _evaluate(
 
 
 @numba.njit(cache=True, inline="always")
-def _child_offset(x, centre, child_half, ch):
-    """Squared distance from 4D point ``x`` to the centre of child ``ch`` (``_CORNERS``
-    order: bit 3 - axis 0 ... bit 0 - axis 3, set = +half) of the cell at ``centre``, and
-    whether ``x`` lies in that child's box (max norm)."""
-    d2 = 0.0
-    in_box = True
-    for a in range(4):
-        side = child_half if (ch >> (3 - a)) & 1 else -child_half
-        d = x[a] - (centre[a] + side)
-        d2 += d * d
-        in_box = in_box and abs(d) <= child_half
-    return d2, in_box
+def _child_masks(x, centre, h, r2):
+    """Bit masks over the 16 children (``_CORNERS`` order: bit 3 - axis 0 ... bit 0 - axis 3,
+    set = +h) of the cell at ``centre`` whose children have half size ``h``: children whose
+    support ball (radius squared ``r2``) holds the 4D point ``x``, and children whose box
+    (max norm) holds it. Per-axis squared offsets are summed down the 2x2x2x2 choices, and a
+    partial sum beyond ``r2`` prunes its subtree."""
+    d0 = x[0] - centre[0]
+    d1 = x[1] - centre[1]
+    d2 = x[2] - centre[2]
+    d3 = x[3] - centre[3]
+    ball = 0
+    box = 0
+    for b0 in range(2):
+        s0 = (d0 - h) ** 2 if b0 else (d0 + h) ** 2
+        if s0 > r2:
+            continue
+        i0 = (0.0 <= d0 <= 2.0 * h) if b0 else (-2.0 * h <= d0 <= 0.0)
+        for b1 in range(2):
+            s1 = s0 + ((d1 - h) ** 2 if b1 else (d1 + h) ** 2)
+            if s1 > r2:
+                continue
+            i1 = i0 and ((0.0 <= d1 <= 2.0 * h) if b1 else (-2.0 * h <= d1 <= 0.0))
+            for b2 in range(2):
+                s2 = s1 + ((d2 - h) ** 2 if b2 else (d2 + h) ** 2)
+                if s2 > r2:
+                    continue
+                i2 = i1 and ((0.0 <= d2 <= 2.0 * h) if b2 else (-2.0 * h <= d2 <= 0.0))
+                for b3 in range(2):
+                    s3 = s2 + ((d3 - h) ** 2 if b3 else (d3 + h) ** 2)
+                    if s3 <= r2:
+                        bit = 1 << (8 * b0 + 4 * b1 + 2 * b2 + b3)
+                        ball |= bit
+                        if i2 and ((0.0 <= d3 <= 2.0 * h) if b3 else (-2.0 * h <= d3 <= 0.0)):
+                            box |= bit
+    return ball, box
 
 
 @numba.njit(cache=True, parallel=True)
-def _child_counts(X, indptr, indices, parents, centres, child_half, radius, counts, inside):
+def _child_counts(X, indptr, indices, parents, centres, child_half, radius, counts, inside, masks):
     """Per child (16 per parent, ``_CORNERS`` order): points of the parent's list within
-    ``radius`` of the child centre (``counts``) and within its box (``inside``, max norm)."""
+    ``radius`` of the child centre (``counts``) and within its box (``inside``, max norm).
+    ``masks`` [len(indices)] receives, per entry of a parent's list, the bit mask of the
+    children whose support holds that point (read by :func:`_child_fill`)."""
     r2 = radius * radius
     for i in numba.prange(len(parents)):
         centre = centres[parents[i]]
+        local_counts = np.zeros(16, dtype=np.int64)
+        local_inside = np.zeros(16, dtype=np.int64)
         for j in range(indptr[parents[i]], indptr[parents[i] + 1]):
-            x = X[indices[j]]
-            for ch in range(16):
-                d2, in_box = _child_offset(x, centre, child_half, ch)
-                if d2 <= r2:
-                    counts[i * 16 + ch] += 1
-                    if in_box:
-                        inside[i * 16 + ch] += 1
+            ball, box = _child_masks(X[indices[j]], centre, child_half, r2)
+            masks[j] = ball
+            if ball:
+                for ch in range(16):
+                    if (ball >> ch) & 1:
+                        local_counts[ch] += 1
+                        if (box >> ch) & 1:
+                            local_inside[ch] += 1
+        for ch in range(16):
+            counts[i * 16 + ch] = local_counts[ch]
+            inside[i * 16 + ch] = local_inside[ch]
 
 
 @numba.njit(cache=True, parallel=True)
-def _child_fill(X, indptr, indices, parents, centres, child_half, radius, keep, out_ptr, out):
+def _child_fill(indptr, indices, parents, masks, keep, out_ptr, out):
     """Point lists of the kept children (``keep`` [parents * 16] the output slot or -1) into
-    the CSR ``out_ptr`` / ``out``; each list keeps the parent's order."""
-    r2 = radius * radius
+    the CSR ``out_ptr`` / ``out``, from the ``masks`` of :func:`_child_counts`; each list
+    keeps the parent's order."""
     for i in numba.prange(len(parents)):
         pos = np.empty(16, dtype=np.int64)
         for ch in range(16):
             slot = keep[i * 16 + ch]
             pos[ch] = out_ptr[slot] if slot >= 0 else -1
-        centre = centres[parents[i]]
         for j in range(indptr[parents[i]], indptr[parents[i] + 1]):
-            point = indices[j]
-            for ch in range(16):
-                if pos[ch] >= 0 and _child_offset(X[point], centre, child_half, ch)[0] <= r2:
-                    out[pos[ch]] = point
-                    pos[ch] += 1
+            ball = masks[j]
+            if ball:
+                for ch in range(16):
+                    if (ball >> ch) & 1 and pos[ch] >= 0:
+                        out[pos[ch]] = indices[j]
+                        pos[ch] += 1
 
 
 def _ball_csr(
@@ -1037,6 +1068,7 @@ def fit_mpu4d(points: np.ndarray, normals: np.ndarray, *, options: MPUOptions) -
         children = (level_centres[parents][:, None, :] + child_half * _CORNERS[None]).reshape(-1, 4)
         child_counts = np.zeros(len(children), dtype=np.int64)
         child_inside = np.zeros(len(children), dtype=np.int64)
+        child_masks = np.zeros(len(indices), dtype=np.uint16)
         if len(children):
             _child_counts(
                 X,
@@ -1048,6 +1080,7 @@ def fit_mpu4d(points: np.ndarray, normals: np.ndarray, *, options: MPUOptions) -
                 child_radius,
                 child_counts,
                 child_inside,
+                child_masks,
             )
         has_data = child_counts > 0
         barren = ~has_data.reshape(-1, 16).any(axis=1)
@@ -1084,18 +1117,7 @@ def fit_mpu4d(points: np.ndarray, normals: np.ndarray, *, options: MPUOptions) -
         base_ptr = np.zeros(int(keep_child.sum()) + 1, dtype=np.int64)
         np.cumsum(child_counts[keep_child], out=base_ptr[1:])
         base_idx = np.empty(int(base_ptr[-1]), dtype=np.int64)
-        _child_fill(
-            X,
-            indptr,
-            indices,
-            parents,
-            level_centres,
-            child_half,
-            child_radius,
-            slot,
-            base_ptr,
-            base_idx,
-        )
+        _child_fill(indptr, indices, parents, child_masks, slot, base_ptr, base_idx)
         base_inside = child_inside[keep_child]
         level_centres = children[keep_child]
         parent_global = child_parent[keep_child]
