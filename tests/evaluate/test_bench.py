@@ -37,7 +37,7 @@ def test_quick_bench_writes_markdown_json_and_plots(tmp_path):
 def test_a_failing_method_is_recorded_and_the_run_goes_on(tmp_path, monkeypatch):
     calls = []
 
-    def broken(kind, name, scans, log_level):
+    def broken(kind, name, scans, log_level):  # same signature as bench._reconstruct
         calls.append(name)
         raise RuntimeError("no surface today")
 
@@ -88,3 +88,21 @@ def test_runs_made_side_by_side_merge_into_one_report(tmp_path):
     assert "## squash-ball" in text and "## waving-sheet" in text
     sheets = sorted(p.name for p in (tmp_path / "m" / "plots").glob("*-perframe.png"))
     assert sheets == ["squash-ball-perframe.png", "waving-sheet-perframe.png"]
+
+
+@pytest.mark.slow
+def test_a_methods_own_figures_reach_the_row_and_the_table(tmp_path, monkeypatch):
+    real = bench._reconstruct
+
+    def with_figure(kind, name, scans, log_level):
+        result, diagnostics = real(kind, name, scans, log_level)
+        assert diagnostics == {}  # perframe has none of its own
+        return result, {"mass_conservation_error": 0.0123}
+
+    monkeypatch.setattr(bench, "_reconstruct", with_figure)
+    output = tmp_path / "mass.md"
+    report = bench.run_bench(quick=True, scenes=["squash-ball"], methods=["perframe"], output=output,
+                             isolate=False)
+    metrics = report["scenes"]["squash-ball"]["rows"]["perframe"]["metrics"]
+    assert metrics["mass_conservation_error"] == 0.0123
+    assert "mass err." in output.read_text() and "| 1.2% |" in output.read_text()

@@ -3,12 +3,14 @@ the preconditioned MINRES solver."""
 
 from __future__ import annotations
 
+from types import SimpleNamespace
+
 import numpy as np
 import pytest
 import scipy.sparse as sp
 import trimesh
 
-from fourd import InputError, PointCloudSequence
+from fourd import InputError, MeshSequence, PointCloudSequence, synth
 from fourd.geometry.field import Field4D
 from fourd.geometry.neighbors import point_spacing
 from fourd.methods import method_options
@@ -269,3 +271,15 @@ def test_mass_meshes_follow_mass():
     volumes = np.array([_mesh_volume_area(v, f)[0] for v, f in meshes])
     assert abs(volumes[0] / volumes[1] - 1) < 0.005
     assert 4 / 3 * np.pi * 0.5**3 < volumes.mean() < 4 / 3 * np.pi * 0.55**3
+
+
+def test_reconstruct_with_diagnostics_reports_the_mass_error(monkeypatch):
+    import fourd.methods.flow as flow
+    from fourd.methods import reconstruct_with_diagnostics
+
+    scans = synth.scan(synth.scene("squash-ball", frames=2), resolution=32)
+    meshes = MeshSequence(meshes=((np.eye(3), np.array([[0, 1, 2]])),) * 2)
+    fake = SimpleNamespace(meshes=meshes, animation=None, mass_error=0.017)
+    monkeypatch.setattr(flow, "run", lambda seq, options=None: fake)
+    result, diagnostics = reconstruct_with_diagnostics(scans, method="flow")
+    assert result is meshes and diagnostics == {"mass_conservation_error": 0.017}

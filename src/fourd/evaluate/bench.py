@@ -97,6 +97,7 @@ COLUMNS = (
     ("jitter", "jitter", "r"),
     ("vol. change", "volume_change", "r"),
     ("closed & manifold", "closed_manifold", "%"),
+    ("mass err.", "mass_conservation_error", "%1"),
 )
 
 
@@ -109,14 +110,15 @@ SHEET_FRAMES = 4
 
 
 def _reconstruct(kind: str, name: str, scans, log_level: int):
+    """``(result, diagnostics)``: the method's own figures (:func:`fourd.methods.reconstruct_with_diagnostics`); none for peers."""
     logging.getLogger("fourd").setLevel(log_level)
     if kind == "method":
-        from fourd.methods import reconstruct
+        from fourd.methods import reconstruct_with_diagnostics
 
-        return reconstruct(scans, method=name)
+        return reconstruct_with_diagnostics(scans, method=name)
     from fourd.evaluate import baselines
 
-    return getattr(baselines, name)(scans)
+    return getattr(baselines, name)(scans), {}
 
 
 def _peak_mb() -> float:
@@ -129,12 +131,13 @@ def _case(connection, kind: str, name: str, scans, repeats: int, log_level: int)
         if not logging.getLogger().handlers:
             logging.basicConfig(level=logging.WARNING, format="%(name)s: %(message)s")
         start_mb = _peak_mb()
-        seconds, result = [], None
+        seconds, result, diagnostics = [], None, {}
         for _ in range(repeats):
             started = time.perf_counter()
-            result = _reconstruct(kind, name, scans, log_level)
+            result, diagnostics = _reconstruct(kind, name, scans, log_level)
             seconds.append(time.perf_counter() - started)
-        connection.send({"result": result, "seconds": seconds, "peak_mb": _peak_mb(), "start_mb": start_mb})
+        connection.send({"result": result, "diagnostics": diagnostics, "seconds": seconds,
+                         "peak_mb": _peak_mb(), "start_mb": start_mb})
     except BaseException as error:  # reported as the row's error
         connection.send({"error": f"{type(error).__name__}: {error}"})
     finally:
@@ -144,7 +147,8 @@ def _case(connection, kind: str, name: str, scans, repeats: int, log_level: int)
 def run_case(kind: str, name: str, scans, *, repeats: int = 1, timeout: float | None = None,
              isolate: bool = True) -> dict:
     """Reconstruct ``scans`` with method (``kind="method"``) or peer (``kind="baseline"``)
-    ``name``; returns ``result``, ``seconds`` (per repeat), ``peak_mb`` or ``error``.
+    ``name``; returns ``result``, ``diagnostics`` (the method's own figures, of the last
+    repeat), ``seconds`` (per repeat), ``peak_mb`` or ``error``.
 
     With ``isolate`` the work runs in a fresh ``spawn`` child: ``peak_mb`` is that process's
     peak resident memory (interpreter, input and method together) and ``timeout`` (seconds)
@@ -153,15 +157,16 @@ def run_case(kind: str, name: str, scans, *, repeats: int = 1, timeout: float | 
     level = logging.getLogger("fourd").getEffectiveLevel()
     if not isolate:
         start_mb = _peak_mb()
-        seconds, result = [], None
+        seconds, result, diagnostics = [], None, {}
         try:
             for _ in range(repeats):
                 started = time.perf_counter()
-                result = _reconstruct(kind, name, scans, level)
+                result, diagnostics = _reconstruct(kind, name, scans, level)
                 seconds.append(time.perf_counter() - started)
         except Exception as error:  # noqa: BLE001 - one failing case must not stop the run
             return {"error": f"{type(error).__name__}: {error}"}
-        return {"result": result, "seconds": seconds, "peak_mb": _peak_mb(), "start_mb": start_mb}
+        return {"result": result, "diagnostics": diagnostics, "seconds": seconds,
+                "peak_mb": _peak_mb(), "start_mb": start_mb}
     context = multiprocessing.get_context("spawn")
     receiver, sender = context.Pipe(duplex=False)
     process = context.Process(target=_case, args=(sender, kind, name, scans, repeats, level), daemon=True)
@@ -381,6 +386,7 @@ def _run_scene(bench_scene: BenchScene, methods, peers, *, samples, seed, repeat
                       "peak_memory_mb": case["peak_mb"], "start_memory_mb": case["start_mb"]}
             try:
                 metrics = evaluate(case["result"], truth, samples=samples, seed=seed, timing=timing)
+                metrics.update(case.get("diagnostics") or {})
                 entry["rows"][label] = {"metrics": metrics}
             except Exception as error:  # noqa: BLE001
                 entry["rows"][label] = {"error": f"evaluation failed: {type(error).__name__}: {error}"}
@@ -415,6 +421,8 @@ def _cell(value, kind: str) -> str:
         return "—"
     if kind == "%":
         return f"{100 * value:.0f}%"
+    if kind == "%1":
+        return f"{100 * value:.1f}%"
     if kind == "r":
         return f"{value:.2f}"
     return f"{value:.4f}"
@@ -453,7 +461,9 @@ def format_markdown(report: dict, plots: dict[str, Path] | None = None, base: Pa
         f"{settings['samples']:,} surface samples per surface and frame; the floor row is the truth "
         "scored against itself with independent samples. Correspondence and jitter need an "
         "AnimatedMesh result (— otherwise); jitter 1 = as smooth as the truth; volume change "
-        "(max-min)/mean only when every frame is closed. s/frame: median wall time of the "
+        "(max-min)/mean only when every frame is closed; mass err.: the method's own mass "
+        "conservation error (flow: standard deviation of the total mass over frames relative "
+        "to its mean). s/frame: median wall time of the "
         f"reconstruction over {settings['repeats']} run(s) per frame; peak MB: peak resident "
         "memory of the process that ran it.",
         f"- Total wall time of this run: {report.get('wall_seconds', 0):.0f} s.",

@@ -2,7 +2,9 @@
 
 Each method module exposes ``Options`` (a frozen dataclass with documented defaults),
 ``reconstruct(seq, options) -> AnimatedMesh | MeshSequence`` and a module-level constant
-``MIN_FRAMES`` (1 for per-frame methods, 2 for sequence methods). Modules are imported only
+``MIN_FRAMES`` (1 for per-frame methods, 2 for sequence methods); a method with figures of
+its own (flow's mass conservation error) also has ``reconstruct_with_diagnostics(seq,
+options) -> (result, dict)``, which ``fourd bench`` reports. Modules are imported only
 when used, so a broken or slow-to-import method never affects the others.
 """
 
@@ -66,6 +68,25 @@ def reconstruct(
 
     Options are either an ``Options`` instance of that method or keyword values.
     """
+    module, options = _method_and_options(seq, method, options, values)
+    return module.reconstruct(seq, options)
+
+
+def reconstruct_with_diagnostics(
+    seq: PointCloudSequence, method: str | None = None, options=None, **values
+) -> tuple[AnimatedMesh | MeshSequence, dict]:
+    """:func:`reconstruct`, plus the method's own figures as a dict of floats (e.g. ``flow``:
+    ``mass_conservation_error``). A method module that has such figures defines
+    ``reconstruct_with_diagnostics(seq, options) -> (result, dict)``; the others give ``{}``.
+    """
+    module, options = _method_and_options(seq, method, options, values)
+    hook = getattr(module, "reconstruct_with_diagnostics", None)
+    if hook is None:
+        return module.reconstruct(seq, options), {}
+    return hook(seq, options)
+
+
+def _method_and_options(seq, method, options, values):
     name = method or DEFAULT_METHOD
     module = method_module(name)
     if options is None:
@@ -78,4 +99,4 @@ def reconstruct(
     if len(seq) < minimum:
         raise InputError(f"method {name!r} needs at least {minimum} frames, the input has {len(seq)}")
     log.info("reconstructing %d frames with %s", len(seq), name)
-    return module.reconstruct(seq, options)
+    return module, options

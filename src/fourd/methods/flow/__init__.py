@@ -73,6 +73,7 @@ __all__ = [
     "SaddleSolution",
     "mass_conservation_error",
     "reconstruct",
+    "reconstruct_with_diagnostics",
     "run",
     "solve_saddle",
 ]
@@ -590,3 +591,13 @@ def reconstruct(
     """
     result = run(seq, options)
     return result.animation if result.animation is not None else result.meshes
+
+
+def reconstruct_with_diagnostics(
+    seq: PointCloudSequence, options: Options | None = None
+) -> tuple[MeshSequence | AnimatedMesh, dict]:
+    """:func:`reconstruct` and ``{"mass_conservation_error": ...}`` (the paper's figure, a
+    fraction; see :func:`mass_conservation_error`)."""
+    result = run(seq, options)
+    meshes = result.animation if result.animation is not None else result.meshes
+    return meshes, {"mass_conservation_error": float(result.mass_error)}
