@@ -101,3 +101,22 @@ def test_distance_ratio_inliers_drops_sparse_points_with_either_statistic():
     assert distance_ratio_inliers(points[:9], k=8).all()
     with pytest.raises(ValueError):
         distance_ratio_inliers(points, statistic="max")
+
+
+def test_one_neighbour_query_serves_the_outlier_test_and_the_kept_points_neighbours():
+    from fourd.geometry.neighbors import knn, neighbours_among
+
+    rng = np.random.default_rng(3)
+    sphere = rng.normal(size=(3000, 3))
+    sphere /= np.linalg.norm(sphere, axis=1, keepdims=True)
+    points = np.concatenate([sphere, rng.uniform(-2, 2, size=(150, 3))])
+    distances, indices = knn(points, 12)
+    keep = distance_ratio_inliers(points, k=8, statistic="mean", distances=distances)
+    assert np.array_equal(keep, distance_ratio_inliers(points, k=8, statistic="mean"))
+    # a few kept points lose many of their 12 neighbours: those rows are queried again
+    keep[indices[0, :7]] = False
+    got = neighbours_among(points, indices, keep, 6)
+    _, expect = knn(points[keep], 6)
+    assert np.array_equal(got, expect)
+    with pytest.raises(ValueError, match="distances"):
+        distance_ratio_inliers(points, k=8, distances=distances[:, :5])

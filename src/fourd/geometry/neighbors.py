@@ -27,6 +27,43 @@ def knn(points: np.ndarray, k: int, *, tree: cKDTree | None = None) -> tuple[np.
     return distances[:, 1:], indices[:, 1:].astype(np.int64)
 
 
+def neighbours_among(points: np.ndarray, indices: np.ndarray, keep: np.ndarray, k: int) -> np.ndarray:
+    """The ``k`` nearest neighbours of the kept points among the kept points, from the
+    neighbour lists of all points.
+
+    Parameters
+    ----------
+    points : ndarray [P, D]
+    indices : ndarray int [P, K]
+        Neighbour lists of every point (self excluded, nearest first, as :func:`knn` gives).
+    keep : ndarray bool [P]
+    k : int
+        ``K`` should exceed it by a margin: rows with fewer than ``k`` kept neighbours among
+        their ``K`` are queried again.
+
+    Returns
+    -------
+    ndarray int64 [P', k]
+        Indices into ``points[keep]`` (P' kept points), nearest first.
+    """
+    keep = np.asarray(keep, dtype=bool)
+    kept_points = np.asarray(points)[keep]
+    k = int(min(k, len(kept_points) - 1))
+    if k < 1:
+        raise ValueError("need at least two kept points for neighbours")
+    renumber = np.cumsum(keep) - 1
+    rows = np.asarray(indices)[keep]
+    kept = keep[rows]
+    # the kept neighbours first, each group in its distance order
+    order = np.argsort(~kept, axis=1, kind="stable")[:, :k]
+    out = renumber[np.take_along_axis(rows, order, axis=1)]
+    short = np.flatnonzero(kept.sum(axis=1) < k)
+    if len(short):
+        _, again = cKDTree(kept_points).query(kept_points[short], k=k + 1, workers=-1)
+        out[short] = again[:, 1:]
+    return out.astype(np.int64)
+
+
 def point_spacing(points: np.ndarray, *, sample: int = 20000, seed: int = 0) -> float:
     """Median distance from a point to its nearest neighbour (input units).
 

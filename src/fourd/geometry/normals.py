@@ -334,10 +334,12 @@ def estimate_normals(
     k: int = 16,
     sensors: np.ndarray | None = None,
     mode: str = "auto",
+    indices: np.ndarray | None = None,
 ) -> Normals:
     """Oriented unit normals of a scanned point set.
 
-    PCA over the ``k`` nearest neighbours, then orientation by ``mode``:
+    PCA over the ``k`` nearest neighbours (``indices`` [P, k]: neighbour lists already at
+    hand, self excluded), then orientation by ``mode``:
     ``"auto"`` (default): consistent propagation, then one sign per connected part voted by
     the sensors when given (see :func:`orient_parts_to_sensors`); ``"sensors"``: every point towards its nearest sensor with
     a neighbour vote; ``"propagation"``: propagation with an outward check only.
@@ -354,7 +356,10 @@ def estimate_normals(
     if mode not in ("auto", "sensors", "propagation"):
         raise ValueError(f"mode must be auto, sensors or propagation, got {mode!r}")
     points = np.asarray(points, dtype=np.float64)
-    _, indices = knn(points, k)
+    if indices is None:
+        _, indices = knn(points, k)
+    elif len(indices) != len(points):
+        raise ValueError(f"indices must have one row per point ({len(points)}), got {len(indices)}")
     unoriented = pca_normals(points, k, indices=indices)
     has_sensors = sensors is not None and len(sensors) > 0
     if mode == "sensors" and has_sensors:

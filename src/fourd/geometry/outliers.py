@@ -128,18 +128,29 @@ def small_clusters(
 
 
 def distance_ratio_inliers(
-    points: np.ndarray, *, k: int = 8, factor: float = 3.0, statistic: str = "kth"
+    points: np.ndarray,
+    *,
+    k: int = 8,
+    factor: float = 3.0,
+    statistic: str = "kth",
+    distances: np.ndarray | None = None,
 ) -> np.ndarray:
     """Boolean mask [P] of the points kept by a neighbour-distance ratio test: a point is
     dropped when its neighbour distance (``statistic`` "kth": to its ``k``-th neighbour;
     "mean": mean over its ``k`` nearest) exceeds ``factor`` times the median of that distance.
-    ``factor`` 0 keeps every point; so do sets of at most ``k + 1`` points."""
+    ``factor`` 0 keeps every point; so do sets of at most ``k + 1`` points. ``distances``
+    [P, >= k] (optional): the neighbour distances already at hand (self excluded, nearest
+    first, as :func:`~fourd.geometry.neighbors.knn` gives)."""
     if statistic not in ("kth", "mean"):
         raise ValueError(f"statistic must be kth or mean, got {statistic!r}")
     points = np.asarray(points, dtype=np.float64)
     if factor <= 0 or len(points) <= k + 1:
         return np.ones(len(points), dtype=bool)
-    distances, _ = knn(points, k)
+    if distances is None:
+        distances, _ = knn(points, k)
+    elif distances.shape[0] != len(points) or distances.shape[1] < k:
+        raise ValueError(f"distances must be [{len(points)}, >= {k}], got {list(distances.shape)}")
+    distances = distances[:, :k]
     distance = distances[:, -1] if statistic == "kth" else distances.mean(axis=1)
     return distance <= factor * max(float(np.median(distance)), 1e-12)
 
