@@ -54,7 +54,7 @@ import numpy as np
 
 from fourd.animation import AnimatedMesh
 from fourd.errors import InputError
-from fourd.geometry.neighbors import point_spacing
+from fourd.geometry.neighbors import knn, neighbours_among, point_spacing
 from fourd.geometry.normals import estimate_normals
 from fourd.geometry.outliers import distance_ratio_inliers
 from fourd.methods.kinematic.field import SpaceTimeField, fit_windows, space_time_points
@@ -96,6 +96,8 @@ log = logging.getLogger("fourd.methods.kinematic")
 
 #: A space-time fit needs at least two frames.
 MIN_FRAMES = 2
+#: Neighbours of the per-frame outlier test (mean distance to them).
+OUTLIER_NEIGHBOURS = 8
 
 
 @dataclass(frozen=True)
@@ -227,12 +229,25 @@ def prepare_frames(seq: PointCloudSequence, options: Options):
     """Per-frame cleaning and normals: returns ``(points, normals)`` lists (pure per frame)."""
     points, normals = [], []
     for frame in seq.frames:
-        keep = distance_ratio_inliers(frame.points, factor=options.outlier_factor, statistic="mean")
+        # one neighbour query per frame serves the outlier test (8 neighbours) and the
+        # normals of the kept points (a margin of 8 for the dropped ones)
+        k = min(max(OUTLIER_NEIGHBOURS, options.normals_k) + 8, len(frame.points) - 1)
+        distances, indices = knn(frame.points, k)
+        keep = distance_ratio_inliers(
+            frame.points,
+            k=OUTLIER_NEIGHBOURS,
+            factor=options.outlier_factor,
+            statistic="mean",
+            distances=distances,
+        )
         p = frame.points[keep]
         if frame.normals is not None:
             n = frame.normals[keep]
         else:
-            n = estimate_normals(p, k=options.normals_k, sensors=frame.sensors).normals
+            neighbours = neighbours_among(frame.points, indices, keep, options.normals_k)
+            n = estimate_normals(
+                p, k=options.normals_k, sensors=frame.sensors, indices=neighbours
+            ).normals
         points.append(p)
         normals.append(n)
     return points, normals
@@ -285,24 +300,19 @@ def reconstruct(seq: PointCloudSequence, options: Options | None = None) -> Anim
     lo = points[0].min(axis=0)
     hi = points[0].max(axis=0)
 
-    def urshape_at(cell_size):
-        return extract_template(
-            field,
-            times[0],
-            bounds=np.array([lo, hi]),
-            cell_size=cell_size,
-            data_points=points[0],
-            smoothing_iterations=options.smoothing_iterations,
-            min_component_faces=20,
-        )
-
-    vertices, faces = urshape_at(cell)
-    ratio = len(vertices) / options.template_vertices
-    if not options.cell_size and len(faces) and not (0.8 <= ratio <= 1.25):
-        # the area estimate is rough on curved or thin shapes (dfaust-hopping: 1.7x the
-        # target): one more extraction at the corrected cell size, since sliding costs grow
-        # with the vertex count
-        vertices, faces = urshape_at(cell * np.sqrt(ratio))
+    # the area estimate of template_cell_size is rough on curved or thin shapes
+    # (dfaust-hopping: 1.7x the target), so an automatic cell size is corrected once from the
+    # marching-cubes vertex count: sliding costs grow with the vertex count
+    vertices, faces = extract_template(
+        field,
+        times[0],
+        bounds=np.array([lo, hi]),
+        cell_size=cell,
+        data_points=points[0],
+        smoothing_iterations=options.smoothing_iterations,
+        min_component_faces=20,
+        target_vertices=0 if options.cell_size else options.template_vertices,
+    )
     if len(faces) == 0:
         raise InputError("the 4D implicit has no surface at the first frame (too few points?)")
     bandwidth = options.data_bandwidth or 2.0 * spacing

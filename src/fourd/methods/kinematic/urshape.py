@@ -60,51 +60,9 @@ def remove_small_components(vertices, faces, min_faces: int):
     return compact(vertices, faces[keep])
 
 
-def extract_template(
-    field: Field4D,
-    time: float,
-    *,
-    bounds: np.ndarray,
-    cell_size: float,
-    data_points: np.ndarray | None = None,
-    smoothing_iterations: int = 5,
-    projection_iterations: int = 8,
-    min_component_faces: int = 0,
-) -> tuple[np.ndarray, np.ndarray]:
-    """Urshape extraction (000_00387fefe94cc850.txt section 4).
-
-    Parameters
-    ----------
-    field : Field4D
-        Space-time implicit, negative inside.
-    time : float
-        Time at which to extract.
-    bounds : ndarray [2, 3]
-        Box to sample (padded by two cells on every side).
-    cell_size : float
-        Marching-cubes cell edge length, input units.
-    data_points : ndarray [P, 3], optional
-        Input points at ``time``: only cells with one of them inside their circumsphere are
-        polygonised (and ``f`` is only evaluated at the corners of those cells).
-    smoothing_iterations : int
-        Umbrella smoothing steps (step 0.5) before the projection back onto ``f = 0``.
-    projection_iterations : int
-        Newton steps of that projection.
-    min_component_faces : int
-        Connected pieces with fewer triangles are dropped (0: keep all).
-
-    Returns
-    -------
-    vertices : ndarray [N, 3]
-    faces : ndarray int64 [F, 3] (outward wound; empty when ``f`` has no zero crossing)
-    """
-    from fourd.methods.kinematic.sliding import project_to_surface
-
-    bounds = np.asarray(bounds, dtype=np.float64)
-    if bounds.shape != (2, 3) or np.any(bounds[1] < bounds[0]):
-        raise ValueError(f"bounds must be [[min x, y, z], [max x, y, z]], got {bounds.tolist()}")
-    if not (cell_size > 0):
-        raise ValueError(f"cell_size must be positive, got {cell_size}")
+def _polygonise(field, time, bounds, cell_size, data_points, min_component_faces):
+    """Marching cubes of ``f(., time)`` in ``bounds`` (cells near ``data_points`` only),
+    degenerate triangles and small pieces removed; see :func:`extract_template`."""
     origin = bounds[0] - 2.0 * cell_size
     cells = np.ceil((bounds[1] - bounds[0]) / cell_size).astype(np.int64) + 4
     if np.prod(cells + 1) > 400_000_000:
@@ -143,6 +101,66 @@ def extract_template(
     )
     vertices, faces = compact(vertices, faces[good])
     vertices, faces = remove_small_components(vertices, faces, min_component_faces)
+    return vertices, faces
+
+
+def extract_template(
+    field: Field4D,
+    time: float,
+    *,
+    bounds: np.ndarray,
+    cell_size: float,
+    data_points: np.ndarray | None = None,
+    smoothing_iterations: int = 5,
+    projection_iterations: int = 8,
+    min_component_faces: int = 0,
+    target_vertices: int = 0,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Urshape extraction (000_00387fefe94cc850.txt section 4).
+
+    Parameters
+    ----------
+    field : Field4D
+        Space-time implicit, negative inside.
+    time : float
+        Time at which to extract.
+    bounds : ndarray [2, 3]
+        Box to sample (padded by two cells on every side).
+    cell_size : float
+        Marching-cubes cell edge length, input units.
+    data_points : ndarray [P, 3], optional
+        Input points at ``time``: only cells with one of them inside their circumsphere are
+        polygonised (and ``f`` is only evaluated at the corners of those cells).
+    smoothing_iterations : int
+        Umbrella smoothing steps (step 0.5) before the projection back onto ``f = 0``.
+    projection_iterations : int
+        Newton steps of that projection.
+    min_component_faces : int
+        Connected pieces with fewer triangles are dropped (0: keep all).
+    target_vertices : int
+        When positive, ``cell_size`` is a first guess: if marching cubes gives not within
+        0.8-1.25 times this many vertices, it runs once more at the cell size corrected by
+        the square root of the ratio, before the smoothing and projection.
+
+    Returns
+    -------
+    vertices : ndarray [N, 3]
+    faces : ndarray int64 [F, 3] (outward wound; empty when ``f`` has no zero crossing)
+    """
+    from fourd.methods.kinematic.sliding import project_to_surface
+
+    bounds = np.asarray(bounds, dtype=np.float64)
+    if bounds.shape != (2, 3) or np.any(bounds[1] < bounds[0]):
+        raise ValueError(f"bounds must be [[min x, y, z], [max x, y, z]], got {bounds.tolist()}")
+    if not (cell_size > 0):
+        raise ValueError(f"cell_size must be positive, got {cell_size}")
+    vertices, faces = _polygonise(field, time, bounds, cell_size, data_points, min_component_faces)
+    ratio = len(vertices) / target_vertices if target_vertices > 0 else 1.0
+    if len(faces) and not (0.8 <= ratio <= 1.25):
+        cell_size = cell_size * float(np.sqrt(ratio))
+        vertices, faces = _polygonise(field, time, bounds, cell_size, data_points, min_component_faces)
+    if len(faces) == 0:
+        return vertices, faces
     if smoothing_iterations > 0:
         vertices = laplacian_smooth(vertices, faces, iterations=smoothing_iterations)
         vertices = project_to_surface(
