@@ -13,7 +13,8 @@ with the nearest point's (so the far side of a thin part does not pull); its gra
 as ``sum_i w_i n_i / sum_i w_i``. ``coverage = min(1, sum_i w_i)``: 1 where the frame has
 points within about ``h``, 0 far from its points. The points are bucketed in a grid of cells
 of at least ``2.5 h`` (a dense index of at most ``MAX_CELLS`` cells) and every query scans
-its 27 cells (compiled, in parallel).
+its 27 cells, the search for the nearest point only those nearer than the best so far
+(compiled, in parallel).
 """
 
 from __future__ import annotations
@@ -28,17 +29,22 @@ MAX_CELLS = 8_000_000
 
 
 @numba.njit(cache=True)
-def _neighbour_cells(xq, origin, cell, dims, out):
-    """Ids of the (at most 27) grid cells around ``xq`` [3] that lie in the grid; returns
-    how many were written to ``out``."""
+def _neighbour_cells(xq, origin, cell, dims, out, gaps):
+    """Ids of the (at most 27) grid cells around ``xq`` [3] that lie in the grid, and the
+    squared distances from ``xq`` to their boxes; returns how many were written to ``out``
+    and ``gaps``."""
     ci = np.empty(3, np.int64)
     for a in range(3):
         ci[a] = np.int64(np.floor((xq[a] - origin[a]) / cell))
     count = 0
     for i in range(max(ci[0] - 1, 0), min(ci[0] + 2, dims[0])):
+        gi = max(origin[0] + i * cell - xq[0], xq[0] - origin[0] - (i + 1) * cell, 0.0)
         for j in range(max(ci[1] - 1, 0), min(ci[1] + 2, dims[1])):
+            gj = max(origin[1] + j * cell - xq[1], xq[1] - origin[1] - (j + 1) * cell, 0.0)
             for k in range(max(ci[2] - 1, 0), min(ci[2] + 2, dims[2])):
+                gk = max(origin[2] + k * cell - xq[2], xq[2] - origin[2] - (k + 1) * cell, 0.0)
                 out[count] = (i * dims[1] + j) * dims[2] + k
+                gaps[count] = gi * gi + gj * gj + gk * gk
                 count += 1
     return count
 
@@ -49,11 +55,21 @@ def _imls(x, points, normals, starts, origin, cell, dims, h, out_v, out_g, out_w
     inv_h2 = 1.0 / (h * h)
     for q in numba.prange(x.shape[0]):
         cells = np.empty(27, np.int64)
-        count = _neighbour_cells(x[q], origin, cell, dims, cells)
-        # pass 1: the nearest point's normal (the reference orientation)
+        gaps = np.empty(27)
+        count = _neighbour_cells(x[q], origin, cell, dims, cells, gaps)
+        # pass 1: the nearest point's normal (the reference orientation); the query's own
+        # cell first, then only the cells whose box is nearer than the best point so far
         best = -1
         best_d2 = cutoff2
-        for c in cells[:count]:
+        own = 0
+        for ci in range(count):
+            if gaps[ci] < gaps[own]:
+                own = ci
+        for step in range(count):
+            ci = own if step == 0 else (step - 1 if step <= own else step)
+            if gaps[ci] >= best_d2:
+                continue
+            c = cells[ci]
             for p in range(starts[c], starts[c + 1]):
                 d2 = 0.0
                 for a in range(3):
@@ -74,7 +90,10 @@ def _imls(x, points, normals, starts, origin, cell, dims, h, out_v, out_g, out_w
         g0 = 0.0
         g1 = 0.0
         g2 = 0.0
-        for c in cells[:count]:
+        for ci in range(count):
+            if gaps[ci] >= cutoff2:
+                continue
+            c = cells[ci]
             for p in range(starts[c], starts[c + 1]):
                 d0 = x[q, 0] - points[p, 0]
                 d1 = x[q, 1] - points[p, 1]
