@@ -125,19 +125,25 @@ def _peak_mb() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # Linux: KiB
 
 
+def _timed_runs(kind: str, name: str, scans, repeats: int, log_level: int) -> dict:
+    """Reconstruct ``repeats`` times here: ``result`` and ``diagnostics`` of the last run,
+    ``seconds`` per run, ``peak_mb`` and ``start_mb`` of this process."""
+    start_mb = _peak_mb()
+    seconds, result, diagnostics = [], None, {}
+    for _ in range(repeats):
+        started = time.perf_counter()
+        result, diagnostics = _reconstruct(kind, name, scans, log_level)
+        seconds.append(time.perf_counter() - started)
+    return {"result": result, "diagnostics": diagnostics, "seconds": seconds,
+            "peak_mb": _peak_mb(), "start_mb": start_mb}
+
+
 def _case(connection, kind: str, name: str, scans, repeats: int, log_level: int) -> None:
     """Child process body: reconstruct ``repeats`` times, send back result and measurements."""
     try:
         if not logging.getLogger().handlers:
             logging.basicConfig(level=logging.WARNING, format="%(name)s: %(message)s")
-        start_mb = _peak_mb()
-        seconds, result, diagnostics = [], None, {}
-        for _ in range(repeats):
-            started = time.perf_counter()
-            result, diagnostics = _reconstruct(kind, name, scans, log_level)
-            seconds.append(time.perf_counter() - started)
-        connection.send({"result": result, "diagnostics": diagnostics, "seconds": seconds,
-                         "peak_mb": _peak_mb(), "start_mb": start_mb})
+        connection.send(_timed_runs(kind, name, scans, repeats, log_level))
     except BaseException as error:  # reported as the row's error
         connection.send({"error": f"{type(error).__name__}: {error}"})
     finally:
@@ -156,17 +162,10 @@ def run_case(kind: str, name: str, scans, *, repeats: int = 1, timeout: float | 
     """
     level = logging.getLogger("fourd").getEffectiveLevel()
     if not isolate:
-        start_mb = _peak_mb()
-        seconds, result, diagnostics = [], None, {}
         try:
-            for _ in range(repeats):
-                started = time.perf_counter()
-                result, diagnostics = _reconstruct(kind, name, scans, level)
-                seconds.append(time.perf_counter() - started)
+            return _timed_runs(kind, name, scans, repeats, level)
         except Exception as error:  # noqa: BLE001 - one failing case must not stop the run
             return {"error": f"{type(error).__name__}: {error}"}
-        return {"result": result, "diagnostics": diagnostics, "seconds": seconds,
-                "peak_mb": _peak_mb(), "start_mb": start_mb}
     context = multiprocessing.get_context("spawn")
     receiver, sender = context.Pipe(duplex=False)
     process = context.Process(target=_case, args=(sender, kind, name, scans, repeats, level), daemon=True)

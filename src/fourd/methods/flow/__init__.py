@@ -605,8 +605,7 @@ def reconstruct(
     The mass conservation error is logged at info level; :func:`run` returns it with every
     other intermediate result.
     """
-    result = run(seq, options)
-    return result.animation if result.animation is not None else result.meshes
+    return reconstruct_with_diagnostics(seq, options)[0]
 
 
 def reconstruct_with_diagnostics(
