@@ -240,16 +240,22 @@ def test_squash_ball_scene_volume_target(squash_scene_volumes):
 
 
 @pytest.mark.slow
-def test_coherent_uses_kinematic_sliding():
-    try:
-        from fourd.methods.kinematic import extract_template, slide  # noqa: F401
-    except ImportError as error:
-        pytest.skip(
-            f"the kinematic method's extract_template/slide are not available yet ({error})"
-        )
-    seq, _ = _squash_sequence(3, hole=False)
+def test_coherent_animation_is_closed_on_the_surface_and_returns():
+    """coherent=true: one closed, manifold connectivity for every frame, vertices on the
+    ellipsoid of their frame, and when the ellipsoid is back to its first shape (frame 2 of
+    4) the vertices are back where they started (no drift)."""
+    frames, radius = 4, 0.5
+    seq, _ = _squash_sequence(frames, radius=radius, hole=False)
     anim = reconstruct(seq, Options(**FAST, coherent=True))
-    assert anim.vertices.shape[0] == 3 and len(anim.faces)
+    assert anim.vertices.shape[0] == frames and len(anim.faces)
+    for t in range(frames):
+        a = np.exp(0.3 * np.sin(2 * np.pi * t / frames))
+        radii = radius * np.array([1 / np.sqrt(a), a, 1 / np.sqrt(a)])
+        _check_closed_manifold(anim.vertices[t], anim.faces)
+        off_surface = np.abs(np.linalg.norm(anim.vertices[t] / radii, axis=1) - 1.0)
+        assert off_surface.mean() < 0.025, (t, off_surface.mean())
+    returned = np.linalg.norm(anim.vertices[2] - anim.vertices[0], axis=1) / radius
+    assert returned.mean() < 0.04, returned.mean()
 
 
 def test_field_outside_grid_is_positive():
@@ -257,6 +263,29 @@ def test_field_outside_grid_is_positive():
     field = FlowField(values, np.zeros(3), 1.0, np.array([0.0, 1.0]))
     assert field.value(np.array([[1.0, 1.0, 1.0]]), 0.5)[0] < 0
     assert field.value(np.array([[10.0, 1.0, 1.0]]), 0.5)[0] > 0
+
+
+def test_redistanced_is_a_signed_distance_without_pockets():
+    from fourd.methods.flow.post import extract_mesh, redistanced
+
+    h, n = 0.05, 40
+    grid = np.stack(np.meshgrid(*[-1.0 + h * np.arange(n)] * 3, indexing="ij"), axis=-1)
+    radius = np.linalg.norm(grid, axis=-1)
+    # a flat, non-distance-like field (gradient 0.2) with a small stray inside pocket
+    values = 0.2 * (radius - 0.5)
+    pocket = np.linalg.norm(grid - np.array([0.8, 0.8, 0.8]), axis=-1) < 0.08
+    values[pocket] = -0.01
+    field = FlowField(values[None], np.full(3, -1.0), h, np.array([0.0]))
+    mesh = extract_mesh(field, 0, min_component=0.02)
+    sdf = redistanced(field, np.array([0]), [mesh])
+    truth = radius - 0.5
+    near = np.abs(truth) < 2 * h
+    assert np.abs(sdf.values[0][near] - truth[near]).max() < 0.15 * h
+    assert np.abs(sdf.values[0] - truth).max() < 0.6 * h  # far: distance to the nearest vertex
+    assert (sdf.values[0][pocket] > 0).all()
+    probe = np.array([[0.3, 0.2, 0.1], [0.6, -0.1, 0.2]])
+    gradient = sdf.gradient(probe, 0.0)[:, :3]
+    assert np.allclose(np.linalg.norm(gradient, axis=1), 1.0, atol=0.1)
 
 
 def test_mass_meshes_follow_mass():

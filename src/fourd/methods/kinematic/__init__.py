@@ -75,6 +75,7 @@ __all__ = [
     "MIN_FRAMES",
     "Options",
     "reconstruct",
+    "animate",
     "extract_template",
     "slide",
     "SlideOptions",
@@ -300,9 +301,54 @@ def reconstruct(seq: PointCloudSequence, options: Options | None = None) -> Anim
     fitted = _time.perf_counter()
     log.info("4D fit: %.2f s", fitted - started)
 
+    result = animate(field, points, normals, times, spacing=spacing, options=options)
+    finished = _time.perf_counter()
+    log.info(
+        "kinematic: %d frames in %.2f s (fit %.2f, urshape and sliding %.2f)",
+        len(result.times),
+        finished - started,
+        fitted - started,
+        finished - fitted,
+    )
+    return result
+
+
+def animate(
+    field,
+    points: list[np.ndarray],
+    normals: list[np.ndarray],
+    times: np.ndarray,
+    *,
+    spacing: float,
+    options: Options,
+    closed: bool = False,
+    bounds: np.ndarray | None = None,
+) -> AnimatedMesh:
+    """Urshape at ``times[0]`` and its sliding along ``field`` (sections 4 and 5 with this
+    method's data term): everything of :func:`reconstruct` after the 4D fit, for any
+    :class:`~fourd.Field4D` (the ``flow`` method's ``coherent`` option composes with it).
+
+    Parameters
+    ----------
+    field : Field4D
+        Space-time implicit, negative inside, time in the units of ``times``.
+    points, normals : lists of T arrays [P_k, 3]
+        Cleaned input points per frame with oriented unit normals (``P_k`` may be 0: a frame
+        with no data slides without a data term; frame 0 must have points).
+    times : array [T]
+        Input times, strictly increasing.
+    spacing : float
+        Point spacing ``s`` (see :class:`Options`).
+    closed : bool
+        Polygonise the urshape everywhere in ``bounds`` (a closed template of a closed
+        field), not only near the first frame's points (open scans stay open).
+    bounds : ndarray [2, 3], optional
+        Box of the urshape (default: the first frame's points).
+    """
+    started = _time.perf_counter()
+    times = np.asarray(times, dtype=float)
     cell = options.cell_size or template_cell_size(points[0], spacing, options.template_vertices)
-    lo = points[0].min(axis=0)
-    hi = points[0].max(axis=0)
+    box = np.array([points[0].min(axis=0), points[0].max(axis=0)]) if bounds is None else bounds
 
     # the area estimate of template_cell_size is rough on curved or thin shapes
     # (dfaust-hopping: 1.7x the target), so an automatic cell size is corrected once from the
@@ -310,9 +356,9 @@ def reconstruct(seq: PointCloudSequence, options: Options | None = None) -> Anim
     vertices, faces = extract_template(
         field,
         times[0],
-        bounds=np.array([lo, hi]),
+        bounds=np.asarray(box, dtype=float),
         cell_size=cell,
-        data_points=points[0],
+        data_points=None if closed else points[0],
         smoothing_iterations=options.smoothing_iterations,
         min_component_faces=20,
         target_vertices=0 if options.cell_size else options.template_vertices,
@@ -330,15 +376,17 @@ def reconstruct(seq: PointCloudSequence, options: Options | None = None) -> Anim
             max_step=2.0 * median_edge_length(vertices, faces),
         )
     urshape = _time.perf_counter()
-    log.info("urshape: %d vertices in %.2f s", len(vertices), urshape - fitted)
+    log.info("urshape: %d vertices in %.2f s", len(vertices), urshape - started)
 
-    out_times = np.array(options.times, dtype=float) if options.times else np.asarray(times, float)
+    time_unit = float(np.median(np.diff(times))) if len(times) > 1 else 1.0
+    out_times = np.array(options.times, dtype=float) if options.times else times.copy()
     out_times = np.unique(out_times)
     nearest = np.abs(out_times[:, None] - times[None, :]).argmin(axis=1)
     data = [points[k] for k in nearest]
     # per output time, the input frame whose surface is the data term there (-1: none)
     exact = np.abs(out_times - times[nearest]) <= 1e-9 * time_unit
-    surface_frames = list(np.where(exact & options.data_term, nearest, -1))
+    has_points = np.array([len(points[k]) > 0 for k in nearest])
+    surface_frames = list(np.where(exact & has_points & options.data_term, nearest, -1))
 
     def surfaces(frames):
         return _FrameSurfaces(frames, points, normals, bandwidth)
@@ -384,7 +432,7 @@ def reconstruct(seq: PointCloudSequence, options: Options | None = None) -> Anim
         fv, fo = fv[1:], fo[1:]
     parts_v.append(fv)
     parts_o.append(fo)
-    result = AnimatedMesh(
+    return AnimatedMesh(
         faces=faces,
         vertices=smooth_trajectories(
             np.concatenate(parts_v), out_times, options.temporal_smoothing
@@ -393,16 +441,6 @@ def reconstruct(seq: PointCloudSequence, options: Options | None = None) -> Anim
         observed=np.concatenate(parts_o),
         rest=vertices,
     )
-    finished = _time.perf_counter()
-    log.info(
-        "kinematic: %d frames in %.2f s (fit %.2f, urshape %.2f, sliding %.2f)",
-        len(out_times),
-        finished - started,
-        fitted - started,
-        urshape - fitted,
-        finished - urshape,
-    )
-    return result
 
 
 def smooth_trajectories(vertices: np.ndarray, times: np.ndarray, passes: int) -> np.ndarray:
