@@ -232,7 +232,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true", help="print all metrics as JSON")
 
     p = add("bench", "run methods x scenes and write benchmarks/BENCHMARKS.md", cmd_bench)
-    p.add_argument("--methods", nargs="+")
+    p.add_argument(
+        "--methods",
+        nargs="+",
+        help="method names; NAME:key=value,... adds a row for a method with options "
+        "(e.g. flow:coherent=true)",
+    )
     p.add_argument("--scenes", nargs="+")
     p.add_argument("-o", "--output", default="benchmarks/BENCHMARKS.md")
     p.add_argument("--quick", action="store_true", help="a tiny run that exercises the whole path")

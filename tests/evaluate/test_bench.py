@@ -106,3 +106,37 @@ def test_a_methods_own_figures_reach_the_row_and_the_table(tmp_path, monkeypatch
     metrics = report["scenes"]["squash-ball"]["rows"]["perframe"]["metrics"]
     assert metrics["mass_conservation_error"] == 0.0123
     assert "mass err." in output.read_text() and "| 1.2% |" in output.read_text()
+
+
+def test_method_specs_carry_options():
+    assert bench.parse_method_spec("flow:coherent=true, resolution=40") == (
+        "flow",
+        {"coherent": "true", "resolution": "40"},
+    )
+    assert bench.parse_method_spec("perframe") == ("perframe", {})
+    with pytest.raises(InputError, match="expected key=value"):
+        bench.parse_method_spec("flow:coherent")
+    with pytest.raises(InputError, match="valid keys"):
+        bench._select_methods(["perframe:no_such_option=1"], quick=False)
+    with pytest.raises(InputError, match="unknown method"):
+        bench._select_methods(["nope:x=1"], quick=False)
+
+
+def test_a_method_spec_is_its_own_row_with_its_options(tmp_path, monkeypatch):
+    import fourd.methods
+
+    seen = []
+    real = fourd.methods.reconstruct_with_diagnostics
+
+    def recording(scans, method=None, **values):
+        seen.append((method, values))
+        return real(scans, method=method, **values)
+
+    monkeypatch.setattr(fourd.methods, "reconstruct_with_diagnostics", recording)
+    spec = "perframe:outlier_z=6"
+    report = bench.run_bench(quick=True, scenes=["squash-ball"], methods=["perframe", spec],
+                             output=tmp_path / "spec.md", isolate=False)
+    assert seen == [("perframe", {}), ("perframe", {"outlier_z": "6"})]
+    rows = report["scenes"]["squash-ball"]["rows"]
+    assert "metrics" in rows[spec] and "metrics" in rows["perframe"]
+    assert f"| {spec} |" in (tmp_path / "spec.md").read_text()

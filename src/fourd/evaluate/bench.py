@@ -115,7 +115,8 @@ def _reconstruct(kind: str, name: str, scans, log_level: int):
     if kind == "method":
         from fourd.methods import reconstruct_with_diagnostics
 
-        return reconstruct_with_diagnostics(scans, method=name)
+        method, values = parse_method_spec(name)
+        return reconstruct_with_diagnostics(scans, method=method, **values)
     from fourd.evaluate import baselines
 
     return getattr(baselines, name)(scans), {}
@@ -211,17 +212,34 @@ def _select_scenes(scenes, quick: bool) -> list[BenchScene]:
     return chosen
 
 
+def parse_method_spec(spec: str) -> tuple[str, dict[str, str]]:
+    """``"flow:coherent=true,resolution=40"`` -> ``("flow", {"coherent": "true", ...})``: a
+    bench row for a method with options (the spec is the row's label)."""
+    name, _, rest = spec.partition(":")
+    values = {}
+    for item in filter(None, (part.strip() for part in rest.split(","))):
+        key, sep, value = item.partition("=")
+        if not sep or not key.strip():
+            raise InputError(f"method spec {spec!r}: expected key=value, got {item!r}")
+        values[key.strip()] = value.strip()
+    return name.strip(), values
+
+
 def _select_methods(methods, quick: bool) -> list[str]:
-    from fourd.methods import METHODS, available_methods
+    from fourd.methods import METHODS, available_methods, method_options
 
     if methods is None:
         available = available_methods()
         if quick:
             return ["perframe"] if "perframe" in available else available[:1]
         return available
-    unknown = [m for m in methods if m not in METHODS]
+    unknown = [m for m in methods if parse_method_spec(m)[0] not in METHODS]
     if unknown:
         raise InputError(f"unknown method(s) {', '.join(unknown)}; choose from {', '.join(METHODS)}")
+    for spec in methods:  # a bad option fails here, not after the first scene's truth is built
+        name, values = parse_method_spec(spec)
+        if values:
+            method_options(name, values)
     return list(methods)
 
 
