@@ -114,11 +114,11 @@ class Options:
     max_iterations : int
         Upper bound on IRLS iterations. With the standard scans the loop reaches it before
         ``stop_fraction`` (about 40% of the hull decided after 12 iterations), and the frames
-        after the postprocessing no longer change past 4-6 iterations (crane, Chamfer /
-        completeness-95 / s per frame on the 2-core machine: 12 iterations 0.0054 / 0.0170 /
-        6.5, 6 iterations 0.0054 / 0.0176 / 4.1, 4 iterations 0.0054 / 0.0177 / 3.2;
-        splitting-blob 0.0034 / 0.0075 / 7.1 -> 0.0034 / 0.0077 / 4.2 at 6), so the default
-        is 6 (12 before).
+        after the postprocessing no longer change past 3 iterations (bench scans, 20k samples,
+        Chamfer / completeness-95 at 6 and at 3 iterations: crane 0.0034 / 0.0069 both;
+        dfaust-hopping 0.0040 / 0.0111 and 0.0040 / 0.0114; splitting-blob 0.0028 / 0.0050
+        and 0.0027 / 0.0050, right part count in every frame), so the default is 3 (12, then
+        6 before); the flow stage costs about proportionally less.
     gamma : float
         Preconditioner parameter (1).
     softness : float
@@ -186,7 +186,7 @@ class Options:
     weight_scale: float = 10.0
     clamp: float = 0.05
     stop_fraction: float = 0.93
-    max_iterations: int = 6
+    max_iterations: int = 3
     gamma: float = 1.0
     softness: float = 1e-3
     outer_rtol: float = 1e-3
