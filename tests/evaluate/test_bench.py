@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import pytest
 
@@ -140,3 +141,5 @@ def test_a_method_spec_is_its_own_row_with_its_options(tmp_path, monkeypatch):
     rows = report["scenes"]["squash-ball"]["rows"]
     assert "metrics" in rows[spec] and "metrics" in rows["perframe"]
     assert f"| {spec} |" in (tmp_path / "spec.md").read_text()
+    sheet = rows[spec]["sheet"]
+    assert sheet and sheet.endswith("squash-ball-perframe-outlier_z-6.png") and Path(sheet).exists()

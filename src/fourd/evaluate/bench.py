@@ -22,6 +22,7 @@ import math
 import multiprocessing
 import os
 import platform
+import re
 import resource
 import statistics
 import subprocess
@@ -413,12 +414,18 @@ def _run_scene(bench_scene: BenchScene, methods, peers, *, samples, seed, repeat
     return entry
 
 
+def _portable(file_name: str) -> str:
+    """``file_name`` with characters other than letters, digits, ``.``, ``_``, ``-`` replaced
+    by ``-`` (a method spec such as ``flow:coherent=true`` is no file name on every system)."""
+    return re.sub(r"[^A-Za-z0-9._-]+", "-", file_name)
+
+
 def _contact_sheet(result, truth, folder: Path, scene: str, label: str) -> str | None:
     """The (scene, method) contact sheet with the first-frame checker; its path, or None."""
     from fourd.viz.render import bench_sheet
 
     folder.mkdir(parents=True, exist_ok=True)
-    path = folder / f"{scene}-{label}.png"
+    path = folder / _portable(f"{scene}-{label}.png")
     try:
         count = len(result.meshes) if hasattr(result, "meshes") else result.frame_count
         frames = sorted({int(round(i)) for i in np.linspace(0, count - 1, SHEET_FRAMES)})
@@ -633,7 +640,7 @@ def merge_reports(parts: list[str | os.PathLike], output: str | os.PathLike, *, 
                     beside = _plots_dir(Path(part)) / Path(row["sheet"]).name
                     row["sheet"] = str(beside) if beside.exists() else None
                 if row.get("sheet"):
-                    target = _plots_dir(output) / Path(row["sheet"]).name
+                    target = _plots_dir(output) / _portable(Path(row["sheet"]).name)
                     target.parent.mkdir(parents=True, exist_ok=True)
                     if Path(row["sheet"]).resolve() != target.resolve():
                         shutil.copyfile(row["sheet"], target)
