@@ -258,6 +258,17 @@ def test_coherent_animation_is_closed_on_the_surface_and_returns():
     assert returned.mean() < 0.04, returned.mean()
 
 
+@pytest.mark.slow
+def test_coherent_animation_reaches_a_missing_first_frame():
+    """With no data in frame 0 the template comes from frame 1 and slides back to frame 0."""
+    seq, _ = _squash_sequence(4, hole=False)
+    anim = reconstruct(seq, Options(**FAST, coherent=True, missing_frames=(0,)))
+    assert anim.vertices.shape[0] == 4 and np.allclose(anim.times, seq.times)
+    for t in range(4):
+        _check_closed_manifold(anim.vertices[t], anim.faces)
+    assert not np.allclose(anim.vertices[0], anim.vertices[1])
+
+
 def test_field_outside_grid_is_positive():
     values = -np.ones((2, 3, 3, 3), dtype=np.float32)
     field = FlowField(values, np.zeros(3), 1.0, np.array([0.0, 1.0]))
