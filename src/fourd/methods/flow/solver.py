@@ -72,16 +72,21 @@ def _inner_operator(
     S: sp.csr_matrix, inner: Inner, inner_rtol: float, counter: list[int], inner_maxiter: int
 ):
     n = S.shape[0]
-    if inner == "amg" or inner == "cg-amg":
+    if inner == "amg":
+        # one V-cycle is a rough inverse anyway: in single precision it costs 16% less per
+        # MINRES step with the same residual (captured crane system: 60 steps 9.3 -> 7.8 s,
+        # residual 1.1e-2 both)
+        ml = pyamg.ruge_stuben_solver(S.astype(np.float32), max_coarse=500)
+        cycle = ml.aspreconditioner(cycle="V")
+
+        def apply(r):
+            counter[0] += 1
+            return cycle.matvec(r.astype(np.float32)).astype(np.float64)
+
+        return apply
+    if inner == "cg-amg":
         ml = pyamg.ruge_stuben_solver(S, max_coarse=500)
         precond = ml.aspreconditioner(cycle="V")
-        if inner == "amg":
-
-            def apply(r):
-                counter[0] += 1
-                return precond.matvec(r)
-
-            return apply
     elif inner == "cg-ilu":
         ilu = spilu(S.tocsc(), drop_tol=0.01, fill_factor=4)
         precond = LinearOperator((n, n), matvec=ilu.solve)
