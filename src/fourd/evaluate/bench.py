@@ -234,11 +234,11 @@ def _select_methods(methods, quick: bool) -> list[str]:
         if quick:
             return ["perframe"] if "perframe" in available else available[:1]
         return available
-    unknown = [m for m in methods if parse_method_spec(m)[0] not in METHODS]
+    specs = {spec: parse_method_spec(spec) for spec in methods}
+    unknown = [spec for spec, (name, _) in specs.items() if name not in METHODS]
     if unknown:
         raise InputError(f"unknown method(s) {', '.join(unknown)}; choose from {', '.join(METHODS)}")
-    for spec in methods:  # a bad option fails here, not after the first scene's truth is built
-        name, values = parse_method_spec(spec)
+    for name, values in specs.values():  # a bad option fails here, not after the first scene
         if values:
             method_options(name, values)
     return list(methods)

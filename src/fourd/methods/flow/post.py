@@ -195,15 +195,15 @@ def implicit_function(
         # nearest only for the nodes near data
         nearest, _ = tree.query(positions[mine], distance_upper_bound=1.5 * h, workers=-1)
         near = nearest < 1.5 * hf
-        d, idx = tree.query(positions[mine[near]], k=k, workers=-1)
+        sel = mine[near]
+        d, idx = tree.query(positions[sel], k=k, workers=-1)
         if k == 1:
             d, idx = d[:, None], idx[:, None]
         plane = np.einsum(
-            "nkj,nkj->nk", positions[mine[near]][:, None, :] - points[s][idx], normals[s][idx]
+            "nkj,nkj->nk", positions[sel][:, None, :] - points[s][idx], normals[s][idx]
         )
         wk = np.exp(-((d / (1.5 * hf)) ** 2))
         signed = (wk * plane).sum(axis=1) / np.maximum(wk.sum(axis=1), 1e-12)
-        sel = mine[near]
         # data dominates where it is present: replace the flow target there
         omega[sel] = 1.0
         target[sel] = signed

@@ -323,6 +323,7 @@ def animate(
     options: Options,
     closed: bool = False,
     bounds: np.ndarray | None = None,
+    project_smoothed: bool = False,
 ) -> AnimatedMesh:
     """Urshape at ``times[0]`` and its sliding along ``field`` (sections 4 and 5 with this
     method's data term): everything of :func:`reconstruct` after the 4D fit, for any
@@ -344,6 +345,10 @@ def animate(
         field), not only near the first frame's points (open scans stay open).
     bounds : ndarray [2, 3], optional
         Box of the urshape (default: the first frame's points).
+    project_smoothed : bool
+        Project the frames back onto ``field`` after the trajectory smoothing (4 Newton
+        steps, at most 2 edges each; the template's frame stays): on fast curved motion the
+        filter cuts the corners of the trajectories, off the surface.
     """
     started = _time.perf_counter()
     times = np.asarray(times, dtype=float)
@@ -432,11 +437,16 @@ def animate(
         fv, fo = fv[1:], fo[1:]
     parts_v.append(fv)
     parts_o.append(fo)
+    smoothed = smooth_trajectories(np.concatenate(parts_v), out_times, options.temporal_smoothing)
+    if project_smoothed:
+        edge = median_edge_length(vertices, faces)
+        for k in np.flatnonzero(out_times != t0):
+            smoothed[k] = project_to_surface(
+                field, smoothed[k], float(out_times[k]), iterations=4, max_step=2.0 * edge
+            )
     return AnimatedMesh(
         faces=faces,
-        vertices=smooth_trajectories(
-            np.concatenate(parts_v), out_times, options.temporal_smoothing
-        ),
+        vertices=smoothed,
         times=out_times,
         observed=np.concatenate(parts_o),
         rest=vertices,
