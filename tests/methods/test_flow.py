@@ -23,6 +23,7 @@ from fourd.methods.flow import (
     solve_saddle,
 )
 from fourd.methods.flow.grid import build_grid, carve_visual_hull, speed_prune
+from fourd.methods.flow.post import drop_cavities
 from fourd.methods.flow.solver import saddle_matrix
 from fourd.methods.flow.system import build_system, neighbourhood
 
@@ -172,6 +173,42 @@ def test_speed_prune_bounded_speed():
     assert pruned[1].sum() == 7 and pruned[2].sum() == 25
 
 
+def test_frame_motion_and_automatic_substeps():
+    from fourd.methods.flow.grid import frame_motion, substeps_for_motion
+
+    rng = np.random.default_rng(0)
+    base = rng.uniform(-1, 1, size=(4000, 3))
+    base /= np.linalg.norm(base, axis=1, keepdims=True)
+    # a unit sphere growing by 0.05, then 0.2 per frame, then a frame without points
+    frames = [base, 1.05 * base, 1.25 * base, None]
+    motion = frame_motion(frames)
+    assert np.allclose(motion[:2], [0.05, 0.2], rtol=0.05) and np.isnan(motion[2])
+    assert substeps_for_motion(motion, 0.1, limit=1.0, most=4) == 2
+    assert substeps_for_motion(motion, 0.01, limit=1.0, most=4) == 4
+    assert substeps_for_motion(np.array([np.nan]), 0.1, limit=1.0, most=4) == 1
+
+
+@pytest.mark.slow
+def test_automatic_substeps_follow_fast_motion():
+    """A ball whose top moves ~1.2 cells per frame: time_substeps=0 inserts a slice between
+    the frames and every frame stays closed, without cavities, near its ellipsoid."""
+    frames, radius = 3, 0.5
+    points, all_radii = [], []
+    for t in range(frames):
+        a = np.exp(0.4 * t / (frames - 1))
+        all_radii.append(radius * np.array([1 / np.sqrt(a), a, 1 / np.sqrt(a)]))
+        points.append(_ellipsoid_scan(all_radii[-1], seed=t, hole=False))
+    sensors = np.vstack([SENSORS, [[0.0, 3.0, 0.0]]])
+    seq = PointCloudSequence.from_arrays(points, sensors=sensors)
+    result = run(seq, Options(resolution=16, max_iterations=3, time_substeps=0, max_substeps=3))
+    assert result.grid.slices == 2 * (frames - 1) + 1
+    for (vertices, faces), radii in zip(result.meshes.meshes, all_radii, strict=True):
+        _check_closed_manifold(vertices, faces)
+        assert drop_cavities(vertices, faces)[2] == 0
+        off = np.abs(np.linalg.norm(vertices / radii, axis=1) - 1.0)
+        assert off.mean() < 0.05, off.mean()
+
+
 @pytest.mark.slow
 def test_missing_frame_reconstructed():
     seq, volumes = _squash_sequence(5)
@@ -297,6 +334,28 @@ def test_redistanced_is_a_signed_distance_without_pockets():
     probe = np.array([[0.3, 0.2, 0.1], [0.6, -0.1, 0.2]])
     gradient = sdf.gradient(probe, 0.0)[:, :3]
     assert np.allclose(np.linalg.norm(gradient, axis=1), 1.0, atol=0.1)
+
+
+def test_extract_mesh_drops_cavities_unless_asked():
+    """A cavity inside the solid (no outside scanner can see one) is dropped by default; the
+    outer surface and a separate small-but-kept part stay."""
+    from fourd.methods.flow.post import extract_mesh
+
+    h, n = 0.05, 44
+    grid = np.stack(np.meshgrid(*[-1.1 + h * np.arange(n)] * 3, indexing="ij"), axis=-1)
+    radius = np.linalg.norm(grid, axis=-1)
+    shell = np.maximum(radius - 0.7, 0.3 - radius)  # a ball of radius 0.7 around a hollow
+    island = np.linalg.norm(grid - np.array([0.85, 0.85, 0.85]), axis=-1) - 0.15
+    field = FlowField(np.minimum(shell, island)[None], np.full(3, -1.1), h, np.array([0.0]))
+    volumes = {}
+    for cavities in (False, True):
+        vertices, faces = extract_mesh(field, 0, min_component=0.005, cavities=cavities)
+        parts = trimesh.Trimesh(vertices, faces, process=False).split(only_watertight=True)
+        volumes[cavities] = sorted(round(float(p.volume), 2) for p in parts)
+    ball, hollow, small = 4 / 3 * np.pi * np.array([0.7**3, 0.3**3, 0.15**3])
+    assert len(volumes[True]) == 3 and volumes[True][0] < 0
+    assert np.allclose(volumes[True], [-hollow, small, ball], atol=0.02)
+    assert np.allclose(volumes[False], [small, ball], atol=0.02)
 
 
 def test_mass_meshes_follow_mass():

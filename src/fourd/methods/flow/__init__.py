@@ -45,12 +45,15 @@ from fourd.methods.flow.grid import (
     carve_by_distance,
     carve_visual_hull,
     data_cells,
+    frame_motion,
     inside_seeds,
+    substeps_for_motion,
     unsigned_distance,
 )
 from fourd.methods.flow.irls import IRLSResult, run_irls
 from fourd.methods.flow.post import (
     FlowField,
+    drop_cavities,
     enclosed_volume,
     extract_mesh,
     implicit_function,
@@ -95,7 +98,19 @@ class Options:
         7 (the cell and its face neighbours; faster, motion only along axes per step).
     time_substeps : int
         Solution slices per frame interval (1: one slice per frame; 2: one empty slice
-        between frames, the paper's solution grid finer than the data, halving the speed bound).
+        between frames, the paper's solution grid finer than the data, halving the speed bound;
+        0: automatic, see ``motion_limit``). Material moves at most one cell per slice, so
+        faster motion cannot be followed: conserving mass then pulls material out of the
+        interior (``squash-ball``, whose poles move up to 1.5 cells per frame at resolution 32:
+        with 1 slice per frame, cavities in 10 of 20 frames and Chamfer / completeness-95
+        0.0076 / 0.0163; with 2, none and 0.0052 / 0.0114, at 2.3 times the cost). A warning
+        is logged when the data moves more than one cell per slice between over a quarter of
+        the frame pairs.
+    motion_limit, max_substeps : float, int
+        With ``time_substeps=0``: the slices per frame interval that bring the 75th percentile
+        over frame pairs of the data's motion (99th percentile of the nearest-point
+        distances between consecutive frames, :func:`~.grid.frame_motion`) to at most
+        ``motion_limit`` cells per slice, at most ``max_substeps``.
     missing_frames : tuple of int
         Frames whose points are ignored (reconstructed from the flow only, Figure 6).
     alpha : float
@@ -156,6 +171,12 @@ class Options:
         0.02 is no better. Default 0.1 (0.5 before).
     min_component : float
         Closed components with volume below this fraction of the frame's largest are dropped.
+    cavities : bool
+        Keep closed cavities inside the solid (inner surfaces, negative enclosed volume). Off
+        by default: no scanner outside the object sees one, so a cavity is the flow's doing.
+        Where the motion is faster than the flow's one cell per time step, conserving mass
+        pulls material out of the interior and leaves a pocket there (``squash-ball`` with
+        one slice per frame: inner surfaces in 10 of 20 frames, 11% of the solid's volume).
     mass_levels : bool
         Choose each frame's iso-level so that its enclosed volume follows the flow's mass
         (:func:`frame_levels`). A deviation from the paper, which contours the zero level:
@@ -178,6 +199,8 @@ class Options:
     resolution: int = 32
     neighbourhood: int = 7
     time_substeps: int = 1
+    motion_limit: float = 1.0
+    max_substeps: int = 4
     missing_frames: tuple[int, ...] = ()
     alpha: float = 1.0 / 3.0
     regularization: float = 0.0025
@@ -200,6 +223,7 @@ class Options:
     band: float = 2.0
     smoothness: float = 0.1
     min_component: float = 0.02
+    cavities: bool = False
     mass_levels: bool = False
     level_limit: float = 1.0
     coherent: bool = False
@@ -209,8 +233,13 @@ class Options:
             raise ValueError(f"resolution must be at least 4, got {self.resolution}")
         if self.neighbourhood not in (7, 27):
             raise ValueError(f"neighbourhood must be 7 or 27, got {self.neighbourhood}")
-        if self.time_substeps < 1:
-            raise ValueError(f"time_substeps must be at least 1, got {self.time_substeps}")
+        if self.time_substeps < 0:
+            raise ValueError(f"time_substeps must be 0 (automatic) or more, got {self.time_substeps}")
+        if self.max_substeps < 1 or self.motion_limit <= 0:
+            raise ValueError(
+                f"max_substeps must be at least 1 and motion_limit positive, got "
+                f"{self.max_substeps}, {self.motion_limit}"
+            )
         if not 0 < self.alpha < 1:
             raise ValueError(f"alpha must be in (0, 1), got {self.alpha}")
         if not 0 < self.stop_fraction <= 1:
@@ -334,9 +363,14 @@ def run(seq: PointCloudSequence, options: Options | None = None) -> FlowResult:
             np.max([p.max(axis=0) for p in present], axis=0),
         ]
     )
-    grid = build_grid(
-        bounds, seq.times, resolution=options.resolution, substeps=options.time_substeps
-    )
+    substeps = options.time_substeps
+    if substeps == 0:
+        h = build_grid(bounds, seq.times, resolution=options.resolution, substeps=1).h
+        substeps = substeps_for_motion(
+            frame_motion(frame_points), h, limit=options.motion_limit, most=options.max_substeps
+        )
+        log.info("flow: %d time slices per frame interval (automatic)", substeps)
+    grid = build_grid(bounds, seq.times, resolution=options.resolution, substeps=substeps)
     S = grid.slices
     slice_points: list[np.ndarray | None] = [None] * S
     slice_sensors: list[np.ndarray | None] = [None] * S
@@ -451,12 +485,26 @@ def run(seq: PointCloudSequence, options: Options | None = None) -> FlowResult:
             mass,
             limit=options.level_limit * h,
             min_component=options.min_component,
+            cavities=True,
         )
     else:
         meshes = [
-            extract_mesh(field, int(s), min_component=options.min_component)
+            extract_mesh(field, int(s), min_component=options.min_component, cavities=True)
             for s in grid.frame_slice
         ]
+    cavities = [drop_cavities(*mesh) for mesh in meshes]
+    if not options.cavities:
+        meshes = [(v, f) for v, f, _ in cavities]
+    if any(count for *_, count in cavities):
+        log.warning(
+            "flow: closed cavities inside the solid in %d of %d frames (%s): the motion is "
+            "faster than the flow's speed bound of one cell per time slice, and conserving mass "
+            "pulled material out of the interior. Raise time_substeps (0: automatic).%s",
+            sum(1 for *_, count in cavities if count),
+            len(meshes),
+            ", ".join(str(i) for i, (*_, count) in enumerate(cavities) if count)[:80],
+            "" if options.cavities else " The cavities were filled.",
+        )
     result_meshes = MeshSequence(tuple(meshes), seq.times)
     seconds["post"] = time.perf_counter() - clock
 
@@ -533,6 +581,7 @@ def mass_meshes(
     *,
     limit: float,
     min_component: float = 0.0,
+    cavities: bool = True,
     steps: int = 10,
     rtol: float = 2e-3,
 ) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -545,7 +594,10 @@ def mass_meshes(
     actual mesh volume (relative tolerance ``rtol``) within ``[-limit, limit]`` (input
     units); the closest mesh is kept. :func:`frame_levels` is a cheaper voxel estimate.
     """
-    zero = [extract_mesh(field, int(s), min_component=min_component) for s in frame_slice]
+    zero = [
+        extract_mesh(field, int(s), min_component=min_component, cavities=cavities)
+        for s in frame_slice
+    ]
     volumes = np.array([_mesh_volume_area(v, f)[0] for v, f in zero])
     mass = np.asarray(mass, float)
     good = (volumes > 0) & (mass > 0)
@@ -564,7 +616,11 @@ def mass_meshes(
         for _ in range(steps):
             level = 0.5 * (lo + hi)
             mesh = extract_mesh(
-                field, int(frame_slice[i]), min_component=min_component, level=level
+                field,
+                int(frame_slice[i]),
+                min_component=min_component,
+                level=level,
+                cavities=cavities,
             )
             volume = _mesh_volume_area(*mesh)[0]
             error = abs(volume - target)

@@ -253,22 +253,49 @@ def implicit_function(
     return FlowField(values.reshape(shape4), origin, hf, grid.times)
 
 
-def _drop_small_components(vertices, faces, fraction):
-    if len(faces) == 0 or fraction <= 0:
-        return vertices, faces
+def component_volumes(vertices, faces) -> tuple[np.ndarray, np.ndarray]:
+    """The closed components of a mesh: the component of every face [F] and the signed volume
+    each encloses [C] (positive for outward-oriented faces, negative for a cavity's inner
+    surface)."""
     n = len(vertices)
     edges = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
     graph = sp.coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(n, n))
     count, labels = sp.csgraph.connected_components(graph, directed=False)
-    if count <= 1:
-        return vertices, faces
     face_label = labels[faces[:, 0]]
     tri = vertices[faces]
     signed = np.einsum("ij,ij->i", tri[:, 0], np.cross(tri[:, 1], tri[:, 2])) / 6.0
-    volume = np.abs(np.bincount(face_label, weights=signed, minlength=count))
-    keep = volume >= fraction * volume.max()
+    return face_label, np.bincount(face_label, weights=signed, minlength=count)
+
+
+def _drop_small_components(vertices, faces, fraction, cavities=False):
+    """Drop the closed components whose enclosed volume is below ``fraction`` of the largest
+    and, unless ``cavities``, the inner surfaces of cavities (see :func:`drop_cavities`)."""
+    if len(faces) == 0 or fraction <= 0:
+        return (vertices, faces) if cavities else drop_cavities(vertices, faces)[:2]
+    face_label, volume = component_volumes(vertices, faces)
+    if len(volume) <= 1:
+        return vertices, faces
+    keep = np.abs(volume) >= fraction * np.abs(volume).max()
+    if not cavities and volume.max() > 0:
+        keep &= volume > 0
     faces = faces[keep[face_label]]
     return compact(vertices, faces)
+
+
+def drop_cavities(vertices, faces) -> tuple[np.ndarray, np.ndarray, int]:
+    """The mesh without the inner surfaces of cavities, and how many there were.
+
+    Marching cubes orients faces outward, so a pocket of outside enclosed by the solid has
+    a negative signed volume. No scanner outside the object sees one; in the flow's output
+    a cavity means the motion outran its speed bound (see ``time_substeps``).
+    """
+    if len(faces) == 0:
+        return vertices, faces, 0
+    face_label, volume = component_volumes(vertices, faces)
+    cavity = volume < 0
+    if not cavity.any() or volume.max() <= 0:
+        return vertices, faces, 0
+    return (*compact(vertices, faces[~cavity[face_label]]), int(cavity.sum()))
 
 
 def enclosed_volume(values: np.ndarray, spacing: float, level: float = 0.0) -> float:
@@ -299,10 +326,16 @@ def mass_level(
 
 
 def extract_mesh(
-    field: FlowField, slice_index: int, *, min_component: float = 0.0, level: float = 0.0
+    field: FlowField,
+    slice_index: int,
+    *,
+    min_component: float = 0.0,
+    level: float = 0.0,
+    cavities: bool = True,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Closed mesh of the ``level`` set of one time slice (marching cubes on the padded
-    slice)."""
+    slice), without the components smaller than ``min_component`` of the largest and, with
+    ``cavities=False``, without the inner surfaces of cavities."""
     values = field.values[slice_index].astype(np.float64) - level
     values = np.pad(
         values, 1, mode="constant", constant_values=max(float(values.max()), field.spacing)
@@ -311,7 +344,7 @@ def extract_mesh(
     vertices, faces = marching_cubes(
         values, origin=field.origin - field.spacing, spacing=field.spacing
     )
-    return _drop_small_components(vertices, faces, min_component)
+    return _drop_small_components(vertices, faces, min_component, cavities)
 
 
 def redistanced(
