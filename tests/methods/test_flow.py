@@ -164,6 +164,33 @@ def test_visual_hull_carves_outside_keeps_inside():
     assert carved[radius > 0.75].mean() > 0.95
 
 
+def test_visual_hull_with_a_rim_is_tight_above_a_grazing_top():
+    """Cameras slightly above a ball see its top at a grazing angle. The flow's hull leaves
+    about three cells above it; with ``rim=1`` (the hull that trims the output) no more than
+    the margin and about a cell, and never a cell of the ball."""
+    rng = np.random.default_rng(1)
+    angles = 0.3 + 2 * np.pi * np.arange(3) / 3
+    sensors = np.stack([4 * np.cos(angles), np.full(3, 1.0), 4 * np.sin(angles)], axis=1)
+    unit = rng.normal(size=(30000, 3))
+    unit /= np.linalg.norm(unit, axis=1, keepdims=True)
+    points = 0.5 * unit
+    seen = np.zeros(len(points), bool)
+    for sensor in sensors:
+        seen |= np.einsum("ij,ij->i", unit, sensor - points) > 0
+    points = points[seen][:8000]
+    grid = build_grid(np.array([[-0.5] * 3, [0.5] * 3]), np.array([0.0]), resolution=24, substeps=1)
+    margin = 1.5 * grid.h
+    centres = grid.centres()
+    radius = np.linalg.norm(centres, axis=-1)
+    above = (centres[..., 1] > 0.3) & (radius > 0.5 + margin + 1.5 * grid.h)
+    spacing = point_spacing(points)
+    wide = carve_visual_hull(grid, points, sensors, spacing=spacing, margin=margin)
+    tight = carve_visual_hull(grid, points, sensors, spacing=spacing, margin=margin, rim=1)
+    assert not wide[radius < 0.5].any() and not tight[radius < 0.5 - 0.5 * grid.h].any()
+    assert (wide <= tight).all()
+    assert tight[above].all() and not wide[above].all()
+
+
 def test_speed_prune_bounded_speed():
     alive = np.zeros((3, 9, 9, 9), bool)
     alive[0, 4, 4, 4] = True

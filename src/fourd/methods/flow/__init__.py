@@ -171,6 +171,12 @@ class Options:
         0.02 is no better. Default 0.1 (0.5 before).
     min_component : float
         Closed components with volume below this fraction of the frame's largest are dropped.
+    hull_trim : bool
+        Before the postprocessing, empty the cells outside a tighter visual hull (the
+        sampling's gaps and a one-pixel rim filled instead of a three-pixel rim, see
+        :func:`~.grid.carve_visual_hull`). The flow itself keeps the wider hull (solving with
+        the tighter one pulls material out of the interior where the motion is fast), but
+        where it parks material in the rim above a grazing view, the output would bulge.
     cavities : bool
         Keep closed cavities inside the solid (inner surfaces, negative enclosed volume). Off
         by default: no scanner outside the object sees one, so a cavity is the flow's doing.
@@ -224,6 +230,7 @@ class Options:
     smoothness: float = 0.1
     min_component: float = 0.02
     cavities: bool = False
+    hull_trim: bool = True
     mass_levels: bool = False
     level_limit: float = 1.0
     coherent: bool = False
@@ -383,6 +390,7 @@ def run(seq: PointCloudSequence, options: Options | None = None) -> FlowResult:
     outside = np.zeros(grid.shape4, dtype=bool)
     data = np.zeros(grid.shape4, dtype=bool)
     seeds = np.zeros(grid.shape4, dtype=bool)
+    trim = np.zeros(grid.shape4, dtype=bool)
     h = grid.h
     for s in progress(range(S), desc="flow: visual hull", total=S):
         pts = slice_points[s]
@@ -396,6 +404,10 @@ def run(seq: PointCloudSequence, options: Options | None = None) -> FlowResult:
         cells = data_cells(grid, pts)
         carved &= ~cells
         outside[s] = carved
+        if options.hull_trim and slice_sensors[s] is not None:
+            trim[s] = ~cells & carve_visual_hull(
+                grid, pts, slice_sensors[s], spacing=spacing, margin=1.5 * h, rim=1
+            )
         data[s] = cells
         distance = unsigned_distance(grid, pts)
         seeds[s] = inside_seeds(distance, carved | cells, minimum=1.5 * h)
@@ -470,7 +482,7 @@ def run(seq: PointCloudSequence, options: Options | None = None) -> FlowResult:
     clock = time.perf_counter()
     field = implicit_function(
         grid,
-        irls.x,
+        np.where(trim, 0.0, irls.x),
         slice_points,
         slice_normals,
         refine=options.refine,

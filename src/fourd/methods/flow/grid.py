@@ -155,6 +155,7 @@ def carve_visual_hull(
     spacing: float,
     margin: float,
     fill_pixels: int = 2,
+    rim: int | None = None,
 ) -> np.ndarray:
     """Cells seen as empty by at least one sensor (the complement of a low-resolution visual hull).
 
@@ -165,6 +166,12 @@ def carve_visual_hull(
     are certainly empty are labelled). A cell is carved when it projects in front of the sensor and
     its range is smaller than the pixel's depth minus ``margin``, or when it projects onto a
     background pixel (no data along that ray).
+
+    The filling also grows the data's outline by ``fill_pixels + 1`` pixels (about three
+    cells): at a grazing view of a convex top it leaves three cells above the data uncarved.
+    With ``rim`` set, only the sampling's gaps (a morphological closing of ``fill_pixels``)
+    and a rim of ``rim`` pixels are filled: a tighter hull (used to trim the output, see
+    ``hull_trim`` of the flow options).
 
     Parameters
     ----------
@@ -209,11 +216,20 @@ def carve_visual_hull(
         depth = depth.reshape(nu, nv)
         # Conservative image: fill holes near data with the smallest nearby depth and take the
         # 3x3 minimum (a smaller depth carves less); pixels still empty are background.
+        if rim is None:
+            filled = np.ones(depth.shape, dtype=bool)
+        else:  # only the sampling's gaps and a rim of ``rim`` pixels
+            hit = np.isfinite(depth)
+            filled = ndimage.binary_dilation(hit, iterations=rim) | ndimage.binary_closing(
+                hit, iterations=fill_pixels, border_value=0
+            )
         work = depth
-        for _ in range(fill_pixels):
+        for _ in range(fill_pixels if rim is None else fill_pixels + rim):
             grown = ndimage.minimum_filter(work, size=3, mode="constant", cval=np.inf)
-            work = np.where(np.isfinite(work), work, grown)
+            work = np.where(np.isfinite(work) | ~filled, work, grown)
         work = ndimage.minimum_filter(work, size=3, mode="constant", cval=np.inf)
+        if rim is not None:
+            work[~filled] = np.inf
         # cells
         crel = centres - sensor
         cz = crel @ axis
