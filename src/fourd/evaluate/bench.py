@@ -653,7 +653,7 @@ def merge_reports(parts: list[str | os.PathLike], output: str | os.PathLike, *, 
         raise InputError("no bench reports to merge")
     # Notes that describe how a part was put together are replaced by ones for the whole.
     merged["notes"] = [n for n in merged["notes"] if not n.startswith(_MERGE_NOTES)]
-    merged["notes"].append(f"Merged from {len(parts)} runs made side by side; total wall time is their sum.")
+    merged["notes"].append(f"Merged from {len(parts)} reports; total wall time is the sum of theirs.")
     missing = [f"{name}/{method}" for name, entry in merged["scenes"].items() if "rows" in entry
                for method in merged["settings"]["methods"] if method not in entry["rows"]]
     if missing:
