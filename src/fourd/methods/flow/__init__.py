@@ -102,10 +102,13 @@ class Options:
         0: automatic, see ``motion_limit``). Material moves at most one cell per slice, so
         faster motion cannot be followed: conserving mass then pulls material out of the
         interior (``squash-ball``, whose poles move up to 1.5 cells per frame at resolution 32:
-        with 1 slice per frame, cavities in 10 of 20 frames and Chamfer / completeness-95
-        0.0076 / 0.0163; with 2, none and 0.0052 / 0.0114, at 2.3 times the cost). A warning
-        is logged when the data moves more than one cell per slice between over a quarter of
-        the frame pairs.
+        with 1 slice per frame, cavities in 7 of 20 frames, filled by ``cavities=False``; bench
+        at 5cae82f, Chamfer / completeness-95 / volume change 0.0047 / 0.0130 / 15% at 8.6
+        s/frame; with ``time_substeps=0``, which picks 2, no cavities and 0.0041 / 0.0109 / 8%
+        at 18.4 s/frame). Cavities in the output are logged as a warning. Not automatic by
+        default: crane's leg moves up to 5.8 cells per frame, so the rule below picks 3 for
+        it, but with 2 it measured no better (Chamfer / completeness-95 0.0035 / 0.0072
+        against 0.0034 / 0.0069) at twice the cost.
     motion_limit, max_substeps : float, int
         With ``time_substeps=0``: the slices per frame interval that bring the 75th percentile
         over frame pairs of the data's motion (99th percentile of the nearest-point
@@ -182,7 +185,8 @@ class Options:
         by default: no scanner outside the object sees one, so a cavity is the flow's doing.
         Where the motion is faster than the flow's one cell per time step, conserving mass
         pulls material out of the interior and leaves a pocket there (``squash-ball`` with
-        one slice per frame: inner surfaces in 10 of 20 frames, 11% of the solid's volume).
+        one slice per frame: inner surfaces in 7 of 20 frames at 5cae82f, up to 11% of the
+        solid's volume).
     mass_levels : bool
         Choose each frame's iso-level so that its enclosed volume follows the flow's mass
         (:func:`frame_levels`). A deviation from the paper, which contours the zero level:
