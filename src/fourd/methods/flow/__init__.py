@@ -185,8 +185,8 @@ class Options:
         by default: no scanner outside the object sees one, so a cavity is the flow's doing.
         Where the motion is faster than the flow's one cell per time step, conserving mass
         pulls material out of the interior and leaves a pocket there (``squash-ball`` with
-        one slice per frame: inner surfaces in 7 of 20 frames at 5cae82f, up to 11% of the
-        solid's volume).
+        one slice per frame: inner surfaces in 7 of 20 frames at 5cae82f; before the hull
+        trim, 10 of 20, the largest 11% of the solid's volume).
     mass_levels : bool
         Choose each frame's iso-level so that its enclosed volume follows the flow's mass
         (:func:`frame_levels`). A deviation from the paper, which contours the zero level:
