@@ -363,9 +363,9 @@ def test_redistanced_is_a_signed_distance_without_pockets():
     assert np.allclose(np.linalg.norm(gradient, axis=1), 1.0, atol=0.1)
 
 
-def test_extract_mesh_drops_cavities_unless_asked():
-    """A cavity inside the solid (no outside scanner can see one) is dropped by default; the
-    outer surface and a separate small-but-kept part stay."""
+def test_drop_cavities_keeps_the_solid_and_small_parts():
+    """A cavity inside the solid (no outside scanner can see one) is dropped by
+    ``drop_cavities``; the outer surface and a separate small-but-kept part stay."""
     from fourd.methods.flow.post import extract_mesh
 
     h, n = 0.05, 44
@@ -375,8 +375,9 @@ def test_extract_mesh_drops_cavities_unless_asked():
     island = np.linalg.norm(grid - np.array([0.85, 0.85, 0.85]), axis=-1) - 0.15
     field = FlowField(np.minimum(shell, island)[None], np.full(3, -1.1), h, np.array([0.0]))
     volumes = {}
+    mesh = extract_mesh(field, 0, min_component=0.005)
     for cavities in (False, True):
-        vertices, faces = extract_mesh(field, 0, min_component=0.005, cavities=cavities)
+        vertices, faces = mesh if cavities else drop_cavities(*mesh)[:2]
         parts = trimesh.Trimesh(vertices, faces, process=False).split(only_watertight=True)
         volumes[cavities] = sorted(round(float(p.volume), 2) for p in parts)
     ball, hollow, small = 4 / 3 * np.pi * np.array([0.7**3, 0.3**3, 0.15**3])

@@ -501,24 +501,24 @@ def run(seq: PointCloudSequence, options: Options | None = None) -> FlowResult:
             mass,
             limit=options.level_limit * h,
             min_component=options.min_component,
-            cavities=True,
         )
     else:
         meshes = [
-            extract_mesh(field, int(s), min_component=options.min_component, cavities=True)
+            extract_mesh(field, int(s), min_component=options.min_component)
             for s in grid.frame_slice
         ]
-    cavities = [drop_cavities(*mesh) for mesh in meshes]
+    filled = [drop_cavities(*mesh) for mesh in meshes]
+    cavity_frames = [i for i, (*_, count) in enumerate(filled) if count]
     if not options.cavities:
-        meshes = [(v, f) for v, f, _ in cavities]
-    if any(count for *_, count in cavities):
+        meshes = [(v, f) for v, f, _ in filled]
+    if cavity_frames:
         log.warning(
             "flow: closed cavities inside the solid in %d of %d frames (%s): the motion is "
             "faster than the flow's speed bound of one cell per time slice, and conserving mass "
             "pulled material out of the interior. Raise time_substeps (0: automatic).%s",
-            sum(1 for *_, count in cavities if count),
+            len(cavity_frames),
             len(meshes),
-            ", ".join(str(i) for i, (*_, count) in enumerate(cavities) if count)[:80],
+            ", ".join(map(str, cavity_frames))[:80],
             "" if options.cavities else " The cavities were filled.",
         )
     result_meshes = MeshSequence(tuple(meshes), seq.times)
@@ -597,7 +597,6 @@ def mass_meshes(
     *,
     limit: float,
     min_component: float = 0.0,
-    cavities: bool = True,
     steps: int = 10,
     rtol: float = 2e-3,
 ) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -610,10 +609,7 @@ def mass_meshes(
     actual mesh volume (relative tolerance ``rtol``) within ``[-limit, limit]`` (input
     units); the closest mesh is kept. :func:`frame_levels` is a cheaper voxel estimate.
     """
-    zero = [
-        extract_mesh(field, int(s), min_component=min_component, cavities=cavities)
-        for s in frame_slice
-    ]
+    zero = [extract_mesh(field, int(s), min_component=min_component) for s in frame_slice]
     volumes = np.array([_mesh_volume_area(v, f)[0] for v, f in zero])
     mass = np.asarray(mass, float)
     good = (volumes > 0) & (mass > 0)
@@ -632,11 +628,7 @@ def mass_meshes(
         for _ in range(steps):
             level = 0.5 * (lo + hi)
             mesh = extract_mesh(
-                field,
-                int(frame_slice[i]),
-                min_component=min_component,
-                level=level,
-                cavities=cavities,
+                field, int(frame_slice[i]), min_component=min_component, level=level
             )
             volume = _mesh_volume_area(*mesh)[0]
             error = abs(volume - target)

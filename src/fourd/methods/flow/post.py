@@ -267,18 +267,16 @@ def component_volumes(vertices, faces) -> tuple[np.ndarray, np.ndarray]:
     return face_label, np.bincount(face_label, weights=signed, minlength=count)
 
 
-def _drop_small_components(vertices, faces, fraction, cavities=False):
-    """Drop the closed components whose enclosed volume is below ``fraction`` of the largest
-    and, unless ``cavities``, the inner surfaces of cavities (see :func:`drop_cavities`)."""
+def _drop_small_components(vertices, faces, fraction):
+    """Drop the closed components whose enclosed volume (absolute, so a cavity's inner
+    surface counts by its size) is below ``fraction`` of the largest."""
     if len(faces) == 0 or fraction <= 0:
-        return (vertices, faces) if cavities else drop_cavities(vertices, faces)[:2]
+        return vertices, faces
     face_label, volume = component_volumes(vertices, faces)
     if len(volume) <= 1:
         return vertices, faces
-    keep = np.abs(volume) >= fraction * np.abs(volume).max()
-    if not cavities and volume.max() > 0:
-        keep &= volume > 0
-    faces = faces[keep[face_label]]
+    volume = np.abs(volume)
+    faces = faces[(volume >= fraction * volume.max())[face_label]]
     return compact(vertices, faces)
 
 
@@ -331,11 +329,10 @@ def extract_mesh(
     *,
     min_component: float = 0.0,
     level: float = 0.0,
-    cavities: bool = True,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Closed mesh of the ``level`` set of one time slice (marching cubes on the padded
-    slice), without the components smaller than ``min_component`` of the largest and, with
-    ``cavities=False``, without the inner surfaces of cavities."""
+    slice), without the components smaller than ``min_component`` of the largest (cavities
+    are kept: see :func:`drop_cavities`)."""
     values = field.values[slice_index].astype(np.float64) - level
     values = np.pad(
         values, 1, mode="constant", constant_values=max(float(values.max()), field.spacing)
@@ -344,7 +341,7 @@ def extract_mesh(
     vertices, faces = marching_cubes(
         values, origin=field.origin - field.spacing, spacing=field.spacing
     )
-    return _drop_small_components(vertices, faces, min_component, cavities)
+    return _drop_small_components(vertices, faces, min_component)
 
 
 def redistanced(
