@@ -241,12 +241,18 @@ def orient_by_propagation(points: np.ndarray, normals: np.ndarray, indices: np.n
 
     Returns the re-oriented normals, [P, 3].
     """
+    return _propagate(points, normals, indices)[0]
+
+
+def _propagate(points, normals, indices):
+    """:func:`orient_by_propagation`, also returning the connected parts of the symmetric
+    neighbour graph: ``(normals [P, 3], labels [P], part count)``."""
     points = np.asarray(points, dtype=np.float64)
     normals = np.ascontiguousarray(normals, dtype=np.float64)
     indices = np.ascontiguousarray(indices, dtype=np.int64)
     count = len(points)
     if count == 0:
-        return normals.copy()
+        return normals.copy(), np.zeros(0, dtype=np.int64), 0
     pointer, members = _reverse_adjacency(indices)
     signs = np.ones(count)
     labels = np.empty(count, dtype=np.int64)
@@ -262,7 +268,7 @@ def orient_by_propagation(points: np.ndarray, normals: np.ndarray, indices: np.n
     order = np.lexsort((reach, labels))
     roots = order[np.cumsum(sizes) - 1]
     outward = np.einsum("ij,ij->i", oriented[roots], offsets[roots]) >= 0
-    return np.where(outward[labels][:, None], oriented, -oriented)
+    return np.where(outward[labels][:, None], oriented, -oriented), labels, parts
 
 
 def orient_to_sensors(
@@ -302,7 +308,12 @@ def orient_to_sensors(
 
 
 def orient_parts_to_sensors(
-    points: np.ndarray, normals: np.ndarray, sensors: np.ndarray, indices: np.ndarray
+    points: np.ndarray,
+    normals: np.ndarray,
+    sensors: np.ndarray,
+    indices: np.ndarray,
+    *,
+    labels: np.ndarray | None = None,
 ) -> np.ndarray:
     """Flip whole connected parts of the neighbour graph so that, summed over the part, the
     normals face the sensors better than their flips do.
@@ -310,13 +321,22 @@ def orient_parts_to_sensors(
     Used after :func:`orient_by_propagation`: neighbours already agree, and the sensors
     decide one sign per part. On the crane scans this orients 99.6-99.8% of points like the
     truth, against 70-82% for orienting every point towards its nearest sensor.
+
+    ``labels`` [P] (optional): the connected parts when already known (the propagation finds
+    them); otherwise they are computed from ``indices``.
     """
     count = len(points)
-    graph = sp.csr_matrix(
-        (np.ones(indices.size), (np.repeat(np.arange(count), indices.shape[1]), indices.ravel())),
-        shape=(count, count),
-    )
-    parts, labels = connected_components(graph, directed=False)
+    if labels is None:
+        graph = sp.csr_matrix(
+            (
+                np.ones(indices.size),
+                (np.repeat(np.arange(count), indices.shape[1]), indices.ravel()),
+            ),
+            shape=(count, count),
+        )
+        parts, labels = connected_components(graph, directed=False)
+    else:
+        parts = int(labels.max()) + 1 if count else 0
     to_sensor = np.asarray(sensors, dtype=np.float64)[None, :, :] - points[:, None, :]
     distance = np.linalg.norm(to_sensor, axis=2)
     nearest = np.argmin(distance, axis=1)
@@ -365,9 +385,11 @@ def estimate_normals(
     if mode == "sensors" and has_sensors:
         oriented = orient_to_sensors(points, unoriented.normals, np.asarray(sensors, float), indices)
     else:
-        oriented = orient_by_propagation(points, unoriented.normals, indices)
+        oriented, labels, _ = _propagate(points, unoriented.normals, indices)
         if mode == "auto" and has_sensors:
-            oriented = orient_parts_to_sensors(points, oriented, np.asarray(sensors, float), indices)
+            oriented = orient_parts_to_sensors(
+                points, oriented, np.asarray(sensors, float), indices, labels=labels
+            )
     return Normals(oriented, unoriented.flatness)
 
 
