@@ -853,6 +853,20 @@ def _child_fill(indptr, indices, parents, masks, keep, out_ptr, out):
                         pos[ch] += 1
 
 
+def z_order(points: np.ndarray, bits: int = 10) -> np.ndarray:
+    """Order [P] of points [P, D] (D * bits <= 63) along a Z-order (Morton) curve over their
+    bounding cube, ``2^bits`` cells a side."""
+    lo = points.min(axis=0)
+    span = max(float(np.max(points.max(axis=0) - lo)), 1e-300)
+    cells = np.minimum(((points - lo) / span * (1 << bits)).astype(np.int64), (1 << bits) - 1)
+    dims = points.shape[1]
+    code = np.zeros(len(points), dtype=np.int64)
+    for bit in range(bits):
+        for axis in range(dims):
+            code |= ((cells[:, axis] >> bit) & 1) << (dims * bit + axis)
+    return np.argsort(code, kind="stable")
+
+
 def _ball_csr(
     tree: cKDTree, centres: np.ndarray, radii: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -969,6 +983,10 @@ def fit_mpu4d(points: np.ndarray, normals: np.ndarray, *, options: MPUOptions) -
         raise ValueError(f"need at least {options.min_points} points, got {len(X)}")
     lengths = np.linalg.norm(N, axis=1)
     N = N / np.maximum(lengths, 1e-300)[:, None]
+    # points in Z order: a cell's point list then lies in a few runs of memory (measured on
+    # dfaust-hopping: the fit's list kernels about twice as fast)
+    order = z_order(X)
+    X, N = np.ascontiguousarray(X[order]), np.ascontiguousarray(N[order])
     tree = cKDTree(X)
     lo, hi = X.min(axis=0), X.max(axis=0)
     half0 = 0.5 * float(np.max(hi - lo)) * 1.01 + 1e-12
