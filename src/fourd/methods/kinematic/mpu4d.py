@@ -36,7 +36,8 @@ from __future__ import annotations
 
 import itertools
 import logging
-from dataclasses import dataclass
+from collections import OrderedDict
+from dataclasses import dataclass, field
 from typing import NamedTuple
 
 import numba
@@ -56,6 +57,12 @@ OP_SINGLE, OP_MAX, OP_MIN = 0, 1, 2
 #: small, so that the auxiliary points fix the sign and scale of the quadric without pulling
 #: it off the data (an exact quadric is reproduced exactly).
 AUX_WEIGHT = 0.01
+#: Evaluations of at least this many points at one time use that time slice's leaf grid.
+SLICE_MIN_QUERIES = 64
+#: Time slices whose leaf grids are kept.
+SLICE_CACHE = 4
+#: Largest leaf grid of a time slice (cells).
+SLICE_MAX_CELLS = 2_000_000
 
 _CORNERS = np.array(list(itertools.product((-1.0, 1.0), repeat=4)))  # [16, 4]
 
@@ -674,6 +681,7 @@ def _evaluate(
     q_count = len(queries)
     for chunk in numba.prange(chunks):
         stack = np.empty(1024, dtype=np.int64)
+        acc = np.empty(10)
         grad = np.empty(4)
         best = np.empty(4)
         lo_q = chunk * q_count // chunks
@@ -685,16 +693,7 @@ def _evaluate(
             x3 = queries[qi, 3]
             stack[0] = 0
             top = 1
-            s0 = 0.0
-            s1 = 0.0
-            a0 = 0.0
-            a1 = 0.0
-            a2 = 0.0
-            a3 = 0.0
-            b0 = 0.0
-            b1 = 0.0
-            b2 = 0.0
-            b3 = 0.0
+            acc[:] = 0.0
             while top > 0:
                 top -= 1
                 node = stack[top]
@@ -711,59 +710,148 @@ def _evaluate(
                     continue
                 leaf = node_leaf[node]
                 if leaf >= 0:
-                    e0 = x0 - leaf_centre[leaf, 0]
-                    e1 = x1 - leaf_centre[leaf, 1]
-                    e2 = x2 - leaf_centre[leaf, 2]
-                    e3 = x3 - leaf_centre[leaf, 3]
-                    r = np.sqrt(e0 * e0 + e1 * e1 + e2 * e2 + e3 * e3)
-                    R = leaf_radius[leaf]
-                    t = 1.5 * r / R
-                    if t >= 1.5:
-                        continue
-                    weight = _bspline(t)
-                    start = leaf_start[leaf]
-                    value = _piece_value(M, g, c, origins, start, x0, x1, x2, x3, best)
-                    op = leaf_op[leaf]
-                    for p in range(start + 1, start + leaf_count[leaf]):
-                        v = _piece_value(M, g, c, origins, p, x0, x1, x2, x3, grad)
-                        if (op == OP_MAX and v > value) or (op == OP_MIN and v < value):
-                            value = v
-                            best[:] = grad
-                    s0 += weight
-                    s1 += weight * value
-                    if with_gradient:
-                        if r > 0:
-                            k = _bspline_derivative(t) * 1.5 / (R * r)
-                        else:
-                            k = 0.0
-                        a0 += k * e0
-                        a1 += k * e1
-                        a2 += k * e2
-                        a3 += k * e3
-                        b0 += k * e0 * value + weight * best[0]
-                        b1 += k * e1 * value + weight * best[1]
-                        b2 += k * e2 * value + weight * best[2]
-                        b3 += k * e3 * value + weight * best[3]
+                    _add_leaf(
+                        leaf, x0, x1, x2, x3, with_gradient, leaf_centre, leaf_radius,
+                        leaf_start, leaf_count, leaf_op, M, g, c, origins, acc, grad, best,
+                    )  # fmt: skip
                 else:
                     for child in range(child_start[node], child_start[node] + child_count[node]):
                         if top < 1024:
                             stack[top] = child
                             top += 1
-            if s0 > 0.0:
-                f = s1 / s0
-                values[qi] = f
-                if with_gradient:
-                    gradients[qi, 0] = (b0 - f * a0) / s0
-                    gradients[qi, 1] = (b1 - f * a1) / s0
-                    gradients[qi, 2] = (b2 - f * a2) / s0
-                    gradients[qi, 3] = (b3 - f * a3) / s0
-            else:
-                values[qi] = outside
-                if with_gradient:
-                    gradients[qi, 0] = 0.0
-                    gradients[qi, 1] = 0.0
-                    gradients[qi, 2] = 0.0
-                    gradients[qi, 3] = 0.0
+            _blend(acc, qi, with_gradient, outside, values, gradients)
+
+
+@numba.njit(cache=True, inline="always")
+def _add_leaf(
+    leaf, x0, x1, x2, x3, with_gradient, leaf_centre, leaf_radius, leaf_start, leaf_count,
+    leaf_op, M, g, c, origins, acc, grad, best,
+):  # fmt: skip
+    """Adds leaf ``leaf``'s weighted local function at ``x`` to the partition-of-unity sums
+    ``acc`` [10]: weight, weighted value, weight gradient [4], weighted-value gradient [4]."""
+    e0 = x0 - leaf_centre[leaf, 0]
+    e1 = x1 - leaf_centre[leaf, 1]
+    e2 = x2 - leaf_centre[leaf, 2]
+    e3 = x3 - leaf_centre[leaf, 3]
+    r = np.sqrt(e0 * e0 + e1 * e1 + e2 * e2 + e3 * e3)
+    R = leaf_radius[leaf]
+    t = 1.5 * r / R
+    if t >= 1.5:
+        return
+    weight = _bspline(t)
+    start = leaf_start[leaf]
+    value = _piece_value(M, g, c, origins, start, x0, x1, x2, x3, best)
+    op = leaf_op[leaf]
+    for p in range(start + 1, start + leaf_count[leaf]):
+        v = _piece_value(M, g, c, origins, p, x0, x1, x2, x3, grad)
+        if (op == OP_MAX and v > value) or (op == OP_MIN and v < value):
+            value = v
+            best[:] = grad
+    acc[0] += weight
+    acc[1] += weight * value
+    if with_gradient:
+        k = _bspline_derivative(t) * 1.5 / (R * r) if r > 0 else 0.0
+        acc[2] += k * e0
+        acc[3] += k * e1
+        acc[4] += k * e2
+        acc[5] += k * e3
+        acc[6] += k * e0 * value + weight * best[0]
+        acc[7] += k * e1 * value + weight * best[1]
+        acc[8] += k * e2 * value + weight * best[2]
+        acc[9] += k * e3 * value + weight * best[3]
+
+
+@numba.njit(cache=True, inline="always")
+def _blend(acc, qi, with_gradient, outside, values, gradients):
+    """``f = sum w f_i / sum w`` and its gradient from the sums of :func:`_add_leaf`."""
+    s0 = acc[0]
+    if s0 > 0.0:
+        f = acc[1] / s0
+        values[qi] = f
+        if with_gradient:
+            for a in range(4):
+                gradients[qi, a] = (acc[6 + a] - f * acc[2 + a]) / s0
+    else:
+        values[qi] = outside
+        if with_gradient:
+            for a in range(4):
+                gradients[qi, a] = 0.0
+
+
+@numba.njit(cache=True)
+def _slice_grid(leaf_centre, leaf_radius, ids, w, lo, cell, dims):
+    """CSR ``(start [cells + 1], leaves)`` over a 3D grid (origin ``lo``, cell size ``cell``,
+    ``dims`` cells a side) of the leaves ``ids``, each listed in every cell that the box of
+    its support's cross-section at time ``w`` touches."""
+    n = len(ids)
+    lo_cell = np.zeros((n, 3), dtype=np.int64)
+    hi_cell = np.full((n, 3), -1, dtype=np.int64)
+    start = np.zeros(dims[0] * dims[1] * dims[2] + 1, dtype=np.int64)
+    for m in range(n):
+        leaf = ids[m]
+        dw = w - leaf_centre[leaf, 3]
+        r2 = leaf_radius[leaf] ** 2 - dw * dw
+        if r2 <= 0.0:
+            continue
+        r = np.sqrt(r2)
+        for a in range(3):
+            lo_cell[m, a] = max(np.int64(np.floor((leaf_centre[leaf, a] - r - lo[a]) / cell)), 0)
+            hi_cell[m, a] = min(
+                np.int64(np.floor((leaf_centre[leaf, a] + r - lo[a]) / cell)), dims[a] - 1
+            )
+        for i in range(lo_cell[m, 0], hi_cell[m, 0] + 1):
+            for j in range(lo_cell[m, 1], hi_cell[m, 1] + 1):
+                for k in range(lo_cell[m, 2], hi_cell[m, 2] + 1):
+                    start[(i * dims[1] + j) * dims[2] + k + 1] += 1
+    for i in range(len(start) - 1):
+        start[i + 1] += start[i]
+    fill = start[:-1].copy()
+    leaves = np.empty(start[-1], dtype=np.int32)
+    for m in range(n):
+        for i in range(lo_cell[m, 0], hi_cell[m, 0] + 1):
+            for j in range(lo_cell[m, 1], hi_cell[m, 1] + 1):
+                for k in range(lo_cell[m, 2], hi_cell[m, 2] + 1):
+                    key = (i * dims[1] + j) * dims[2] + k
+                    leaves[fill[key]] = ids[m]
+                    fill[key] += 1
+    return start, leaves
+
+
+@numba.njit(cache=True, parallel=True)
+def _evaluate_slice(
+    queries, with_gradient, grid_lo, grid_cell, grid_dims, grid_offset, cell_start, cell_leaves,
+    leaf_centre, leaf_radius, leaf_start, leaf_count, leaf_op, M, g, c, origins, outside, values,
+    gradients, chunks,
+):  # fmt: skip
+    """:func:`_evaluate` for queries that share one time ``w``, from that slice's grids of
+    leaves (one per size class, :func:`_slice_grid`; grid ``k``'s cells start at
+    ``grid_offset[k]`` in ``cell_start``) instead of the tree."""
+    q_count = len(queries)
+    for chunk in numba.prange(chunks):
+        acc = np.empty(10)
+        grad = np.empty(4)
+        best = np.empty(4)
+        for qi in range(chunk * q_count // chunks, (chunk + 1) * q_count // chunks):
+            x0 = queries[qi, 0]
+            x1 = queries[qi, 1]
+            x2 = queries[qi, 2]
+            x3 = queries[qi, 3]
+            acc[:] = 0.0
+            for grid in range(len(grid_cell)):
+                cell = grid_cell[grid]
+                i = np.int64(np.floor((x0 - grid_lo[grid, 0]) / cell))
+                j = np.int64(np.floor((x1 - grid_lo[grid, 1]) / cell))
+                k = np.int64(np.floor((x2 - grid_lo[grid, 2]) / cell))
+                dims = grid_dims[grid]
+                if 0 <= i < dims[0] and 0 <= j < dims[1] and 0 <= k < dims[2]:
+                    key = grid_offset[grid] + (i * dims[1] + j) * dims[2] + k
+                    for e in range(cell_start[key], cell_start[key + 1]):
+                        _add_leaf(
+                            cell_leaves[e], x0, x1, x2, x3, with_gradient, leaf_centre,
+                            leaf_radius, leaf_start, leaf_count, leaf_op, M, g, c, origins, acc,
+                            grad, best,
+                        )  # fmt: skip
+            _blend(acc, qi, with_gradient, outside, values, gradients)
 
 
 # --------------------------------------------------------------------------------------------
@@ -907,6 +995,7 @@ class MPU4D:
     origins: np.ndarray
     outside: float
     stats: MPUStats
+    _slices: OrderedDict = field(default_factory=OrderedDict, repr=False)
 
     def evaluate(
         self, points4: np.ndarray, *, gradient: bool = True
@@ -914,11 +1003,34 @@ class MPU4D:
         """``f`` [M] and, if asked, ``grad f`` [M, 4] at 4D points [M, 4].
 
         Where no leaf support covers a point, ``f`` is ``outside`` (positive) and the gradient 0.
+        Many points at one time ``w`` (the sliding's queries) are evaluated from a grid of
+        the leaves that meet that time slice (built once per slice, the last
+        ``SLICE_CACHE`` kept), other points by descending the tree.
         """
         q = np.ascontiguousarray(points4, dtype=np.float64).reshape(-1, 4)
         values = np.empty(len(q))
         grads = np.empty((len(q) if gradient else 0, 4))
-        if len(q):
+        if len(q) >= SLICE_MIN_QUERIES and np.all(q[:, 3] == q[0, 3]):
+            grids = self._slice(float(q[0, 3]))
+            _evaluate_slice(
+                q,
+                gradient,
+                *grids,
+                self.leaf_centre,
+                self.leaf_radius,
+                self.leaf_start,
+                self.leaf_count,
+                self.leaf_op,
+                self.M,
+                self.g,
+                self.c,
+                self.origins,
+                float(self.outside),
+                values,
+                grads,
+                max(1, min(len(q), 8 * numba.get_num_threads())),
+            )
+        elif len(q):
             _evaluate(
                 q,
                 gradient,
@@ -945,6 +1057,52 @@ class MPU4D:
 
     def __call__(self, points4: np.ndarray) -> np.ndarray:
         return self.evaluate(points4, gradient=False)[0]
+
+    def _slice(self, w: float):
+        """Grids of the leaves whose support meets the time slice ``w`` (cached): one grid per
+        size class (support radius in ``[s, 2 s)`` with ``s`` the smallest radius times a power
+        of two, cells of size ``s``), so that every leaf is listed in at most 125 cells."""
+        if w in self._slices:
+            self._slices.move_to_end(w)
+            return self._slices[w]
+        dw = w - self.leaf_centre[:, 3]
+        meets = self.leaf_radius**2 - dw * dw > 0
+        ids = np.flatnonzero(meets)
+        smallest = float(self.leaf_radius.min()) if len(self.leaf_radius) else 1.0
+        size_class = np.floor(np.log2(self.leaf_radius[ids] / smallest)).astype(np.int64)
+        los, cells, dims_all, offsets, starts, leaves = [], [], [], [], [], []
+        cell_total, leaf_total = 0, 0
+        for k in np.unique(size_class):
+            members = ids[size_class == k]
+            centres = self.leaf_centre[members, :3]
+            radii = self.leaf_radius[members, None]
+            lo = (centres - radii).min(axis=0)
+            hi = (centres + radii).max(axis=0)
+            cell = max(smallest * 2.0**k, float(np.prod(hi - lo) / SLICE_MAX_CELLS) ** (1 / 3))
+            dims = np.maximum(np.ceil((hi - lo) / cell).astype(np.int64), 1)
+            start, listed = _slice_grid(
+                self.leaf_centre, self.leaf_radius, members, w, lo, cell, dims
+            )
+            los.append(lo)
+            cells.append(cell)
+            dims_all.append(dims)
+            offsets.append(cell_total)
+            starts.append(start[:-1] + leaf_total)
+            leaves.append(listed)
+            cell_total += len(start) - 1
+            leaf_total += len(listed)
+        grids = (
+            np.array(los, dtype=np.float64).reshape(-1, 3),
+            np.array(cells, dtype=np.float64),
+            np.array(dims_all, dtype=np.int64).reshape(-1, 3),
+            np.array(offsets, dtype=np.int64),
+            np.concatenate(starts + [np.array([leaf_total], dtype=np.int64)]),
+            np.concatenate(leaves) if leaves else np.zeros(0, np.int32),
+        )
+        self._slices[w] = grids
+        while len(self._slices) > SLICE_CACHE:
+            self._slices.popitem(last=False)
+        return grids
 
     @property
     def nbytes(self) -> int:
