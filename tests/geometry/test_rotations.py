@@ -30,6 +30,28 @@ def test_best_rotations_never_reflects():
     assert np.abs(R - reference).max() < 1e-8
 
 
+def test_best_rotations_of_planar_patches_rank_2_covariances():
+    # the covariances of surface vertices: edges in a plane, rotated (or reflected) copies
+    rng = np.random.default_rng(4)
+    R = Rotation.random(300, random_state=2).as_matrix()
+    P = rng.normal(size=(300, 8, 3))
+    P[..., 2] = 0.0
+    Q = np.einsum("nab,nkb->nka", R, P) + 1e-4 * rng.normal(size=P.shape)
+    Q[:100] *= -1.0  # reflected: negative or zero determinant
+    S = np.einsum("nka,nkb->nab", P, Q)
+    found = best_rotations(S)
+    assert np.abs(np.linalg.det(found) - 1.0).max() < 1e-9
+    assert np.abs(found[100:] - R[100:]).max() < 1e-3
+    # as good as the sign-corrected SVD answer
+    U, _, Vt = np.linalg.svd(S)
+    D = np.ones((300, 3))
+    D[:, 2] = np.sign(np.linalg.det(np.einsum("nji,nkj->nik", Vt, U)))
+    reference = np.einsum("nji,nj,nkj->nik", Vt, D, U)
+    objective = np.einsum("nab,nba->n", found, S)
+    best = np.einsum("nab,nba->n", reference, S)
+    assert np.all(objective >= best - 1e-9 * np.abs(best))
+
+
 def test_single_matrix_and_procrustes():
     R = Rotation.from_rotvec([0.3, -0.2, 0.9]).as_matrix()
     X = np.random.default_rng(5).normal(size=(30, 3))

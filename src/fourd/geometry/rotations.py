@@ -97,6 +97,128 @@ def _polar_newton(X, out):
     return change < 1e-12
 
 
+@numba.njit(cache=True)
+def _rotation_by_eigenvectors(S, out):
+    """Best rotation ``V U^T`` for ``S^T = V Sigma U^T`` from the eigenvectors of
+    ``S S^T = U Sigma^2 U^T`` in closed form, without allocation: ``u_3`` (smallest
+    eigenvalue) from the rows of ``S S^T - lambda_3 I``, ``u_1, u_2`` by a 2x2 rotation in the
+    plane normal to it, ``v_i = S^T u_i / sigma_i`` for the two largest, and
+    ``v_3 = det(U) v_1 x v_2`` (no reflection). Made for the nearly rank-2 covariances of
+    surface vertices, where the Newton iteration is slow or the determinant is not positive;
+    False when two singular values are (nearly) equal to the smallest one (rank 1, or no
+    distinct smallest eigenvalue)."""
+    a00 = S[0, 0] * S[0, 0] + S[0, 1] * S[0, 1] + S[0, 2] * S[0, 2]
+    a11 = S[1, 0] * S[1, 0] + S[1, 1] * S[1, 1] + S[1, 2] * S[1, 2]
+    a22 = S[2, 0] * S[2, 0] + S[2, 1] * S[2, 1] + S[2, 2] * S[2, 2]
+    a01 = S[0, 0] * S[1, 0] + S[0, 1] * S[1, 1] + S[0, 2] * S[1, 2]
+    a02 = S[0, 0] * S[2, 0] + S[0, 1] * S[2, 1] + S[0, 2] * S[2, 2]
+    a12 = S[1, 0] * S[2, 0] + S[1, 1] * S[2, 1] + S[1, 2] * S[2, 2]
+    q = (a00 + a11 + a22) / 3.0
+    p1 = a01 * a01 + a02 * a02 + a12 * a12
+    p2 = (a00 - q) ** 2 + (a11 - q) ** 2 + (a22 - q) ** 2 + 2.0 * p1
+    if p2 <= 1e-300:
+        return False
+    pp = np.sqrt(p2 / 6.0)
+    b00 = (a00 - q) / pp
+    b11 = (a11 - q) / pp
+    b22 = (a22 - q) / pp
+    b01 = a01 / pp
+    b02 = a02 / pp
+    b12 = a12 / pp
+    r = 0.5 * (
+        b00 * (b11 * b22 - b12 * b12)
+        - b01 * (b01 * b22 - b12 * b02)
+        + b02 * (b01 * b12 - b11 * b02)
+    )
+    r = min(max(r, -1.0), 1.0)
+    smallest = q + 2.0 * pp * np.cos(np.arccos(r) / 3.0 + 2.0 * np.pi / 3.0)
+    # u3: the largest cross product of two rows of A - smallest I
+    m00 = a00 - smallest
+    m11 = a11 - smallest
+    m22 = a22 - smallest
+    c0 = a01 * a12 - a02 * m11
+    c1 = a02 * a01 - m00 * a12
+    c2 = m00 * m11 - a01 * a01
+    best = c0 * c0 + c1 * c1 + c2 * c2
+    d0 = a01 * m22 - a02 * a12
+    d1 = a02 * a02 - m00 * m22
+    d2 = m00 * a12 - a01 * a02
+    length = d0 * d0 + d1 * d1 + d2 * d2
+    if length > best:
+        c0, c1, c2, best = d0, d1, d2, length
+    d0 = m11 * m22 - a12 * a12
+    d1 = a12 * a02 - a01 * m22
+    d2 = a01 * a12 - m11 * a02
+    length = d0 * d0 + d1 * d1 + d2 * d2
+    if length > best:
+        c0, c1, c2, best = d0, d1, d2, length
+    if best <= 1e-20 * p2 * p2:
+        return False
+    inv = 1.0 / np.sqrt(best)
+    u30, u31, u32 = c0 * inv, c1 * inv, c2 * inv
+    # an orthonormal basis (e, f) of the plane normal to u3
+    if abs(u30) <= abs(u31) and abs(u30) <= abs(u32):
+        e0, e1, e2 = 0.0, u32, -u31
+    elif abs(u31) <= abs(u32):
+        e0, e1, e2 = -u32, 0.0, u30
+    else:
+        e0, e1, e2 = u31, -u30, 0.0
+    inv = 1.0 / np.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
+    e0, e1, e2 = e0 * inv, e1 * inv, e2 * inv
+    f0 = u31 * e2 - u32 * e1
+    f1 = u32 * e0 - u30 * e2
+    f2 = u30 * e1 - u31 * e0
+    # A restricted to the plane, diagonalised by the angle theta
+    ae0 = a00 * e0 + a01 * e1 + a02 * e2
+    ae1 = a01 * e0 + a11 * e1 + a12 * e2
+    ae2 = a02 * e0 + a12 * e1 + a22 * e2
+    af0 = a00 * f0 + a01 * f1 + a02 * f2
+    af1 = a01 * f0 + a11 * f1 + a12 * f2
+    af2 = a02 * f0 + a12 * f1 + a22 * f2
+    bee = e0 * ae0 + e1 * ae1 + e2 * ae2
+    bff = f0 * af0 + f1 * af1 + f2 * af2
+    bef = e0 * af0 + e1 * af1 + e2 * af2
+    theta = 0.5 * np.arctan2(2.0 * bef, bee - bff)
+    ct, st = np.cos(theta), np.sin(theta)
+    u10, u11, u12 = ct * e0 + st * f0, ct * e1 + st * f1, ct * e2 + st * f2
+    u20, u21, u22 = -st * e0 + ct * f0, -st * e1 + ct * f1, -st * e2 + ct * f2
+    # v_i = S^T u_i / sigma_i, the second made orthogonal to the first
+    w0 = S[0, 0] * u10 + S[1, 0] * u11 + S[2, 0] * u12
+    w1 = S[0, 1] * u10 + S[1, 1] * u11 + S[2, 1] * u12
+    w2 = S[0, 2] * u10 + S[1, 2] * u11 + S[2, 2] * u12
+    n1 = np.sqrt(w0 * w0 + w1 * w1 + w2 * w2)
+    if not n1 > 1e-150:
+        return False
+    v10, v11, v12 = w0 / n1, w1 / n1, w2 / n1
+    w0 = S[0, 0] * u20 + S[1, 0] * u21 + S[2, 0] * u22
+    w1 = S[0, 1] * u20 + S[1, 1] * u21 + S[2, 1] * u22
+    w2 = S[0, 2] * u20 + S[1, 2] * u21 + S[2, 2] * u22
+    dot = v10 * w0 + v11 * w1 + v12 * w2
+    w0, w1, w2 = w0 - dot * v10, w1 - dot * v11, w2 - dot * v12
+    n2 = np.sqrt(w0 * w0 + w1 * w1 + w2 * w2)
+    if not n2 > 1e-6 * n1:
+        return False
+    v20, v21, v22 = w0 / n2, w1 / n2, w2 / n2
+    sign = 1.0
+    if (u11 * u22 - u12 * u21) * u30 + (u12 * u20 - u10 * u22) * u31 + (
+        u10 * u21 - u11 * u20
+    ) * u32 < 0:
+        sign = -1.0
+    v30 = sign * (v11 * v22 - v12 * v21)
+    v31 = sign * (v12 * v20 - v10 * v22)
+    v32 = sign * (v10 * v21 - v11 * v20)
+    out[0, 0] = v10 * u10 + v20 * u20 + v30 * u30
+    out[0, 1] = v10 * u11 + v20 * u21 + v30 * u31
+    out[0, 2] = v10 * u12 + v20 * u22 + v30 * u32
+    out[1, 0] = v11 * u10 + v21 * u20 + v31 * u30
+    out[1, 1] = v11 * u11 + v21 * u21 + v31 * u31
+    out[1, 2] = v11 * u12 + v21 * u22 + v31 * u32
+    out[2, 0] = v12 * u10 + v22 * u20 + v32 * u30
+    out[2, 1] = v12 * u11 + v22 * u21 + v32 * u31
+    out[2, 2] = v12 * u12 + v22 * u22 + v32 * u32
+    return True
+
+
 @numba.njit(cache=True, parallel=True)
 def _best_rotations(S, R):
     for i in numba.prange(len(S)):
@@ -104,6 +226,8 @@ def _best_rotations(S, R):
         if _det3(X) > 1e-12 * (np.sum(X * X) ** 1.5 + 1e-300):
             if _polar_newton(X, R[i]):
                 continue
+        if _rotation_by_eigenvectors(S[i], R[i]):
+            continue
         U, _, Vt = np.linalg.svd(S[i])
         Ri = Vt.T @ U.T
         det = (
