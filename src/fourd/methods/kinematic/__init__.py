@@ -243,10 +243,11 @@ def prepare_frames(seq: PointCloudSequence, options: Options):
     points, normals = [], []
     for frame in seq.frames:
         # one neighbour query per frame serves the outlier test (8 neighbours) and the
-        # normals of the kept points (a margin of 8 for the dropped ones)
+        # normals of the kept points (a margin of 4 for the dropped ones; rows that keep fewer
+        # are queried again)
         distances = indices = None
         if frame.normals is None:
-            k = max(OUTLIER_NEIGHBOURS, options.normals_k) + 8
+            k = max(OUTLIER_NEIGHBOURS, options.normals_k) + 4
             distances, indices = knn(frame.points, min(k, len(frame.points) - 1))
         elif options.outlier_factor > 0 and len(frame.points) > OUTLIER_NEIGHBOURS + 1:
             distances, _ = knn(frame.points, OUTLIER_NEIGHBOURS)
