@@ -272,8 +272,9 @@ def _unit_constraints(normals, residuals):
     """Unit normals and residuals in length units (zero where the gradient vanishes)."""
     norm = np.linalg.norm(normals, axis=1)
     ok = norm > 1e-12
-    unit = np.where(ok[:, None], normals / np.maximum(norm, 1e-300)[:, None], 0.0)
-    return unit, np.where(ok, residuals / np.maximum(norm, 1e-300), 0.0)
+    safe = np.where(ok, norm, 1.0)
+    unit = np.where(ok[:, None], normals / safe[:, None], 0.0)
+    return unit, np.where(ok, residuals / safe, 0.0)
 
 
 def global_rigid_motion(
@@ -400,9 +401,11 @@ def _project(evaluate, points, iterations, *, max_step=np.inf, tolerance=0.0):
     return x
 
 
-#: Vertices (about) that determine a step's global rigid estimates (a stride through the
-#: template). Measured on rigid-turn, correspondence mean / last frame: all vertices 0.0016 /
-#: 0.0023, every second 0.0016 / 0.0022, every fifth 0.0018 / 0.0028.
+#: Vertices that determine a step's first global rigid estimate, from the 4D implicit (a
+#: fixed random subset of the template). The estimates against a frame's points use every
+#: vertex: on a nearly symmetric shape their rotation is poorly determined, and a subset's
+#: noise then turns the template (squash-ball correspondence mean 0.055 with all vertices,
+#: 0.073-0.076 with half).
 RIGID_SAMPLE = 5000
 
 
@@ -421,6 +424,7 @@ class SlidePrecompute(NamedTuple):
     indptr: np.ndarray
     order: np.ndarray
     ordered_laplacian: sp.csr_matrix
+    sample: np.ndarray
 
 
 def median_edge_length(vertices: np.ndarray, faces: np.ndarray) -> float:
@@ -458,7 +462,17 @@ def slide_precompute(rest_vertices: np.ndarray, faces: np.ndarray) -> SlidePreco
         Wc.indptr.astype(np.int64),
         order,
         ordered,
+        rigid_sample(len(rest)),
     )
+
+
+def rigid_sample(count: int, size: int | None = None, seed: int = 0) -> np.ndarray:
+    """Sorted indices of ``min(count, size)`` vertices drawn at random without replacement
+    (``size`` defaults to :data:`RIGID_SAMPLE`)."""
+    size = RIGID_SAMPLE if size is None else size
+    if count <= size:
+        return np.arange(count)
+    return np.sort(np.random.default_rng(seed).choice(count, size, replace=False))
 
 
 def elimination_order(laplacian: sp.csr_matrix) -> np.ndarray:
@@ -661,7 +675,7 @@ class ConstrainedSolver:
         self.factor = spla.splu(
             K, permc_spec="NATURAL", diag_pivot_thresh=0.0, options={"SymmetricMode": True}
         )
-        self._unknown = (np.arange(3)[None, :] < dims[:, None])  # [N, 3] in elimination order
+        self._unknown = np.arange(3)[None, :] < dims[:, None]  # [N, 3] in elimination order
         self.constrained = constrained
         self._La = pre.laplacian @ self.anchor + self.mu_vertex[:, None] * self.anchor
 
@@ -726,10 +740,10 @@ def slide_step(
     start = vertices if velocity is None else vertices + dt * velocity
     # constraint (2) at p^t: for all vertices when the system is linearised there, else only
     # for the global rigid estimate, which a subsample determines
-    sample = max(1, n // RIGID_SAMPLE)
-    stride = 1 if options.linearize_at == "previous" else sample
-    at = vertices[::stride]
-    if stride == 1 or options.rigid_guess:
+    sample = pre.sample
+    every = options.linearize_at == "previous"
+    at = vertices if every else vertices[sample]
+    if every or options.rigid_guess:
         values, grad = value_and_gradient(field, at, _field_times(time, len(at)))
         normals = grad[:, :3]
         offsets = np.einsum("ij,ij->i", normals, at) - dt * grad[:, 3]
@@ -743,22 +757,14 @@ def slide_step(
         rigid_iterations, groups = options.data_rigid_iterations, None
     if options.rigid_guess:
         # constraint residual of the start positions, to first order
-        residual = np.einsum("ij,ij->i", normals, start[::stride]) - offsets
-        start = global_rigid_motion(start[::stride], normals, residual)(start)
+        subset = start if every else start[sample]
+        residual = np.einsum("ij,ij->i", normals, subset) - offsets
+        start = global_rigid_motion(subset, normals, residual)(start)
         # Gauss-Newton on the target itself: point-to-plane ICP against the implicit (or the
         # frame's points)
         for _ in range(rigid_iterations):
-            if groups is None:
-                # one global motion: estimated from a subsample
-                values_next, grad_next, weights = target(start[::sample])
-                start = global_rigid_motion(
-                    start[::sample], grad_next, values_next, weights=weights
-                )(start)
-            else:
-                values_next, grad_next, weights = target(start)
-                start = rigid_prediction(
-                    start, grad_next, values_next, groups=groups, weights=weights
-                )
+            values_next, grad_next, weights = target(start)
+            start = rigid_prediction(start, grad_next, values_next, groups=groups, weights=weights)
     tolerance = options.projection_tolerance * pre.edge_length
     guess = _project(
         target, start, options.projection_iterations, max_step=max_step, tolerance=tolerance
