@@ -17,8 +17,8 @@ Pipeline (000_00387fefe94cc850.txt):
 
 Beyond the paper (all documented options): robust MPU error / normal-spread quantile,
 rigid point-to-plane prediction of the initial guess, constraint linearised at the guess,
-time sub-steps, sliding windows of frames for the 4D fit, ``time_scale`` 2, the data term
-and temporal smoothing.
+time sub-steps, sliding windows of frames for the 4D fit, every second point in the 4D fit
+(``fit_stride``), ``time_scale`` 2, the data term and temporal smoothing.
 
 Known limit (the paper states it too): motion between frames much larger than the features
 (crane's kicking leg, up to 14% of the diagonal per kept frame) leaves no space-time surface

@@ -22,7 +22,8 @@ A cell is split into 16 children while the local error (max Taubin distance
 ``min_points`` points; cells with fewer points grow their support until they hold
 ``min_points`` and become leaves. Every local function is stored as a quadric in world
 coordinates, so evaluation is one compiled kernel (tree traversal with support bounding boxes,
-parallel over query points). Memory is linear in the number of points.
+parallel over query points; many queries at one time read a grid of the leaves that meet that
+time slice instead). Memory is linear in the number of points.
 
 References
 ----------
