@@ -277,19 +277,6 @@ def _unit_constraints(normals, residuals):
     return unit, np.where(ok, residuals / safe, 0.0)
 
 
-def global_rigid_motion(
-    positions, normals, residuals, *, regularization: float = 1e-3, weights=None
-):
-    """The linearised rigid motion that best satisfies the first-order constraints at
-    ``positions`` [M, 3] (see :func:`rigid_prediction`), as a function that moves any points
-    [K, 3]; a subsample of the vertices determines it as well as all of them."""
-    unit, res = _unit_constraints(normals, residuals)
-    omega, c, centroid = _rigid_increments(
-        positions, unit, res, np.arange(len(positions))[None], regularization, weights
-    )
-    return lambda points: centroid[0] + _rotate(points - centroid[0], omega[0]) + c[0]
-
-
 def rigid_prediction(
     positions,
     normals,
@@ -401,14 +388,6 @@ def _project(evaluate, points, iterations, *, max_step=np.inf, tolerance=0.0):
     return x
 
 
-#: Vertices that determine a step's first global rigid estimate, from the 4D implicit (a
-#: fixed random subset of the template). The estimates against a frame's points use every
-#: vertex: on a nearly symmetric shape their rotation is poorly determined, and a subset's
-#: noise then turns the template (squash-ball correspondence mean 0.055 with all vertices,
-#: 0.073-0.076 with half).
-RIGID_SAMPLE = 5000
-
-
 class SlidePrecompute(NamedTuple):
     """What stays fixed over the whole sliding: the template's cotangent weights, Laplacian
     and edge incidence (libigl's ``arap_precomputation``)."""
@@ -424,7 +403,6 @@ class SlidePrecompute(NamedTuple):
     indptr: np.ndarray
     order: np.ndarray
     ordered_laplacian: sp.csr_matrix
-    sample: np.ndarray
 
 
 def median_edge_length(vertices: np.ndarray, faces: np.ndarray) -> float:
@@ -462,17 +440,7 @@ def slide_precompute(rest_vertices: np.ndarray, faces: np.ndarray) -> SlidePreco
         Wc.indptr.astype(np.int64),
         order,
         ordered,
-        rigid_sample(len(rest)),
     )
-
-
-def rigid_sample(count: int, size: int | None = None, seed: int = 0) -> np.ndarray:
-    """Sorted indices of ``min(count, size)`` vertices drawn at random without replacement
-    (``size`` defaults to :data:`RIGID_SAMPLE`)."""
-    size = RIGID_SAMPLE if size is None else size
-    if count <= size:
-        return np.arange(count)
-    return np.sort(np.random.default_rng(seed).choice(count, size, replace=False))
 
 
 def elimination_order(laplacian: sp.csr_matrix) -> np.ndarray:
@@ -738,17 +706,12 @@ def slide_step(
     max_step = options.max_step or 4.0 * pre.edge_length
     dt = next_time - time
     start = vertices if velocity is None else vertices + dt * velocity
-    # constraint (2) at p^t: for all vertices when the system is linearised there, else only
-    # for the global rigid estimate, which a subsample determines
-    sample = pre.sample
-    every = options.linearize_at == "previous"
-    at = vertices if every else vertices[sample]
-    if every or options.rigid_guess:
-        values, grad = value_and_gradient(field, at, _field_times(time, len(at)))
-        normals = grad[:, :3]
-        offsets = np.einsum("ij,ij->i", normals, at) - dt * grad[:, 3]
-        if options.residual_correction:
-            offsets -= values
+    times = _field_times(time, n)
+    values, grad = value_and_gradient(field, vertices, times)
+    normals = grad[:, :3]
+    offsets = np.einsum("ij,ij->i", normals, vertices) - dt * grad[:, 3]
+    if options.residual_correction:
+        offsets -= values
     if surface is None:
         target = _implicit_target(field, next_time)
         rigid_iterations, groups = options.rigid_iterations, patches
@@ -757,9 +720,8 @@ def slide_step(
         rigid_iterations, groups = options.data_rigid_iterations, None
     if options.rigid_guess:
         # constraint residual of the start positions, to first order
-        subset = start if every else start[sample]
-        residual = np.einsum("ij,ij->i", normals, subset) - offsets
-        start = global_rigid_motion(subset, normals, residual)(start)
+        residual = np.einsum("ij,ij->i", normals, start) - offsets
+        start = rigid_prediction(start, normals, residual, neighbours=0)
         # Gauss-Newton on the target itself: point-to-plane ICP against the implicit (or the
         # frame's points)
         for _ in range(rigid_iterations):
