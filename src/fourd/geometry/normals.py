@@ -16,6 +16,7 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
+from fourd.geometry.eigen3 import DEGENERATE, smallest_eigenpair
 from fourd.geometry.neighbors import knn
 
 
@@ -34,43 +35,17 @@ class Normals(NamedTuple):
 @numba.njit(cache=True)
 def _smallest_eigenpair(C, out):
     """Smallest eigenvalue of the symmetric 3x3 ``C`` (returned) and its unit eigenvector
-    (written to ``out``): eigenvalues in closed form (Smith 1961), the vector as the largest
-    cross product of two rows of ``C - lambda I``; LAPACK when that is degenerate."""
-    q = (C[0, 0] + C[1, 1] + C[2, 2]) / 3.0
-    p1 = C[0, 1] ** 2 + C[0, 2] ** 2 + C[1, 2] ** 2
-    p2 = (C[0, 0] - q) ** 2 + (C[1, 1] - q) ** 2 + (C[2, 2] - q) ** 2 + 2.0 * p1
-    if p2 <= 1e-300:
-        out[0], out[1], out[2] = 0.0, 0.0, 1.0
-        return q
-    pp = np.sqrt(p2 / 6.0)
-    B = (C - q * np.eye(3)) / pp
-    r = (
-        B[0, 0] * (B[1, 1] * B[2, 2] - B[1, 2] * B[2, 1])
-        - B[0, 1] * (B[1, 0] * B[2, 2] - B[1, 2] * B[2, 0])
-        + B[0, 2] * (B[1, 0] * B[2, 1] - B[1, 1] * B[2, 0])
-    ) / 2.0
-    r = min(max(r, -1.0), 1.0)
-    phi = np.arccos(r) / 3.0
-    smallest = q + 2.0 * pp * np.cos(phi + 2.0 * np.pi / 3.0)
-    M = C - smallest * np.eye(3)
-    best = 0.0
-    for a, b in ((0, 1), (0, 2), (1, 2)):
-        c0 = M[a, 1] * M[b, 2] - M[a, 2] * M[b, 1]
-        c1 = M[a, 2] * M[b, 0] - M[a, 0] * M[b, 2]
-        c2 = M[a, 0] * M[b, 1] - M[a, 1] * M[b, 0]
-        length = c0 * c0 + c1 * c1 + c2 * c2
-        if length > best:
-            best = length
-            out[0], out[1], out[2] = c0, c1, c2
-    if best <= 1e-24 * p2 * p2:
+    (written to ``out``): :func:`fourd.geometry.eigen3.smallest_eigenpair`, ``(0, 0, 1)`` for
+    an isotropic ``C``, LAPACK when the closed form is degenerate."""
+    value, x, y, z, status = smallest_eigenpair(
+        C[0, 0], C[0, 1], C[0, 2], C[1, 1], C[1, 2], C[2, 2], 1e-24
+    )
+    if status == DEGENERATE:
         values, vectors = np.linalg.eigh(C)
         out[:] = vectors[:, 0]
         return values[0]
-    scale = 1.0 / np.sqrt(best)
-    out[0] *= scale
-    out[1] *= scale
-    out[2] *= scale
-    return smallest
+    out[0], out[1], out[2] = x, y, z
+    return value
 
 
 @numba.njit(cache=True, parallel=True)

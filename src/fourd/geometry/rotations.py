@@ -15,6 +15,8 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
+from fourd.geometry.eigen3 import FOUND, smallest_eigenpair
+
 
 def best_rotations(covariances: np.ndarray) -> np.ndarray:
     """Rotations maximising ``trace(R S)`` for each covariance ``S = sum w (p0)(p)^T``.
@@ -113,49 +115,9 @@ def _rotation_by_eigenvectors(S, out):
     a01 = S[0, 0] * S[1, 0] + S[0, 1] * S[1, 1] + S[0, 2] * S[1, 2]
     a02 = S[0, 0] * S[2, 0] + S[0, 1] * S[2, 1] + S[0, 2] * S[2, 2]
     a12 = S[1, 0] * S[2, 0] + S[1, 1] * S[2, 1] + S[1, 2] * S[2, 2]
-    q = (a00 + a11 + a22) / 3.0
-    p1 = a01 * a01 + a02 * a02 + a12 * a12
-    p2 = (a00 - q) ** 2 + (a11 - q) ** 2 + (a22 - q) ** 2 + 2.0 * p1
-    if p2 <= 1e-300:
+    _, u30, u31, u32, status = smallest_eigenpair(a00, a01, a02, a11, a12, a22, 1e-20)
+    if status != FOUND:
         return False
-    pp = np.sqrt(p2 / 6.0)
-    b00 = (a00 - q) / pp
-    b11 = (a11 - q) / pp
-    b22 = (a22 - q) / pp
-    b01 = a01 / pp
-    b02 = a02 / pp
-    b12 = a12 / pp
-    r = 0.5 * (
-        b00 * (b11 * b22 - b12 * b12)
-        - b01 * (b01 * b22 - b12 * b02)
-        + b02 * (b01 * b12 - b11 * b02)
-    )
-    r = min(max(r, -1.0), 1.0)
-    smallest = q + 2.0 * pp * np.cos(np.arccos(r) / 3.0 + 2.0 * np.pi / 3.0)
-    # u3: the largest cross product of two rows of A - smallest I
-    m00 = a00 - smallest
-    m11 = a11 - smallest
-    m22 = a22 - smallest
-    c0 = a01 * a12 - a02 * m11
-    c1 = a02 * a01 - m00 * a12
-    c2 = m00 * m11 - a01 * a01
-    best = c0 * c0 + c1 * c1 + c2 * c2
-    d0 = a01 * m22 - a02 * a12
-    d1 = a02 * a02 - m00 * m22
-    d2 = m00 * a12 - a01 * a02
-    length = d0 * d0 + d1 * d1 + d2 * d2
-    if length > best:
-        c0, c1, c2, best = d0, d1, d2, length
-    d0 = m11 * m22 - a12 * a12
-    d1 = a12 * a02 - a01 * m22
-    d2 = a01 * a12 - m11 * a02
-    length = d0 * d0 + d1 * d1 + d2 * d2
-    if length > best:
-        c0, c1, c2, best = d0, d1, d2, length
-    if best <= 1e-20 * p2 * p2:
-        return False
-    inv = 1.0 / np.sqrt(best)
-    u30, u31, u32 = c0 * inv, c1 * inv, c2 * inv
     # an orthonormal basis (e, f) of the plane normal to u3
     if abs(u30) <= abs(u31) and abs(u30) <= abs(u32):
         e0, e1, e2 = 0.0, u32, -u31

@@ -1011,49 +1011,27 @@ class MPU4D:
         q = np.ascontiguousarray(points4, dtype=np.float64).reshape(-1, 4)
         values = np.empty(len(q))
         grads = np.empty((len(q) if gradient else 0, 4))
+        # the leaves and their pieces, then the outputs: shared by both kernels
+        leaves = (
+            self.leaf_centre,
+            self.leaf_radius,
+            self.leaf_start,
+            self.leaf_count,
+            self.leaf_op,
+            self.M,
+            self.g,
+            self.c,
+            self.origins,
+            float(self.outside),
+            values,
+            grads,
+            max(1, min(len(q), 8 * numba.get_num_threads())),
+        )
         if len(q) >= SLICE_MIN_QUERIES and np.all(q[:, 3] == q[0, 3]):
-            grids = self._slice(float(q[0, 3]))
-            _evaluate_slice(
-                q,
-                gradient,
-                *grids,
-                self.leaf_centre,
-                self.leaf_radius,
-                self.leaf_start,
-                self.leaf_count,
-                self.leaf_op,
-                self.M,
-                self.g,
-                self.c,
-                self.origins,
-                float(self.outside),
-                values,
-                grads,
-                max(1, min(len(q), 8 * numba.get_num_threads())),
-            )
+            _evaluate_slice(q, gradient, *self._slice(float(q[0, 3])), *leaves)
         elif len(q):
-            _evaluate(
-                q,
-                gradient,
-                self.child_start,
-                self.child_count,
-                self.node_lo,
-                self.node_hi,
-                self.node_leaf,
-                self.leaf_centre,
-                self.leaf_radius,
-                self.leaf_start,
-                self.leaf_count,
-                self.leaf_op,
-                self.M,
-                self.g,
-                self.c,
-                self.origins,
-                float(self.outside),
-                values,
-                grads,
-                max(1, min(len(q), 8 * numba.get_num_threads())),
-            )
+            tree = (self.child_start, self.child_count, self.node_lo, self.node_hi, self.node_leaf)
+            _evaluate(q, gradient, *tree, *leaves)
         return values, (grads if gradient else None)
 
     def __call__(self, points4: np.ndarray) -> np.ndarray:

@@ -268,15 +268,6 @@ def _rotate(vectors, rotvecs):
     )
 
 
-def _unit_constraints(normals, residuals):
-    """Unit normals and residuals in length units (zero where the gradient vanishes)."""
-    norm = np.linalg.norm(normals, axis=1)
-    ok = norm > 1e-12
-    safe = np.where(ok, norm, 1.0)
-    unit = np.where(ok[:, None], normals / safe[:, None], 0.0)
-    return unit, np.where(ok, residuals / safe, 0.0)
-
-
 def rigid_prediction(
     positions,
     normals,
@@ -294,7 +285,11 @@ def rigid_prediction(
     ``residuals`` are ``dt * df/dt + f`` at the vertices, ``normals`` the spatial gradients,
     ``weights`` [N] (optional) the vertices' weights in the fits.
     """
-    unit, res = _unit_constraints(normals, residuals)
+    norm = np.linalg.norm(normals, axis=1)
+    ok = norm > 1e-12
+    safe = np.where(ok, norm, 1.0)
+    unit = np.where(ok[:, None], normals / safe[:, None], 0.0)
+    res = np.where(ok, residuals / safe, 0.0)
     omega, c, centroid = _rigid_increments(
         positions, unit, res, np.arange(len(positions))[None], regularization, weights
     )
