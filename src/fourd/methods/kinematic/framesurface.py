@@ -12,9 +12,9 @@ between frames and the urshape.
 with the nearest point's (so the far side of a thin part does not pull); its gradient is taken
 as ``sum_i w_i n_i / sum_i w_i``. ``coverage = min(1, sum_i w_i)``: 1 where the frame has
 points within about ``h``, 0 far from its points. The points are bucketed in a grid of cells
-of at least ``2.5 h`` (a dense index of at most ``MAX_CELLS`` cells) and every query scans
-its 27 cells, the search for the nearest point only those nearer than the best so far
-(compiled, in parallel).
+of at least ``2.5 h`` (a dense index of at most ``MAX_CELLS`` cells, keyed z-fastest); every
+query scans its 27 cells once, as 9 contiguous z-runs, collecting the points in range and the
+nearest among them (compiled, in parallel).
 """
 
 from __future__ import annotations
@@ -28,96 +28,89 @@ CUTOFF = 2.5
 MAX_CELLS = 8_000_000
 
 
-@numba.njit(cache=True)
-def _neighbour_cells(xq, origin, cell, dims, out, gaps):
-    """Ids of the (at most 27) grid cells around ``xq`` [3] that lie in the grid, and the
-    squared distances from ``xq`` to their boxes; returns how many were written to ``out``
-    and ``gaps``."""
-    ci = np.empty(3, np.int64)
-    for a in range(3):
-        ci[a] = np.int64(np.floor((xq[a] - origin[a]) / cell))
-    count = 0
-    for i in range(max(ci[0] - 1, 0), min(ci[0] + 2, dims[0])):
-        gi = max(origin[0] + i * cell - xq[0], xq[0] - origin[0] - (i + 1) * cell, 0.0)
-        for j in range(max(ci[1] - 1, 0), min(ci[1] + 2, dims[1])):
-            gj = max(origin[1] + j * cell - xq[1], xq[1] - origin[1] - (j + 1) * cell, 0.0)
-            for k in range(max(ci[2] - 1, 0), min(ci[2] + 2, dims[2])):
-                gk = max(origin[2] + k * cell - xq[2], xq[2] - origin[2] - (k + 1) * cell, 0.0)
-                out[count] = (i * dims[1] + j) * dims[2] + k
-                gaps[count] = gi * gi + gj * gj + gk * gk
-                count += 1
-    return count
+#: Queries per task of the parallel loop (each task owns one candidate buffer).
+CHUNK = 256
 
 
 @numba.njit(cache=True, parallel=True)
-def _imls(x, points, normals, starts, origin, cell, dims, h, out_v, out_g, out_w):
+def _imls(x, points, normals, starts, origin, cell, dims, h, capacity, out_v, out_g, out_w):
     cutoff2 = (CUTOFF * h) ** 2
     inv_h2 = 1.0 / (h * h)
-    for q in numba.prange(x.shape[0]):
-        cells = np.empty(27, np.int64)
-        gaps = np.empty(27)
-        count = _neighbour_cells(x[q], origin, cell, dims, cells, gaps)
-        # pass 1: the nearest point's normal (the reference orientation); the query's own
-        # cell first, then only the cells whose box is nearer than the best point so far
-        best = -1
-        best_d2 = cutoff2
-        own = 0
-        for ci in range(count):
-            if gaps[ci] < gaps[own]:
-                own = ci
-        for step in range(count):
-            ci = own if step == 0 else (step - 1 if step <= own else step)
-            if gaps[ci] >= best_d2:
+    chunks = (x.shape[0] + CHUNK - 1) // CHUNK
+    for chunk in numba.prange(chunks):
+        candidates = np.empty(capacity, np.int64)
+        candidate_d2 = np.empty(capacity)
+        for q in range(chunk * CHUNK, min((chunk + 1) * CHUNK, x.shape[0])):
+            x0 = x[q, 0]
+            x1 = x[q, 1]
+            x2 = x[q, 2]
+            c0 = np.int64(np.floor((x0 - origin[0]) / cell))
+            c1 = np.int64(np.floor((x1 - origin[1]) / cell))
+            c2 = np.int64(np.floor((x2 - origin[2]) / cell))
+            # cells are keyed z-fastest, so the (at most 3) cells of a z-row around the query
+            # hold one contiguous run of points: 9 runs instead of 27 cells
+            k0 = max(c2 - 1, 0)
+            k1 = min(c2 + 1, dims[2] - 1)
+            count = 0
+            best = -1
+            best_d2 = cutoff2
+            if k0 <= k1:
+                for i in range(max(c0 - 1, 0), min(c0 + 2, dims[0])):
+                    gi = max(origin[0] + i * cell - x0, x0 - origin[0] - (i + 1) * cell, 0.0)
+                    for j in range(max(c1 - 1, 0), min(c1 + 2, dims[1])):
+                        gj = max(origin[1] + j * cell - x1, x1 - origin[1] - (j + 1) * cell, 0.0)
+                        if gi * gi + gj * gj >= cutoff2:
+                            continue
+                        row = (i * dims[1] + j) * dims[2]
+                        for p in range(starts[row + k0], starts[row + k1 + 1]):
+                            d0 = x0 - points[p, 0]
+                            d1 = x1 - points[p, 1]
+                            d2_ = x2 - points[p, 2]
+                            d2 = d0 * d0 + d1 * d1 + d2_ * d2_
+                            if d2 < cutoff2:
+                                candidates[count] = p
+                                candidate_d2[count] = d2
+                                count += 1
+                                if d2 < best_d2:
+                                    best_d2 = d2
+                                    best = p
+            out_v[q] = 0.0
+            out_g[q, 0] = 0.0
+            out_g[q, 1] = 0.0
+            out_g[q, 2] = 0.0
+            out_w[q] = 0.0
+            if best < 0:
                 continue
-            c = cells[ci]
-            for p in range(starts[c], starts[c + 1]):
-                d2 = 0.0
-                for a in range(3):
-                    d2 += (x[q, a] - points[p, a]) ** 2
-                if d2 < best_d2:
-                    best_d2 = d2
-                    best = p
-        out_v[q] = 0.0
-        out_g[q, 0] = 0.0
-        out_g[q, 1] = 0.0
-        out_g[q, 2] = 0.0
-        out_w[q] = 0.0
-        if best < 0:
-            continue
-        # pass 2: weighted sums over the points whose normal agrees
-        total = 0.0
-        value = 0.0
-        g0 = 0.0
-        g1 = 0.0
-        g2 = 0.0
-        for ci in range(count):
-            if gaps[ci] >= cutoff2:
-                continue
-            c = cells[ci]
-            for p in range(starts[c], starts[c + 1]):
-                d0 = x[q, 0] - points[p, 0]
-                d1 = x[q, 1] - points[p, 1]
-                d2_ = x[q, 2] - points[p, 2]
-                d2 = d0 * d0 + d1 * d1 + d2_ * d2_
-                if d2 >= cutoff2:
-                    continue
+            # weighted sums over the points in range whose normal agrees with the nearest's
+            b0 = normals[best, 0]
+            b1 = normals[best, 1]
+            b2 = normals[best, 2]
+            total = 0.0
+            value = 0.0
+            g0 = 0.0
+            g1 = 0.0
+            g2 = 0.0
+            for c in range(count):
+                p = candidates[c]
                 n0 = normals[p, 0]
                 n1 = normals[p, 1]
                 n2 = normals[p, 2]
-                if n0 * normals[best, 0] + n1 * normals[best, 1] + n2 * normals[best, 2] <= 0:
+                if n0 * b0 + n1 * b1 + n2 * b2 <= 0:
                     continue
-                w = np.exp(-d2 * inv_h2)
+                w = np.exp(-candidate_d2[c] * inv_h2)
                 total += w
-                value += w * (n0 * d0 + n1 * d1 + n2 * d2_)
+                value += w * (
+                    n0 * (x0 - points[p, 0]) + n1 * (x1 - points[p, 1]) + n2 * (x2 - points[p, 2])
+                )
                 g0 += w * n0
                 g1 += w * n1
                 g2 += w * n2
-        if total > 1e-300:
-            out_v[q] = value / total
-            out_g[q, 0] = g0 / total
-            out_g[q, 1] = g1 / total
-            out_g[q, 2] = g2 / total
-        out_w[q] = min(total, 1.0)
+            if total > 1e-300:
+                out_v[q] = value / total
+                out_g[q, 0] = g0 / total
+                out_g[q, 1] = g1 / total
+                out_g[q, 2] = g2 / total
+            out_w[q] = min(total, 1.0)
 
 
 class FrameSurface:
@@ -151,6 +144,8 @@ class FrameSurface:
         self.normals = np.ascontiguousarray(normals[order])
         counts = np.bincount(key, minlength=int(np.prod(self.dims)))
         self.starts = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+        # the most points a query can meet: its 27 cells
+        self.capacity = int(min(len(points), 27 * counts.max())) if len(points) else 1
 
     def evaluate(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """IMLS at ``x`` [M, 3]: ``(distance [M], gradient [M, 3], coverage [M])``.
@@ -171,6 +166,7 @@ class FrameSurface:
                 self.cell,
                 self.dims,
                 self.bandwidth,
+                self.capacity,
                 value,
                 gradient,
                 coverage,
