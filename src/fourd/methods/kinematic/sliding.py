@@ -88,7 +88,8 @@ class SlideOptions:
         Gradient steps of the re-projections between iterations.
     projection_tolerance : float
         A vertex stops projecting once its Newton step is below this fraction of the median
-        edge length.
+        edge length; the Gauss-Newton steps of the rigid prediction stop once no vertex moves
+        by more than that.
     max_step : float
         Largest move of one projection step (0: 4x the median edge length), so that a vertex
         never jumps across a thin gap in one step.
@@ -108,11 +109,11 @@ class SlideOptions:
         vertices (point-to-plane steps on the implicit; beyond the paper).
     rigid_neighbours : int
     rigid_iterations : int
-        Gauss-Newton steps of that rigid prediction against ``f(., t')`` itself (point-to-
-        plane ICP on the implicit) after the first, linearised one.
+        At most this many Gauss-Newton steps of that rigid prediction against ``f(., t')``
+        itself (point-to-plane ICP on the implicit) after the first, linearised one.
     data_rigid_iterations : int
-        Gauss-Newton steps of the rigid prediction against an input frame's own points when
-        the step has a data term (see :func:`slide_step`).
+        At most this many Gauss-Newton steps of the rigid prediction against an input frame's
+        own points when the step has a data term (see :func:`slide_step`).
     linearize_at : "previous" or "guess"
         Where constraint (2) is linearised: at the previous positions ``p^t`` with the 4D
         normal there (the paper), or at the initial guess on ``f(., t') = 0`` (the first-order
@@ -713,16 +714,21 @@ def slide_step(
     else:
         target = _data_target(field, surface, next_time)
         rigid_iterations, groups = options.data_rigid_iterations, None
+    tolerance = options.projection_tolerance * pre.edge_length
     if options.rigid_guess:
         # constraint residual of the start positions, to first order
         residual = np.einsum("ij,ij->i", normals, start) - offsets
         start = rigid_prediction(start, normals, residual, neighbours=0)
         # Gauss-Newton on the target itself: point-to-plane ICP against the implicit (or the
-        # frame's points)
+        # frame's points), stopped once no vertex moves by more than the projection tolerance
+        # (on the data the steps shrink about tenfold each, so what is left is far below it)
         for _ in range(rigid_iterations):
             values_next, grad_next, weights = target(start)
-            start = rigid_prediction(start, grad_next, values_next, groups=groups, weights=weights)
-    tolerance = options.projection_tolerance * pre.edge_length
+            moved = rigid_prediction(start, grad_next, values_next, groups=groups, weights=weights)
+            converged = np.abs(moved - start).max() < tolerance
+            start = moved
+            if converged:
+                break
     guess = _project(
         target, start, options.projection_iterations, max_step=max_step, tolerance=tolerance
     )
