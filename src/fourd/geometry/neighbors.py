@@ -2,12 +2,27 @@
 
 from __future__ import annotations
 
+import numba
 import numpy as np
 from scipy.spatial import cKDTree
+
+#: Below this many 3D points :func:`knn` queries a k-d tree instead of a grid.
+GRID_MIN_POINTS = 2000
+#: Grid cell side in typical k-th neighbour distances (measured fastest on the scans).
+GRID_CELL = 1.2
+#: Largest number of grid cells (coarser cells beyond).
+GRID_MAX_CELLS = 8_000_000
+#: Points per task of the parallel grid search.
+CHUNK = 256
 
 
 def knn(points: np.ndarray, k: int, *, tree: cKDTree | None = None) -> tuple[np.ndarray, np.ndarray]:
     """The ``k`` nearest neighbours of every point, itself excluded.
+
+    Sets of at least :data:`GRID_MIN_POINTS` 3D points (and no ``tree`` given) are searched
+    on a uniform grid (:func:`_grid_neighbours`, about twice as fast as ``cKDTree`` on the
+    scans); otherwise a k-d tree. Both give the same neighbours in the same order, equal
+    distances by index.
 
     Parameters
     ----------
@@ -22,9 +37,132 @@ def knn(points: np.ndarray, k: int, *, tree: cKDTree | None = None) -> tuple[np.
     k = int(min(k, len(points) - 1))
     if k < 1:
         raise ValueError("need at least two points for neighbours")
+    points = np.asarray(points)
+    if tree is None and points.ndim == 2 and points.shape[1] == 3 and len(points) >= GRID_MIN_POINTS:
+        return _grid_neighbours(np.ascontiguousarray(points, dtype=np.float64), k)
     tree = cKDTree(points) if tree is None else tree
     distances, indices = tree.query(points, k=k + 1, workers=-1)
     return distances[:, 1:], indices[:, 1:].astype(np.int64)
+
+
+def _grid_neighbours(points: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`knn` on a uniform grid of cells :data:`GRID_CELL` times the median ``k``-th
+    neighbour distance wide, keyed z-fastest so that a row of cells is one run of points.
+
+    That distance is measured on a first grid (cells sized as if the points covered the box's
+    largest face) at 256 of the points. A point whose ``k``-th neighbour lies farther than
+    its block of 27 cells reaches (sparse parts, outliers) searches blocks twice as wide
+    until it does, so the result is exact whatever the cell size.
+    """
+    count = len(points)
+    origin = points.min(axis=0)
+    extent = np.maximum(np.ptp(points, axis=0), 1e-12)
+    smallest = float(np.prod(extent) / GRID_MAX_CELLS) ** (1 / 3)
+    faces = np.sort(extent)[1:]
+    cell = max(float(np.sqrt(faces[0] * faces[1] * (k + 1) / count)) * GRID_CELL, smallest)
+    squared = np.empty((count, k + 1))
+    indices = np.empty((count, k + 1), dtype=np.int64)
+    grid = _grid(points, origin, cell)
+    probe = np.linspace(0, count - 1, min(count, 256)).astype(np.int64)
+    _grid_knn(*grid, origin, cell, probe, squared, indices)
+    measured = max(GRID_CELL * float(np.sqrt(np.median(squared[grid[1][probe], k]))), smallest)
+    if abs(measured - cell) > 0.1 * cell:
+        cell = measured
+        grid = _grid(points, origin, cell)
+    _grid_knn(*grid, origin, cell, np.arange(count), squared, indices)
+    return np.sqrt(squared[:, 1:]), indices[:, 1:]
+
+
+def _grid(points, origin, cell):
+    """Points sorted by cell (z-fastest), their original indices, the run start of every
+    cell [cells + 1] and the grid's dimensions [3]."""
+    index = np.floor((points - origin) / cell).astype(np.int64)
+    dims = index.max(axis=0) + 1
+    key = (index[:, 0] * dims[1] + index[:, 1]) * dims[2] + index[:, 2]
+    order = np.argsort(key, kind="stable").astype(np.int64)
+    starts = np.zeros(int(np.prod(dims)) + 1, dtype=np.int64)
+    np.cumsum(np.bincount(key, minlength=len(starts) - 1), out=starts[1:])
+    return np.ascontiguousarray(points[order]), order, starts, dims
+
+
+@numba.njit(cache=True, parallel=True)
+def _grid_knn(sorted_points, ids, starts, dims, origin, cell, rows, out_d2, out_idx):
+    """For the sorted points at ``rows`` (``ids`` [P]: the sorted points' original indices)
+    their ``k + 1`` nearest, themselves first: squared distances and original indices into
+    ``out_d2`` / ``out_idx`` [P, k + 1] at their original rows."""
+    kk = out_d2.shape[1]
+    chunks = (len(rows) + CHUNK - 1) // CHUNK
+    for chunk in numba.prange(chunks):
+        best_d2 = np.empty(kk)
+        best_id = np.empty(kk, np.int64)
+        for r in range(chunk * CHUNK, min((chunk + 1) * CHUNK, len(rows))):
+            q = rows[r]
+            x0 = sorted_points[q, 0]
+            x1 = sorted_points[q, 1]
+            x2 = sorted_points[q, 2]
+            c0 = np.int64(np.floor((x0 - origin[0]) / cell))
+            c1 = np.int64(np.floor((x1 - origin[1]) / cell))
+            c2 = np.int64(np.floor((x2 - origin[2]) / cell))
+            reach = 1
+            while True:
+                for a in range(kk):
+                    best_d2[a] = np.inf
+                    best_id[a] = -1
+                # the point itself first (also ahead of a duplicate of it)
+                best_d2[0] = -1.0
+                best_id[0] = ids[q]
+                worst = np.inf
+                z0 = max(c2 - reach, 0)
+                z1 = min(c2 + reach, dims[2] - 1)
+                for i in range(max(c0 - reach, 0), min(c0 + reach + 1, dims[0])):
+                    for j in range(max(c1 - reach, 0), min(c1 + reach + 1, dims[1])):
+                        row = (i * dims[1] + j) * dims[2]
+                        for p in range(starts[row + z0], starts[row + z1 + 1]):
+                            if p == q:
+                                continue
+                            d0 = x0 - sorted_points[p, 0]
+                            d1 = x1 - sorted_points[p, 1]
+                            d2_ = x2 - sorted_points[p, 2]
+                            d2 = d0 * d0 + d1 * d1 + d2_ * d2_
+                            if d2 > worst:
+                                continue
+                            other = ids[p]
+                            if d2 == worst and other > best_id[kk - 1]:
+                                continue
+                            a = kk - 1
+                            while a > 1 and (
+                                best_d2[a - 1] > d2 or (best_d2[a - 1] == d2 and best_id[a - 1] > other)
+                            ):
+                                best_d2[a] = best_d2[a - 1]
+                                best_id[a] = best_id[a - 1]
+                                a -= 1
+                            best_d2[a] = d2
+                            best_id[a] = other
+                            worst = best_d2[kk - 1]
+                # every point within this distance lies in the block searched (the grid's
+                # outside is empty)
+                covered = np.inf
+                if c0 - reach > 0:
+                    covered = min(covered, x0 - (origin[0] + (c0 - reach) * cell))
+                if c0 + reach + 1 < dims[0]:
+                    covered = min(covered, origin[0] + (c0 + reach + 1) * cell - x0)
+                if c1 - reach > 0:
+                    covered = min(covered, x1 - (origin[1] + (c1 - reach) * cell))
+                if c1 + reach + 1 < dims[1]:
+                    covered = min(covered, origin[1] + (c1 + reach + 1) * cell - x1)
+                if c2 - reach > 0:
+                    covered = min(covered, x2 - (origin[2] + (c2 - reach) * cell))
+                if c2 + reach + 1 < dims[2]:
+                    covered = min(covered, origin[2] + (c2 + reach + 1) * cell - x2)
+                if worst <= covered * covered:
+                    break
+                reach *= 2
+            row = ids[q]
+            out_d2[row, 0] = 0.0
+            out_idx[row, 0] = row
+            for a in range(1, kk):
+                out_d2[row, a] = best_d2[a]
+                out_idx[row, a] = best_id[a]
 
 
 def neighbours_among(points: np.ndarray, indices: np.ndarray, keep: np.ndarray, k: int) -> np.ndarray:
