@@ -116,95 +116,102 @@ def _reverse_adjacency(indices):
 
 
 @numba.njit(cache=True)
-def _heap_push(keys, nodes, parents, size, key, node, parent):
-    i = size
+def _sift_up(keys, heap, where, i):
+    """Move ``heap[i]`` up the binary heap of node ids ordered by ``keys`` (``where``: each
+    node's heap position)."""
+    node = heap[i]
+    key = keys[node]
     while i > 0:
         up = (i - 1) >> 1
-        if keys[up] <= key:
+        if keys[heap[up]] <= key:
             break
-        keys[i] = keys[up]
-        nodes[i] = nodes[up]
-        parents[i] = parents[up]
+        heap[i] = heap[up]
+        where[heap[i]] = i
         i = up
-    keys[i] = key
-    nodes[i] = node
-    parents[i] = parent
-    return size + 1
+    heap[i] = node
+    where[node] = i
 
 
 @numba.njit(cache=True)
-def _heap_pop(keys, nodes, parents, size):
-    """Removes the smallest entry (returned as node, parent); the caller passes the old size."""
-    node = nodes[0]
-    parent = parents[0]
+def _heap_pop(keys, heap, where, size):
+    """Remove the node of smallest key; returns it and the new size."""
+    top = heap[0]
+    where[top] = -1
     size -= 1
-    key = keys[size]
-    last_node = nodes[size]
-    last_parent = parents[size]
+    if size == 0:
+        return top, size
+    node = heap[size]
+    key = keys[node]
     i = 0
     while True:
         child = 2 * i + 1
         if child >= size:
             break
-        if child + 1 < size and keys[child + 1] < keys[child]:
+        if child + 1 < size and keys[heap[child + 1]] < keys[heap[child]]:
             child += 1
-        if key <= keys[child]:
+        if key <= keys[heap[child]]:
             break
-        keys[i] = keys[child]
-        nodes[i] = nodes[child]
-        parents[i] = parents[child]
+        heap[i] = heap[child]
+        where[heap[i]] = i
         i = child
-    keys[i] = key
-    nodes[i] = last_node
-    parents[i] = last_parent
-    return node, parent
+    heap[i] = node
+    where[node] = i
+    return top, size
 
 
 @numba.njit(cache=True)
 def _propagate_over_spanning_tree(normals, indices, pointer, members, signs, labels):
     """Prim's minimum spanning tree of the symmetric neighbour graph (weights
-    ``1 - |n_i . n_j|``), grown from every not yet reached point in turn; each point takes the
-    sign that makes its normal agree with its tree parent's. ``labels`` gets the part index."""
+    ``1 - |n_i . n_j|``; a heap of the unreached points keyed by their lightest edge to the
+    tree), grown from every not yet reached point in turn; each point takes the sign that
+    makes its normal agree with its tree parent's. ``labels`` gets the part index."""
     count, k = indices.shape
-    capacity = 2 * count * k + 1
-    keys = np.empty(capacity)
-    nodes = np.empty(capacity, dtype=np.int64)
-    parents = np.empty(capacity, dtype=np.int64)
+    keys = np.full(count, np.inf)
+    parent = np.empty(count, dtype=np.int64)
+    heap = np.empty(count, dtype=np.int64)
+    where = np.full(count, -1, dtype=np.int64)
     reached = np.zeros(count, dtype=np.bool_)
-    best = np.full(count, np.inf)
     part = 0
     for seed in range(count):
         if reached[seed]:
             continue
-        size = _heap_push(keys, nodes, parents, 0, 0.0, seed, seed)
+        keys[seed] = 0.0
+        parent[seed] = seed
+        heap[0] = seed
+        where[seed] = 0
+        size = 1
         while size > 0:
-            node, parent = _heap_pop(keys, nodes, parents, size)
-            size -= 1
-            if reached[node]:
-                continue
+            node, size = _heap_pop(keys, heap, where, size)
             reached[node] = True
             labels[node] = part
-            if node == parent:
+            up = parent[node]
+            if node == up:
                 signs[node] = 1.0
             else:
                 d = (
-                    normals[node, 0] * normals[parent, 0]
-                    + normals[node, 1] * normals[parent, 1]
-                    + normals[node, 2] * normals[parent, 2]
+                    normals[node, 0] * normals[up, 0]
+                    + normals[node, 1] * normals[up, 1]
+                    + normals[node, 2] * normals[up, 2]
                 )
-                signs[node] = signs[parent] if d >= 0 else -signs[parent]
+                signs[node] = signs[up] if d >= 0 else -signs[up]
             for a in range(k + pointer[node + 1] - pointer[node]):
                 j = indices[node, a] if a < k else members[pointer[node] + a - k]
-                if not reached[j]:
-                    d = (
-                        normals[node, 0] * normals[j, 0]
-                        + normals[node, 1] * normals[j, 1]
-                        + normals[node, 2] * normals[j, 2]
-                    )
-                    weight = 1.0 - abs(d)
-                    if weight < best[j]:
-                        best[j] = weight
-                        size = _heap_push(keys, nodes, parents, size, weight, j, node)
+                if reached[j]:
+                    continue
+                d = (
+                    normals[node, 0] * normals[j, 0]
+                    + normals[node, 1] * normals[j, 1]
+                    + normals[node, 2] * normals[j, 2]
+                )
+                weight = 1.0 - abs(d)
+                if weight < keys[j]:
+                    keys[j] = weight
+                    parent[j] = node
+                    if where[j] < 0:
+                        heap[size] = j
+                        where[j] = size
+                        size += 1
+                    _sift_up(keys, heap, where, where[j])
         part += 1
     return part
 
