@@ -20,8 +20,8 @@ def knn(points: np.ndarray, k: int, *, tree: cKDTree | None = None) -> tuple[np.
     """The ``k`` nearest neighbours of every point, itself excluded.
 
     Sets of at least :data:`GRID_MIN_POINTS` 3D points (and no ``tree`` given) are searched
-    on a uniform grid (:func:`_grid_neighbours`, about twice as fast as ``cKDTree`` on the
-    scans); otherwise a k-d tree. Both give the same neighbours in the same order, equal
+    on a uniform grid (:func:`_grid_neighbours`; 1.3-1.4 times as fast as ``cKDTree`` on the
+    scans, 2 threads); otherwise a k-d tree. Both give the same neighbours in the same order, equal
     distances by index.
 
     Parameters
@@ -57,20 +57,28 @@ def _grid_neighbours(points: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray
     count = len(points)
     origin = points.min(axis=0)
     extent = np.maximum(np.ptp(points, axis=0), 1e-12)
-    smallest = float(np.prod(extent) / GRID_MAX_CELLS) ** (1 / 3)
     faces = np.sort(extent)[1:]
-    cell = max(float(np.sqrt(faces[0] * faces[1] * (k + 1) / count)) * GRID_CELL, smallest)
+    cell = _coarse_enough(extent, float(np.sqrt(faces[0] * faces[1] * (k + 1) / count)) * GRID_CELL)
     squared = np.empty((count, k + 1))
     indices = np.empty((count, k + 1), dtype=np.int64)
     grid = _grid(points, origin, cell)
     probe = np.linspace(0, count - 1, min(count, 256)).astype(np.int64)
     _grid_knn(*grid, origin, cell, probe, squared, indices)
-    measured = max(GRID_CELL * float(np.sqrt(np.median(squared[grid[1][probe], k]))), smallest)
+    measured = _coarse_enough(extent, GRID_CELL * float(np.sqrt(np.median(squared[grid[1][probe], k]))))
     if abs(measured - cell) > 0.1 * cell:
         cell = measured
         grid = _grid(points, origin, cell)
     _grid_knn(*grid, origin, cell, np.arange(count), squared, indices)
     return np.sqrt(squared[:, 1:]), indices[:, 1:]
+
+
+def _coarse_enough(extent, cell):
+    """``cell``, enlarged until a grid over ``extent`` [3] has at most :data:`GRID_MAX_CELLS`
+    cells (also for flat or linear point sets)."""
+    cell = max(cell, float(extent.max()) * 1e-9)
+    while np.prod(np.floor(extent / cell) + 1) > GRID_MAX_CELLS:
+        cell *= 1.25
+    return cell
 
 
 def _grid(points, origin, cell):
