@@ -21,8 +21,8 @@ def knn(points: np.ndarray, k: int, *, tree: cKDTree | None = None) -> tuple[np.
 
     Sets of at least :data:`GRID_MIN_POINTS` 3D points (and no ``tree`` given) are searched
     on a uniform grid (:func:`_grid_neighbours`; 1.3-1.4 times as fast as ``cKDTree`` on the
-    scans, 2 threads); otherwise a k-d tree. Both give the same neighbours in the same order, equal
-    distances by index.
+    scans, 2 threads), others with a k-d tree: the same neighbours in the same order (the
+    grid puts equal distances in index order, and a point's duplicates after itself).
 
     Parameters
     ----------
