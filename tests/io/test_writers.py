@@ -283,6 +283,16 @@ def test_folder_of_meshes(tmp_path, mesh_format):
     assert isinstance(back, AnimatedMesh)
     assert np.allclose(back.times, anim.times)
     assert np.abs(back.vertices - anim.vertices).max() <= 1e-6
+    assert np.array_equal(back.observed, anim.observed) and not back.observed[1, :10].any()
+
+
+def test_folder_observed_flags_are_checked(tmp_path):
+    save(_animation(frames=3), tmp_path / "out")
+    np.save(tmp_path / "out" / "observed.npy", np.ones((2, 5), bool))
+    with pytest.raises(InputError, match=r"observed\.npy: .*shape \[3, 162\]"):
+        load_result(tmp_path / "out")
+    (tmp_path / "out" / "observed.npy").unlink()
+    assert load_result(tmp_path / "out").observed.all()
 
 
 def test_folder_of_a_mesh_sequence_and_existing_folder(tmp_path):

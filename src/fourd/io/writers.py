@@ -10,7 +10,8 @@
 ``.usd`` ``.usda`` ``.usdc``  time-sampled ``UsdGeom.Mesh`` (needs usd-core: ``fourd[usd]``).
 ``.pc2``                    Blender point cache + ``.obj`` topology beside it.
 folder                      an existing folder, a path ending in ``/`` or a path without a
-                            suffix: ``frame_0000.obj`` ... (or ``.ply``) and ``times.txt``.
+                            suffix: ``frame_0000.obj`` ... (or ``.ply``), ``times.txt`` and, for
+                            an AnimatedMesh, ``observed.npy`` (bool [T, N]).
 ==========================  ===================================================================
 
 Every file is written under a temporary name and renamed into place (:mod:`fourd.io.atomic`),
@@ -178,6 +179,9 @@ def _write_folder(path: Path, result, *, mesh_format: str) -> None:
             else:
                 write_ply(target, vertices, faces=faces)
         (tmp / "times.txt").write_text("".join(f"{t!r}\n" for t in result.times.tolist()))
+        if isinstance(result, AnimatedMesh):
+            with open(tmp / "observed.npy", "wb") as stream:
+                np.save(stream, np.asarray(result.observed, dtype=bool))
 
 
 def _rewrap(error: InputError, path) -> InputError:
@@ -242,18 +246,36 @@ def _load_folder(path: Path):
     shared = all(len(v) == len(first_v) and np.array_equal(f, first_f) for v, f in meshes)
     try:
         if shared and len(first_v):
-            return AnimatedMesh(first_f, np.stack([v for v, _ in meshes]), times)
+            observed = _read_observed(path / "observed.npy", (len(meshes), len(first_v)))
+            return AnimatedMesh(first_f, np.stack([v for v, _ in meshes]), times, observed=observed)
         return MeshSequence(tuple(meshes), times)
     except InputError as error:
         raise _rewrap(error, path) from None
+
+
+def _read_observed(path: Path, shape: tuple[int, int]) -> np.ndarray | None:
+    """The ``observed`` flags [T, N] of a folder result, None when it has no such file."""
+    if not path.exists():
+        return None
+    try:
+        observed = np.load(path, allow_pickle=False)
+    except Exception as error:  # header, truncation: one clear line
+        raise InputError(f"is not a readable .npy array ({type(error).__name__}: {error})", path) from None
+    if observed.dtype != bool or observed.shape != shape:
+        raise InputError(
+            f"must be a bool array of shape {list(shape)} (frames, vertices), "
+            f"got {observed.dtype} {list(observed.shape)}",
+            path,
+        )
+    return observed
 
 
 def load_result(path: str | os.PathLike) -> AnimatedMesh | MeshSequence:
     """Read a result written by :func:`save`: an ``.npz`` or a folder of per-frame meshes.
 
     A folder whose meshes all share the same faces (and vertex count) is an AnimatedMesh
-    (``observed`` all True, since folders do not store it); otherwise a MeshSequence. Times
-    come from ``times.txt`` when present.
+    (``observed`` from ``observed.npy``, all True without it); otherwise a MeshSequence.
+    Times come from ``times.txt`` when present.
     """
     path = Path(path)
     if not path.exists():
