@@ -61,13 +61,13 @@ def _grid_neighbours(points: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray
     cell = _coarse_enough(extent, float(np.sqrt(faces[0] * faces[1] * (k + 1) / count)) * GRID_CELL)
     squared = np.empty((count, k + 1))
     indices = np.empty((count, k + 1), dtype=np.int64)
-    grid = _grid(points, origin, cell)
+    grid = bucket_points(points, origin, cell)
     probe = np.linspace(0, count - 1, min(count, 256)).astype(np.int64)
     _grid_knn(*grid, origin, cell, probe, squared, indices)
     measured = _coarse_enough(extent, GRID_CELL * float(np.sqrt(np.median(squared[grid[1][probe], k]))))
     if abs(measured - cell) > 0.1 * cell:
         cell = measured
-        grid = _grid(points, origin, cell)
+        grid = bucket_points(points, origin, cell)
     _grid_knn(*grid, origin, cell, np.arange(count), squared, indices)
     return np.sqrt(squared[:, 1:]), indices[:, 1:]
 
@@ -81,9 +81,16 @@ def _coarse_enough(extent, cell):
     return cell
 
 
-def _grid(points, origin, cell):
-    """Points sorted by cell (z-fastest), their original indices, the run start of every
-    cell [cells + 1] and the grid's dimensions [3]."""
+def bucket_points(points: np.ndarray, origin: np.ndarray, cell: float):
+    """Points [P, 3] sorted into the cells of a uniform grid (corner ``origin`` [3], side
+    ``cell``, over the points' extent), keyed z-fastest so that a row of cells along z holds
+    one contiguous run of points.
+
+    Returns ``(sorted points [P, 3], order [P]`` (the original index of each sorted point),
+    ``starts [cells + 1]`` (where each cell's run starts), ``dims [3])``.
+    """
+    if len(points) == 0:
+        return np.zeros((0, 3)), np.zeros(0, np.int64), np.zeros(2, np.int64), np.ones(3, np.int64)
     index = np.floor((points - origin) / cell).astype(np.int64)
     dims = index.max(axis=0) + 1
     key = (index[:, 0] * dims[1] + index[:, 1]) * dims[2] + index[:, 2]

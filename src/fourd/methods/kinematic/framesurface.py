@@ -22,6 +22,8 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from fourd.geometry.neighbors import bucket_points
+
 #: Points farther than this many bandwidths are ignored (their weight is below 0.2%).
 CUTOFF = 2.5
 #: Largest dense cell index; coarser cells beyond.
@@ -136,16 +138,11 @@ class FrameSurface:
         extent = np.ptp(points, axis=0) + 1e-12 if len(points) else np.ones(3)
         self.cell = max(CUTOFF * self.bandwidth, float(np.prod(extent) / MAX_CELLS) ** (1 / 3))
         self.origin = points.min(axis=0) if len(points) else np.zeros(3)
-        index = np.floor((points - self.origin) / self.cell).astype(np.int64)
-        self.dims = index.max(axis=0) + 1 if len(points) else np.ones(3, np.int64)
-        key = (index[:, 0] * self.dims[1] + index[:, 1]) * self.dims[2] + index[:, 2]
-        order = np.argsort(key, kind="stable")
-        self.points = np.ascontiguousarray(points[order])
+        self.points, order, self.starts, self.dims = bucket_points(points, self.origin, self.cell)
         self.normals = np.ascontiguousarray(normals[order])
-        counts = np.bincount(key, minlength=int(np.prod(self.dims)))
-        self.starts = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
         # the most points a query can meet: its 27 cells
-        self.capacity = int(min(len(points), 27 * counts.max())) if len(points) else 1
+        most = int(np.diff(self.starts).max()) if len(points) else 0
+        self.capacity = max(1, min(len(points), 27 * most))
 
     def evaluate(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """IMLS at ``x`` [M, 3]: ``(distance [M], gradient [M, 3], coverage [M])``.
