@@ -56,17 +56,25 @@ def test_a_moving_plane_is_reproduced_with_its_normal_velocity():
     assert np.abs(grads[:, 3] / grads[:, 2] + 0.3).max() < 0.03
 
 
+def _moving_sphere(rng, *, frames, count, shift, time_step, bump=0.0):
+    """4D points [frames * count, 4] and normals of a unit sphere (radius modulated by
+    ``bump * sin(3 x)``) moving ``shift`` along x per frame, frame ``t`` at time
+    ``t * time_step``; directions drawn from ``rng``."""
+    points, normals = [], []
+    for t in range(frames):
+        d = rng.normal(size=(count, 3))
+        d /= np.linalg.norm(d, axis=1, keepdims=True)
+        shape = d * (1 + bump * np.sin(3 * d[:, :1]))
+        points.append(np.c_[shape + [shift * t, 0.0, 0.0], np.full(count, time_step * t)])
+        normals.append(np.c_[d, np.zeros(count)])
+    return np.concatenate(points), np.concatenate(normals)
+
+
 def test_values_and_gradients_agree_with_finite_differences():
     rng = np.random.default_rng(4)
-    pts, nrm = [], []
-    for t in range(6):
-        d = rng.normal(size=(1500, 3))
-        d /= np.linalg.norm(d, axis=1, keepdims=True)
-        shape = d * (1 + 0.1 * np.sin(3 * d[:, :1]))
-        pts.append(np.c_[shape + [0.02 * t, 0, 0], np.full(1500, 0.05 * t)])
-        nrm.append(np.c_[d, np.zeros(1500)])
-    mpu = fit_mpu4d(np.concatenate(pts), np.concatenate(nrm), options=MPUOptions(error=0.01))
-    q = np.concatenate(pts)[::17] + rng.normal(scale=0.01, size=(len(np.concatenate(pts)[::17]), 4))
+    pts, nrm = _moving_sphere(rng, frames=6, count=1500, shift=0.02, time_step=0.05, bump=0.1)
+    mpu = fit_mpu4d(pts, nrm, options=MPUOptions(error=0.01))
+    q = pts[::17] + rng.normal(scale=0.01, size=(len(pts[::17]), 4))
     values, grads = mpu.evaluate(q)
     covered = np.abs(values) < 0.5 * mpu.outside
     h = 1e-6
@@ -191,13 +199,8 @@ def test_evaluation_on_a_time_slice_matches_the_tree_descent():
     import fourd.methods.kinematic.mpu4d as mpu4d
 
     rng = np.random.default_rng(0)
-    points, normals = [], []
-    for t in range(8):
-        d = rng.normal(size=(3000, 3))
-        d /= np.linalg.norm(d, axis=1, keepdims=True)
-        points.append(np.c_[d + [0.05 * t, 0.0, 0.0], np.full(len(d), 0.1 * t)])
-        normals.append(np.c_[d, np.zeros(len(d))])
-    mpu = fit_mpu4d(np.concatenate(points), np.concatenate(normals), options=MPUOptions(0.005))
+    points, normals = _moving_sphere(rng, frames=8, count=3000, shift=0.05, time_step=0.1)
+    mpu = fit_mpu4d(points, normals, options=MPUOptions(0.005))
     q = rng.normal(size=(2000, 3)) * 0.8
     for w in (0.0, 0.33, 0.7, 5.0):
         Q = np.c_[q, np.full(len(q), w)]
