@@ -100,6 +100,17 @@ def bucket_points(points: np.ndarray, origin: np.ndarray, cell: float):
     return np.ascontiguousarray(points[order]), order, starts, dims
 
 
+@numba.njit(cache=True, inline="always")
+def cell_of(x0, x1, x2, origin, cell):
+    """The (unclamped) cell indices of the point ``(x0, x1, x2)`` in a grid of
+    :func:`bucket_points` (corner ``origin`` [3], side ``cell``), for compiled kernels."""
+    return (
+        np.int64(np.floor((x0 - origin[0]) / cell)),
+        np.int64(np.floor((x1 - origin[1]) / cell)),
+        np.int64(np.floor((x2 - origin[2]) / cell)),
+    )
+
+
 @numba.njit(cache=True, parallel=True)
 def _grid_knn(sorted_points, ids, starts, dims, origin, cell, rows, out_d2, out_idx):
     """For the sorted points at ``rows`` (``ids`` [P]: the sorted points' original indices)
@@ -115,9 +126,7 @@ def _grid_knn(sorted_points, ids, starts, dims, origin, cell, rows, out_d2, out_
             x0 = sorted_points[q, 0]
             x1 = sorted_points[q, 1]
             x2 = sorted_points[q, 2]
-            c0 = np.int64(np.floor((x0 - origin[0]) / cell))
-            c1 = np.int64(np.floor((x1 - origin[1]) / cell))
-            c2 = np.int64(np.floor((x2 - origin[2]) / cell))
+            c0, c1, c2 = cell_of(x0, x1, x2, origin, cell)
             reach = 1
             while True:
                 for a in range(kk):

@@ -22,7 +22,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from fourd.geometry.neighbors import bucket_points
+from fourd.geometry.neighbors import bucket_points, cell_of
 
 #: Points farther than this many bandwidths are ignored (their weight is below 0.2%).
 CUTOFF = 2.5
@@ -46,9 +46,7 @@ def _imls(x, points, normals, starts, origin, cell, dims, h, capacity, out_v, ou
             x0 = x[q, 0]
             x1 = x[q, 1]
             x2 = x[q, 2]
-            c0 = np.int64(np.floor((x0 - origin[0]) / cell))
-            c1 = np.int64(np.floor((x1 - origin[1]) / cell))
-            c2 = np.int64(np.floor((x2 - origin[2]) / cell))
+            c0, c1, c2 = cell_of(x0, x1, x2, origin, cell)
             # cells are keyed z-fastest, so the (at most 3) cells of a z-row around the query
             # hold one contiguous run of points: 9 runs instead of 27 cells
             k0 = max(c2 - 1, 0)
