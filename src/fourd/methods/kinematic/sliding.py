@@ -64,6 +64,7 @@ from fourd.animation import AnimatedMesh
 from fourd.geometry.field import Field4D
 from fourd.geometry.laplacian import cotangent_weights, weights_laplacian
 from fourd.geometry.rotations import best_rotations
+from fourd.methods.kinematic.register import ArapIcp, RegisterOptions
 from fourd.progress import progress
 
 log = logging.getLogger("fourd.methods.kinematic.sliding")
@@ -114,6 +115,10 @@ class SlideOptions:
     data_rigid_iterations : int
         At most this many Gauss-Newton steps of the rigid prediction against an input frame's
         own points when the step has a data term (see :func:`slide_step`).
+    register : RegisterOptions or None
+        Large-motion registration (:mod:`.register`): at a step with a data term whose
+        prediction leaves many of the frame's points unexplained, the template is registered
+        to them by as-rigid-as-possible ICP before the projection of 5.1 (None: never).
     linearize_at : "previous" or "guess"
         Where constraint (2) is linearised: at the previous positions ``p^t`` with the 4D
         normal there (the paper), or at the initial guess on ``f(., t') = 0`` (the first-order
@@ -137,6 +142,7 @@ class SlideOptions:
     rigid_neighbours: int = 48
     rigid_iterations: int = 2
     data_rigid_iterations: int = 6
+    register: RegisterOptions | None = RegisterOptions()
     linearize_at: Literal["previous", "guess"] = "guess"
 
     def __post_init__(self):
@@ -682,6 +688,7 @@ def slide_step(
     diagnostics: bool = False,
     patches: np.ndarray | None = None,
     surface=None,
+    registration: ArapIcp | None = None,
 ) -> tuple[np.ndarray, np.ndarray, SlideStep]:
     """One step of section 5: ``vertices`` at ``time`` -> positions at ``next_time``.
 
@@ -694,6 +701,11 @@ def slide_step(
     global motion iterated ``data_rigid_iterations`` times against the frame's points (the
     vertices near them weighted 1, the others 0), and the projections and constraint (2) use
     the frame's surface where it has points and ``f(., next_time)`` elsewhere.
+
+    ``registration`` (optional, with ``surface``): the large-motion registration of the
+    template. It runs after the rigid prediction when that leaves more than its
+    ``threshold`` of the frame's points unexplained, and its result is kept when it explains
+    more of them.
 
     Returns ``(positions [N, 3], constrained [N] bool, diagnostics)``.
     """
@@ -730,6 +742,19 @@ def slide_step(
             start = moved
             if converged:
                 break
+    if registration is not None and surface is not None and len(surface.points):
+        before = registration.unexplained(start, surface.points)
+        if before > registration.options.threshold:
+            registered = registration.register(start, surface.points, surface.normals)
+            after = registration.unexplained(registered, surface.points)
+            # kept only when it explains more of the frame: where the template cannot
+            # follow (a shape that splits) it would stretch the template over both parts
+            log.debug(
+                "t=%g: large-motion registration, unexplained %.3f -> %.3f%s",
+                next_time, before, after, "" if after < before else " (rejected)",
+            )
+            if after < before:
+                start = registered
     guess = _project(
         target, start, options.projection_iterations, max_step=max_step, tolerance=tolerance
     )
@@ -868,6 +893,11 @@ def slide(
     if options.rigid_guess and 1 < options.rigid_neighbours < len(rest):
         # patches of the template (fixed connectivity: neighbours on the template stay so)
         _, patches = cKDTree(rest).query(rest, k=options.rigid_neighbours, workers=-1)
+    registration = (
+        ArapIcp(pre, faces, options.register, epsilon)
+        if options.register is not None and surfaces is not None
+        else None
+    )
     for k in progress(range(1, len(times)), desc="sliding", total=len(times) - 1):
         sub = np.linspace(times[k - 1], times[k], options.substeps + 1)
         for s in range(options.substeps):
@@ -876,6 +906,7 @@ def slide(
             if trees is not None and tree is None:
                 tree = cKDTree(np.full((1, 3), np.inf))
             previous = current
+            surface = surfaces[k] if surfaces is not None and s == options.substeps - 1 else None
             current, _, info = slide_step(
                 pre,
                 field,
@@ -887,9 +918,8 @@ def slide(
                 velocity=velocity,
                 diagnostics=return_steps,
                 patches=patches,
-                surface=(
-                    surfaces[k] if surfaces is not None and s == options.substeps - 1 else None
-                ),
+                surface=surface,
+                registration=registration,
             )
             if options.extrapolate:
                 velocity = (current - previous) / (sub[s + 1] - sub[s])

@@ -1,0 +1,60 @@
+"""Large-motion registration of the ``kinematic`` template (as-rigid-as-possible ICP)."""
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+from test_kinematic import MovingBlob, _sphere_template
+
+from fourd import synth
+from fourd.io.glb import vertex_normals
+from fourd.methods import kinematic as K
+from fourd.methods.kinematic.register import ArapIcp, RegisterOptions, unexplained_fraction
+
+
+def test_unexplained_fraction_counts_the_points_far_from_every_vertex():
+    vertices = np.zeros((1, 3))
+    points = np.array([[0.5, 0, 0], [0, 1.5, 0], [0, 0, -3.0], [0.9, 0, 0]])
+    assert unexplained_fraction(vertices, points, 1.0) == 0.5
+    assert unexplained_fraction(vertices, points[:0], 1.0) == 0.0
+
+
+def test_a_shape_moved_by_many_edges_is_registered_onto_its_points():
+    blob = MovingBlob()
+    V, F = _sphere_template(blob, resolution=0.15)
+    pre = K.slide_precompute(V, F)
+    R = Rotation.from_rotvec([0.0, 0.1, 0.05]).as_matrix()
+    shift = np.array([1.2, 0.1, 0.0])  # about 9 edges, half the blob's width
+    rest = blob.surface(6000, 0.0, seed=1)
+    normals = blob.gradient(rest, np.zeros(len(rest)))[:, :3] @ R.T
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    points = rest @ R.T + shift
+    expected = V @ R.T + shift
+    icp = ArapIcp(pre, F, RegisterOptions())
+    assert icp.unexplained(V, points) > 0.5
+    registered = icp.register(V, points, normals)
+    assert icp.unexplained(registered, points) < 0.01
+    before = np.linalg.norm(V - expected, axis=1).mean()
+    after = np.linalg.norm(registered - expected, axis=1).mean()
+    assert after < 0.1 * before
+    assert K.arap_energy(pre, registered) < 0.01
+
+
+def test_a_bending_limb_is_followed():
+    truth = synth.scene("bending-arm", frames=6)
+    V, F = truth.vertices[0], truth.faces
+    target = truth.vertices[2]  # the forearm has turned by several of its widths at the tip
+    icp = ArapIcp(K.slide_precompute(V, F), F, RegisterOptions())
+    registered = icp.register(V, target, vertex_normals(target, F))
+    before = np.linalg.norm(V - target, axis=1)
+    after = np.linalg.norm(registered - target, axis=1)
+    assert after.mean() < 0.5 * before.mean()
+    assert after.max() < 0.4 * before.max()
+
+
+def test_register_options_are_validated():
+    with pytest.raises(ValueError):
+        RegisterOptions(iterations=0)
+    with pytest.raises(ValueError):
+        RegisterOptions(weight=0.0)
+    with pytest.raises(ValueError):
+        RegisterOptions(point_stride=0)
