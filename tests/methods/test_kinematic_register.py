@@ -58,3 +58,5 @@ def test_register_options_are_validated():
         RegisterOptions(weight=0.0)
     with pytest.raises(ValueError):
         RegisterOptions(point_stride=0)
+    with pytest.raises(ValueError):
+        RegisterOptions(relaxation=1.0)
