@@ -10,9 +10,9 @@ import trimesh
 
 from fourd.animation import AnimatedMesh, MeshSequence
 from fourd.errors import InputError
+from fourd.geometry.normals import vertex_normals
 from fourd.io import writers
 from fourd.io.atomic import atomic_path
-from fourd.io.glb import vertex_normals
 from fourd.io.pc2 import read_pc2
 from fourd.io.writers import load_result, output_kind, save
 

@@ -6,7 +6,7 @@ from scipy.spatial.transform import Rotation
 from test_kinematic import MovingBlob, _sphere_template
 
 from fourd import synth
-from fourd.io.glb import vertex_normals
+from fourd.geometry.normals import vertex_normals
 from fourd.methods import kinematic as K
 from fourd.methods.kinematic.register import ArapIcp, RegisterOptions, unexplained_fraction
 

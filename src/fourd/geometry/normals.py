@@ -1,4 +1,5 @@
-"""Point normals: PCA over neighbours, oriented by the sensors or by consistent propagation.
+"""Point normals: PCA over neighbours, oriented by the sensors or by consistent propagation;
+and the area-weighted vertex normals of triangle meshes.
 
 References
 ----------
@@ -379,3 +380,59 @@ def nearest_normals(points: np.ndarray, reference_points: np.ndarray, reference_
     """Normals of the nearest reference point for each of ``points`` ([P, 3])."""
     _, index = cKDTree(reference_points).query(points, workers=-1)
     return reference_normals[index]
+
+
+#: Floats per block when accumulating mesh vertex normals over many frames.
+_NORMALS_CHUNK = 20_000_000
+
+
+def face_incidence(faces: np.ndarray, count: int) -> sp.csr_matrix:
+    """Vertex x face incidence [count, F] of a triangle mesh (1 where the face uses the
+    vertex): summing face vectors onto their vertices is one product with it."""
+    faces = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
+    corners = faces.ravel()
+    return sp.csr_matrix(
+        (np.ones(len(corners)), (corners, np.repeat(np.arange(len(faces)), 3))),
+        shape=(count, len(faces)),
+    )
+
+
+def vertex_normals(
+    vertices: np.ndarray, faces: np.ndarray, *, incidence: sp.csr_matrix | None = None
+) -> np.ndarray:
+    """Area-weighted vertex normals of a triangle mesh.
+
+    Parameters
+    ----------
+    vertices : array [N, 3] or [T, N, 3]
+    faces : int array [F, 3]
+    incidence : csr_matrix [N, F], optional
+        :func:`face_incidence` of ``faces``, for callers that ask many times.
+
+    Returns
+    -------
+    ndarray, float64, same shape as ``vertices``
+        Unit normals: the sum of the (unnormalised, hence area-weighted) normals of the faces
+        around each vertex. Vertices without faces, or whose faces cancel, get ``(0, 0, 1)``.
+    """
+    vertices = np.asarray(vertices, dtype=np.float64)
+    single = vertices.ndim == 2
+    frames = vertices[None] if single else vertices
+    faces = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
+    count, n = frames.shape[0], frames.shape[1]
+    out = np.zeros_like(frames)
+    if len(faces):
+        if incidence is None:
+            incidence = face_incidence(faces, n)
+        step = max(1, _NORMALS_CHUNK // max(1, 3 * len(faces)))
+        for start in range(0, count, step):
+            block = frames[start : start + step]
+            a, b, c = block[:, faces[:, 0]], block[:, faces[:, 1]], block[:, faces[:, 2]]
+            face_normals = np.cross(b - a, c - a)  # [t, F, 3], length = twice the area
+            stacked = face_normals.transpose(1, 0, 2).reshape(len(faces), -1)
+            out[start : start + step] = (incidence @ stacked).reshape(n, -1, 3).transpose(1, 0, 2)
+    lengths = np.linalg.norm(out, axis=-1, keepdims=True)
+    tiny = lengths[..., 0] <= 1e-300
+    out = np.divide(out, lengths, out=np.zeros_like(out), where=lengths > 1e-300)
+    out[tiny] = (0.0, 0.0, 1.0)
+    return out[0] if single else out

@@ -23,6 +23,7 @@ import numpy as np
 
 from fourd.animation import AnimatedMesh, MeshSequence
 from fourd.errors import InputError
+from fourd.geometry.normals import vertex_normals
 from fourd.io.atomic import atomic_path
 
 ARRAY_BUFFER = 34962
@@ -30,49 +31,6 @@ ELEMENT_ARRAY_BUFFER = 34963
 FLOAT = 5126
 UNSIGNED_SHORT = 5123
 UNSIGNED_INT = 5125
-_CHUNK = 20_000_000  # floats per block when accumulating normals over many frames
-
-
-def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    """Area-weighted vertex normals.
-
-    Parameters
-    ----------
-    vertices : array [N, 3] or [T, N, 3]
-    faces : int array [F, 3]
-
-    Returns
-    -------
-    ndarray, float64, same shape as ``vertices``
-        Unit normals: the sum of the (unnormalised, hence area-weighted) normals of the faces
-        around each vertex. Vertices without faces, or whose faces cancel, get ``(0, 0, 1)``.
-    """
-    vertices = np.asarray(vertices, dtype=np.float64)
-    single = vertices.ndim == 2
-    frames = vertices[None] if single else vertices
-    faces = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
-    count, n = frames.shape[0], frames.shape[1]
-    out = np.zeros_like(frames)
-    if len(faces):
-        import scipy.sparse as sp
-
-        corners = faces.ravel()
-        incidence = sp.csr_matrix(
-            (np.ones(len(corners)), (corners, np.repeat(np.arange(len(faces)), 3))),
-            shape=(n, len(faces)),
-        )
-        step = max(1, _CHUNK // max(1, 3 * len(faces)))
-        for start in range(0, count, step):
-            block = frames[start : start + step]
-            a, b, c = block[:, faces[:, 0]], block[:, faces[:, 1]], block[:, faces[:, 2]]
-            face_normals = np.cross(b - a, c - a)  # [t, F, 3], length = twice the area
-            stacked = face_normals.transpose(1, 0, 2).reshape(len(faces), -1)
-            out[start : start + step] = (incidence @ stacked).reshape(n, -1, 3).transpose(1, 0, 2)
-    lengths = np.linalg.norm(out, axis=-1, keepdims=True)
-    tiny = lengths[..., 0] <= 1e-300
-    out = np.divide(out, lengths, out=np.zeros_like(out), where=lengths > 1e-300)
-    out[tiny] = (0.0, 0.0, 1.0)
-    return out[0] if single else out
 
 
 class _Blob:

@@ -33,8 +33,8 @@ from numba import njit
 
 from fourd.animation import AnimatedMesh
 from fourd.errors import InputError
+from fourd.geometry.normals import vertex_normals
 from fourd.io.atomic import atomic_path
-from fourd.io.glb import vertex_normals
 from fourd.io.writers import as_result
 from fourd.viz import texture as tex
 

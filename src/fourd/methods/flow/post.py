@@ -30,7 +30,7 @@ from scipy.sparse.linalg import cg
 from scipy.spatial import cKDTree
 
 from fourd.geometry.marching import compact, marching_cubes
-from fourd.io.glb import vertex_normals
+from fourd.geometry.normals import vertex_normals
 from fourd.methods.flow.grid import SpaceTimeGrid
 
 log = logging.getLogger("fourd.methods.flow.post")

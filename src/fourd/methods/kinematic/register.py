@@ -48,6 +48,8 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 from scipy.spatial import cKDTree
 
+from fourd.geometry.normals import face_incidence, vertex_normals
+
 
 @dataclass(frozen=True)
 class RegisterOptions:
@@ -127,17 +129,7 @@ class ArapIcp:
         diagonal = pre.laplacian.diagonal()
         self.weight = options.weight * float(diagonal.mean()) if len(diagonal) else 0.0
         self._factor = None
-        n, count = len(pre.rest), len(self.faces)
-        # vertex x face incidence: area-weighted vertex normals as one sparse product
-        self._incidence = sp.csr_matrix(
-            (np.ones(3 * count), (self.faces.ravel(), np.repeat(np.arange(count), 3))),
-            shape=(n, count),
-        )
-
-    def _vertex_normals(self, x: np.ndarray) -> np.ndarray:
-        f = self.faces
-        normals = self._incidence @ np.cross(x[f[:, 1]] - x[f[:, 0]], x[f[:, 2]] - x[f[:, 0]])
-        return normals / np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-300)
+        self._incidence = face_incidence(self.faces, len(pre.rest))
 
     def _solve(self, rhs: np.ndarray) -> np.ndarray:
         if self._factor is None:
@@ -175,7 +167,7 @@ class ArapIcp:
         for it in range(o.iterations):
             fraction = it / max(o.iterations - 1, 1)
             radius = edge * o.start_radius * (o.end_radius / o.start_radius) ** fraction
-            vn = self._vertex_normals(x)
+            vn = vertex_normals(x, self.faces, incidence=self._incidence)
             targets = np.zeros((n, 3))
             counts = np.zeros(n)
             # model to data: the tangent-plane projection onto the nearest agreeing point
