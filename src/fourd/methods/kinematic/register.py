@@ -49,6 +49,7 @@ import scipy.sparse.linalg as spla
 from scipy.spatial import cKDTree
 
 from fourd.geometry.normals import face_incidence, vertex_normals
+from fourd.methods.kinematic.arap import arap_rhs, arap_rotations
 
 
 @dataclass(frozen=True)
@@ -154,8 +155,6 @@ class ArapIcp:
     def register(self, vertices: np.ndarray, points: np.ndarray, normals: np.ndarray) -> np.ndarray:
         """Positions [N, 3] of the template registered from ``vertices`` [N, 3] to the frame's
         ``points`` [P, 3] with unit outward ``normals`` [P, 3]."""
-        from fourd.methods.kinematic.sliding import arap_rhs, arap_rotations
-
         o = self.options
         x = np.array(vertices, dtype=np.float64, copy=True)
         points, normals = points[:: self.options.point_stride], normals[:: self.options.point_stride]
