@@ -8,6 +8,7 @@ from fourd.animation import AnimatedMesh
 from fourd.errors import InputError
 from fourd.methods import kinematic as K
 from fourd.methods import reconstruct
+from fourd.methods.kinematic.sliding import slide_step
 from fourd.sequence import Frame, PointCloudSequence
 
 
@@ -112,6 +113,49 @@ def test_vertices_without_data_are_unconstrained_and_not_observed():
     assert np.linalg.norm(anim.vertices[2][top] - (V[top] @ R.T + c), axis=1).mean() < 0.05
 
 
+class BlobAndPlate:
+    """Analytic Field4D: a static :class:`MovingBlob` and, 0.6 beyond its +x pole, the
+    half-space ``x > 1.6`` (union: the smaller of the two fields)."""
+
+    def __init__(self):
+        self.blob = MovingBlob(speed=(0.0, 0.0, 0.0), spin=(0.0, 0.0, 0.0))
+
+    def value(self, points, times):
+        return np.minimum(self.blob.value(points, times), 1.6 - np.asarray(points)[:, 0])
+
+    def gradient(self, points, times):
+        points = np.asarray(points, float)
+        gradient = self.blob.gradient(points, times)
+        plate = 1.6 - points[:, 0] < self.blob.value(points, times)
+        gradient[plate] = [-1.0, 0.0, 0.0, 0.0]
+        return gradient
+
+
+def test_a_vertex_predicted_off_the_surface_is_not_snapped_onto_another_one():
+    """A cap of the template predicted 0.35 outwards lies nearer the plate than its own blob:
+    the projection of 5.1 would move it onto the plate, more than 1.5 edges. With the
+    projection limit it stays unconstrained and ARAP brings it back onto the blob."""
+    field = BlobAndPlate()
+    V, F = _sphere_template(field.blob)
+    pre = K.slide_precompute(V, F)
+    cap = V[:, 0] > 0.9
+    start = V.copy()
+    start[cap] += 0.35 * V[cap] / np.linalg.norm(V[cap], axis=1, keepdims=True)
+
+    def step(limit):
+        options = K.SlideOptions(rigid_guess=False, register=None, projection_limit=limit)
+        out, constrained, _ = slide_step(pre, field, start, 0.0, 1.0, options=options)
+        return out, constrained
+
+    snapped, constrained = step(0.0)
+    assert constrained.all()
+    assert np.linalg.norm(snapped[cap] - V[cap], axis=1).mean() > 0.3  # on the plate
+    kept, constrained = step(1.5)
+    assert not constrained[cap].any() and constrained[~cap].all()
+    assert np.linalg.norm(kept[cap] - V[cap], axis=1).mean() < 0.1
+    assert np.abs(field.blob.value(kept[cap], 1.0)).max() < 0.1
+
+
 def test_slide_rejects_bad_input():
     blob = MovingBlob()
     V, F = _sphere_template(blob, resolution=0.3)
@@ -121,6 +165,8 @@ def test_slide_rejects_bad_input():
         K.slide(V, F, blob, [0.0, 1.0], data=[V])
     with pytest.raises(ValueError):
         K.SlideOptions(iterations=0)
+    with pytest.raises(ValueError):
+        K.SlideOptions(projection_limit=-1.0)
 
 
 def _blob_sequence(frames=4, count=2500, noise=0.003, seed=0):

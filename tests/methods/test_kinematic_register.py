@@ -60,3 +60,7 @@ def test_register_options_are_validated():
         RegisterOptions(point_stride=0)
     with pytest.raises(ValueError):
         RegisterOptions(relaxation=1.0)
+    with pytest.raises(ValueError):
+        RegisterOptions(refine_iterations=-1)
+    with pytest.raises(ValueError):
+        RegisterOptions(refine_weight=0.0)

@@ -102,6 +102,9 @@ log = logging.getLogger("fourd.methods.kinematic")
 MIN_FRAMES = 2
 #: Neighbours of the per-frame outlier test (mean distance to them).
 OUTLIER_NEIGHBOURS = 8
+#: With the large-motion registration: the projection of 5.1 may move a vertex at most this
+#: many median edges (:class:`SlideOptions` ``projection_limit``).
+PROJECTION_LIMIT = 1.5
 
 
 @dataclass(frozen=True)
@@ -177,7 +180,9 @@ class Options:
         3% of the frame's points farther than ``1.5 epsilon`` from it (a limb moved farther
         than its width), register the template to those points by as-rigid-as-possible ICP
         before the projection, and keep the result when it explains more of them
-        (:mod:`.register`; beyond the paper).
+        (:mod:`.register`; beyond the paper). With it, the projection of 5.1 may move a
+        vertex at most 1.5 median edges; one that would move farther is left unconstrained
+        for that step (``SlideOptions.projection_limit``).
     temporal_smoothing : int
         Passes of a ``[1/4, 1/2, 1/4]`` filter over the vertex trajectories (time-weighted for
         uneven output times; the first and last frames stay): the data term gives every frame
@@ -425,6 +430,7 @@ def animate(
     def surfaces(frames):
         return _FrameSurfaces(frames, points, normals, bandwidth)
 
+    registering = options.large_motion and options.data_term
     slide_options = SlideOptions(
         iterations=options.iterations,
         # a vertex is observed when an input point lies within 2 edges, or within 3 point
@@ -433,7 +439,8 @@ def animate(
         substeps=options.substeps,
         rigid_guess=options.rigid_guess,
         rigid_neighbours=options.rigid_neighbours,
-        register=RegisterOptions() if options.large_motion else None,
+        register=RegisterOptions() if registering else None,
+        projection_limit=PROJECTION_LIMIT if registering else 0.0,
     )
     t0 = float(times[0])
     forward = out_times >= t0

@@ -23,7 +23,9 @@ Each iteration, with ``r`` shrinking geometrically from ``start_radius`` to ``en
 and every iteration is one back-substitution. A small ``w`` (stiff ARAP) measured best on
 crane: the limb moves as a whole instead of its vertices sliding to the nearest points
 (``exp`` runs, 20k samples, correspondence mean / last, 30 plain iterations: w = 1: 0.020 /
-0.034, 0.1: 0.016 / 0.024, 0.01: 0.012 / 0.017, 0.003: 0.011 / 0.015).
+0.034, 0.1: 0.016 / 0.024, 0.01: 0.012 / 0.017, 0.003: 0.011 / 0.015). A few last iterations
+at the smallest radius use a ten times larger ``w`` (a second factorisation) so that the
+template also follows what does not bend rigidly before the projection of the sliding step.
 
 It runs only on frames where the ordinary prediction leaves more than ``threshold`` of the
 input points unexplained (:func:`unexplained_fraction`), and its result is kept only when it
@@ -66,7 +68,7 @@ class RegisterOptions:
         lengths, and 3 point spacings in ``kinematic``), so that a template finer than the
         data does not count the gaps between points.
     iterations : int
-        ARAP-ICP iterations.
+        ARAP-ICP iterations with the stiff weight ``weight``.
     relaxation : float
         Over-relaxation ``rho`` of every global step after the first, ``x <- s + rho (s - x)``
         with ``s`` the step's solution: with a stiff ARAP the plain iterates creep towards the
@@ -75,7 +77,15 @@ class RegisterOptions:
     weight : float
         Data weight ``w`` relative to the mean diagonal of the template's Laplacian.
     start_radius, end_radius : float
-        Correspondence radius of the first and last iteration, in median edge lengths.
+        Correspondence radius of the first and last stiff iteration, in median edge lengths.
+        A limb of crane's held-out frames moves up to 15 edges per kept frame, so the
+        search starts well beyond that.
+    refine_iterations, refine_weight : int, float
+        Plain iterations after the stiff ones, at ``end_radius`` with the softer data weight
+        ``refine_weight`` (same units as ``weight``): the stiff template leaves a misfit of
+        a few edges where the body does not bend as rigidly (clothing, joints), and the
+        projection that follows would close it by moving vertices along their normals,
+        crushing and stretching the template there.
     normal_agreement : float
         Least cosine between a vertex normal and an input point's normal for them to match.
     point_stride : int
@@ -84,13 +94,15 @@ class RegisterOptions:
 
     threshold: float = 0.03
     unexplained_distance: float = 1.5
-    iterations: int = 15
+    iterations: int = 30
     relaxation: float = 0.8
     weight: float = 0.003
-    start_radius: float = 20.0
+    start_radius: float = 40.0
     end_radius: float = 3.0
     normal_agreement: float = 0.3
     point_stride: int = 2
+    refine_iterations: int = 3
+    refine_weight: float = 0.03
 
     def __post_init__(self):
         if self.iterations < 1 or self.point_stride < 1:
@@ -98,8 +110,13 @@ class RegisterOptions:
                 f"iterations and point_stride must be at least 1, got {self.iterations} and "
                 f"{self.point_stride}"
             )
-        if not (self.weight > 0 and self.start_radius > 0 and self.end_radius > 0):
-            raise ValueError("weight, start_radius and end_radius must be positive")
+        if not (
+            self.weight > 0 and self.refine_weight > 0 and self.start_radius > 0
+            and self.end_radius > 0
+        ):
+            raise ValueError("weight, refine_weight, start_radius and end_radius must be positive")
+        if self.refine_iterations < 0:
+            raise ValueError(f"refine_iterations must not be negative, got {self.refine_iterations}")
         if not 0.0 <= self.relaxation < 1.0:
             raise ValueError(f"relaxation must lie in [0, 1), got {self.relaxation}")
         if self.threshold < 0 or self.unexplained_distance <= 0:
@@ -116,8 +133,9 @@ def unexplained_fraction(vertices: np.ndarray, points: np.ndarray, distance: flo
 
 class ArapIcp:
     """The registration for one template (:func:`fourd.methods.kinematic.sliding.slide_precompute`
-    output ``pre`` and its ``faces``); ``L + w I`` is factorised on first use. ``epsilon``:
-    the data radius of the sliding (0: 2 median edge lengths)."""
+    output ``pre`` and its ``faces``); ``L + w I`` is factorised on first use, once per data
+    weight (the stiff and the refining one). ``epsilon``: the data radius of the sliding (0: 2
+    median edge lengths)."""
 
     def __init__(
         self, pre, faces: np.ndarray, options: RegisterOptions = RegisterOptions(),
@@ -128,23 +146,24 @@ class ArapIcp:
         self.faces = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
         self.options = options
         diagonal = pre.laplacian.diagonal()
-        self.weight = options.weight * float(diagonal.mean()) if len(diagonal) else 0.0
-        self._factor = None
+        scale = float(diagonal.mean()) if len(diagonal) else 0.0
+        self.weight = options.weight * scale
+        self.refine_weight = options.refine_weight * scale
+        self._factors: dict[float, object] = {}
         self._incidence = face_incidence(self.faces, len(pre.rest))
 
-    def _solve(self, rhs: np.ndarray) -> np.ndarray:
-        if self._factor is None:
+    def _solve(self, rhs: np.ndarray, weight: float) -> np.ndarray:
+        """``(L + weight I)^-1 rhs`` [N, 3]."""
+        if weight not in self._factors:
             n = self.pre.laplacian.shape[0]
-            order = self.pre.order
-            matrix = (self.pre.ordered_laplacian + self.weight * sp.identity(n)).tocsc()
-            factor = spla.splu(
+            matrix = (self.pre.ordered_laplacian + weight * sp.identity(n)).tocsc()
+            self._factors[weight] = spla.splu(
                 matrix, permc_spec="NATURAL", diag_pivot_thresh=0.0,
                 options={"SymmetricMode": True},
             )
-            self._factor = (factor, order)
-        factor, order = self._factor
+        order = self.pre.order
         out = np.empty_like(rhs)
-        out[order] = factor.solve(np.ascontiguousarray(rhs[order]))
+        out[order] = self._factors[weight].solve(np.ascontiguousarray(rhs[order]))
         return out
 
     def unexplained(self, vertices: np.ndarray, points: np.ndarray) -> float:
@@ -163,9 +182,11 @@ class ArapIcp:
         n = len(x)
         tree = cKDTree(points)
         edge = self.pre.edge_length
-        for it in range(o.iterations):
-            fraction = it / max(o.iterations - 1, 1)
+        for it in range(o.iterations + o.refine_iterations):
+            refining = it >= o.iterations
+            fraction = min(it / max(o.iterations - 1, 1), 1.0)
             radius = edge * o.start_radius * (o.end_radius / o.start_radius) ** fraction
+            weight = self.refine_weight if refining else self.weight
             vn = vertex_normals(x, self.faces, incidence=self._incidence)
             targets = np.zeros((n, 3))
             counts = np.zeros(n)
@@ -189,8 +210,8 @@ class ArapIcp:
             has = counts > 0
             targets[has] /= counts[has, None]
             targets[~has] = x[~has]
-            rhs = arap_rhs(self.pre, arap_rotations(self.pre, x)) + self.weight * targets
-            solved = self._solve(rhs)
-            # over-relaxed: with a stiff ARAP the iterates creep along one direction
-            x = solved + o.relaxation * (solved - x) if it > 0 else solved
+            rhs = arap_rhs(self.pre, arap_rotations(self.pre, x)) + weight * targets
+            solved = self._solve(rhs, weight)
+            # stiff steps over-relaxed: with a stiff ARAP the iterates creep along one direction
+            x = solved + o.relaxation * (solved - x) if 0 < it and not refining else solved
         return x
