@@ -8,6 +8,8 @@ from fourd.animation import AnimatedMesh
 from fourd.errors import InputError
 from fourd.methods import kinematic as K
 from fourd.methods import reconstruct
+from fourd.methods.kinematic.framesurface import FrameSurface
+from fourd.methods.kinematic.register import RegisterOptions
 from fourd.methods.kinematic.sliding import slide_step
 from fourd.sequence import Frame, PointCloudSequence
 
@@ -131,26 +133,53 @@ class BlobAndPlate:
         return gradient
 
 
-def test_a_vertex_predicted_off_the_surface_is_not_snapped_onto_another_one():
-    """A cap of the template predicted 0.35 outwards lies nearer the plate than its own blob:
-    the projection of 5.1 would move it onto the plate, more than 1.5 edges. With the
-    projection limit it stays unconstrained and ARAP brings it back onto the blob."""
+class AcceptingRegistration:
+    """Stands in for the large-motion registration: runs at every step, returns its seed
+    unchanged and reports that it explains more of the frame, so the step counts as
+    registered."""
+
+    options = RegisterOptions(threshold=0.0)
+
+    def __init__(self):
+        self.calls = 0
+
+    def unexplained(self, vertices, points):
+        self.calls += 1
+        return 1.0 / self.calls
+
+    def register(self, seed, points, normals):
+        return seed.copy()
+
+
+def test_after_a_registration_a_vertex_off_the_surface_is_not_snapped_onto_another_one():
+    """A cap of the template left 0.35 outwards lies nearer the plate than its own blob: the
+    projection of 5.1 would move it onto the plate, more than 1.5 edges. After a registration
+    the projection limit leaves it unconstrained and ARAP brings it back onto the blob;
+    without one (a step the prediction explains, or a rejected registration) the paper's
+    projection stands."""
     field = BlobAndPlate()
     V, F = _sphere_template(field.blob)
     pre = K.slide_precompute(V, F)
     cap = V[:, 0] > 0.9
     start = V.copy()
     start[cap] += 0.35 * V[cap] / np.linalg.norm(V[cap], axis=1, keepdims=True)
+    points = field.blob.surface(4000, 0.0, 0)
+    normals = field.blob.gradient(points, 0.0)[:, :3]
+    surface = FrameSurface(points, normals / np.linalg.norm(normals, axis=1)[:, None], 0.05)
 
-    def step(limit):
-        options = K.SlideOptions(rigid_guess=False, register=None, projection_limit=limit)
-        out, constrained, _ = slide_step(pre, field, start, 0.0, 1.0, options=options)
+    def step(limit, registration):
+        options = K.SlideOptions(rigid_guess=False, projection_limit=limit)
+        out, constrained, _ = slide_step(
+            pre, field, start, 0.0, 1.0, options=options, surface=surface,
+            registration=registration,
+        )
         return out, constrained
 
-    snapped, constrained = step(0.0)
-    assert constrained.all()
-    assert np.linalg.norm(snapped[cap] - V[cap], axis=1).mean() > 0.3  # on the plate
-    kept, constrained = step(1.5)
+    for limit, registration in [(0.0, AcceptingRegistration()), (1.5, None)]:
+        snapped, constrained = step(limit, registration)
+        assert constrained.all()
+        assert np.linalg.norm(snapped[cap] - V[cap], axis=1).mean() > 0.3  # on the plate
+    kept, constrained = step(1.5, AcceptingRegistration())
     assert not constrained[cap].any() and constrained[~cap].all()
     assert np.linalg.norm(kept[cap] - V[cap], axis=1).mean() < 0.1
     assert np.abs(field.blob.value(kept[cap], 1.0)).max() < 0.1

@@ -8,7 +8,38 @@ from test_kinematic import MovingBlob, _sphere_template
 from fourd import synth
 from fourd.geometry.normals import vertex_normals
 from fourd.methods import kinematic as K
+from fourd.methods.kinematic.framesurface import FrameSurface
 from fourd.methods.kinematic.register import ArapIcp, RegisterOptions, unexplained_fraction
+from fourd.methods.kinematic.sliding import slide_step
+
+
+def test_the_registration_starts_from_the_carried_motion_when_that_explains_more():
+    """A blob moves 0.6 and spins 0.6 rad about its axis in one step, with no rigid
+    prediction: registered from its old place the spin is lost (nearest points cannot tell
+    it); carried on by the previous step's velocity it is kept. A velocity that explains
+    less than the old place is not used."""
+    blob = MovingBlob(speed=(0.5, 0.0, 0.0), spin=(0.0, 0.0, 0.6))
+    V, F = _sphere_template(blob)
+    pre = K.slide_precompute(V, F)
+    points = blob.surface(6000, 1.0, 0)
+    normals = blob.gradient(points, 1.0)[:, :3]
+    surface = FrameSurface(points, normals / np.linalg.norm(normals, axis=1)[:, None], 0.05)
+    R, c = blob.motion(1.0)
+    truth = V @ R.T + c
+    icp = ArapIcp(pre, F, RegisterOptions(), 2 * pre.edge_length)
+    options = K.SlideOptions(rigid_guess=False)
+
+    def error(velocity):
+        out, _, _ = slide_step(
+            pre, blob, V, 0.0, 1.0, options=options, surface=surface, registration=icp,
+            registration_velocity=velocity,
+        )
+        return np.linalg.norm(out - truth, axis=1).mean()
+
+    from_old_place = error(None)
+    assert from_old_place > 0.2  # the blob's radius is about 1
+    assert error(truth - V) < 0.02
+    assert error(V - truth) == pytest.approx(from_old_place)
 
 
 def test_unexplained_fraction_counts_the_points_far_from_every_vertex():

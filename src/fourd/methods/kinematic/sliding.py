@@ -630,6 +630,7 @@ def slide_step(
     patches: np.ndarray | None = None,
     surface=None,
     registration: ArapIcp | None = None,
+    registration_velocity: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray, SlideStep]:
     """One step of section 5: ``vertices`` at ``time`` -> positions at ``next_time``.
 
@@ -646,7 +647,8 @@ def slide_step(
     ``registration`` (optional, with ``surface``): the large-motion registration of the
     template. It runs after the rigid prediction when that leaves more than its
     ``threshold`` of the frame's points unexplained, and its result is kept when it explains
-    more of them.
+    more of them. It starts from ``vertices + dt * registration_velocity`` when that is
+    given [N, 3] (the previous step's vertex velocities), else from the prediction.
 
     Returns ``(positions [N, 3], constrained [N] bool, diagnostics)``.
     """
@@ -683,10 +685,18 @@ def slide_step(
             start = moved
             if converged:
                 break
+    registered_step = False
     if registration is not None and surface is not None and len(surface.points):
         before = registration.unexplained(start, surface.points)
         if before > registration.options.threshold:
-            registered = registration.register(start, surface.points, surface.normals)
+            # from the prediction, or from the previous step's motion carried on
+            # (RegisterOptions.constant_velocity) when that explains more of the frame
+            seed = start
+            if registration_velocity is not None:
+                carried = vertices + dt * registration_velocity
+                if registration.unexplained(carried, surface.points) < before:
+                    seed = carried
+            registered = registration.register(seed, surface.points, surface.normals)
             after = registration.unexplained(registered, surface.points)
             # kept only when it explains more of the frame: where the template cannot
             # follow (a shape that splits) it would stretch the template over both parts
@@ -696,6 +706,7 @@ def slide_step(
             )
             if after < before:
                 start = registered
+                registered_step = True
     guess = _project(
         target, start, options.projection_iterations, max_step=max_step, tolerance=tolerance
     )
@@ -708,7 +719,7 @@ def slide_step(
     if data_tree is not None:
         distance, _ = data_tree.query(guess, k=1, distance_upper_bound=epsilon, workers=-1)
         constrained = np.isfinite(distance)
-    if options.projection_limit > 0:
+    if options.projection_limit > 0 and registered_step:
         limit = options.projection_limit * pre.edge_length
         jumped = np.linalg.norm(guess - start, axis=1) > limit
         guess[jumped] = start[jumped]
@@ -834,6 +845,7 @@ def slide(
     observed[0] = observed_at(0, rest)
     current = rest
     velocity = None
+    motion = None
     steps = []
     patches = None
     if options.rigid_guess and 1 < options.rigid_neighbours < len(rest):
@@ -866,9 +878,14 @@ def slide(
                 patches=patches,
                 surface=surface,
                 registration=registration,
+                registration_velocity=(
+                    motion if registration is not None and options.register.constant_velocity
+                    else None
+                ),
             )
+            motion = (current - previous) / (sub[s + 1] - sub[s])
             if options.extrapolate:
-                velocity = (current - previous) / (sub[s + 1] - sub[s])
+                velocity = motion
             steps.append(info)
         frames[k] = current
         observed[k] = observed_at(k, current)
