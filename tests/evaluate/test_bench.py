@@ -72,6 +72,18 @@ def test_bad_selections_are_input_errors(tmp_path):
         bench.run_bench(repeats=0, output=tmp_path / "b.md")
 
 
+def test_held_out_stretches_of_a_capture_are_named_scenes():
+    """``crane-90``: the crane capture from frame 90, same length and step as the standard
+    crane scene, selectable by its label and not run by default."""
+    (chosen,) = bench._select_scenes(["crane-90"], quick=False)
+    standard = {s.key: s for s in bench.STANDARD_SCENES}["crane"]
+    assert chosen.key == "crane-90" and chosen.name == "crane"
+    assert chosen.options == {**standard.options, "start": 90}
+    assert chosen.frames == standard.frames and chosen.resolution == standard.resolution
+    assert "crane-90" not in {s.key for s in bench._select_scenes(None, quick=False)}
+    assert "From frame 90 on." in bench._describe("crane", chosen.options)
+
+
 def test_machine_info_names_the_machine():
     info = bench.machine_info()
     assert info["cores"] >= 1 and info["cpu"] and info["date"].endswith("UTC")
