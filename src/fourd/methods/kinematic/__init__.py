@@ -102,8 +102,8 @@ log = logging.getLogger("fourd.methods.kinematic")
 MIN_FRAMES = 2
 #: Neighbours of the per-frame outlier test (mean distance to them).
 OUTLIER_NEIGHBOURS = 8
-#: With the large-motion registration: the projection of 5.1 may move a vertex at most this
-#: many median edges (:class:`SlideOptions` ``projection_limit``).
+#: After a kept large-motion registration, the projection of 5.1 may move a vertex at most
+#: this many median edges (:class:`SlideOptions` ``projection_limit``).
 PROJECTION_LIMIT = 1.5
 
 
@@ -180,9 +180,9 @@ class Options:
         3% of the frame's points farther than ``1.5 epsilon`` from it (a limb moved farther
         than its width), register the template to those points by as-rigid-as-possible ICP
         before the projection, and keep the result when it explains more of them
-        (:mod:`.register`; beyond the paper). With it, the projection of 5.1 may move a
-        vertex at most 1.5 median edges; one that would move farther is left unconstrained
-        for that step (``SlideOptions.projection_limit``).
+        (:mod:`.register`; beyond the paper). After a kept registration, the projection of
+        5.1 may move a vertex at most 1.5 median edges; one that would move farther is left
+        unconstrained for that step (``SlideOptions.projection_limit``).
     temporal_smoothing : int
         Passes of a ``[1/4, 1/2, 1/4]`` filter over the vertex trajectories (time-weighted for
         uneven output times; the first and last frames stay): the data term gives every frame

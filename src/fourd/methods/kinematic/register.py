@@ -79,7 +79,9 @@ class RegisterOptions:
     start_radius, end_radius : float
         Correspondence radius of the first and last stiff iteration, in median edge lengths.
         A limb of crane's held-out frames moves up to 15 edges per kept frame, so the
-        search starts well beyond that.
+        search starts well beyond that (``exp`` runs, crane from frame 90, correspondence
+        mean / last: 15 iterations from 20 edges 0.0244 / 0.0366, 30 from 40 edges 0.0143 /
+        0.0225; with 30 iterations the registration costs about 0.8 s per frame).
     refine_iterations, refine_weight : int, float
         Plain iterations after the stiff ones, at ``end_radius`` with the softer data weight
         ``refine_weight`` (same units as ``weight``): the stiff template leaves a misfit of

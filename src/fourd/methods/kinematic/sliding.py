@@ -40,9 +40,9 @@ Beyond the paper (documented options, defaults on):
   normals, so a turning body's tangential motion would be left to the ARAP iterations, which
   recover it far too slowly (measured: a rigidly turning blob drifts by 10% of its size in
   five steps without it, not at all with it).
-* ``projection_limit``: a vertex that the projection of 5.1 would move farther than a few
-  edges is left unconstrained for the step instead (it was predicted off the surface, and the
-  nearest surface is rarely its own).
+* ``projection_limit``: after a large-motion registration, a vertex that the projection of
+  5.1 would move farther than a few edges is left unconstrained for the step instead (the
+  registration left it off the surface, and the nearest surface is rarely its own).
 * ``linearize_at = "guess"``: constraint (2) linearised at the initial guess on
   ``f(., t') = 0`` rather than at ``p^t``; still one factorisation per time step.
 * the data term (``surfaces``): at an input time, the rigid prediction, the projections and
@@ -123,15 +123,16 @@ class SlideOptions:
         prediction leaves many of the frame's points unexplained, the template is registered
         to them by as-rigid-as-possible ICP before the projection of 5.1 (None: never).
     projection_limit : float
-        A vertex whose projection of 5.1 moves it farther than this many median edge lengths
-        from its predicted position is left there, unconstrained in this step (lambda = 0,
-        as a vertex without data): it was predicted off the surface and the Newton steps
-        took it to whichever surface was nearest, stretching and crushing the template
-        around it (crane held-out frames 90-128: edges stretched 1.5x or more went from
-        under 0.01% after the registration to 2-3% after the projection). ARAP carries it
-        with its neighbours instead. 0: no limit (the paper). ``kinematic`` sets 1.5 with its
-        large-motion registration; without a data term (``flow``'s coherent animation) the
-        limit measured worse (crane completeness-95 0.028 -> 0.035).
+        At a step whose large-motion registration was kept: a vertex that the projection of
+        5.1 would move farther than this many median edge lengths from its registered
+        position is left there, unconstrained in this step (lambda = 0, as a vertex without
+        data). The registration left it off the surface, and the Newton steps would take it
+        to whichever surface is nearest, stretching and crushing the template around it
+        (crane held-out frames 90-128: edges stretched 1.5x or more went from under 0.01%
+        after the registration to 2-3% after the projection); ARAP carries it with its
+        neighbours instead. Other steps keep the paper's projection, which is how the
+        template follows fast motion where a registration is rejected (splitting-blob:
+        Chamfer 0.020 -> 0.048 with the limit on every step). 0: no limit (the paper).
     linearize_at : "previous" or "guess"
         Where constraint (2) is linearised: at the previous positions ``p^t`` with the 4D
         normal there (the paper), or at the initial guess on ``f(., t') = 0`` (the first-order
