@@ -430,7 +430,6 @@ def animate(
     def surfaces(frames):
         return _FrameSurfaces(frames, points, normals, bandwidth)
 
-    registering = options.large_motion and options.data_term
     slide_options = SlideOptions(
         iterations=options.iterations,
         # a vertex is observed when an input point lies within 2 edges, or within 3 point
@@ -439,8 +438,9 @@ def animate(
         substeps=options.substeps,
         rigid_guess=options.rigid_guess,
         rigid_neighbours=options.rigid_neighbours,
-        register=RegisterOptions() if registering else None,
-        projection_limit=PROJECTION_LIMIT if registering else 0.0,
+        # both act only at input times with the data term
+        register=RegisterOptions() if options.large_motion else None,
+        projection_limit=PROJECTION_LIMIT,
     )
     t0 = float(times[0])
     forward = out_times >= t0

@@ -845,8 +845,7 @@ def slide(
     frames[0] = rest
     observed[0] = observed_at(0, rest)
     current = rest
-    velocity = None
-    motion = None
+    motion = None  # the previous step's vertex velocities [N, 3]
     steps = []
     patches = None
     if options.rigid_guess and 1 < options.rigid_neighbours < len(rest):
@@ -874,7 +873,7 @@ def slide(
                 sub[s + 1],
                 options=options,
                 data_tree=tree,
-                velocity=velocity,
+                velocity=motion if options.extrapolate else None,
                 diagnostics=return_steps,
                 patches=patches,
                 surface=surface,
@@ -885,8 +884,6 @@ def slide(
                 ),
             )
             motion = (current - previous) / (sub[s + 1] - sub[s])
-            if options.extrapolate:
-                velocity = motion
             steps.append(info)
         frames[k] = current
         observed[k] = observed_at(k, current)
