@@ -105,6 +105,9 @@ OUTLIER_NEIGHBOURS = 8
 #: After a kept large-motion registration, the projection of 5.1 may move a vertex at most
 #: this many median edges (:class:`SlideOptions` ``projection_limit``).
 PROJECTION_LIMIT = 1.5
+#: With ``animate(project_smoothed=True)``: only the vertices that the trajectory smoothing
+#: moved farther than this many median edges are projected back onto the surface.
+SMOOTHED_PROJECTION_MIN = 1.0
 
 
 @dataclass(frozen=True)
@@ -380,9 +383,15 @@ def animate(
     bounds : ndarray [2, 3], optional
         Box of the urshape (default: the first frame's points).
     project_smoothed : bool
-        Project the frames back onto ``field`` after the trajectory smoothing (4 Newton
-        steps, at most 2 edges each; the template's frame stays): on fast curved motion the
-        filter cuts the corners of the trajectories, off the surface.
+        After the trajectory smoothing, project the vertices it moved farther than
+        :data:`SMOOTHED_PROJECTION_MIN` median edges back onto the surface (4 Newton steps,
+        at most 2 edges each; the template's frame stays): on fast curved motion the filter
+        cuts the corners of the trajectories, off the surface. The surface is the frame's own
+        points where the data term has them, else ``field``. The vertices the smoothing
+        moved less keep their smoothed place: projecting every vertex brought the frames'
+        noise back (``flow`` ``coherent=true`` on ``dfaust-hopping``, 20k samples: jitter
+        0.89 unprojected, 1.74 all projected, 0.94 with this rule; crane Chamfer /
+        completeness-95 0.0034 / 0.0073, 0.0031 / 0.0060 and 0.0032 / 0.0062).
     """
     started = _time.perf_counter()
     times = np.asarray(times, dtype=float)
@@ -474,12 +483,20 @@ def animate(
         fv, fo = fv[1:], fo[1:]
     parts_v.append(fv)
     parts_o.append(fo)
-    smoothed = smooth_trajectories(np.concatenate(parts_v), out_times, options.temporal_smoothing)
+    slid = np.concatenate(parts_v)
+    smoothed = smooth_trajectories(slid, out_times, options.temporal_smoothing)
     if project_smoothed:
         edge = median_edge_length(vertices, faces)
         for k in np.flatnonzero(out_times != t0):
-            smoothed[k] = project_to_surface(
-                field, smoothed[k], float(out_times[k]), iterations=4, max_step=2.0 * edge
+            moved = np.linalg.norm(smoothed[k] - slid[k], axis=1) > SMOOTHED_PROJECTION_MIN * edge
+            frame = surface_frames[k]
+            smoothed[k][moved] = project_to_surface(
+                field,
+                smoothed[k][moved],
+                float(out_times[k]),
+                iterations=4,
+                max_step=2.0 * edge,
+                surface=FrameSurface(points[frame], normals[frame], bandwidth) if frame >= 0 else None,
             )
     return AnimatedMesh(
         faces=faces,
