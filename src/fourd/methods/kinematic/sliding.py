@@ -290,11 +290,14 @@ def _rigid_increments(
         sizes,
         traces,
     )
-    values, vectors = np.linalg.eigh(A)
-    seen = values > degenerate * values[:, -1:]
-    damped = values + (regularization * traces / 6.0 + 1e-300)[:, None]
-    coefficients = np.where(seen, np.einsum("gij,gi->gj", vectors, b) / damped, 0.0)
-    x = np.einsum("gij,gj->gi", vectors, coefficients)
+    damping = regularization * traces / 6.0 + 1e-300
+    if degenerate > 0:
+        values, vectors = np.linalg.eigh(A)
+        seen = values > degenerate * values[:, -1:]
+        projected = np.einsum("gij,gi->gj", vectors, b) / (values + damping[:, None])
+        x = np.einsum("gij,gj->gi", vectors, np.where(seen, projected, 0.0))
+    else:
+        x = np.linalg.solve(A + damping[:, None, None] * np.eye(6), b[..., None])[..., 0]
     return x[:, :3] / sizes[:, None], x[:, 3:], centroids
 
 
