@@ -98,6 +98,7 @@ def run_irls(
     max_iterations: int,
     solver_options: dict,
     guess: np.ndarray | None = None,
+    regularize_towards: str = "zero",
     progress=None,
 ) -> IRLSResult:
     """Run the IRLS loop from the initial labels.
@@ -115,7 +116,13 @@ def run_irls(
     guess : float64 [S, X, Y, Z], optional
         Starting values of the free cells for the first solve (e.g. the implicit fit's
         inside indicator); flows start as "material stays in its cell".
+    regularize_towards : ``"zero"`` or ``"previous"``
+        What the regulariser ``F_r`` pulls the free cells' values towards: 0 (the paper), or
+        each solve's starting values (``guess``, then the previous iterate); see the flow
+        method's ``Options.regularize_towards``.
     """
+    if regularize_towards not in ("zero", "previous"):
+        raise ValueError(f"regularize_towards must be zero or previous, got {regularize_towards!r}")
     value = value.copy()
     full = len(offsets) == 27
     total = max(int(region.sum()), 1)
@@ -134,8 +141,13 @@ def run_irls(
         if n_x == 0:
             break
         start = _warm_start(system, x, previous_flows, previous_v, offsets)
+        f = system.f
+        if regularize_towards == "previous":
+            # F_r = reg * sum (x - x_start)^2 + reg * sum v^2: the same matrix, another right side
+            f = f.copy()
+            f[:n_x] += reg * start[:n_x]
         solution: SaddleSolution = solve_saddle(
-            system.A, system.B, system.f, system.g, x0=start, **solver_options
+            system.A, system.B, f, system.g, x0=start, **solver_options
         )
         iterations += 1
         xs = solution.u[:n_x]
