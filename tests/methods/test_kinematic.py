@@ -309,6 +309,34 @@ def test_reduced_solver_gives_the_solution_of_the_saddle_system_5():
     assert np.abs(np.einsum("ij,ij->i", normals, P) - offsets)[constrained].max() < 1e-9
 
 
+def test_elimination_order_is_a_permutation_that_reduces_fill():
+    import scipy.sparse as sp
+    import scipy.sparse.linalg as spla
+
+    from fourd.methods.kinematic.sliding import elimination_order
+
+    blob = MovingBlob()
+    V, F = _sphere_template(blob, resolution=0.3)
+    pre = K.slide_precompute(V, F)
+    n = len(V)
+    order = elimination_order(pre.laplacian)
+    assert np.array_equal(np.sort(order), np.arange(n))
+    # a scrambled vertex order, as marching cubes may leave it: the order must undo it
+    scrambled = np.random.default_rng(3).permutation(n)
+    L = (pre.laplacian + 1e-3 * sp.identity(n)).tocsr()[scrambled][:, scrambled]
+
+    def fill(matrix):
+        lu = spla.splu(
+            matrix.tocsc(), permc_spec="NATURAL", diag_pivot_thresh=0.0,
+            options={"SymmetricMode": True},
+        )
+        return lu.L.nnz
+
+    mine = elimination_order(L)
+    assert fill(L[mine][:, mine]) < 0.5 * fill(L)
+    assert np.array_equal(elimination_order(sp.identity(4, format="csr")), np.arange(4))
+
+
 @pytest.mark.slow
 def test_output_before_and_beyond_the_input_times():
     blob, seq = _blob_sequence(frames=3)
