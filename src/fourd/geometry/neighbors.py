@@ -111,7 +111,7 @@ def cell_of(x0, x1, x2, origin, cell):
     )
 
 
-@numba.njit(cache=True, parallel=True)
+@numba.njit(cache=True, parallel=True, nogil=True)
 def _grid_knn(sorted_points, ids, starts, dims, origin, cell, rows, out_d2, out_idx):
     """For the sorted points at ``rows`` (``ids`` [P]: the sorted points' original indices)
     their ``k + 1`` nearest, themselves first: squared distances and original indices into

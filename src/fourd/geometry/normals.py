@@ -49,7 +49,7 @@ def _smallest_eigenpair(C, out):
     return value
 
 
-@numba.njit(cache=True, parallel=True)
+@numba.njit(cache=True, parallel=True, nogil=True)
 def _pca_kernel(points, indices, normals, flatness):
     for p in numba.prange(len(points)):
         k = indices.shape[1]
@@ -96,7 +96,7 @@ def pca_normals(points: np.ndarray, k: int = 16, *, indices: np.ndarray | None =
     return Normals(normals, flatness)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _reverse_adjacency(indices):
     """CSR lists of the points that have each point among their neighbours."""
     count, k = indices.shape
@@ -160,7 +160,7 @@ def _heap_pop(keys, heap, where, size):
     return top, size
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _propagate_over_spanning_tree(normals, indices, pointer, members, signs, labels):
     """Prim's minimum spanning tree of the symmetric neighbour graph (weights
     ``1 - |n_i . n_j|``; a heap of the unreached points keyed by their lightest edge to the
