@@ -40,8 +40,8 @@ def _imls(x, points, normals, starts, origin, cell, dims, h, capacity, out_v, ou
     inv_h2 = 1.0 / (h * h)
     chunks = (x.shape[0] + CHUNK - 1) // CHUNK
     for chunk in numba.prange(chunks):
-        candidates = np.empty(capacity, np.int64)
-        candidate_d2 = np.empty(capacity)
+        candidates = np.empty(capacity + 1, np.int64)
+        candidate_d2 = np.empty(capacity + 1)
         for q in range(chunk * CHUNK, min((chunk + 1) * CHUNK, x.shape[0])):
             x0 = x[q, 0]
             x1 = x[q, 1]
@@ -67,18 +67,19 @@ def _imls(x, points, normals, starts, origin, cell, dims, h, capacity, out_v, ou
                             d1 = x1 - points[p, 1]
                             d2_ = x2 - points[p, 2]
                             d2 = d0 * d0 + d1 * d1 + d2_ * d2_
-                            if d2 < cutoff2:
-                                candidates[count] = p
-                                candidate_d2[count] = d2
-                                count += 1
-                                if d2 < best_d2:
-                                    best_d2 = d2
-                                    best = p
+                            # written always, kept when in range: no branch to mispredict
+                            candidates[count] = p
+                            candidate_d2[count] = d2
+                            count += d2 < cutoff2
             out_v[q] = 0.0
             out_g[q, 0] = 0.0
             out_g[q, 1] = 0.0
             out_g[q, 2] = 0.0
             out_w[q] = 0.0
+            for c in range(count):
+                if candidate_d2[c] < best_d2:
+                    best_d2 = candidate_d2[c]
+                    best = candidates[c]
             if best < 0:
                 continue
             # weighted sums over the points in range whose normal agrees with the nearest's
