@@ -407,7 +407,8 @@ def vertex_normals(
     vertices : array [N, 3] or [T, N, 3]
     faces : int array [F, 3]
     incidence : csr_matrix [N, F], optional
-        :func:`face_incidence` of ``faces``, for callers that ask many times.
+        :func:`face_incidence` of ``faces``, for callers that ask many times about
+        [T, N, 3] frames (one frame is summed by a compiled loop).
 
     Returns
     -------
@@ -417,8 +418,14 @@ def vertex_normals(
     """
     vertices = np.asarray(vertices, dtype=np.float64)
     single = vertices.ndim == 2
-    frames = vertices[None] if single else vertices
     faces = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
+    if single:
+        # one frame: compiled, no incidence product (the registration asks every iteration)
+        out = np.zeros_like(vertices)
+        if len(faces):
+            _accumulate_face_normals(np.ascontiguousarray(vertices), np.ascontiguousarray(faces), out)
+        return _unit_or_up(out)
+    frames = vertices
     count, n = frames.shape[0], frames.shape[1]
     out = np.zeros_like(frames)
     if len(faces):
@@ -431,8 +438,35 @@ def vertex_normals(
             face_normals = np.cross(b - a, c - a)  # [t, F, 3], length = twice the area
             stacked = face_normals.transpose(1, 0, 2).reshape(len(faces), -1)
             out[start : start + step] = (incidence @ stacked).reshape(n, -1, 3).transpose(1, 0, 2)
+    return _unit_or_up(out)
+
+
+def _unit_or_up(out: np.ndarray) -> np.ndarray:
+    """Vectors [..., 3] scaled to unit length; ``(0, 0, 1)`` where they vanish."""
     lengths = np.linalg.norm(out, axis=-1, keepdims=True)
     tiny = lengths[..., 0] <= 1e-300
     out = np.divide(out, lengths, out=np.zeros_like(out), where=lengths > 1e-300)
     out[tiny] = (0.0, 0.0, 1.0)
-    return out[0] if single else out
+    return out
+
+
+@numba.njit(cache=True)
+def _accumulate_face_normals(vertices, faces, out):
+    """Add each face's unnormalised normal (twice its area) to its three vertices, faces in
+    order (the sums of the incidence product)."""
+    for f in range(len(faces)):
+        a, b, c = faces[f, 0], faces[f, 1], faces[f, 2]
+        u0 = vertices[b, 0] - vertices[a, 0]
+        u1 = vertices[b, 1] - vertices[a, 1]
+        u2 = vertices[b, 2] - vertices[a, 2]
+        v0 = vertices[c, 0] - vertices[a, 0]
+        v1 = vertices[c, 1] - vertices[a, 1]
+        v2 = vertices[c, 2] - vertices[a, 2]
+        n0 = u1 * v2 - u2 * v1
+        n1 = u2 * v0 - u0 * v2
+        n2 = u0 * v1 - u1 * v0
+        for corner in range(3):
+            v = faces[f, corner]
+            out[v, 0] += n0
+            out[v, 1] += n1
+            out[v, 2] += n2

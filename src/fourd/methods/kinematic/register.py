@@ -43,14 +43,16 @@ optimization for non-rigid registration of depth scans, SGP 2008 (both-ways corr
 
 from __future__ import annotations
 
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 from scipy.spatial import cKDTree
 
-from fourd.geometry.normals import face_incidence, vertex_normals
+from fourd.geometry.normals import vertex_normals
 from fourd.methods.kinematic.arap import arap_rhs, arap_rotations
 
 
@@ -136,6 +138,57 @@ class RegisterOptions:
             raise ValueError("threshold must not be negative, unexplained_distance positive")
 
 
+@numba.njit(cache=True)
+def _targets(x, vn, points, normals, nearest_point, nearest_vertex, agreement, out):
+    """Per vertex the mean of its targets (its own position where it has none) into ``out``
+    [N, 3]: the tangent-plane projection of ``x`` [N, 3] onto its nearest point
+    (``nearest_point`` [N], ``len(points)`` for none) and the points whose nearest vertex it
+    is (``nearest_vertex`` [P], ``N`` for none), each only where the vertex normal ``vn`` and
+    the point's normal agree (cosine above ``agreement``)."""
+    n = len(x)
+    count = len(points)
+    projected = np.zeros((n, 3))
+    counts = np.zeros(n)
+    for v in range(n):
+        p = nearest_point[v]
+        if p >= count:
+            continue
+        m0 = normals[p, 0]
+        m1 = normals[p, 1]
+        m2 = normals[p, 2]
+        if vn[v, 0] * m0 + vn[v, 1] * m1 + vn[v, 2] * m2 > agreement:
+            along = (x[v, 0] - points[p, 0]) * m0 + (x[v, 1] - points[p, 1]) * m1 + (
+                x[v, 2] - points[p, 2]
+            ) * m2
+            projected[v, 0] = x[v, 0] - m0 * along
+            projected[v, 1] = x[v, 1] - m1 * along
+            projected[v, 2] = x[v, 2] - m2 * along
+            counts[v] = 1.0
+    pulls = np.zeros((n, 3))
+    for p in range(count):
+        v = nearest_vertex[p]
+        if v >= n:
+            continue
+        if vn[v, 0] * normals[p, 0] + vn[v, 1] * normals[p, 1] + vn[v, 2] * normals[p, 2] > agreement:
+            pulls[v, 0] += points[p, 0]
+            pulls[v, 1] += points[p, 1]
+            pulls[v, 2] += points[p, 2]
+            counts[v] += 1.0
+    for v in range(n):
+        if counts[v] > 0:
+            for a in range(3):
+                out[v, a] = (projected[v, a] + pulls[v, a]) / counts[v]
+        else:
+            for a in range(3):
+                out[v, a] = x[v, a]
+
+
+def _nearest_vertices(x: np.ndarray, points: np.ndarray, radius: float) -> np.ndarray:
+    """Index of the nearest of ``x`` [N, 3] within ``radius`` of each of ``points`` [P, 3]
+    (``N`` where none)."""
+    return cKDTree(x).query(points, k=1, distance_upper_bound=radius)[1]
+
+
 def unexplained_fraction(vertices: np.ndarray, points: np.ndarray, distance: float) -> float:
     """Fraction of ``points`` [P, 3] farther than ``distance`` from every one of ``vertices``."""
     if len(points) == 0 or len(vertices) == 0:
@@ -163,7 +216,6 @@ class ArapIcp:
         self.weight = options.weight * scale
         self.refine_weight = options.refine_weight * scale
         self._factors: dict[float, object] = {}
-        self._incidence = face_incidence(self.faces, len(pre.rest))
 
     def _solve(self, rhs: np.ndarray, weight: float) -> np.ndarray:
         """``(L + weight I)^-1 rhs`` [N, 3]."""
@@ -189,42 +241,36 @@ class ArapIcp:
         ``points`` [P, 3] with unit outward ``normals`` [P, 3]."""
         o = self.options
         x = np.array(vertices, dtype=np.float64, copy=True)
-        points, normals = points[:: self.options.point_stride], normals[:: self.options.point_stride]
+        stride = self.options.point_stride
+        points = np.ascontiguousarray(points[::stride], dtype=np.float64)
+        normals = np.ascontiguousarray(normals[::stride], dtype=np.float64)
         if len(points) == 0:
             return x
-        n = len(x)
         tree = cKDTree(points)
-        edge = self.pre.edge_length
-        for it in range(o.iterations + o.refine_iterations):
-            refining = it >= o.iterations
-            fraction = min(it / max(o.iterations - 1, 1), 1.0)
-            radius = edge * o.start_radius * (o.end_radius / o.start_radius) ** fraction
-            weight = self.refine_weight if refining else self.weight
-            vn = vertex_normals(x, self.faces, incidence=self._incidence)
-            targets = np.zeros((n, 3))
-            counts = np.zeros(n)
-            # model to data: the tangent-plane projection onto the nearest agreeing point
-            d, j = tree.query(x, k=1, distance_upper_bound=radius, workers=-1)
-            found = np.isfinite(d)
-            j = np.where(found, j, 0)
-            q, nq = points[j], normals[j]
-            found &= np.einsum("ij,ij->i", vn, nq) > o.normal_agreement
-            projected = x - nq * np.einsum("ij,ij->i", x - q, nq)[:, None]
-            targets[found] = projected[found]
-            counts[found] = 1.0
-            # data to model: each point pulls its nearest agreeing vertex
-            d, i = cKDTree(x).query(points, k=1, distance_upper_bound=radius, workers=-1)
-            pulled = np.isfinite(d)
-            i = np.where(pulled, i, 0)
-            pulled &= np.einsum("ij,ij->i", vn[i], normals) > o.normal_agreement
-            for axis in range(3):
-                targets[:, axis] += np.bincount(i[pulled], points[pulled, axis], minlength=n)
-            counts += np.bincount(i[pulled], minlength=n)
-            has = counts > 0
-            targets[has] /= counts[has, None]
-            targets[~has] = x[~has]
-            rhs = arap_rhs(self.pre, arap_rotations(self.pre, x)) + weight * targets
-            solved = self._solve(rhs, weight)
-            # stiff steps over-relaxed: with a stiff ARAP the iterates creep along one direction
-            x = solved + o.relaxation * (solved - x) if 0 < it and not refining else solved
+        with ThreadPoolExecutor(max_workers=1) as pool:
+            for it in range(o.iterations + o.refine_iterations):
+                x = self._iteration(it, x, tree, points, normals, pool)
         return x
+
+    def _iteration(self, it, x, tree, points, normals, pool):
+        """One ARAP-ICP iteration ``it`` from positions ``x`` [N, 3]."""
+        o = self.options
+        n = len(x)
+        edge = self.pre.edge_length
+        refining = it >= o.iterations
+        fraction = min(it / max(o.iterations - 1, 1), 1.0)
+        radius = edge * o.start_radius * (o.end_radius / o.start_radius) ** fraction
+        weight = self.refine_weight if refining else self.weight
+        # data to model (each point pulls its nearest agreeing vertex) on a second thread,
+        # while this one finds the model to data pairs (the tangent-plane projection onto
+        # the nearest agreeing point), the vertex normals and the ARAP rotations
+        to_model = pool.submit(_nearest_vertices, x, points, radius)
+        _, j = tree.query(x, k=1, distance_upper_bound=radius)
+        vn = vertex_normals(x, self.faces)
+        rotations = arap_rotations(self.pre, x)
+        targets = np.empty((n, 3))
+        _targets(x, vn, points, normals, j, to_model.result(), o.normal_agreement, targets)
+        rhs = arap_rhs(self.pre, rotations) + weight * targets
+        solved = self._solve(rhs, weight)
+        # stiff steps over-relaxed: with a stiff ARAP the iterates creep along one direction
+        return solved + o.relaxation * (solved - x) if 0 < it and not refining else solved
