@@ -97,3 +97,24 @@ def test_propagation_orients_every_separate_part_outwards():
     normals = orient_by_propagation(points, unoriented * flips[:, None], indices)
     facing = np.einsum("ij,ij->i", normals, outward)
     assert np.mean(facing[:2000] > 0.9) > 0.99 and np.mean(facing[2000:] > 0.9) > 0.99
+
+
+def test_vertex_normals_of_one_frame_and_of_frames_agree_and_point_outwards():
+    import trimesh
+
+    from fourd.geometry.normals import vertex_normals
+
+    sphere = trimesh.creation.icosphere(subdivisions=3)
+    rng = np.random.default_rng(2)
+    vertices = np.asarray(sphere.vertices) * (1.0 + 0.05 * rng.normal(size=(len(sphere.vertices), 1)))
+    # an unused vertex, which gets (0, 0, 1)
+    vertices = np.vstack([vertices, [[5.0, 5.0, 5.0]]])
+    faces = np.asarray(sphere.faces)
+    one = vertex_normals(vertices, faces)
+    many = vertex_normals(np.stack([vertices, 2.0 * vertices]), faces)
+    np.testing.assert_allclose(one, many[0], atol=1e-15)
+    np.testing.assert_allclose(one, many[1], atol=1e-12)
+    np.testing.assert_allclose(np.linalg.norm(one, axis=1), 1.0)
+    np.testing.assert_array_equal(one[-1], [0.0, 0.0, 1.0])
+    radial = vertices[:-1] / np.linalg.norm(vertices[:-1], axis=1, keepdims=True)
+    assert np.einsum("ij,ij->i", one[:-1], radial).min() > 0.8
