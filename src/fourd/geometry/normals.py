@@ -382,33 +382,13 @@ def nearest_normals(points: np.ndarray, reference_points: np.ndarray, reference_
     return reference_normals[index]
 
 
-#: Floats per block when accumulating mesh vertex normals over many frames.
-_NORMALS_CHUNK = 20_000_000
-
-
-def face_incidence(faces: np.ndarray, count: int) -> sp.csr_matrix:
-    """Vertex x face incidence [count, F] of a triangle mesh (1 where the face uses the
-    vertex): summing face vectors onto their vertices is one product with it."""
-    faces = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
-    corners = faces.ravel()
-    return sp.csr_matrix(
-        (np.ones(len(corners)), (corners, np.repeat(np.arange(len(faces)), 3))),
-        shape=(count, len(faces)),
-    )
-
-
-def vertex_normals(
-    vertices: np.ndarray, faces: np.ndarray, *, incidence: sp.csr_matrix | None = None
-) -> np.ndarray:
+def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     """Area-weighted vertex normals of a triangle mesh.
 
     Parameters
     ----------
     vertices : array [N, 3] or [T, N, 3]
     faces : int array [F, 3]
-    incidence : csr_matrix [N, F], optional
-        :func:`face_incidence` of ``faces``, for callers that ask many times about
-        [T, N, 3] frames (one frame is summed by a compiled loop).
 
     Returns
     -------
@@ -417,43 +397,25 @@ def vertex_normals(
         around each vertex. Vertices without faces, or whose faces cancel, get ``(0, 0, 1)``.
     """
     vertices = np.asarray(vertices, dtype=np.float64)
-    single = vertices.ndim == 2
-    faces = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
-    if single:
-        # one frame: compiled, no incidence product (the registration asks every iteration)
-        out = np.zeros_like(vertices)
-        if len(faces):
-            _accumulate_face_normals(np.ascontiguousarray(vertices), np.ascontiguousarray(faces), out)
-        return _unit_or_up(out)
-    frames = vertices
-    count, n = frames.shape[0], frames.shape[1]
+    faces = np.ascontiguousarray(np.asarray(faces, dtype=np.int64).reshape(-1, 3))
+    frames = vertices[None] if vertices.ndim == 2 else vertices
+    if len(faces) and (faces.min() < 0 or faces.max() >= frames.shape[1]):
+        raise ValueError(f"faces index vertices outside 0..{frames.shape[1] - 1}")
     out = np.zeros_like(frames)
     if len(faces):
-        if incidence is None:
-            incidence = face_incidence(faces, n)
-        step = max(1, _NORMALS_CHUNK // max(1, 3 * len(faces)))
-        for start in range(0, count, step):
-            block = frames[start : start + step]
-            a, b, c = block[:, faces[:, 0]], block[:, faces[:, 1]], block[:, faces[:, 2]]
-            face_normals = np.cross(b - a, c - a)  # [t, F, 3], length = twice the area
-            stacked = face_normals.transpose(1, 0, 2).reshape(len(faces), -1)
-            out[start : start + step] = (incidence @ stacked).reshape(n, -1, 3).transpose(1, 0, 2)
-    return _unit_or_up(out)
-
-
-def _unit_or_up(out: np.ndarray) -> np.ndarray:
-    """Vectors [..., 3] scaled to unit length; ``(0, 0, 1)`` where they vanish."""
+        for t in range(len(frames)):
+            _accumulate_face_normals(np.ascontiguousarray(frames[t]), faces, out[t])
     lengths = np.linalg.norm(out, axis=-1, keepdims=True)
     tiny = lengths[..., 0] <= 1e-300
     out = np.divide(out, lengths, out=np.zeros_like(out), where=lengths > 1e-300)
     out[tiny] = (0.0, 0.0, 1.0)
-    return out
+    return out[0] if vertices.ndim == 2 else out
 
 
 @numba.njit(cache=True)
 def _accumulate_face_normals(vertices, faces, out):
-    """Add each face's unnormalised normal (twice its area) to its three vertices, faces in
-    order (the sums of the incidence product)."""
+    """Add each face's unnormalised normal (twice its area) to ``out`` [N, 3] at its three
+    vertices, faces in order."""
     for f in range(len(faces)):
         a, b, c = faces[f, 0], faces[f, 1], faces[f, 2]
         u0 = vertices[b, 0] - vertices[a, 0]
