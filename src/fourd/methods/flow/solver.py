@@ -68,6 +68,12 @@ def saddle_matrix(A: sp.spmatrix, B: sp.spmatrix, softness: float = 0.0) -> sp.c
     return sp.bmat([[A, B.T], [B, lower]], format="csr")
 
 
+# Direct interpolation instead of pyamg's default classical one: on a captured crane system at
+# resolution 64 (1.7M unknowns) the set-up takes 8.4 s instead of 13.5 s and 60 MINRES steps
+# reach a relative residual of 2.5e-2 instead of 2.6e-2, at the same cost per step.
+_AMG_SETUP = {"max_coarse": 500, "interpolation": "direct"}
+
+
 def _inner_operator(
     S: sp.csr_matrix, inner: Inner, inner_rtol: float, counter: list[int], inner_maxiter: int
 ):
@@ -76,7 +82,7 @@ def _inner_operator(
         # one V-cycle is a rough inverse anyway: in single precision it costs 16% less per
         # MINRES step with the same residual (captured crane system: 60 steps 9.3 -> 7.8 s,
         # residual 1.1e-2 both)
-        ml = pyamg.ruge_stuben_solver(S.astype(np.float32), max_coarse=500)
+        ml = pyamg.ruge_stuben_solver(S.astype(np.float32), **_AMG_SETUP)
         cycle = ml.aspreconditioner(cycle="V")
 
         def apply(r):
@@ -85,7 +91,7 @@ def _inner_operator(
 
         return apply
     if inner == "cg-amg":
-        ml = pyamg.ruge_stuben_solver(S, max_coarse=500)
+        ml = pyamg.ruge_stuben_solver(S, **_AMG_SETUP)
         precond = ml.aspreconditioner(cycle="V")
     elif inner == "cg-ilu":
         ilu = spilu(S.tocsc(), drop_tol=0.01, fill_factor=4)
