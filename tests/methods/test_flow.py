@@ -22,7 +22,13 @@ from fourd.methods.flow import (
     run,
     solve_saddle,
 )
-from fourd.methods.flow.grid import build_grid, carve_visual_hull, speed_prune
+from fourd.methods.flow.grid import (
+    build_grid,
+    carve_visual_hull,
+    inside_seeds,
+    speed_prune,
+    unsigned_distance,
+)
 from fourd.methods.flow.post import drop_cavities
 from fourd.methods.flow.solver import saddle_matrix
 from fourd.methods.flow.system import build_system, neighbourhood
@@ -189,6 +195,20 @@ def test_visual_hull_with_a_rim_is_tight_above_a_grazing_top():
     assert not wide[radius < 0.5].any() and not tight[radius < 0.5 - 0.5 * grid.h].any()
     assert (wide <= tight).all()
     assert tight[above].all() and not wide[above].all()
+
+
+def test_distance_inside_the_hull_only_gives_the_same_seeds():
+    """The hull's seeds need the distance to the data only at the cells not carved: computed
+    there alone it equals the full one, and the seeds (the sphere's centre) are the same."""
+    points = _ellipsoid_scan(np.array([0.4, 0.4, 0.4]), hole=False)
+    grid = build_grid(np.array([[-0.5] * 3, [0.5] * 3]), np.array([0.0]), resolution=16, substeps=1)
+    outside = np.linalg.norm(grid.centres(), axis=-1) > 0.42
+    full = unsigned_distance(grid, points)
+    inside = unsigned_distance(grid, points, where=~outside)
+    assert np.array_equal(inside[~outside], full[~outside]) and np.isinf(inside[outside]).all()
+    seeds = inside_seeds(inside, outside, minimum=1.5 * grid.h)
+    assert seeds.any() and np.array_equal(seeds, inside_seeds(full, outside, minimum=1.5 * grid.h))
+    assert np.linalg.norm(grid.centres()[seeds], axis=-1).max() < 2 * grid.h
 
 
 def test_speed_prune_bounded_speed():

@@ -442,7 +442,8 @@ def run(seq: PointCloudSequence, options: Options | None = None) -> FlowResult:
                 grid, pts, slice_sensors[s], spacing=spacing, margin=1.5 * h, rim=1
             )
         data[s] = cells
-        distance = unsigned_distance(grid, pts)
+        # only the cells inside the hull can be seeds
+        distance = unsigned_distance(grid, pts, where=~(carved | cells))
         seeds[s] = inside_seeds(distance, carved | cells, minimum=1.5 * h)
     seconds["hull"] = time.perf_counter() - clock
 

@@ -263,10 +263,20 @@ def carve_by_distance(grid: SpaceTimeGrid, points: np.ndarray, *, distance: floa
     return np.isin(labels, keep)
 
 
-def unsigned_distance(grid: SpaceTimeGrid, points: np.ndarray) -> np.ndarray:
-    """Distance from every cell centre to the nearest point, ``[X, Y, Z]``."""
-    d, _ = cKDTree(points).query(grid.centres().reshape(-1, 3), workers=-1)
-    return d.reshape(grid.shape)
+def unsigned_distance(
+    grid: SpaceTimeGrid, points: np.ndarray, where: np.ndarray | None = None
+) -> np.ndarray:
+    """Distance from every cell centre to the nearest point, ``[X, Y, Z]``; with ``where``
+    (bool ``[X, Y, Z]``) only at those cells, ``inf`` elsewhere."""
+    centres = grid.centres().reshape(-1, 3)
+    if where is None:
+        d, _ = cKDTree(points).query(centres, workers=-1)
+        return d.reshape(grid.shape)
+    where = where.ravel()
+    distance = np.full(len(centres), np.inf)
+    d, _ = cKDTree(points).query(centres[where], workers=-1)
+    distance[where] = d
+    return distance.reshape(grid.shape)
 
 
 def inside_seeds(distance: np.ndarray, outside: np.ndarray, *, minimum: float) -> np.ndarray:
