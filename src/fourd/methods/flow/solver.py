@@ -154,7 +154,10 @@ def solve_saddle(
     n, m = A.shape[0], B.shape[0]
     K = saddle_matrix(A, B, softness)
     b = np.concatenate([f, g])
-    S = (A + (B.T @ B) / gamma).tocsr()
+    BtB = (B.T @ B).tocsr()
+    if gamma != 1.0:
+        BtB.data /= gamma
+    S = (A + BtB).tocsr()
     counter = [0]
     inner_apply = _inner_operator(S, inner, inner_rtol, counter, inner_maxiter)
 
