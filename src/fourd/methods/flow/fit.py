@@ -117,7 +117,11 @@ def fit_implicit(
             cols.append(idx)
             vals.append(np.full(len(idx), weight))
             np.add.at(rhs, idx, weight * 1.0)
-    # data points
+    # data points: point p's value is the row sum_k w_pk f(corner_pk) of a sparse stencil
+    # W [P, m] (the carved corners' known +1 moved into const_p), energy pw_p (W f + const)_p^2
+    # -> W^T diag(pw) W in the matrix, -W^T (pw const) on the right side
+    stencil_rows, stencil_cols, stencil_weights, point_weights, point_consts = [], [], [], [], []
+    first = 0
     for s, pts in enumerate(points):
         if pts is None or len(pts) == 0:
             continue
@@ -126,19 +130,28 @@ def fit_implicit(
         cell = grid.cell_of(pts)
         key = (cell[:, 0] * grid.shape[1] + cell[:, 1]) * grid.shape[2] + cell[:, 2]
         _, inverse, counts = np.unique(key, return_inverse=True, return_counts=True)
-        pw = data_weight / counts[inverse]
+        point_weights.append(data_weight / counts[inverse])
         known = ~unknown[index]
-        const = (weight * known).sum(axis=1)  # value +1 at carved corners
-        c = np.where(known, 0, col[index])
-        wk = np.where(known, 0.0, weight)
-        # row r = sum_k wk c_k + const; energy pw r^2
-        rr = np.repeat(c[:, :, None], 8, axis=2)
-        cc = np.repeat(c[:, None, :], 8, axis=1)
-        vv = pw[:, None, None] * wk[:, :, None] * wk[:, None, :]
-        rows.append(rr.ravel())
-        cols.append(cc.ravel())
-        vals.append(vv.ravel())
-        np.add.at(rhs, c.ravel(), (-pw[:, None] * wk * const[:, None]).ravel())
+        point_consts.append((weight * known).sum(axis=1))  # value +1 at carved corners
+        point, corner = np.nonzero(~known)
+        stencil_rows.append(first + point)
+        stencil_cols.append(col[index[point, corner]])
+        stencil_weights.append(weight[point, corner])
+        first += len(pts)
+    if first:
+        stencil = sp.csr_matrix(
+            (
+                np.concatenate(stencil_weights),
+                (np.concatenate(stencil_rows), np.concatenate(stencil_cols)),
+            ),
+            shape=(first, m),
+        )
+        pw = np.concatenate(point_weights)
+        data_term = (stencil.T @ (sp.diags(pw) @ stencil)).tocoo()
+        rows.append(data_term.row)
+        cols.append(data_term.col)
+        vals.append(data_term.data)
+        rhs -= stencil.T @ (pw * np.concatenate(point_consts))
     seeds = np.flatnonzero(inside.ravel() & unknown)
     rows.append(col[seeds])
     cols.append(col[seeds])
