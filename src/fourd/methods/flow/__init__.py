@@ -174,6 +174,11 @@ class Options:
         completeness-95 at 60 and 40: crane 0.0026 / 0.0066 both, dfaust-hopping 0.0031 /
         0.0111 and 0.0031 / 0.0112, squash-ball 0.0040 / 0.0133 and 0.0041 / 0.0134); 30 gave
         squash-ball 0.0054 / 0.0110.
+    reuse_interpolation : bool
+        With ``inner="amg"``, IRLS iterations after the first keep the previous V-cycle's
+        AMG interpolation, restricted to the unknowns still free, and only recompute the
+        coarse matrices (half the set-up; the same MINRES residual on the captured crane
+        systems, see :func:`.solver.solve_saddle`). False: a new set-up every iteration.
     outward_cosine : float
         A face of a data cell is an outward boundary face (first-iteration weight 0) when the
         cell's mean normal makes a cosine above this with the face direction.
@@ -251,6 +256,7 @@ class Options:
     inner_rtol: float = 1e-6
     inner: Literal["cg-amg", "cg-ilu", "amg"] = "amg"
     max_outer: int = 40
+    reuse_interpolation: bool = True
     outward_cosine: float = 0.5
     fit_level: float = 0.5
     outlier_factor: float = 3.0
@@ -507,6 +513,7 @@ def run(seq: PointCloudSequence, options: Options | None = None) -> FlowResult:
             solver_options=solver_options,
             guess=(fit.values < 0).astype(float),
             regularize_towards=options.regularize_towards,
+            reuse_interpolation=options.reuse_interpolation,
             progress=bar,
         )
     finally:

@@ -82,6 +82,20 @@ def _warm_start(
     return start
 
 
+def _previous_unknowns(system, previous_free, previous_flows: Flows) -> np.ndarray | None:
+    """The index of each primal unknown of ``system`` (free cells, then flows) among the
+    previous system's, or None if one of them is new."""
+    cell = np.searchsorted(previous_free, system.free)
+    if len(system.free) and (
+        cell.max() >= len(previous_free) or (previous_free[cell] != system.free).any()
+    ):
+        return None
+    flow = flow_lookup(previous_flows, system.flows.source, system.flows.offset)
+    if (flow < 0).any():
+        return None
+    return np.concatenate([cell, len(previous_free) + flow])
+
+
 def run_irls(
     value: np.ndarray,
     weights: np.ndarray,
@@ -99,6 +113,7 @@ def run_irls(
     solver_options: dict,
     guess: np.ndarray | None = None,
     regularize_towards: str = "zero",
+    reuse_interpolation: bool = True,
     progress=None,
 ) -> IRLSResult:
     """Run the IRLS loop from the initial labels.
@@ -120,6 +135,10 @@ def run_irls(
         What the regulariser ``F_r`` pulls the free cells' values towards: 0 (the paper), or
         each solve's starting values (``guess``, then the previous iterate); see the flow
         method's ``Options.regularize_towards``.
+    reuse_interpolation : bool
+        From the second iteration on, the inner V-cycle keeps the previous solve's AMG
+        interpolation, restricted to the unknowns still free (see
+        :func:`.solver.restricted_hierarchy`); a new set-up only if an unknown is new.
     """
     if regularize_towards not in ("zero", "previous"):
         raise ValueError(f"regularize_towards must be zero or previous, got {regularize_towards!r}")
@@ -129,6 +148,7 @@ def run_irls(
     x = np.where(np.isnan(value), 0.5 if guess is None else guess, value)
     history = []
     previous_flows, previous_v = None, None
+    previous_free, previous_interpolations = None, None
     band = clamp
     iterations = 0
     for iteration in range(max_iterations):
@@ -146,9 +166,15 @@ def run_irls(
             # F_r = reg * sum (x - x_start)^2 + reg * sum v^2: the same matrix, another right side
             f = f.copy()
             f[:n_x] += reg * start[:n_x]
+        reuse = None
+        if reuse_interpolation and previous_interpolations is not None:
+            rows = _previous_unknowns(system, previous_free, previous_flows)
+            if rows is not None:
+                reuse = (previous_interpolations, rows)
         solution: SaddleSolution = solve_saddle(
-            system.A, system.B, f, system.g, x0=start, **solver_options
+            system.A, system.B, f, system.g, x0=start, reuse=reuse, **solver_options
         )
+        previous_free, previous_interpolations = system.free, solution.interpolations
         iterations += 1
         xs = solution.u[:n_x]
         x.ravel()[system.free] = xs
