@@ -95,6 +95,8 @@ def restricted_hierarchy(
     for P in interpolations:
         P = sp.csr_matrix(P)[rows]
         used = np.flatnonzero(np.diff(P.tocsc().indptr))
+        if len(used) == 0:  # nothing left to interpolate from: A is the coarsest level
+            break
         P = P[:, used].tocsr()
         current = MultilevelSolver.Level()
         current.A, current.P, current.R = A, P, P.T.tocsr()
