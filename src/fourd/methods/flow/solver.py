@@ -94,7 +94,7 @@ def restricted_hierarchy(
     A = S
     for P in interpolations:
         P = sp.csr_matrix(P)[rows]
-        used = np.flatnonzero(np.diff(P.tocsc().indptr))
+        used = np.flatnonzero(np.bincount(P.indices, minlength=P.shape[1]))
         if len(used) == 0:  # nothing left to interpolate from: A is the coarsest level
             break
         P = P[:, used].tocsr()
