@@ -32,7 +32,8 @@ from fourd.methods.flow.grid import (
 )
 from fourd.methods.flow.irls import _previous_unknowns
 from fourd.methods.flow.post import drop_cavities
-from fourd.methods.flow.solver import saddle_matrix
+from fourd.methods.flow.solver import amg_hierarchy, saddle_matrix
+from fourd.methods.flow.sparse import csr_product
 from fourd.methods.flow.system import build_system, neighbourhood
 
 # cameras below the object: the top is never seen (a persistent hole), consistently with carving
@@ -181,6 +182,51 @@ def test_minres_reusing_an_earlier_interpolation_solves_the_smaller_system():
         assert np.abs(solution.u[:cells] - exact[:cells]).max() < 0.03
     # a system with an unknown the earlier one did not have cannot reuse it
     assert _previous_unknowns(first, second.free, second.flows) is None
+
+
+def test_csr_product_matches_scipy():
+    """The parallel sparse product: the same matrix as scipy's, also with empty rows and
+    columns, mixed precisions and more rows than one chunk each."""
+    rng = np.random.default_rng(0)
+    a = sp.random(3000, 400, density=0.01, random_state=1, format="csr")
+    b = sp.random(400, 2500, density=0.02, random_state=2, format="csr").astype(np.float32)
+    a = sp.csr_matrix(a.multiply(rng.random(a.shape[0])[:, None] > 0.2))  # empty rows
+    a.eliminate_zeros()
+    product = csr_product(a, b)
+    expected = (a @ b).tocsr()
+    assert product.shape == expected.shape and product.dtype == np.float64
+    assert abs(product - expected).max() <= 1e-6 * abs(expected).max()
+    assert product.nnz == expected.nnz  # random data: no cancellation to an explicit zero
+    symmetric = csr_product(b.T, b)
+    assert symmetric.dtype == np.float32
+    assert abs(symmetric - (b.T @ b)).max() <= 1e-5 * abs(symmetric).max()
+    assert csr_product(sp.csr_matrix((5, 4)), sp.csr_matrix((4, 3))).nnz == 0
+    with pytest.raises(ValueError, match="do not match"):
+        csr_product(a, a)
+
+
+def test_amg_hierarchy_is_pyamgs_and_a_symmetric_v_cycle():
+    """The V-cycle hierarchy equals pyamg's Ruge-Stueben one (direct interpolation) up to
+    rounding, and its V-cycle is a symmetric operator (MINRES needs an SPD preconditioner)."""
+    import pyamg
+
+    value = np.full((3, 12, 12, 12), np.nan)
+    value[:, [0, -1], :, :] = value[:, :, [0, -1], :] = value[:, :, :, [0, -1]] = 0.0
+    value[:, 5:7, 5:7, 5:7] = 1.0
+    system = build_system(value, np.ones((3, *value.shape)), neighbourhood(7), alpha=1 / 3,
+                          reg=0.0025)
+    S = (system.A + system.B.T @ system.B).tocsr()
+    mine = amg_hierarchy(S, max_coarse=50)
+    theirs = pyamg.ruge_stuben_solver(S, max_coarse=50, interpolation="direct")
+    assert len(mine.levels) == len(theirs.levels) >= 3
+    for ours, reference in zip(mine.levels, theirs.levels, strict=True):
+        assert ours.A.shape == reference.A.shape
+        assert abs(ours.A - reference.A).max() <= 1e-9 * abs(reference.A).max()
+    cycle = mine.aspreconditioner(cycle="V")
+    rng = np.random.default_rng(0)
+    x, y = rng.standard_normal((2, S.shape[0]))
+    assert abs(x @ cycle.matvec(y) - y @ cycle.matvec(x)) <= 1e-9 * abs(x @ cycle.matvec(x))
+    assert x @ cycle.matvec(x) > 0
 
 
 def test_saddle_solver_on_known_answer():

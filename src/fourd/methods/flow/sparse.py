@@ -1,0 +1,107 @@
+"""Sparse matrix products on all cores, for the AMG set-up of the flow solver.
+
+Why: scipy's sparse product runs on one core, and the set-up of the flow's V-cycle is mostly
+products (``B^T B`` and the Galerkin products ``P^T A P`` of every level): about 20% of the
+flow stage at resolution 64. :func:`csr_product` is Gustavson's row-by-row product, rows
+split into chunks that run in parallel; each chunk keeps one dense marker of the output
+columns. Two passes: the row lengths, then the entries. Column indices within a row come in
+first-touch order (not sorted), as from scipy.
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+import scipy.sparse as sp
+
+#: Chunks per thread (rows are uneven: the coarse levels are denser towards some rows).
+CHUNKS_PER_THREAD = 8
+
+
+@numba.njit(cache=True, parallel=True)
+def _row_lengths(a_indptr, a_indices, b_indptr, b_indices, n_cols, bounds):
+    lengths = np.zeros(len(a_indptr) - 1, np.int64)
+    for c in numba.prange(len(bounds) - 1):
+        marker = np.full(n_cols, -1, np.int64)
+        for i in range(bounds[c], bounds[c + 1]):
+            count = 0
+            for jj in range(a_indptr[i], a_indptr[i + 1]):
+                k = a_indices[jj]
+                for kk in range(b_indptr[k], b_indptr[k + 1]):
+                    col = b_indices[kk]
+                    if marker[col] != i:
+                        marker[col] = i
+                        count += 1
+            lengths[i] = count
+    return lengths
+
+
+@numba.njit(cache=True, parallel=True)
+def _fill(
+    a_indptr, a_indices, a_data, b_indptr, b_indices, b_data, n_cols, bounds,
+    c_indptr, c_indices, c_data,
+):
+    for c in numba.prange(len(bounds) - 1):
+        # marker[col]: where col's entry of the current row is (below the row start: none yet)
+        marker = np.full(n_cols, -1, np.int64)
+        for i in range(bounds[c], bounds[c + 1]):
+            start = c_indptr[i]
+            end = start
+            for jj in range(a_indptr[i], a_indptr[i + 1]):
+                k = a_indices[jj]
+                value = a_data[jj]
+                for kk in range(b_indptr[k], b_indptr[k + 1]):
+                    col = b_indices[kk]
+                    at = marker[col]
+                    if at < start:
+                        marker[col] = end
+                        c_indices[end] = col
+                        c_data[end] = value * b_data[kk]
+                        end += 1
+                    else:
+                        c_data[at] += value * b_data[kk]
+
+
+def _row_bounds(indptr: np.ndarray, chunks: int) -> np.ndarray:
+    """Row ranges of about equal nonzero counts (``chunks + 1`` increasing bounds)."""
+    n = len(indptr) - 1
+    targets = np.linspace(0, indptr[-1], chunks + 1)
+    bounds = np.searchsorted(indptr, targets, side="left")
+    bounds[0], bounds[-1] = 0, n
+    return np.unique(bounds).astype(np.int64)
+
+
+def csr_product(a: sp.spmatrix, b: sp.spmatrix) -> sp.csr_matrix:
+    """``a @ b`` for sparse ``a`` [n, k] and ``b`` [k, m] as CSR, in the result type of their
+    dtypes; explicit zeros from cancellation are kept (as in scipy's product).
+
+    Examples
+    --------
+    >>> import numpy as np, scipy.sparse as sp
+    >>> a = sp.random(30, 20, density=0.2, random_state=0, format="csr")
+    >>> b = sp.random(20, 25, density=0.2, random_state=1, format="csr")
+    >>> bool(abs(csr_product(a, b) - a @ b).max() < 1e-12)
+    True
+    """
+    a = sp.csr_matrix(a)
+    b = sp.csr_matrix(b)
+    if a.shape[1] != b.shape[0]:
+        raise ValueError(f"shapes {a.shape} and {b.shape} do not match")
+    dtype = np.result_type(a.dtype, b.dtype)
+    n, m = a.shape[0], b.shape[1]
+    if n == 0 or m == 0 or a.nnz == 0 or b.nnz == 0:
+        return sp.csr_matrix((n, m), dtype=dtype)
+    a_data = a.data.astype(dtype, copy=False)
+    b_data = b.data.astype(dtype, copy=False)
+    bounds = _row_bounds(a.indptr, CHUNKS_PER_THREAD * numba.get_num_threads())
+    lengths = _row_lengths(a.indptr, a.indices, b.indptr, b.indices, m, bounds)
+    indptr = np.zeros(n + 1, np.int64)
+    np.cumsum(lengths, out=indptr[1:])
+    index_type = np.int32 if indptr[-1] < np.iinfo(np.int32).max and m < 2**31 else np.int64
+    indices = np.empty(indptr[-1], index_type)
+    data = np.empty(indptr[-1], dtype)
+    _fill(
+        a.indptr, a.indices, a_data, b.indptr, b.indices, b_data, m, bounds,
+        indptr, indices, data,
+    )
+    return sp.csr_matrix((data, indices, indptr.astype(index_type, copy=False)), shape=(n, m))
