@@ -32,7 +32,7 @@ from fourd.methods.flow.grid import (
 )
 from fourd.methods.flow.irls import _previous_unknowns
 from fourd.methods.flow.post import drop_cavities
-from fourd.methods.flow.solver import amg_hierarchy, saddle_matrix
+from fourd.methods.flow.solver import amg_hierarchy, saddle_matrix, v_cycle
 from fourd.methods.flow.sparse import csr_product
 from fourd.methods.flow.system import build_system, neighbourhood
 
@@ -225,6 +225,7 @@ def test_amg_hierarchy_is_pyamgs_and_a_symmetric_v_cycle():
     cycle = mine.aspreconditioner(cycle="V")
     rng = np.random.default_rng(0)
     x, y = rng.standard_normal((2, S.shape[0]))
+    assert np.allclose(v_cycle(mine, x), cycle.matvec(x), rtol=0, atol=1e-12 * abs(x).max())
     assert abs(x @ cycle.matvec(y) - y @ cycle.matvec(x)) <= 1e-9 * abs(x @ cycle.matvec(x))
     assert x @ cycle.matvec(x) > 0
 
