@@ -33,7 +33,7 @@ from fourd.methods.flow.grid import (
 from fourd.methods.flow.irls import _previous_unknowns
 from fourd.methods.flow.post import drop_cavities
 from fourd.methods.flow.solver import amg_hierarchy, saddle_matrix, v_cycle
-from fourd.methods.flow.sparse import csr_product
+from fourd.methods.flow.sparse import csr_hstack, csr_product
 from fourd.methods.flow.system import build_system, neighbourhood
 
 # cameras below the object: the top is never seen (a persistent hole), consistently with carving
@@ -203,6 +203,28 @@ def test_csr_product_matches_scipy():
     assert csr_product(sp.csr_matrix((5, 4)), sp.csr_matrix((4, 3))).nnz == 0
     with pytest.raises(ValueError, match="do not match"):
         csr_product(a, a)
+    addend = sp.random(2500, 2500, density=0.001, random_state=3, format="csr")
+    fused = csr_product(b.T, b, add=addend)
+    assert abs(fused - (b.T @ b + addend)).max() <= 1e-5 * abs(fused).max()
+    with pytest.raises(ValueError, match="addend"):
+        csr_product(b.T, b, add=a)
+
+
+def test_csr_hstack_and_saddle_matrix_match_scipy():
+    a = sp.random(40, 30, density=0.1, random_state=0, format="csr")
+    b = sp.random(40, 7, density=0.3, random_state=1, format="csr")
+    empty = sp.csr_matrix((40, 5))
+    stacked = csr_hstack([a, empty, b])
+    assert stacked.shape == (40, 42)
+    assert (stacked != sp.hstack([a, empty, b])).nnz == 0
+    with pytest.raises(ValueError, match="row counts"):
+        csr_hstack([a, b.T])
+    A = (a.T @ a + sp.identity(30)).tocsr()
+    B = sp.random(12, 30, density=0.2, random_state=2, format="csr")
+    for softness in (0.0, 1e-3):
+        lower = -softness * sp.identity(12) if softness else sp.csr_matrix((12, 12))
+        expected = sp.bmat([[A, B.T], [B, lower]])
+        assert abs(saddle_matrix(A, B, softness) - expected).max() == 0
 
 
 def test_amg_hierarchy_is_pyamgs_and_a_symmetric_v_cycle():

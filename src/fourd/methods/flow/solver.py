@@ -42,7 +42,7 @@ from pyamg.relaxation.smoothing import change_smoothers
 from pyamg.strength import classical_strength_of_connection
 from scipy.sparse.linalg import LinearOperator, cg, minres, spilu
 
-from fourd.methods.flow.sparse import csr_product
+from fourd.methods.flow.sparse import csr_hstack, csr_product
 
 log = logging.getLogger("fourd.methods.flow.solver")
 
@@ -75,7 +75,7 @@ def saddle_matrix(A: sp.spmatrix, B: sp.spmatrix, softness: float = 0.0) -> sp.c
     """``[[A, B^T], [B, -softness I]]`` as one sparse matrix."""
     m = B.shape[0]
     lower = -softness * sp.identity(m, format="csr") if softness else sp.csr_matrix((m, m))
-    return sp.bmat([[A, B.T], [B, lower]], format="csr")
+    return sp.vstack([csr_hstack([A, B.T]), csr_hstack([B, lower])], format="csr")
 
 
 # Direct interpolation instead of pyamg's default classical one: on a captured crane system at
@@ -284,10 +284,9 @@ def solve_saddle(
     # the captured crane system at resolution 64, the same entries)
     precision = np.float32 if inner == "amg" else np.float64
     B_inner = B.astype(precision)
-    BtB = csr_product(B_inner.T, B_inner)
     if gamma != 1.0:
-        BtB.data /= gamma
-    S = (A.astype(precision) + BtB).tocsr()
+        B_inner = B_inner * precision(1.0 / np.sqrt(gamma))
+    S = csr_product(B_inner.T, B_inner, add=A.astype(precision))
     counter = [0]
     inner_apply, interpolations = _inner_operator(
         S, inner, inner_rtol, counter, inner_maxiter, reuse if inner == "amg" else None
