@@ -3,7 +3,7 @@
 Why: scipy's sparse product runs on one core, and the set-up of the flow's V-cycle is mostly
 products (``B^T B`` and the Galerkin products ``P^T A P`` of every level): about 20% of the
 flow stage at resolution 64. :func:`csr_product` is Gustavson's row-by-row product, rows
-split into chunks that run in parallel; each chunk keeps one dense marker of the output
+split into chunks that run in parallel; each thread keeps one dense marker of the output
 columns. Two passes: the row lengths, then the entries. Column indices within a row come in
 first-touch order (not sorted), as from scipy.
 """
@@ -19,10 +19,12 @@ CHUNKS_PER_THREAD = 8
 
 
 @numba.njit(cache=True, parallel=True)
-def _row_lengths(a_indptr, a_indices, b_indptr, b_indices, d_indptr, d_indices, n_cols, bounds):
+def _row_lengths(
+    a_indptr, a_indices, b_indptr, b_indices, d_indptr, d_indices, bounds, last_row,
+):
     lengths = np.zeros(len(a_indptr) - 1, np.int64)
     for c in numba.prange(len(bounds) - 1):
-        marker = np.full(n_cols, -1, np.int64)
+        marker = last_row[numba.get_thread_id()]
         for i in range(bounds[c], bounds[c + 1]):
             count = 0
             for dd in range(d_indptr[i], d_indptr[i + 1]):
@@ -44,37 +46,38 @@ def _row_lengths(a_indptr, a_indices, b_indptr, b_indices, d_indptr, d_indices, 
 @numba.njit(cache=True, parallel=True)
 def _fill(
     a_indptr, a_indices, a_data, b_indptr, b_indices, b_data, d_indptr, d_indices, d_data,
-    n_cols, bounds, c_indptr, c_indices, c_data,
+    bounds, last_row, position, c_indptr, c_indices, c_data,
 ):
     for c in numba.prange(len(bounds) - 1):
-        # marker[col]: where col's entry of the current row is (below the row start: none yet)
-        marker = np.full(n_cols, -1, np.int64)
+        thread = numba.get_thread_id()
+        # marker[col] == i: column col of row i is already at position[col]
+        marker = last_row[thread]
+        at = position[thread]
         for i in range(bounds[c], bounds[c + 1]):
-            start = c_indptr[i]
-            end = start
+            end = c_indptr[i]
             for dd in range(d_indptr[i], d_indptr[i + 1]):
                 col = d_indices[dd]
-                at = marker[col]
-                if at < start:
-                    marker[col] = end
+                if marker[col] != i:
+                    marker[col] = i
+                    at[col] = end
                     c_indices[end] = col
                     c_data[end] = d_data[dd]
                     end += 1
                 else:
-                    c_data[at] += d_data[dd]
+                    c_data[at[col]] += d_data[dd]
             for jj in range(a_indptr[i], a_indptr[i + 1]):
                 k = a_indices[jj]
                 value = a_data[jj]
                 for kk in range(b_indptr[k], b_indptr[k + 1]):
                     col = b_indices[kk]
-                    at = marker[col]
-                    if at < start:
-                        marker[col] = end
+                    if marker[col] != i:
+                        marker[col] = i
+                        at[col] = end
                         c_indices[end] = col
                         c_data[end] = value * b_data[kk]
                         end += 1
                     else:
-                        c_data[at] += value * b_data[kk]
+                        c_data[at[col]] += value * b_data[kk]
 
 
 def _row_bounds(indptr: np.ndarray, chunks: int) -> np.ndarray:
@@ -119,14 +122,19 @@ def csr_product(
         b.indptr, b.indices, b.data.astype(dtype, copy=False),
         add.indptr, add.indices, add.data.astype(dtype, copy=False),
     )
-    bounds = _row_bounds(a.indptr + add.indptr, CHUNKS_PER_THREAD * numba.get_num_threads())
-    lengths = _row_lengths(*arrays[0:2], *arrays[3:5], *arrays[6:8], m, bounds)
+    threads = numba.get_num_threads()
+    bounds = _row_bounds(a.indptr + add.indptr, CHUNKS_PER_THREAD * threads)
+    # one marker per thread, allocated once here (not per chunk inside the worker threads,
+    # whose malloc arenas keep what they freed)
+    last_row = np.full((threads, m), -1, np.int64)
+    lengths = _row_lengths(*arrays[0:2], *arrays[3:5], *arrays[6:8], bounds, last_row)
     indptr = np.zeros(n + 1, np.int64)
     np.cumsum(lengths, out=indptr[1:])
     index_type = np.int32 if indptr[-1] < np.iinfo(np.int32).max and m < 2**31 else np.int64
     indices = np.empty(indptr[-1], index_type)
     data = np.empty(indptr[-1], dtype)
-    _fill(*arrays, m, bounds, indptr, indices, data)
+    last_row.fill(-1)
+    _fill(*arrays, bounds, last_row, np.empty((threads, m), np.int64), indptr, indices, data)
     return sp.csr_matrix((data, indices, indptr.astype(index_type, copy=False)), shape=(n, m))
 
 
