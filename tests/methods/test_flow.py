@@ -130,6 +130,65 @@ def test_options_validated_through_registry():
         method_options("flow", {"inner": "lu"})
 
 
+def test_system_quadratic_is_the_energy():
+    """``u^T A u - 2 f^T u`` differs from the energy F of the system's docstring (continuity
+    with the fixed cells substituted, momentum with missing partners as zero flows, the
+    regulariser) by a constant, computed here term by term with Python loops."""
+    rng = np.random.default_rng(3)
+    value = np.full((4, 6, 5, 5), np.nan)
+    value[:, [0, -1], :, :] = value[:, :, [0, -1], :] = value[:, :, :, [0, -1]] = 0.0
+    value[:, 2:4, 2:3, 2:4] = 1.0
+    value[rng.random(value.shape) < 0.1] = 0.0
+    weights = rng.random((3, *value.shape))
+    alpha, reg = 1 / 3, 0.0025
+    offsets = neighbourhood(7)
+    system = build_system(value, weights, offsets, alpha=alpha, reg=reg)
+    n_x = len(system.free)
+    flows = system.flows
+    index = {(int(a), int(k)): i for i, (a, k) in enumerate(zip(flows.source, flows.offset, strict=True))}
+    S, shape = value.shape[0], value.shape
+    strides = np.array([np.prod(shape[a + 1 :]) for a in range(4)])
+
+    def energy(u):
+        x = np.where(np.isnan(value), 0.0, value).ravel().copy()
+        x[system.free] = u[:n_x]
+        v = u[n_x:]
+        total = reg * (u**2).sum()
+        cells = x.reshape(shape)
+        for axis in range(3):
+            for cell in np.ndindex(*shape):
+                other = list(cell)
+                other[axis + 1] += 1
+                if other[axis + 1] >= shape[axis + 1]:
+                    continue
+                if np.isnan(value[cell]) or np.isnan(value[tuple(other)]):
+                    w = alpha * weights[(axis, *cell)]
+                    total += w * (cells[cell] - cells[tuple(other)]) ** 2
+        for i, (source, target, k) in enumerate(
+            zip(flows.source, flows.target, flows.offset, strict=True)
+        ):
+            t = source // strides[0]
+            if t < S - 2:
+                after = index.get((int(target), int(k)))
+                total += (1 - alpha) * (v[i] - (v[after] if after is not None else 0.0)) ** 2
+            shift = strides[0] + offsets[k] @ strides[1:]
+            if t >= 1 and (int(source - shift), int(k)) not in index:
+                total += (1 - alpha) * v[i] ** 2
+        return total
+
+    def quadratic(u):
+        return u @ (system.A @ u) - 2 * system.f @ u
+
+    differences = [
+        energy(u) - quadratic(u)
+        for u in (np.zeros(system.A.shape[0]), *rng.standard_normal((2, system.A.shape[0])))
+    ]
+    assert len(flows.source) > 100 and n_x > 20
+    assert np.allclose(differences, differences[0], rtol=0, atol=1e-9 * abs(energy(
+        np.ones(system.A.shape[0]))))
+    assert abs(system.A - system.A.T).max() == 0
+
+
 def test_minres_block_preconditioner_converges():
     """A small flow system: MINRES with diag(A + B^T B, I) converges in < 100 iterations and
     the true residual of the full saddle-point system is small."""

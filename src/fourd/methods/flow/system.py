@@ -28,6 +28,8 @@ from typing import NamedTuple
 import numpy as np
 import scipy.sparse as sp
 
+from fourd.methods.flow.sparse import csr_product
+
 
 def neighbourhood(size: int) -> np.ndarray:
     """Offsets ``[K, 3]`` of the temporally adjacent cells: ``size`` 7 (faces) or 27 (all)."""
@@ -105,6 +107,22 @@ class System(NamedTuple):
     infeasible: int
 
 
+def _gram(first: np.ndarray, second: np.ndarray, weight: np.ndarray, n: int, reg: float):
+    """``D^T diag(weight) D + reg I`` [n, n] (CSR) for the operator ``D`` whose row ``k`` is
+    ``+1`` at unknown ``first[k]`` and ``-1`` at ``second[k]`` (either ``-1``: no entry)."""
+    columns = np.stack([first, second], axis=1)
+    signs = np.broadcast_to(np.array([1.0, -1.0]), columns.shape)
+    present = columns >= 0
+    indptr = np.zeros(len(columns) + 1, dtype=np.int64)
+    np.cumsum(present.sum(axis=1), out=indptr[1:])
+    D = sp.csr_matrix((signs[present], columns[present], indptr), shape=(len(columns), n))
+    weighted = sp.csr_matrix(
+        (signs[present] * np.repeat(weight, present.sum(axis=1)), columns[present], indptr),
+        shape=D.shape,
+    )
+    return csr_product(weighted.T, D, add=reg * sp.identity(n, format="csr"))
+
+
 def build_system(
     value: np.ndarray,
     weights: np.ndarray,
@@ -140,10 +158,16 @@ def build_system(
     n = n_x + n_v
     fixed_value = np.where(free_mask, 0.0, flat_value)
 
-    rows, cols, vals = [], [], []
     f = np.zeros(n)
 
-    # continuity (5): faces with at least one free cell
+    # Every term of F but the regulariser is a weighted square of a difference of at most two
+    # unknowns: one row of an operator D [terms, n] with +1 / -1 at the unknowns (none at a
+    # fixed cell) and weight w, so that A = D^T W D + reg I, one parallel product
+    # (:func:`.sparse.csr_product`; triplet lists for scipy's COO took several GB at
+    # resolution 64).
+    first, second, term_weight = [], [], []
+
+    # continuity (5): faces with at least one free cell; a fixed neighbour's value goes to f
     strides = np.array([np.prod(shape4[a + 1 :]) for a in range(4)], dtype=np.int64)
     flat = np.arange(n_cells).reshape(shape4)
     for axis in range(3):
@@ -153,21 +177,17 @@ def build_system(
         a, b = a[keep], b[keep]
         w = alpha * weights[axis].ravel()[a]
         fa, fb = free_mask[a], free_mask[b]
-        ca, cb = xcol[a], xcol[b]
-        both = fa & fb
-        rows += [ca[both], cb[both], ca[both], cb[both]]
-        cols += [ca[both], cb[both], cb[both], ca[both]]
-        vals += [w[both], w[both], -w[both], -w[both]]
+        first.append(xcol[a])  # -1 where fixed
+        second.append(xcol[b])
+        term_weight.append(w)
         only_a = fa & ~fb
-        rows.append(ca[only_a])
-        cols.append(ca[only_a])
-        vals.append(w[only_a])
-        np.add.at(f, ca[only_a], w[only_a] * fixed_value[b[only_a]])
+        f[:n_x] += np.bincount(
+            xcol[a[only_a]], w[only_a] * fixed_value[b[only_a]], minlength=n_x
+        )
         only_b = fb & ~fa
-        rows.append(cb[only_b])
-        cols.append(cb[only_b])
-        vals.append(w[only_b])
-        np.add.at(f, cb[only_b], w[only_b] * fixed_value[a[only_b]])
+        f[:n_x] += np.bincount(
+            xcol[b[only_b]], w[only_b] * fixed_value[a[only_b]], minlength=n_x
+        )
 
     # momentum (4): (v_a - v_b)^2 for each flow and its successor in the same direction;
     # a missing partner is a zero flow.
@@ -179,25 +199,18 @@ def build_system(
         successor = flow_lookup(flows, flows.target, flows.offset)
         has_next_slice = t_src < S - 2
         pair = has_next_slice & (successor >= 0)
-        va = n_x + np.flatnonzero(pair)
-        vb = n_x + successor[pair]
-        rows += [va, vb, va, vb]
-        cols += [va, vb, vb, va]
-        vals += [np.full(len(va), mom)] * 2 + [np.full(len(va), -mom)] * 2
+        first.append(n_x + np.flatnonzero(pair))
+        second.append(n_x + successor[pair])
         lonely_out = has_next_slice & (successor < 0)
         predecessor = flow_lookup(flows, flows.source - shift, flows.offset)
         lonely_in = (t_src >= 1) & (predecessor < 0)
         single = n_x + np.concatenate([np.flatnonzero(lonely_out), np.flatnonzero(lonely_in)])
-        rows.append(single)
-        cols.append(single)
-        vals.append(np.full(len(single), mom))
+        first.append(single)
+        second.append(np.full(len(single), -1, dtype=np.int64))
+        term_weight.append(np.full(len(first[-2]) + len(single), mom))
 
-    # regulariser F_r
-    rows.append(np.arange(n))
-    cols.append(np.arange(n))
-    vals.append(np.full(n, reg))
-    A = sp.csr_matrix(
-        (np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(n, n)
+    A = _gram(
+        np.concatenate(first), np.concatenate(second), np.concatenate(term_weight), n, reg
     )
 
     # incompressibility: out rows (t < S-1) and in rows (t > 0) for every living cell
@@ -210,21 +223,20 @@ def build_system(
     row_of_in = np.full(n_cells, -1, dtype=np.int64)
     row_of_in[in_cells] = len(out_cells) + np.arange(len(in_cells))
     m_all = len(out_cells) + len(in_cells)
-    vcols = n_x + np.arange(n_v)
-    brows = [row_of_out[flows.source], row_of_in[flows.target]]
-    bcols = [vcols, vcols]
-    bvals = [np.ones(n_v), np.ones(n_v)]
+    # B column by column: a free cell's column has -1 in its out and in rows (where they
+    # exist), a flow's column +1 in its source's out row and its target's in row
+    cell_rows = np.stack([row_of_out[free], row_of_in[free]], axis=1)
+    flow_rows = np.stack([row_of_out[flows.source], row_of_in[flows.target]], axis=1)
+    table = np.concatenate([cell_rows, flow_rows])
+    signs = np.concatenate([np.full(cell_rows.shape, -1.0), np.ones(flow_rows.shape)])
+    present = table >= 0
+    indptr = np.zeros(n + 1, dtype=np.int64)
+    np.cumsum(present.sum(axis=1), out=indptr[1:])
+    B = sp.csc_matrix((signs[present], table[present], indptr), shape=(m_all, n)).tocsr()
     cells = np.concatenate([out_cells, in_cells])
-    cell_rows = np.arange(m_all)
     is_free = free_mask[cells]
-    brows.append(cell_rows[is_free])
-    bcols.append(xcol[cells[is_free]])
-    bvals.append(-np.ones(int(is_free.sum())))
     g_all = np.where(is_free, 0.0, fixed_value[cells])
-    B = sp.csr_matrix(
-        (np.concatenate(bvals), (np.concatenate(brows), np.concatenate(bcols))), shape=(m_all, n)
-    )
-    flow_count = np.bincount(np.concatenate(brows[:2]), minlength=m_all)
+    flow_count = np.bincount(flow_rows.ravel(), minlength=m_all)
     has_flow = flow_count > 0
     infeasible = int((~has_flow & ~is_free).sum())
     keep = has_flow | is_free
