@@ -91,8 +91,8 @@ class Options:
     ----------
     resolution : int
         Flow grid cells along the longest side of the data's bounding box (64 in the paper;
-        32 by default here: on crane, bench at 50425aa, medians of 3, 1.29 s/frame with
-        Chamfer / completeness-95 0.0026 / 0.0067 at 32 and 4.56 s/frame (2.2 GB) with
+        32 by default here: on crane, bench at 68be547 / 7ca8ce0, medians of 3, 0.97 s/frame
+        with Chamfer / completeness-95 0.0026 / 0.0067 at 32 and 3.5-3.8 s/frame (2.3 GB) with
         0.0030 / 0.0069 at 64).
     neighbourhood : int
         Temporally adjacent cells a cell's material may flow to: 27 (the paper's Figure 2) or
