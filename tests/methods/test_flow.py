@@ -342,10 +342,11 @@ def test_amg_hierarchy_is_pyamgs_and_a_symmetric_v_cycle():
     assert x @ cycle.matvec(x) > 0
 
 
-def test_saddle_solver_on_known_answer():
+@pytest.mark.parametrize("inner", ["cg-amg", "amg"])  # "amg": a one-level hierarchy here
+def test_saddle_solver_on_known_answer(inner):
     A = sp.diags([2.0, 2.0, 2.0, 2.0]).tocsr()
     B = sp.csr_matrix(np.array([[1.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 1.0]]))
-    s = solve_saddle(A, B, np.zeros(4), np.array([2.0, 4.0]), inner="cg-amg", rtol=1e-8)
+    s = solve_saddle(A, B, np.zeros(4), np.array([2.0, 4.0]), inner=inner, rtol=1e-8)
     assert np.allclose(s.u, [1, 1, 2, 2], atol=1e-6)
 
 
