@@ -43,6 +43,20 @@ def _row_lengths(
     return lengths
 
 
+@numba.njit(cache=True, inline="always")
+def _add(i, col, value, end, marker, at, c_indices, c_data):
+    """Add ``value`` to entry ``col`` of row ``i``; a new entry goes to ``end``. Returns the
+    next free position."""
+    if marker[col] != i:
+        marker[col] = i
+        at[col] = end
+        c_indices[end] = col
+        c_data[end] = value
+        return end + 1
+    c_data[at[col]] += value
+    return end
+
+
 @numba.njit(cache=True, parallel=True)
 def _fill(
     a_indptr, a_indices, a_data, b_indptr, b_indices, b_data, d_indptr, d_indices, d_data,
@@ -56,28 +70,14 @@ def _fill(
         for i in range(bounds[c], bounds[c + 1]):
             end = c_indptr[i]
             for dd in range(d_indptr[i], d_indptr[i + 1]):
-                col = d_indices[dd]
-                if marker[col] != i:
-                    marker[col] = i
-                    at[col] = end
-                    c_indices[end] = col
-                    c_data[end] = d_data[dd]
-                    end += 1
-                else:
-                    c_data[at[col]] += d_data[dd]
+                end = _add(i, d_indices[dd], d_data[dd], end, marker, at, c_indices, c_data)
             for jj in range(a_indptr[i], a_indptr[i + 1]):
                 k = a_indices[jj]
                 value = a_data[jj]
                 for kk in range(b_indptr[k], b_indptr[k + 1]):
-                    col = b_indices[kk]
-                    if marker[col] != i:
-                        marker[col] = i
-                        at[col] = end
-                        c_indices[end] = col
-                        c_data[end] = value * b_data[kk]
-                        end += 1
-                    else:
-                        c_data[at[col]] += value * b_data[kk]
+                    end = _add(
+                        i, b_indices[kk], value * b_data[kk], end, marker, at, c_indices, c_data
+                    )
 
 
 def _row_bounds(indptr: np.ndarray, chunks: int) -> np.ndarray:
