@@ -163,8 +163,7 @@ def build_system(
     # Every term of F but the regulariser is a weighted square of a difference of at most two
     # unknowns: one row of an operator D [terms, n] with +1 / -1 at the unknowns (none at a
     # fixed cell) and weight w, so that A = D^T W D + reg I, one parallel product
-    # (:func:`.sparse.csr_product`; triplet lists for scipy's COO took several GB at
-    # resolution 64).
+    # (:func:`.sparse.csr_product`) instead of twelve triplet lists for scipy's COO.
     first, second, term_weight = [], [], []
 
     # continuity (5): faces with at least one free cell; a fixed neighbour's value goes to f
