@@ -32,6 +32,7 @@ from scipy.spatial import cKDTree
 from fourd.geometry.marching import compact, marching_cubes
 from fourd.geometry.normals import vertex_normals
 from fourd.methods.flow.grid import SpaceTimeGrid
+from fourd.methods.flow.sparse import csr_from_rows
 
 log = logging.getLogger("fourd.methods.flow.post")
 
@@ -237,10 +238,7 @@ def implicit_function(
         rhs[rows[~inner]] += weight * base_flat[b[~inner]]
     columns[:, 4] = np.arange(m)
     entries[:, 4] = diagonal
-    present = columns >= 0
-    indptr = np.zeros(m + 1, dtype=np.int64)
-    np.cumsum(present.sum(axis=1), out=indptr[1:])
-    matrix = sp.csr_matrix((entries[present], columns[present], indptr), shape=(m, m))
+    matrix = csr_from_rows(columns, entries, m)
     # diagonally dominant wherever a node has a target: Jacobi-preconditioned CG needs a few
     # dozen steps (crane, 1.1M band nodes: 0.9 s against 13 s for smoothed-aggregation AMG,
     # 11 s of it the set-up)

@@ -138,6 +138,24 @@ def csr_product(
     return sp.csr_matrix((data, indices, indptr.astype(index_type, copy=False)), shape=(n, m))
 
 
+def csr_from_rows(columns: np.ndarray, values: np.ndarray, n_cols: int) -> sp.csr_matrix:
+    """The CSR matrix [r, n_cols] whose row ``i`` holds ``values[i, j]`` at ``columns[i, j]``
+    for every slot ``j`` with ``columns[i, j] >= 0`` (a row table ``[r, w]``, at most ``w``
+    entries per row, ``-1`` for an empty slot; slots in the order they should be stored).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> csr_from_rows(np.array([[0, 2], [-1, 1]]), np.array([[1.0, 2.0], [9.0, 3.0]]), 3).toarray()
+    array([[1., 0., 2.],
+           [0., 3., 0.]])
+    """
+    present = columns >= 0
+    indptr = np.zeros(len(columns) + 1, dtype=np.int64)
+    np.cumsum(present.sum(axis=1), out=indptr[1:])
+    return sp.csr_matrix((values[present], columns[present], indptr), shape=(len(columns), n_cols))
+
+
 def csr_hstack(blocks: list) -> sp.csr_matrix:
     """``[B_0, B_1, ...]`` side by side (sparse blocks with the same number of rows), as CSR,
     without scipy's detour through COO (which takes seconds for the flow's saddle-point

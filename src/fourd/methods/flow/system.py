@@ -28,7 +28,7 @@ from typing import NamedTuple
 import numpy as np
 import scipy.sparse as sp
 
-from fourd.methods.flow.sparse import csr_product
+from fourd.methods.flow.sparse import csr_from_rows, csr_product
 
 
 def neighbourhood(size: int) -> np.ndarray:
@@ -112,14 +112,8 @@ def _gram(first: np.ndarray, second: np.ndarray, weight: np.ndarray, n: int, reg
     ``+1`` at unknown ``first[k]`` and ``-1`` at ``second[k]`` (either ``-1``: no entry)."""
     columns = np.stack([first, second], axis=1)
     signs = np.broadcast_to(np.array([1.0, -1.0]), columns.shape)
-    present = columns >= 0
-    indptr = np.zeros(len(columns) + 1, dtype=np.int64)
-    np.cumsum(present.sum(axis=1), out=indptr[1:])
-    D = sp.csr_matrix((signs[present], columns[present], indptr), shape=(len(columns), n))
-    weighted = sp.csr_matrix(
-        (signs[present] * np.repeat(weight, present.sum(axis=1)), columns[present], indptr),
-        shape=D.shape,
-    )
+    D = csr_from_rows(columns, signs, n)
+    weighted = csr_from_rows(columns, signs * weight[:, None], n)
     return csr_product(weighted.T, D, add=reg * sp.identity(n, format="csr"))
 
 
@@ -222,16 +216,13 @@ def build_system(
     row_of_in = np.full(n_cells, -1, dtype=np.int64)
     row_of_in[in_cells] = len(out_cells) + np.arange(len(in_cells))
     m_all = len(out_cells) + len(in_cells)
-    # B column by column: a free cell's column has -1 in its out and in rows (where they
+    # B column by column (the rows of its transpose): a free cell's column has -1 in its out and in rows (where they
     # exist), a flow's column +1 in its source's out row and its target's in row
     cell_rows = np.stack([row_of_out[free], row_of_in[free]], axis=1)
     flow_rows = np.stack([row_of_out[flows.source], row_of_in[flows.target]], axis=1)
     table = np.concatenate([cell_rows, flow_rows])
     signs = np.concatenate([np.full(cell_rows.shape, -1.0), np.ones(flow_rows.shape)])
-    present = table >= 0
-    indptr = np.zeros(n + 1, dtype=np.int64)
-    np.cumsum(present.sum(axis=1), out=indptr[1:])
-    B = sp.csc_matrix((signs[present], table[present], indptr), shape=(m_all, n)).tocsr()
+    B = csr_from_rows(table, signs, m_all).T.tocsr()
     cells = np.concatenate([out_cells, in_cells])
     is_free = free_mask[cells]
     g_all = np.where(is_free, 0.0, fixed_value[cells])
