@@ -269,13 +269,9 @@ def unsigned_distance(
     """Distance from every cell centre to the nearest point, ``[X, Y, Z]``; with ``where``
     (bool ``[X, Y, Z]``) only at those cells, ``inf`` elsewhere."""
     centres = grid.centres().reshape(-1, 3)
-    if where is None:
-        d, _ = cKDTree(points).query(centres, workers=-1)
-        return d.reshape(grid.shape)
-    where = where.ravel()
+    where = np.ones(len(centres), dtype=bool) if where is None else where.ravel()
     distance = np.full(len(centres), np.inf)
-    d, _ = cKDTree(points).query(centres[where], workers=-1)
-    distance[where] = d
+    distance[where], _ = cKDTree(points).query(centres[where], workers=-1)
     return distance.reshape(grid.shape)
 
 
