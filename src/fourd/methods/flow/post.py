@@ -295,33 +295,6 @@ def drop_cavities(vertices, faces) -> tuple[np.ndarray, np.ndarray, int]:
     return (*compact(vertices, faces[~cavity[face_label]]), int(cavity.sum()))
 
 
-def enclosed_volume(values: np.ndarray, spacing: float, level: float = 0.0) -> float:
-    """Volume (input units) of ``{f < level}`` of one slice ``values`` [nx, ny, nz] of a
-    distance-like field: each node counts for the fraction ``clip(0.5 - (f - level) / h)`` of
-    its ``h^3`` cell (exact for a planar distance field between nodes)."""
-    fraction = np.clip(0.5 - (values - level) / spacing, 0.0, 1.0)
-    return float(fraction.sum(dtype=np.float64)) * spacing**3
-
-
-def mass_level(
-    values: np.ndarray, spacing: float, target: float, *, limit: float, iterations: int = 40
-) -> float:
-    """Iso-level ``c`` with :func:`enclosed_volume` ``(values, spacing, c) == target``
-    (bisection; monotone in ``c``), clamped to ``[-limit, limit]``."""
-    lo, hi = -float(limit), float(limit)
-    if enclosed_volume(values, spacing, lo) >= target:
-        return lo
-    if enclosed_volume(values, spacing, hi) <= target:
-        return hi
-    for _ in range(iterations):
-        mid = 0.5 * (lo + hi)
-        if enclosed_volume(values, spacing, mid) < target:
-            lo = mid
-        else:
-            hi = mid
-    return 0.5 * (lo + hi)
-
-
 def extract_mesh(
     field: FlowField,
     slice_index: int,
