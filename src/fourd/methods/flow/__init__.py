@@ -227,8 +227,12 @@ class Options:
         ``squash-ball`` at resolution 32 (``exp`` runs, 20k samples; Chamfer /
         completeness-95 / volume change): zero level 0.0054 / 0.0137 / 12.6%, this 0.0046 /
         0.0074 / 1.7%, the whole surface moved instead (before 2026-11-24) 0.0062 / 0.0114 /
-        1.8%. Off by default: it forces a constant volume, and the true volume of
-        ``splitting-blob`` and of captured people is not (crane's truth varies by 7%).
+        1.8%; bench, 60k samples: 0.0035 / 0.0059 / 1.7%, and 0.0034 / 0.0052 / 1.3% with
+        ``regularize_towards="previous"``. More time slices do not help: with
+        ``time_substeps=2`` the flow's mass conservation error rises to 2.4-2.8% (the capped
+        MINRES solves) and the volumes, which follow the mass, change by 6.7-7.6% (``exp``,
+        60k samples). Off by default: it forces a constant
+        volume, and the true volume of ``splitting-blob`` and of captured people is not.
     observed_distance : float
         With ``mass_levels``: vertices within this many flow cells of a data point of their
         frame stay; the offset's weight rises to 1 over the next flow cell.
