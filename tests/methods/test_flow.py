@@ -517,6 +517,12 @@ def test_regularize_towards_is_validated():
         Options(regularize_towards="one")
 
 
+@pytest.mark.parametrize("field", ["observed_distance", "level_limit"])
+def test_mass_level_distances_are_validated(field):
+    with pytest.raises(ValueError, match=field):
+        Options(**{field: -1.0})
+
+
 @pytest.mark.slow
 def test_squash_ball_scene_closed_and_volume_bounded(squash_scene_volumes):
     volumes = squash_scene_volumes
