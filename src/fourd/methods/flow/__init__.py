@@ -223,10 +223,10 @@ class Options:
         flow carries the mass into the parts no scanner sees, but the Laplace solve puts the
         zero level there where the flow's smeared values cross it, so the extracted volume
         does not follow the mass (``squash-ball``, bottom unseen: 12.6% volume change at a
-        0.5% mass error, the unseen pole up to 0.27 of the radius off). Measured on
+        0.5% mass error, the unseen pole up to 45% of the radius off). Measured on
         ``squash-ball`` at resolution 32 (``exp`` runs, 20k samples; Chamfer /
         completeness-95 / volume change): zero level 0.0054 / 0.0137 / 12.6%, this 0.0046 /
-        0.0074 / 1.7%, the whole surface moved instead (before 2026-11-24) 0.0062 / 0.0114 /
+        0.0074 / 1.7%, the whole surface moved by one offset (u = 1) 0.0062 / 0.0114 /
         1.8%; bench, 60k samples: 0.0035 / 0.0059 / 1.7%, and 0.0034 / 0.0052 / 1.3% with
         ``regularize_towards="previous"``. More time slices do not help: with
         ``time_substeps=2`` the flow's mass conservation error rises to 2.4-2.8% (the capped
