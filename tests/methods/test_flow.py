@@ -634,15 +634,15 @@ def test_mass_meshes_move_only_the_unobserved_parts():
     """Two frames of a sphere, radius 0.5 and 0.55, both seen only on their upper half (z >
     0), with the same flow mass: the volumes become equal, the seen halves stay where they
     were, and the unseen halves move apart by what makes up the difference."""
-    from fourd.methods.flow import _mesh_volume_area, mass_meshes
+    from fourd.methods.flow import _mesh_volume, mass_meshes
 
     sphere = trimesh.creation.icosphere(subdivisions=4)
     meshes = [(r * sphere.vertices, sphere.faces) for r in (0.5, 0.55)]
     points = [v[v[:, 2] > 0] for v, _ in meshes]
     h = 0.05
     moved = mass_meshes(meshes, points, np.array([1.0, 1.0]), h=h, reach=0.5, limit=4.0)
-    volumes = np.array([_mesh_volume_area(v, f)[0] for v, f in moved])
-    before = np.array([_mesh_volume_area(v, f)[0] for v, f in meshes])
+    volumes = np.array([_mesh_volume(v, f) for v, f in moved])
+    before = np.array([_mesh_volume(v, f) for v, f in meshes])
     assert abs(volumes[0] / volumes[1] - 1) < 0.002
     assert abs(volumes.mean() / before.mean() - 1) < 0.01
     for (v, _), (w, f) in zip(meshes, moved, strict=True):

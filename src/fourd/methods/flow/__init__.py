@@ -601,13 +601,13 @@ def run(seq: PointCloudSequence, options: Options | None = None) -> FlowResult:
     )
 
 
-def _mesh_volume_area(vertices: np.ndarray, faces: np.ndarray) -> tuple[float, float]:
+def _mesh_volume(vertices: np.ndarray, faces: np.ndarray) -> float:
+    """Signed volume enclosed by a closed mesh (positive for outward-facing triangles; input
+    units^3). :func:`fourd.evaluate.metrics.enclosed_volume` is its absolute value."""
     if len(faces) == 0:
-        return 0.0, 0.0
+        return 0.0
     tri = vertices[faces]
-    volume = np.einsum("ij,ij->i", tri[:, 0], np.cross(tri[:, 1], tri[:, 2])).sum() / 6.0
-    area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
-    return float(volume), float(area.sum())
+    return float(np.einsum("ij,ij->i", tri[:, 0], np.cross(tri[:, 1], tri[:, 2])).sum() / 6.0)
 
 
 def _volume_gradient(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
@@ -648,7 +648,7 @@ def mass_meshes(
     mass : float [T], the flow mass per frame (input units^3).
     h : float, the flow cell (input units).
     """
-    volumes = np.array([_mesh_volume_area(v, f)[0] for v, f in meshes])
+    volumes = np.array([_mesh_volume(v, f) for v, f in meshes])
     mass = np.asarray(mass, float)
     good = (volumes > 0) & (mass > 0)
     if not good.any():
@@ -668,7 +668,7 @@ def mass_meshes(
         direction = free[:, None] * vertex_normals(vertices, faces)
         shift, moved = 0.0, vertices
         for _ in range(steps):
-            volume = _mesh_volume_area(moved, faces)[0]
+            volume = _mesh_volume(moved, faces)
             slope = float(np.einsum("ij,ij->", _volume_gradient(moved, faces), direction))
             if slope <= 0 or abs(volume - target) <= 1e-4 * target:
                 break
