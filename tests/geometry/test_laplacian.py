@@ -65,6 +65,21 @@ def test_smoothing_reduces_noise_on_a_plane():
     assert np.abs(smooth[interior, 2]).std() < 0.5 * np.abs(noisy[interior, 2]).std()
 
 
+
+def test_smoothing_weights_hold_vertices_and_scale_steps():
+    V, F, interior = grid(12)
+    noisy = V.copy()
+    noisy[:, 2] = 0.01 * np.random.default_rng(2).normal(size=len(V))
+    held = noisy[:, 0] < 0.5
+    weights = np.where(held, 0.0, 1.0)
+    smooth = laplacian_smooth(noisy, F, iterations=10, weights=weights)
+    assert np.array_equal(smooth[held], noisy[held])
+    moving = interior & ~held
+    assert np.abs(smooth[moving, 2]).std() < 0.5 * np.abs(noisy[moving, 2]).std()
+    ones = laplacian_smooth(noisy, F, iterations=10, weights=np.ones(len(V)))
+    assert np.allclose(ones, laplacian_smooth(noisy, F, iterations=10))
+
+
 def test_bad_shapes_are_rejected():
     with pytest.raises(ValueError):
         cotangent_laplacian(np.zeros((3, 2)), np.array([[0, 1, 2]]))

@@ -517,10 +517,10 @@ def test_regularize_towards_is_validated():
         Options(regularize_towards="one")
 
 
-@pytest.mark.parametrize("field", ["observed_distance", "level_limit"])
-def test_mass_level_distances_are_validated(field):
+@pytest.mark.parametrize("field", ["observed_distance", "level_limit", "unobserved_smoothing"])
+def test_mass_level_settings_are_validated(field):
     with pytest.raises(ValueError, match=field):
-        Options(**{field: -1.0})
+        Options(**{field: -1})
 
 
 @pytest.mark.slow
@@ -640,7 +640,9 @@ def test_mass_meshes_move_only_the_unobserved_parts():
     meshes = [(r * sphere.vertices, sphere.faces) for r in (0.5, 0.55)]
     points = [v[v[:, 2] > 0] for v, _ in meshes]
     h = 0.05
-    moved = mass_meshes(meshes, points, np.array([1.0, 1.0]), h=h, reach=0.5, limit=4.0)
+    moved = mass_meshes(
+        meshes, points, np.array([1.0, 1.0]), h=h, reach=0.5, limit=4.0, smoothing=0
+    )
     volumes = np.array([_mesh_volume(v, f) for v, f in moved])
     before = np.array([_mesh_volume(v, f) for v, f in meshes])
     assert abs(volumes[0] / volumes[1] - 1) < 0.002
@@ -656,8 +658,36 @@ def test_mass_meshes_move_only_the_unobserved_parts():
     assert np.linalg.norm(moved[0][0], axis=1).min() > 0.5 - 1e-9
     assert np.linalg.norm(moved[1][0], axis=1).max() < 0.55 + 1e-9
     # a frame without points moves as a whole, by at most the limit
-    whole = mass_meshes(meshes, [points[0], None], np.array([1.0, 1.0]), h=h, limit=0.1)
+    whole = mass_meshes(
+        meshes, [points[0], None], np.array([1.0, 1.0]), h=h, limit=0.1, smoothing=0
+    )
     assert np.allclose(np.linalg.norm(whole[1][0], axis=1), 0.55 - 0.1 * h)
+
+
+
+def test_mass_meshes_smooth_a_dent_out_of_the_unobserved_part():
+    """A sphere (radius 0.5) whose unseen bottom cap is pushed 0.2 inwards, a pit: the
+    smoothing before the offset raises the pit's floor, the seen half stays, and the volume is
+    kept (one frame, so the target is its own volume)."""
+    from fourd.methods.flow import _mesh_volume, mass_meshes
+
+    sphere = trimesh.creation.icosphere(subdivisions=4)
+    vertices = 0.5 * sphere.vertices
+    pit = vertices[:, 2] < -0.45
+    vertices[pit] *= 0.6
+    mesh = (vertices, sphere.faces)
+    points = vertices[vertices[:, 2] > 0]
+    (moved, faces), = mass_meshes([mesh], [points], np.array([1.0]), h=0.05)
+    _check_closed_manifold(moved, faces)
+    assert abs(_mesh_volume(moved, faces) / _mesh_volume(*mesh) - 1) < 1e-3
+    seen = vertices[:, 2] > 0
+    assert np.abs(moved[seen] - vertices[seen]).max() < 1e-12
+    # the pit's floor rises by more than a third of its depth, and the unseen half is rounder
+    rise = np.linalg.norm(moved[pit], axis=1).mean() - np.linalg.norm(vertices[pit], axis=1).mean()
+    assert rise > 0.2 / 3, rise
+    unseen = vertices[:, 2] < -0.1
+    spread = np.linalg.norm(moved[unseen], axis=1).std()
+    assert spread < 0.5 * np.linalg.norm(vertices[unseen], axis=1).std(), spread
 
 
 def test_reconstruct_with_diagnostics_reports_the_mass_error(monkeypatch):

@@ -131,11 +131,17 @@ def mass_matrix(vertices: np.ndarray, faces: np.ndarray) -> sp.dia_matrix:
 
 
 def laplacian_smooth(
-    vertices: np.ndarray, faces: np.ndarray, *, iterations: int = 10, step: float = 0.5
+    vertices: np.ndarray,
+    faces: np.ndarray,
+    *,
+    iterations: int = 10,
+    step: float = 0.5,
+    weights: np.ndarray | None = None,
 ) -> np.ndarray:
     """Explicit umbrella smoothing: ``x <- x + step * (mean of neighbours - x)``, repeated.
 
-    Vertices with no incident face stay where they are. Returns new vertices [N, 3].
+    ``weights`` [N] in [0, 1] (optional) scale each vertex's step: 0 keeps a vertex where it
+    is. Vertices with no incident face stay where they are. Returns new vertices [N, 3].
     """
     vertices, faces = _check(vertices, faces)
     if iterations <= 0 or len(faces) == 0:
@@ -143,6 +149,8 @@ def laplacian_smooth(
     L = uniform_laplacian(len(vertices), faces)
     degree = L.diagonal()
     inverse = np.where(degree > 0, 1.0 / np.maximum(degree, 1e-300), 0.0)
+    if weights is not None:
+        inverse = inverse * np.asarray(weights, dtype=np.float64)
     x = vertices.copy()
     for _ in range(iterations):
         x = x - step * inverse[:, None] * (L @ x)

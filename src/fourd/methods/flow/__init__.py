@@ -36,6 +36,7 @@ from scipy.spatial import cKDTree
 
 from fourd.animation import AnimatedMesh, MeshSequence
 from fourd.errors import InputError
+from fourd.geometry.laplacian import laplacian_smooth
 from fourd.geometry.neighbors import point_spacing
 from fourd.geometry.normals import pca_normals, vertex_normals
 from fourd.geometry.outliers import distance_ratio_inliers
@@ -240,6 +241,11 @@ class Options:
         With ``mass_levels``: the largest offset of a frame's unobserved parts, in flow cells
         (``squash-ball`` at resolution 32 needs up to 3.2). Large offsets can make concave
         unseen parts self-intersect.
+    unobserved_smoothing : int
+        With ``mass_levels``: umbrella smoothing steps of the unobserved parts before the
+        offset (``squash-ball``, ``exp``, 20k samples; Chamfer / accuracy-95: 0 steps 0.0046 /
+        0.0150, 20 0.0041 / 0.0097, 100 0.0039 / 0.0089, 300 0.0038 / 0.0083 with
+        completeness-95 0.0080 against 0.0076 at 100).
     coherent : bool
         Return an :class:`~fourd.AnimatedMesh`: a closed template of the first frame slid
         along the signed distance to the flow's meshes with the kinematic method's
@@ -280,6 +286,7 @@ class Options:
     mass_levels: bool = False
     observed_distance: float = 0.5
     level_limit: float = 4.0
+    unobserved_smoothing: int = 100
     coherent: bool = False
 
     def __post_init__(self):
@@ -308,10 +315,10 @@ class Options:
             )
         if self.inner not in ("cg-amg", "cg-ilu", "amg"):
             raise ValueError(f"inner must be cg-amg, cg-ilu or amg, got {self.inner!r}")
-        if self.observed_distance < 0 or self.level_limit < 0:
+        if self.observed_distance < 0 or self.level_limit < 0 or self.unobserved_smoothing < 0:
             raise ValueError(
-                f"observed_distance and level_limit must not be negative, got "
-                f"{self.observed_distance}, {self.level_limit}"
+                f"observed_distance, level_limit and unobserved_smoothing must not be negative, "
+                f"got {self.observed_distance}, {self.level_limit}, {self.unobserved_smoothing}"
             )
         for name in ("regularization", "softness", "band", "smoothness", "gamma"):
             if getattr(self, name) < 0 or (name in ("band", "gamma") and getattr(self, name) == 0):
@@ -564,6 +571,7 @@ def run(seq: PointCloudSequence, options: Options | None = None) -> FlowResult:
             h=h,
             reach=options.observed_distance,
             limit=options.level_limit,
+            smoothing=options.unobserved_smoothing,
         )
     if cavity_frames:
         log.warning(
@@ -628,6 +636,7 @@ def mass_meshes(
     h: float,
     reach: float = 0.5,
     limit: float = 4.0,
+    smoothing: int = 100,
     steps: int = 3,
 ) -> list[tuple[np.ndarray, np.ndarray]]:
     """The frames' closed meshes with their unobserved parts moved so that each frame's
@@ -635,11 +644,13 @@ def mass_meshes(
 
     The target of frame ``i`` is ``mass[i] * V0 / mean(mass)``, ``V0`` the mean enclosed
     volume of ``meshes``: the overall size stays the Laplace solve's, only the frame-to-frame
-    variation is taken from the flow. Each vertex moves along its normal by ``s_i u``, with
-    ``u = clip(d / h - reach, 0, 1)`` from its distance ``d`` to the frame's nearest data
-    point: what lies on the data stays, what no scanner saw moves, and one offset ``s_i``
-    per frame (``steps`` Newton steps on the exact mesh volume, at most ``limit`` flow cells
-    either way) sets the volume. A frame without points moves as a whole.
+    variation is taken from the flow. Each vertex has a weight ``u = clip(d / h - reach, 0,
+    1)`` from its distance ``d`` to the frame's nearest data point: what lies on the data
+    stays, what no scanner saw moves. The unobserved parts are first smoothed (``smoothing``
+    umbrella steps, each vertex's step scaled by ``u``: the flow leaves dents and bumps where
+    it cannot follow the motion), then every vertex moves along its normal by ``s_i u``, one
+    offset per frame (``steps`` Newton steps on the exact mesh volume, at most ``limit``
+    flow cells either way) that sets the volume. A frame without points moves as a whole.
 
     Parameters
     ----------
@@ -665,6 +676,7 @@ def mass_meshes(
                 vertices, distance_upper_bound=(reach + 1.0) * h, workers=-1
             )
             free = np.clip(np.minimum(distance, (reach + 1.0) * h) / h - reach, 0.0, 1.0)
+        vertices = laplacian_smooth(vertices, faces, iterations=smoothing, weights=free)
         direction = free[:, None] * vertex_normals(vertices, faces)
         shift, moved = 0.0, vertices
         for _ in range(steps):
