@@ -226,9 +226,10 @@ class Options:
         does not follow the mass (``squash-ball``, bottom unseen: 12.6% volume change at a
         0.5% mass error, the unseen pole up to 45% of the radius off). Measured on
         ``squash-ball`` at resolution 32 (``exp`` runs, 20k samples; Chamfer /
-        completeness-95 / volume change): zero level 0.0054 / 0.0137 / 12.6%, this 0.0046 /
-        0.0074 / 1.7%, the whole surface moved by one offset (u = 1) 0.0062 / 0.0114 /
-        1.8%; bench, 60k samples: 0.0035 / 0.0059 / 1.7%, and 0.0034 / 0.0052 / 1.3% with
+        completeness-95 / volume change): zero level 0.0054 / 0.0137 / 12.6%, this without
+        smoothing 0.0046 / 0.0074 / 1.7% and with it 0.0039 / 0.0076 / 1.7%, the whole
+        surface moved by one offset (u = 1) 0.0062 / 0.0114 / 1.8%; bench (5f84121, 60k
+        samples): 0.0029 / 0.0066 / 1.7%, and 0.0027 / 0.0047 / 1.4% with
         ``regularize_towards="previous"``. More time slices do not help: with
         ``time_substeps=2`` the flow's mass conservation error rises to 2.4-2.8% (the capped
         MINRES solves) and the volumes, which follow the mass, change by 6.7-7.6% (``exp``,
@@ -245,7 +246,8 @@ class Options:
         With ``mass_levels``: umbrella smoothing steps of the unobserved parts before the
         offset (``squash-ball``, ``exp``, 20k samples; Chamfer / accuracy-95: 0 steps 0.0046 /
         0.0150, 20 0.0041 / 0.0097, 100 0.0039 / 0.0089, 300 0.0038 / 0.0083 with
-        completeness-95 0.0080 against 0.0076 at 100).
+        completeness-95 0.0080 against 0.0076 at 100). Steps are per mesh edge, so the
+        smoothed distance shrinks with finer meshes (higher ``resolution``).
     coherent : bool
         Return an :class:`~fourd.AnimatedMesh`: a closed template of the first frame slid
         along the signed distance to the flow's meshes with the kinematic method's
