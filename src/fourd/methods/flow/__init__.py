@@ -57,6 +57,7 @@ from fourd.methods.flow.post import (
     FlowField,
     drop_cavities,
     extract_mesh,
+    face_volumes,
     implicit_function,
     redistanced,
 )
@@ -612,12 +613,8 @@ def run(seq: PointCloudSequence, options: Options | None = None) -> FlowResult:
 
 
 def _mesh_volume(vertices: np.ndarray, faces: np.ndarray) -> float:
-    """Signed volume enclosed by a closed mesh (positive for outward-facing triangles; input
-    units^3). :func:`fourd.evaluate.metrics.enclosed_volume` is its absolute value."""
-    if len(faces) == 0:
-        return 0.0
-    tri = vertices[faces]
-    return float(np.einsum("ij,ij->i", tri[:, 0], np.cross(tri[:, 1], tri[:, 2])).sum() / 6.0)
+    """Signed volume enclosed by a closed mesh (:func:`.post.face_volumes` summed)."""
+    return float(face_volumes(vertices, faces).sum())
 
 
 def _volume_gradient(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:

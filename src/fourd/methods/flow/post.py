@@ -252,6 +252,13 @@ def implicit_function(
     return FlowField(values.reshape(shape4), origin, hf, grid.times)
 
 
+def face_volumes(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """Each face's signed volume ``a . (b x c) / 6`` against the origin [F]: their sum over a
+    closed mesh is the volume it encloses (positive for outward-oriented faces)."""
+    tri = vertices[faces]
+    return np.einsum("ij,ij->i", tri[:, 0], np.cross(tri[:, 1], tri[:, 2])) / 6.0
+
+
 def component_volumes(vertices, faces) -> tuple[np.ndarray, np.ndarray]:
     """The closed components of a mesh: the component of every face [F] and the signed volume
     each encloses [C] (positive for outward-oriented faces, negative for a cavity's inner
@@ -261,8 +268,7 @@ def component_volumes(vertices, faces) -> tuple[np.ndarray, np.ndarray]:
     graph = sp.coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(n, n))
     count, labels = sp.csgraph.connected_components(graph, directed=False)
     face_label = labels[faces[:, 0]]
-    tri = vertices[faces]
-    signed = np.einsum("ij,ij->i", tri[:, 0], np.cross(tri[:, 1], tri[:, 2])) / 6.0
+    signed = face_volumes(vertices, faces)
     return face_label, np.bincount(face_label, weights=signed, minlength=count)
 
 
@@ -300,12 +306,11 @@ def extract_mesh(
     slice_index: int,
     *,
     min_component: float = 0.0,
-    level: float = 0.0,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Closed mesh of the ``level`` set of one time slice (marching cubes on the padded
-    slice), without the components smaller than ``min_component`` of the largest (cavities
-    are kept: see :func:`drop_cavities`)."""
-    values = field.values[slice_index].astype(np.float64) - level
+    """Closed mesh of the zero set of one time slice (marching cubes on the padded slice),
+    without the components smaller than ``min_component`` of the largest (cavities are kept:
+    see :func:`drop_cavities`)."""
+    values = field.values[slice_index].astype(np.float64)
     values = np.pad(
         values, 1, mode="constant", constant_values=max(float(values.max()), field.spacing)
     )
