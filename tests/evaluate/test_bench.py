@@ -84,6 +84,15 @@ def test_held_out_stretches_of_a_capture_are_named_scenes():
     assert "From frame 90 on." in bench._describe("crane", chosen.options)
 
 
+def test_a_held_still_pose_is_a_named_scene():
+    """``crane-still``: the first crane pose 20 times (each frame scanned anew), not run by
+    default."""
+    (chosen,) = bench._select_scenes(["crane-still"], quick=False)
+    assert chosen.name == "crane" and chosen.options == {"start": 0, "step": 0}
+    assert "crane-still" not in {s.key for s in bench._select_scenes(None, quick=False)}
+    assert "held still" in bench._describe("crane", chosen.options)
+
+
 def test_machine_info_names_the_machine():
     info = bench.machine_info()
     assert info["cores"] >= 1 and info["cpu"] and info["date"].endswith("UTC")

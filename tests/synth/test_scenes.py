@@ -163,6 +163,12 @@ def test_crane_default_is_the_benchmark_selection():
     np.testing.assert_array_equal(short.vertices[0], full.vertices[3])
     with pytest.raises(InputError, match="only"):
         scene("crane", frames=500)
+    still = scene("crane", frames=3, step=0, start=7)
+    assert still.frame_count == 3
+    for k in range(3):
+        np.testing.assert_array_equal(still.vertices[k], full.vertices[7])
+    with pytest.raises(InputError, match="step"):
+        scene("crane", step=-1)
 
 
 @needs_data

@@ -392,9 +392,16 @@ def _shared(name: str):
     def build(frames: int | None, seed: int, *, step: int = default_step, start: int = 0):
         from fourd.synth.data import load_shared
 
-        if step < 1 or start < 0:
-            raise InputError(f"scene {name}: step must be >= 1 and start >= 0, got {step}, {start}")
+        if step < 0 or start < 0:
+            raise InputError(f"scene {name}: step and start must be >= 0, got {step}, {start}")
         full = load_shared(name)
+        if step == 0:  # the pose of frame ``start`` held still
+            if start >= full.frame_count:
+                raise InputError(
+                    f"scene {name}: frame {start} asked for but only {full.frame_count} exist"
+                )
+            held = np.repeat(full.vertices[start : start + 1], frames or DEFAULT_FRAMES, axis=0)
+            return AnimatedMesh(full.faces, held, times=np.arange(len(held), dtype=float))
         available = len(range(start, full.frame_count, step))
         if frames is None:
             frames = min(available, DEFAULT_FRAMES) if name == "crane" else available
@@ -442,7 +449,8 @@ def scene(
         Number of frames. Procedural scenes: default 20, the motion always spans the whole
         sequence (more frames = finer time steps). Shared scenes: the first ``frames`` frames
         after ``start`` and ``step`` (defaults: ``crane`` 20 frames with step 2, the benchmark
-        protocol; the others all their frames).
+        protocol; the others all their frames); ``step=0`` holds the pose of frame ``start``
+        still for ``frames`` frames (default 20), a sequence on which nothing may drift.
     seed : int
         Seed of the scene's random choices (the bumps of ``rigid-turn``; other scenes are fully
         analytic and ignore it).
