@@ -400,7 +400,8 @@ def _shared(name: str):
                 raise InputError(
                     f"scene {name}: frame {start} asked for but only {full.frame_count} exist"
                 )
-            held = np.repeat(full.vertices[start : start + 1], frames or DEFAULT_FRAMES, axis=0)
+            count = DEFAULT_FRAMES if frames is None else frames
+            held = np.repeat(full.vertices[start : start + 1], count, axis=0)
             return AnimatedMesh(full.faces, held, times=np.arange(len(held), dtype=float))
         available = len(range(start, full.frame_count, step))
         if frames is None:

@@ -675,16 +675,17 @@ class SlideStep(NamedTuple):
     max_constraint_residual: float
 
 
-def _still_normals(field, guess, time, dt, normals, options, pre):
+def _still_normals(field, guess, time, dt, normals, limit):
     """``normals`` [N, 3] (the frame surface's gradients at ``guess``) with, at the vertices
-    where the 4D implicit's zero set moves less than ``options.still_normals`` median edges in
-    this step (its normal speed ``|f_t| dt / |grad_x f|``), the direction of ``grad_x f``
-    instead, at the same length (see :attr:`SlideOptions.still_normals`)."""
+    where the 4D implicit's zero set moves less than ``limit`` (input units) in this step (its
+    normal speed ``|f_t| dt / |grad_x f|``), the direction of ``grad_x f`` instead, at the
+    same length (see :attr:`SlideOptions.still_normals`)."""
     _, gradient = value_and_gradient(field, guess, _field_times(time, len(guess)))
     length = np.maximum(np.linalg.norm(gradient[:, :3], axis=1), 1e-12)
-    still = np.abs(gradient[:, 3]) * abs(dt) < options.still_normals * pre.edge_length * length
+    still = np.abs(gradient[:, 3]) * abs(dt) < limit * length
     out = normals.copy()
-    out[still] = gradient[still, :3] * (np.linalg.norm(normals[still], axis=1) / length[still])[:, None]
+    scale = np.linalg.norm(normals[still], axis=1) / length[still]
+    out[still] = gradient[still, :3] * scale[:, None]
     return out
 
 
@@ -787,7 +788,8 @@ def slide_step(
         # f(., t') = 0 instead of at p^t: n' . (p' - g) + f(g, t') = 0 with n' = grad_x f(g, t')
         values_g, normals, _ = target(guess)
         if surface is not None and options.still_normals > 0:
-            normals = _still_normals(field, guess, next_time, dt, normals, options, pre)
+            limit = options.still_normals * pre.edge_length
+            normals = _still_normals(field, guess, next_time, dt, normals, limit)
         offsets = np.einsum("ij,ij->i", normals, guess) - values_g
     constrained = np.ones(n, dtype=bool)
     if data_tree is not None:
