@@ -414,6 +414,40 @@ def test_smooth_trajectories_keeps_linear_motion_and_the_end_frames():
     assert np.array_equal(K.smooth_trajectories(noisy, times, 0), noisy)
 
 
+
+def test_smooth_trajectories_with_a_motion_threshold_leaves_an_acceleration_alone():
+    # a noisy grid, its last quarter accelerating steadily (a kick): the plain filter cuts
+    # the accelerating part's trajectory by a quarter of its second difference, the
+    # motion-aware one keeps it there and still takes out the still part's noise
+    u, v = np.meshgrid(np.linspace(0.0, 1.0, 24), np.linspace(0.0, 1.0, 24))
+    grid = np.c_[u.ravel(), v.ravel(), np.zeros(u.size)]
+    times = np.arange(7.0)
+    truth = np.repeat(grid[None], len(times), axis=0)
+    kicking = grid[:, 0] > 0.75
+    truth[:, kicking, 2] = 0.5 * (times[:, None] - 3.0) ** 2
+    noisy = truth + 0.01 * np.random.default_rng(6).normal(size=truth.shape)
+    plain = K.smooth_trajectories(noisy, times, 1)
+    aware = K.smooth_trajectories(noisy, times, 1, motion_threshold=3.0)
+
+    def error(x, mask):
+        return np.linalg.norm(x[1:-1, mask] - truth[1:-1, mask], axis=2).mean()
+
+    inside, still = grid[:, 0] > 0.85, grid[:, 0] < 0.6
+    assert error(plain, inside) > 0.2
+    assert error(aware, inside) < 0.03
+    assert error(aware, still) < 0.8 * error(noisy, still)
+    assert error(aware, still) < 1.1 * error(plain, still)
+    assert np.array_equal(aware[[0, -1]], noisy[[0, -1]])
+    # a region jumping off in one frame and back in the next (a glitch) is smoothed as
+    # by the plain filter
+    glitch = noisy.copy()
+    glitch[3, grid[:, 0] < 0.3, 2] += 0.5
+    plain = K.smooth_trajectories(glitch, times, 1)
+    aware = K.smooth_trajectories(glitch, times, 1, motion_threshold=3.0)
+    glitched = grid[:, 0] < 0.2
+    worst = [np.abs(x[3, glitched, 2] - truth[3, glitched, 2]).mean() for x in (plain, aware)]
+    assert worst[1] < 1.1 * worst[0] < 0.3
+
 def _lagging_field_and_frames(frames=5, lag=0.7):
     """A blob turning about y, its 4D field lagging behind (posed at ``lag * t``), and frame
     surfaces of the true positions: the data term must pull the sliding onto the data."""
