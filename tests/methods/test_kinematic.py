@@ -8,6 +8,7 @@ from fourd.animation import AnimatedMesh
 from fourd.errors import InputError
 from fourd.methods import kinematic as K
 from fourd.methods import reconstruct
+from fourd.methods.kinematic import urshape
 from fourd.methods.kinematic.framesurface import FrameSurface
 from fourd.methods.kinematic.register import RegisterOptions
 from fourd.methods.kinematic.sliding import slide_step
@@ -80,6 +81,20 @@ def test_extract_template_lies_on_the_surface_and_is_closed():
     # outward orientation: positive enclosed volume
     volume = np.einsum("ij,ij->i", V[F[:, 0]], np.cross(V[F[:, 1]], V[F[:, 2]])).sum() / 6
     assert volume > 3.0
+
+
+def test_extract_template_corrects_its_cell_size_towards_the_target_vertex_count():
+    blob = MovingBlob()
+    bounds = np.array([np.full(3, -1.4), np.full(3, 1.4)])
+    first = len(K.extract_template(blob, 0.0, bounds=bounds, cell_size=0.12)[0])
+    for target in (int(first * 0.6), int(first * 1.15), int(first * 1.05)):
+        count = len(K.extract_template(
+            blob, 0.0, bounds=bounds, cell_size=0.12, target_vertices=target
+        )[0])
+        if abs(first / target - 1.0) <= urshape.VERTEX_TOLERANCE:
+            assert count == first  # close enough: no second marching cubes
+        else:
+            assert abs(count / target - 1.0) < 0.05
 
 
 def test_a_rigidly_moving_shape_is_tracked_with_near_zero_arap_energy():

@@ -21,6 +21,13 @@ from fourd.geometry.marching import compact, marching_cubes
 
 log = logging.getLogger("fourd.methods.kinematic.urshape")
 
+#: With ``target_vertices``: marching cubes runs once more when its vertex count is off the
+#: target by more than this fraction. The sliding's cost grows with the count: at the earlier
+#: 0.8-1.25 crane kept 11,255 vertices for a target of 10,000 (``exp``, crane, 20k samples:
+#: 0.74 s/frame, correspondence 0.0078 / 0.0169 there; 0.61 s/frame and 0.0077 / 0.0160 at
+#: 10,065 vertices).
+VERTEX_TOLERANCE = 0.1
+
 
 def data_cell_mask(points: np.ndarray, origin: np.ndarray, cell_size: float, shape) -> np.ndarray:
     """Cells (``shape`` = cells per axis) with at least one of ``points`` inside their
@@ -138,9 +145,9 @@ def extract_template(
     min_component_faces : int
         Connected pieces with fewer triangles are dropped (0: keep all).
     target_vertices : int
-        When positive, ``cell_size`` is a first guess: if marching cubes gives not within
-        0.8-1.25 times this many vertices, it runs once more at the cell size corrected by
-        the square root of the ratio, before the smoothing and projection.
+        When positive, ``cell_size`` is a first guess: if marching cubes gives more than
+        :data:`VERTEX_TOLERANCE` off this many vertices, it runs once more at the cell size
+        corrected by the square root of the ratio, before the smoothing and projection.
 
     Returns
     -------
@@ -156,7 +163,7 @@ def extract_template(
         raise ValueError(f"cell_size must be positive, got {cell_size}")
     vertices, faces = _polygonise(field, time, bounds, cell_size, data_points, min_component_faces)
     ratio = len(vertices) / target_vertices if target_vertices > 0 else 1.0
-    if len(faces) and not (0.8 <= ratio <= 1.25):
+    if len(faces) and abs(ratio - 1.0) > VERTEX_TOLERANCE:
         cell_size = cell_size * float(np.sqrt(ratio))
         vertices, faces = _polygonise(field, time, bounds, cell_size, data_points, min_component_faces)
     if len(faces) == 0:
