@@ -429,7 +429,6 @@ def test_smooth_trajectories_keeps_linear_motion_and_the_end_frames():
     assert np.array_equal(K.smooth_trajectories(noisy, times, 0), noisy)
 
 
-
 def test_smooth_trajectories_with_a_motion_threshold_leaves_an_acceleration_alone():
     # a noisy grid, its last quarter accelerating steadily (a kick): the plain filter cuts
     # the accelerating part's trajectory by a quarter of its second difference, the
@@ -441,8 +440,9 @@ def test_smooth_trajectories_with_a_motion_threshold_leaves_an_acceleration_alon
     kicking = grid[:, 0] > 0.75
     truth[:, kicking, 2] = 0.5 * (times[:, None] - 3.0) ** 2
     noisy = truth + 0.01 * np.random.default_rng(6).normal(size=truth.shape)
+    threshold = K.Options().smoothing_motion
     plain = K.smooth_trajectories(noisy, times, 1)
-    aware = K.smooth_trajectories(noisy, times, 1, motion_threshold=3.0)
+    aware = K.smooth_trajectories(noisy, times, 1, motion_threshold=threshold)
 
     def error(x, mask):
         return np.linalg.norm(x[1:-1, mask] - truth[1:-1, mask], axis=2).mean()
@@ -458,10 +458,11 @@ def test_smooth_trajectories_with_a_motion_threshold_leaves_an_acceleration_alon
     glitch = noisy.copy()
     glitch[3, grid[:, 0] < 0.3, 2] += 0.5
     plain = K.smooth_trajectories(glitch, times, 1)
-    aware = K.smooth_trajectories(glitch, times, 1, motion_threshold=3.0)
+    aware = K.smooth_trajectories(glitch, times, 1, motion_threshold=threshold)
     glitched = grid[:, 0] < 0.2
     worst = [np.abs(x[3, glitched, 2] - truth[3, glitched, 2]).mean() for x in (plain, aware)]
     assert worst[1] < 1.1 * worst[0] < 0.3
+
 
 def _lagging_field_and_frames(frames=5, lag=0.7):
     """A blob turning about y, its 4D field lagging behind (posed at ``lag * t``), and frame

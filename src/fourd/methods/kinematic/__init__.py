@@ -209,7 +209,7 @@ class Options:
         neighbourhood deviates from the neighbouring frames together, and keeps doing so in
         the next frames, by more than this multiple of the median deviation
         (:func:`smooth_trajectories`; 0: the plain filter everywhere). The plain filter cut
-        crane's kicking leg off the surface (per-frame accuracy 0.0017 unsmoothed against
+        crane's kicking leg off the surface (per-frame accuracy 0.0022 unsmoothed against
         0.0029 smoothed at the kick's peak). ``fourd bench``, Chamfer / jitter, plain and with
         this at 1: crane 0.0027 / 0.79 and 0.0024 / 0.96, dfaust-hopping 0.0025 / 0.75 and
         0.0025 / 0.78, crane-90 and crane-130 0.0028 -> 0.0025, the others within 0.0002.
