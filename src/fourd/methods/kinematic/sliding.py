@@ -129,12 +129,7 @@ class SlideOptions:
         itself (point-to-plane ICP on the implicit) after the first, linearised one.
     data_rigid_iterations : int
         At most this many Gauss-Newton steps of the rigid prediction against an input frame's
-        own points when the step has a data term (see :func:`slide_step`). They seldom stop
-        early, and each evaluates the frame's surface at every vertex. ``exp`` runs (20k
-        samples; correspondence mean / last frame, s/frame) at 6 and at 3: crane 0.0078 /
-        0.0172, 0.62 and 0.0077 / 0.0166, 0.54; rigid-turn 0.0012 / 0.0017 at both, 0.40 and
-        0.35; squash-ball 0.0248 / 0.0167 and 0.0230 / 0.0075; dfaust-hopping, horse-gallop,
-        touching-spheres and crane-90 within 0.0008. At 2, rigid-turn 0.0017 / 0.0038.
+        own points when the step has a data term (see :func:`slide_step`).
     register : RegisterOptions or None
         Large-motion registration (:mod:`.register`): at a step with a data term whose
         prediction leaves many of the frame's points unexplained, the template is registered
@@ -188,7 +183,7 @@ class SlideOptions:
     rigid_guess: bool = True
     rigid_neighbours: int = 48
     rigid_iterations: int = 2
-    data_rigid_iterations: int = 3
+    data_rigid_iterations: int = 6
     register: RegisterOptions | None = RegisterOptions()
     projection_limit: float = 0.0
     linearize_at: Literal["previous", "guess"] = "guess"
