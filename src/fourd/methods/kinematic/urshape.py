@@ -23,9 +23,9 @@ log = logging.getLogger("fourd.methods.kinematic.urshape")
 
 #: With ``target_vertices``: marching cubes runs once more when its vertex count is off the
 #: target by more than this fraction. The sliding's cost grows with the count: at the earlier
-#: 0.8-1.25 crane kept 11,255 vertices for a target of 10,000 (``exp``, crane, 20k samples:
-#: 0.74 s/frame, correspondence 0.0078 / 0.0169 there; 0.61 s/frame and 0.0077 / 0.0160 at
-#: 10,065 vertices).
+#: 0.8-1.25 crane kept 11,255 vertices for a target of 10,000 (``fourd bench``, median of 3:
+#: 0.71 -> 0.59 s/frame, of which dfaust-hopping's unchanged path showed about half to be the
+#: machine's drift; correspondence 0.0078 / 0.0169 -> 0.0077 / 0.0171).
 VERTEX_TOLERANCE = 0.1
 
 
