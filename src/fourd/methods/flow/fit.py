@@ -14,6 +14,11 @@ the labels, is negative inside and positive outside, and costs one sparse SPD so
 smoothed-aggregation AMG preconditioner). Its two uses are the paper's: improving the labels
 (local minima well below zero -> inside, local maxima well above zero -> outside) and orienting
 the data normals (PCA directions, signs from the fit's gradient).
+
+The fit stays on the flow's grid even at resolution 64. On a grid twice as coarse,
+interpolated back (the paper's "low-resolution" fit), ``dfaust-hopping`` at 64 took 2.4
+instead of about 5 s for the fit, but its Chamfer went 0.0037 -> 0.0042 (scratch runs, 20k
+samples, commit 4512ce4): fewer cells came out labelled outside.
 """
 
 from __future__ import annotations
