@@ -40,7 +40,7 @@ from fourd.geometry.laplacian import laplacian_smooth
 from fourd.geometry.neighbors import point_spacing
 from fourd.geometry.normals import pca_normals, vertex_normals
 from fourd.geometry.outliers import distance_ratio_inliers
-from fourd.methods.flow.fit import fit_gradient, fit_implicit, fit_labels
+from fourd.methods.flow.fit import deep_inside, fit_gradient, fit_implicit, fit_labels
 from fourd.methods.flow.grid import (
     SpaceTimeGrid,
     build_grid,
@@ -187,6 +187,20 @@ class Options:
     fit_level : float
         Local extrema of the implicit fit beyond +-``fit_level`` relabel cells (fit values are
         +1 on carved cells, -1 targets at seeds).
+    deep_inside : float
+        Cells where the implicit fit is negative and that lie at least this many flow cells
+        from every carved and every data cell are labelled inside too (0: only the fit's
+        local minima, as the paper). A deviation for thick objects: the paper runs IRLS
+        until 90-95% of the cells are decided, this method stops after ``max_iterations``,
+        and the interior of a thick object far from the few seeds stays undecided, near 0
+        where no data holds it up (``rigid-turn``: a pit from the unseen underside a third
+        of the way into the ball, 17% of the volume missing). Measured (``exp``
+        runs, 20k samples, Chamfer / completeness-95 / volume change, 0 against 4):
+        ``rigid-turn`` 0.0183 / 0.0339 / 7.2% -> 0.0076 / 0.0299 / 1.4% (2 and 3 cells: 0.0079
+        and 0.0082), ``squash-ball`` 0.0054 / 0.0137 -> 0.0052 / 0.0152, ``touching-spheres``
+        0.0039 / 0.0086 -> 0.0040 / 0.0086; the thinner scenes at resolution 32 have almost no
+        such cells (the same figures), and ``crane`` and ``dfaust-hopping`` at resolution 64
+        are within 0.0001.
     outlier_factor : float
         Statistical outlier filter: drop points whose 8th-neighbour distance exceeds this
         multiple of the median.
@@ -282,6 +296,7 @@ class Options:
     reuse_interpolation: bool = True
     outward_cosine: float = 0.5
     fit_level: float = 0.5
+    deep_inside: float = 4.0
     outlier_factor: float = 3.0
     refine: int = 2
     band: float = 2.0
@@ -315,6 +330,8 @@ class Options:
             raise ValueError(f"clamp must be in [0, 0.5), got {self.clamp}")
         if self.refine < 1:
             raise ValueError(f"refine must be at least 1, got {self.refine}")
+        if self.deep_inside < 0:
+            raise ValueError(f"deep_inside must not be negative, got {self.deep_inside}")
         if self.regularize_towards not in ("zero", "previous"):
             raise ValueError(
                 f"regularize_towards must be zero or previous, got {self.regularize_towards!r}"
@@ -487,6 +504,8 @@ def run(seq: PointCloudSequence, options: Options | None = None) -> FlowResult:
     clock = time.perf_counter()
     fit = fit_implicit(grid, slice_points, outside, seeds & ~data)
     fit_inside, fit_outside = fit_labels(fit.values, outside | data, level=options.fit_level)
+    if options.deep_inside > 0:
+        fit_inside |= deep_inside(fit.values, outside | data, distance=options.deep_inside)
     slice_normals: list[np.ndarray | None] = [None] * S
     for s, pts in enumerate(slice_points):
         if pts is None:
