@@ -531,7 +531,7 @@ def test_deep_inside_labels_only_far_negative_cells_of_slices_with_data():
 @pytest.mark.slow
 def test_a_turning_thick_ball_keeps_its_interior():
     """A bumpy ball turning under three cameras that look down on it, at resolution 24 (the
-    ball about 18 cells across). The fit's local minima label a handful of cells inside, and
+    ball about 24 cells across). The fit's local minima label a handful of cells inside, and
     with only those the capped IRLS leaves a pit from the unseen underside into the ball (0.90
     of the truth's volume, the 99th percentile of the distance to the truth 0.15 of its
     diagonal); with the fit's deep interior labelled too, 0.945 and 0.09."""

@@ -209,9 +209,10 @@ def deep_inside(values: np.ndarray, decided: np.ndarray, *, distance: float) -> 
     """Cells ``[S, X, Y, Z]`` where the fit ``values`` is negative and that lie at least
     ``distance`` cells (Euclidean, in space) from every ``decided`` cell (carved or data).
 
-    The local minima of :func:`fit_labels` leave the interior of a thick object free: a
-    ball of radius 15 cells has a handful, and three capped IRLS iterations do not fill it
-    from there (see the flow method's ``Options.deep_inside``)."""
+    The local minima of :func:`fit_labels` and the seeds leave the interior of a thick
+    object free, and three capped IRLS iterations do not fill it from them (see the flow
+    method's ``Options.deep_inside``). A slice without decided cells (a missing frame)
+    gets none."""
     deep = np.zeros(values.shape, dtype=bool)
     for s in range(len(values)):
         if not decided[s].any():  # a slice without data (a missing frame): no distance
