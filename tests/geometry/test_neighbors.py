@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from scipy.spatial import cKDTree
 
-from fourd.geometry.neighbors import GRID_MIN_POINTS, knn
+from fourd.geometry.neighbors import GRID_MIN_POINTS, bucket_points, knn, nearest_within
 
 
 def _surface_with_outliers(rng, count=6000, outliers=120):
@@ -38,3 +38,23 @@ def test_grid_knn_on_flat_and_duplicated_points():
     assert np.all(distances[:50, 0] == 0) and np.all(indices[:50, 0] == np.arange(3000, 3050))
     tree_d, _ = cKDTree(points).query(points, k=7)
     np.testing.assert_allclose(distances, tree_d[:, 1:], rtol=1e-12, atol=0)
+
+
+def test_nearest_within_matches_the_kd_tree_within_each_bound():
+    rng = np.random.default_rng(5)
+    points = _surface_with_outliers(rng, count=3000, outliers=60)
+    queries = _surface_with_outliers(rng, count=500, outliers=40) * 1.05
+    cell = 0.3
+    origin = points.min(axis=0)
+    grid = bucket_points(points, origin, cell)
+    bounds = rng.uniform(0.0, 0.6, len(queries))
+    bounds[:20] = -1.0  # skipped
+    indices, unsearched = nearest_within(grid, origin, cell, queries, bounds, max_cells=64)
+    distances, expected = cKDTree(points).query(queries, k=1)
+    within = distances <= bounds
+    searched = ~unsearched & (bounds >= 0)
+    assert searched.sum() > 250 and unsearched.sum() > 10 and np.sum(searched & within) > 100
+    np.testing.assert_array_equal(indices[searched & within], expected[searched & within])
+    assert np.all(indices[~(searched & within)] == -1)
+    # a query is unsearched only when its bound's block spans more than max_cells cells
+    assert np.all(bounds[unsearched] > cell * (64 ** (1 / 3) - 1) / 2)

@@ -2,6 +2,7 @@
 
 import numpy as np
 import pytest
+from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 from test_kinematic import MovingBlob, _sphere_template
 
@@ -9,7 +10,14 @@ from fourd import synth
 from fourd.geometry.normals import vertex_normals
 from fourd.methods import kinematic as K
 from fourd.methods.kinematic.framesurface import FrameSurface
-from fourd.methods.kinematic.register import ArapIcp, RegisterOptions, unexplained_fraction
+from fourd.methods.kinematic.register import (
+    ArapIcp,
+    RegisterOptions,
+    _farthest_move,
+    _grid,
+    _nearest,
+    unexplained_fraction,
+)
 from fourd.methods.kinematic.sliding import slide_step
 
 
@@ -95,3 +103,24 @@ def test_register_options_are_validated():
         RegisterOptions(refine_iterations=-1)
     with pytest.raises(ValueError):
         RegisterOptions(refine_weight=0.0)
+
+
+def test_the_warm_started_search_finds_the_k_d_tree_pairs_as_the_targets_move():
+    # points (queries, fixed) and a moving vertex set (targets), with a shrinking radius as
+    # in the registration: every step the same nearest targets as a k-d tree query
+    rng = np.random.default_rng(2)
+    points = rng.uniform(-1, 1, (2000, 3))
+    targets = rng.uniform(-1.2, 1.2, (1500, 3))
+    nearest, lower = np.full(len(points), -1), np.zeros(len(points))
+    skipped = 0
+    for step, radius in enumerate(np.geomspace(0.8, 0.05, 12)):
+        tree = cKDTree(targets)
+        expected = tree.query(points, k=1, distance_upper_bound=radius)[1]
+        expected = np.where(expected < len(targets), expected, -1)
+        skipped += int(np.sum((nearest < 0) & (lower >= radius)))
+        nearest, lower = _nearest(points, targets, _grid(targets, 0.1), None, nearest, lower, radius)
+        np.testing.assert_array_equal(nearest, expected, err_msg=f"step {step}")
+        moved = targets + rng.normal(0, 0.01, targets.shape)
+        lower = np.maximum(lower - _farthest_move(targets, moved), 0.0)
+        targets = moved
+    assert skipped > 0  # the lower bounds spared some searches

@@ -189,6 +189,89 @@ def _grid_knn(sorted_points, ids, starts, dims, origin, cell, rows, out_d2, out_
                 out_idx[row, a] = best_id[a]
 
 
+#: Most grid cells :func:`nearest_within` scans for one query; a query whose bound spans
+#: more is left unsearched for the caller to answer another way (a k-d tree).
+NEAREST_MAX_CELLS = 64
+
+
+def nearest_within(
+    grid, origin: np.ndarray, cell: float, queries: np.ndarray, bounds: np.ndarray,
+    max_cells: int = NEAREST_MAX_CELLS,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The nearest of the points bucketed in ``grid`` (:func:`bucket_points` with corner
+    ``origin`` [3] and side ``cell``) within a bound of its own for each of ``queries``
+    [Q, 3]: exact, and fast where the bounds are small (a warm start's distance to the
+    previous nearest point).
+
+    Parameters
+    ----------
+    bounds : ndarray [Q]
+        Largest distance searched, inclusive; negative: the query is skipped (none).
+
+    Returns
+    -------
+    indices : ndarray int64 [Q]
+        Original index of the nearest point, -1 where none lies within the bound.
+    unsearched : ndarray bool [Q]
+        Queries whose bound spans more than ``max_cells`` cells: not searched (index -1).
+    """
+    queries = np.ascontiguousarray(queries, dtype=np.float64)
+    indices = np.full(len(queries), -1, dtype=np.int64)
+    unsearched = np.zeros(len(queries), dtype=bool)
+    if len(grid[0]):
+        _nearest_within(
+            *grid, np.asarray(origin, dtype=np.float64), float(cell), queries,
+            np.ascontiguousarray(bounds, dtype=np.float64), int(max_cells), indices, unsearched,
+        )
+    return indices, unsearched
+
+
+@numba.njit(cache=True, parallel=True, nogil=True)
+def _nearest_within(
+    sorted_points, ids, starts, dims, origin, cell, queries, bounds, max_cells, out_idx,
+    out_unsearched,
+):
+    """:func:`nearest_within`'s search, into ``out_idx`` / ``out_unsearched`` [Q]."""
+    for q in numba.prange(len(queries)):
+        bound = bounds[q]
+        if bound < 0:
+            continue
+        if not bound <= cell * max_cells:
+            out_unsearched[q] = True
+            continue
+        x0 = queries[q, 0]
+        x1 = queries[q, 1]
+        x2 = queries[q, 2]
+        lo0, lo1, lo2 = cell_of(x0 - bound, x1 - bound, x2 - bound, origin, cell)
+        hi0, hi1, hi2 = cell_of(x0 + bound, x1 + bound, x2 + bound, origin, cell)
+        lo0 = max(lo0, 0)
+        lo1 = max(lo1, 0)
+        lo2 = max(lo2, 0)
+        hi0 = min(hi0, dims[0] - 1)
+        hi1 = min(hi1, dims[1] - 1)
+        hi2 = min(hi2, dims[2] - 1)
+        if hi0 < lo0 or hi1 < lo1 or hi2 < lo2:
+            continue
+        if (hi0 - lo0 + 1) * (hi1 - lo1 + 1) * (hi2 - lo2 + 1) > max_cells:
+            out_unsearched[q] = True
+            continue
+        best = bound * bound
+        found = -1
+        for i in range(lo0, hi0 + 1):
+            for j in range(lo1, hi1 + 1):
+                row = (i * dims[1] + j) * dims[2]
+                for p in range(starts[row + lo2], starts[row + hi2 + 1]):
+                    d0 = x0 - sorted_points[p, 0]
+                    d1 = x1 - sorted_points[p, 1]
+                    d2 = x2 - sorted_points[p, 2]
+                    d = d0 * d0 + d1 * d1 + d2 * d2
+                    if d < best or (d == best and found < 0):
+                        best = d
+                        found = p
+        if found >= 0:
+            out_idx[q] = ids[found]
+
+
 def neighbours_among(points: np.ndarray, indices: np.ndarray, keep: np.ndarray, k: int) -> np.ndarray:
     """The ``k`` nearest neighbours of the kept points among the kept points, from the
     neighbour lists of all points.
