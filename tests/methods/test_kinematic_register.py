@@ -7,6 +7,7 @@ from scipy.spatial.transform import Rotation
 from test_kinematic import MovingBlob, _sphere_template
 
 from fourd import synth
+from fourd.geometry.neighbors import bucket_grid
 from fourd.geometry.normals import vertex_normals
 from fourd.methods import kinematic as K
 from fourd.methods.kinematic.framesurface import FrameSurface
@@ -14,7 +15,6 @@ from fourd.methods.kinematic.register import (
     ArapIcp,
     RegisterOptions,
     _farthest_move,
-    _grid,
     _nearest,
     unexplained_fraction,
 )
@@ -118,7 +118,7 @@ def test_the_warm_started_search_finds_the_k_d_tree_pairs_as_the_targets_move():
         expected = tree.query(points, k=1, distance_upper_bound=radius)[1]
         expected = np.where(expected < len(targets), expected, -1)
         skipped += int(np.sum((nearest < 0) & (lower >= radius)))
-        nearest, lower = _nearest(points, targets, _grid(targets, 0.1), None, nearest, lower, radius)
+        nearest, lower = _nearest(points, targets, bucket_grid(targets, 0.1), None, nearest, lower, radius)
         np.testing.assert_array_equal(nearest, expected, err_msg=f"step {step}")
         moved = targets + rng.normal(0, 0.01, targets.shape)
         lower = np.maximum(lower - _farthest_move(targets, moved), 0.0)

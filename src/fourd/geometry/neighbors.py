@@ -194,12 +194,36 @@ def _grid_knn(sorted_points, ids, starts, dims, origin, cell, rows, out_d2, out_
 NEAREST_MAX_CELLS = 64
 
 
+def bucket_grid(points: np.ndarray, cell: float):
+    """``points`` [P >= 1, 3] in a grid of cells about ``cell`` wide (coarser where that would
+    exceed :data:`GRID_MAX_CELLS`) over their box, for :func:`nearest_within`: ``(grid,
+    origin, cell)`` with ``grid`` the :func:`bucket_points` output."""
+    origin, far = _box(points)
+    cell = _coarse_enough(far - origin, cell)
+    return bucket_points(points, origin, cell), origin, cell
+
+
+@numba.njit(cache=True)
+def _box(points):
+    """Smallest and largest coordinates [3] of ``points`` [P >= 1, 3] (a tenth of the cost of
+    numpy's reductions along the short axis, which :func:`bucket_grid` pays every
+    registration iteration)."""
+    low = points[0].copy()
+    high = points[0].copy()
+    for i in range(1, len(points)):
+        for a in range(3):
+            low[a] = min(low[a], points[i, a])
+            high[a] = max(high[a], points[i, a])
+    return low, high
+
+
 def nearest_within(
     grid, origin: np.ndarray, cell: float, queries: np.ndarray, bounds: np.ndarray,
     max_cells: int = NEAREST_MAX_CELLS,
 ) -> tuple[np.ndarray, np.ndarray]:
     """The nearest of the points bucketed in ``grid`` (:func:`bucket_points` with corner
-    ``origin`` [3] and side ``cell``) within a bound of its own for each of ``queries``
+    ``origin`` [3] and side ``cell``; :func:`bucket_grid` gives all three) within a bound of
+    its own for each of ``queries``
     [Q, 3]: exact, and fast where the bounds are small (a warm start's distance to the
     previous nearest point).
 
