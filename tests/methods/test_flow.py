@@ -701,29 +701,6 @@ def test_mass_meshes_move_only_the_unobserved_parts():
     assert np.allclose(np.linalg.norm(whole[1][0], axis=1), 0.55 - 0.1 * h)
 
 
-def test_mass_levels_auto_leaves_volumes_that_the_unseen_parts_cannot_explain():
-    """all_or_nothing (mass_levels="auto"): the two half-seen spheres of radius 0.5 and 0.55
-    need their unseen halves moved by about 0.05 (1 cell of h = 0.05) to reach equal
-    volumes: applied under a limit of 2 cells, every frame left as it was under 0.5 cells
-    (as if their volume truly changed), and mass_levels is validated."""
-    from fourd.methods.flow import _mesh_volume, mass_meshes
-
-    sphere = trimesh.creation.icosphere(subdivisions=4)
-    meshes = [(r * sphere.vertices, sphere.faces) for r in (0.5, 0.55)]
-    points = [v[v[:, 2] > 0] for v, _ in meshes]
-    mass = np.array([1.0, 1.0])
-    kept = mass_meshes(meshes, points, mass, h=0.05, limit=2.0, smoothing=0, all_or_nothing=True)
-    volumes = np.array([_mesh_volume(v, f) for v, f in kept])
-    assert abs(volumes[0] / volumes[1] - 1) < 0.002
-    left = mass_meshes(meshes, points, mass, h=0.05, limit=0.5, smoothing=0, all_or_nothing=True)
-    assert all(w is v for (w, _), (v, _) in zip(left, meshes, strict=True))
-    clipped = mass_meshes(meshes, points, mass, h=0.05, limit=0.5, smoothing=0)
-    assert not np.allclose(clipped[0][0], meshes[0][0])  # without it: moved by the limit
-    assert Options().mass_levels == "auto"
-    with pytest.raises(ValueError):
-        Options(mass_levels="sometimes")
-
-
 
 def test_mass_meshes_smooth_a_dent_out_of_the_unobserved_part():
     """A sphere (radius 0.5) whose unseen bottom cap is pushed 0.2 inwards, a pit: the

@@ -234,7 +234,7 @@ class Options:
         pulls material out of the interior and leaves a pocket there (``squash-ball`` with
         one slice per frame: inner surfaces in 7 of 20 frames at 5cae82f; before the hull
         trim, 10 of 20, the largest 11% of the solid's volume).
-    mass_levels : bool or "auto"
+    mass_levels : bool
         For incompressible objects: move the unobserved parts of each frame's mesh along
         their normals so that its enclosed volume follows the flow's conserved mass
         (:func:`mass_meshes`). A deviation from the paper, which contours the zero level: the
@@ -250,17 +250,11 @@ class Options:
         ``regularize_towards="previous"``. More time slices do not help: with
         ``time_substeps=2`` the flow's mass conservation error rises to 2.4-2.8% (the capped
         MINRES solves) and the volumes, which follow the mass, change by 6.7-7.6% (``exp``,
-        60k samples). Always on, it forces a constant volume, and the true volume of
-        ``splitting-blob`` and of captured people is not (bench at 4512ce4, Chamfer without /
-        with: ``splitting-blob`` 0.0019 / 0.0063, ``dfaust-hopping`` 0.0031 / 0.0040;
-        ``crane``, ``bending-arm``, ``touching-spheres``, ``horse-gallop`` and
-        ``elephant-gallop`` within 0.0004 either way). ``"auto"`` (the default) tests the
-        hypothesis first: the offsets are applied only when every frame's stays within
-        ``level_limit`` cells, that is when the unobserved parts can account for the
-        frames' volume differences. Measured at resolution 32 (largest offset over the
-        frames, in cells): ``squash-ball`` 3.7, ``touching-spheres`` 0.8, ``bending-arm``
-        0.95 (applied); ``dfaust-hopping`` 7.8 and ``splitting-blob`` 13 (left alone: only
-        2-4% of their surface is unobserved, and their volume does change).
+        60k samples). Off by default: it forces a constant
+        volume, and the true volume of ``splitting-blob`` and of captured people is not
+        (bench at 4512ce4, Chamfer without / with: ``splitting-blob`` 0.0019 / 0.0063,
+        ``dfaust-hopping`` 0.0031 / 0.0040; ``crane``, ``bending-arm``, ``touching-spheres``,
+        ``horse-gallop`` and ``elephant-gallop`` within 0.0004 either way).
     observed_distance : float
         With ``mass_levels``: vertices within this many flow cells of a data point of their
         frame stay; the offset's weight rises to 1 over the next flow cell.
@@ -312,7 +306,7 @@ class Options:
     min_component: float = 0.02
     cavities: bool = False
     hull_trim: bool = True
-    mass_levels: bool | Literal["auto"] = "auto"
+    mass_levels: bool = False
     observed_distance: float = 0.5
     level_limit: float = 4.0
     unobserved_smoothing: int = 100
@@ -344,8 +338,6 @@ class Options:
             raise ValueError(
                 f"regularize_towards must be zero or previous, got {self.regularize_towards!r}"
             )
-        if self.mass_levels not in (True, False, "auto"):
-            raise ValueError(f"mass_levels must be true, false or auto, got {self.mass_levels!r}")
         if self.inner not in ("cg-amg", "cg-ilu", "amg"):
             raise ValueError(f"inner must be cg-amg, cg-ilu or amg, got {self.inner!r}")
         if self.observed_distance < 0 or self.level_limit < 0 or self.unobserved_smoothing < 0:
@@ -607,7 +599,6 @@ def run(seq: PointCloudSequence, options: Options | None = None) -> FlowResult:
             reach=options.observed_distance,
             limit=options.level_limit,
             smoothing=options.unobserved_smoothing,
-            all_or_nothing=options.mass_levels == "auto",
         )
     if cavity_frames:
         log.warning(
@@ -670,7 +661,6 @@ def mass_meshes(
     limit: float = 4.0,
     smoothing: int = 100,
     steps: int = 3,
-    all_or_nothing: bool = False,
 ) -> list[tuple[np.ndarray, np.ndarray]]:
     """The frames' closed meshes with their unobserved parts moved so that each frame's
     enclosed volume follows the flow's (conserved) mass.
@@ -684,9 +674,6 @@ def mass_meshes(
     it cannot follow the motion), then every vertex moves along its normal by ``s_i u``, one
     offset per frame (``steps`` Newton steps on the exact mesh volume, at most ``limit``
     flow cells either way) that sets the volume. A frame without points moves as a whole.
-    With ``all_or_nothing``, ``meshes`` come back unchanged when some frame would need an
-    offset beyond ``limit``: the unobserved parts cannot account for the volume differences,
-    so the object is not incompressible (or more than its unseen parts is off).
 
     Parameters
     ----------
@@ -714,22 +701,14 @@ def mass_meshes(
             free = np.clip(np.minimum(distance, (reach + 1.0) * h) / h - reach, 0.0, 1.0)
         vertices = laplacian_smooth(vertices, faces, iterations=smoothing, weights=free)
         direction = free[:, None] * vertex_normals(vertices, faces)
-        shift, moved, beyond = 0.0, vertices, False
+        shift, moved = 0.0, vertices
         for _ in range(steps):
             volume = _mesh_volume(moved, faces)
             slope = float(np.einsum("ij,ij->", _volume_gradient(moved, faces), direction))
             if slope <= 0 or abs(volume - target) <= 1e-4 * target:
                 break
-            proposal = shift + (target - volume) / slope
-            beyond = abs(proposal) > limit * h
-            shift = float(np.clip(proposal, -limit * h, limit * h))
+            shift = float(np.clip(shift + (target - volume) / slope, -limit * h, limit * h))
             moved = vertices + shift * direction
-        if beyond and all_or_nothing:
-            log.info(
-                "flow: frame %d would need its unobserved parts moved by %.1f cells (limit "
-                "%.1f): volumes left as contoured (mass_levels=auto)", i, proposal / h, limit,
-            )
-            return list(meshes)
         out[i] = (moved, faces)
     return out
 
