@@ -701,6 +701,32 @@ def test_mass_meshes_move_only_the_unobserved_parts():
     assert np.allclose(np.linalg.norm(whole[1][0], axis=1), 0.55 - 0.1 * h)
 
 
+def test_mass_levels_auto_leaves_volumes_that_the_unseen_parts_cannot_explain():
+    """all_or_nothing (mass_levels="auto"): two half-seen spheres of radius 0.5 and 0.55 need
+    their unseen halves moved by about 0.05 to reach equal volumes, well under their radius:
+    applied. A sphere of radius 0.5 next to one of 1.5 would need its unseen half moved by
+    several times its radius: every frame left as it was (as if the volume truly changed).
+    mass_levels is validated."""
+    from fourd.methods.flow import _mesh_volume, mass_meshes
+
+    sphere = trimesh.creation.icosphere(subdivisions=4)
+    mass = np.array([1.0, 1.0])
+    meshes = [(r * sphere.vertices, sphere.faces) for r in (0.5, 0.55)]
+    points = [v[v[:, 2] > 0] for v, _ in meshes]
+    kept = mass_meshes(meshes, points, mass, h=0.05, smoothing=0, all_or_nothing=True)
+    volumes = np.array([_mesh_volume(v, f) for v, f in kept])
+    assert abs(volumes[0] / volumes[1] - 1) < 0.002
+    meshes = [(r * sphere.vertices, sphere.faces) for r in (0.5, 1.5)]
+    points = [v[v[:, 2] > 0] for v, _ in meshes]
+    left = mass_meshes(meshes, points, mass, h=0.05, limit=40.0, smoothing=0, all_or_nothing=True)
+    assert all(w is v for (w, _), (v, _) in zip(left, meshes, strict=True))
+    moved = mass_meshes(meshes, points, mass, h=0.05, limit=40.0, smoothing=0)
+    assert not np.allclose(moved[0][0], meshes[0][0])  # without it: moved
+    assert Options().mass_levels == "auto"
+    with pytest.raises(ValueError):
+        Options(mass_levels="sometimes")
+
+
 
 def test_mass_meshes_smooth_a_dent_out_of_the_unobserved_part():
     """A sphere (radius 0.5) whose unseen bottom cap is pushed 0.2 inwards, a pit: the
