@@ -263,12 +263,13 @@ class Options:
         and ``horse-gallop`` 2.7 / 2.9 = 0.87 (applied); ``dfaust-hopping`` 7.8 / 3.3 =
         2.5, ``splitting-blob`` 13.2 / 5.3 = 2.8 and ``crane`` 7.7 / 2.5 = 3.1 (left alone:
         only 2-4% of their surface is unobserved, and the volume of a person or of a
-        splitting blob does change). Bench at a66da0d (single runs), Chamfer / completeness-95
-        / volume change, contoured -> auto: squash-ball 0.0042 / 0.0150 / 12% -> 0.0028
-        / 0.0058 / 3.0%, touching-spheres 0.0029 / 0.0080 -> 0.0027 / 0.0077,
-        elephant-gallop 0.0069 / 0.0248 -> 0.0065 / 0.0264; worse: rigid-turn
-        0.0062 / 0.0295 -> 0.0064 / 0.0371 (the smoothing flattens bumps of the unseen side
-        that the flow had carried round). The Newton iteration's own offsets are no test:
+        splitting blob does change). Bench at a66da0d / ae2357b (single runs), Chamfer /
+        completeness-95 / volume change, contoured -> auto: ``squash-ball`` 0.0042 / 0.0150
+        / 12% -> 0.0026 / 0.0048 / 0.9%, ``touching-spheres`` 0.0029 / 0.0080 -> 0.0027 /
+        0.0075, ``elephant-gallop`` 0.0069 / 0.0248 -> 0.0065 / 0.0264; worse:
+        ``rigid-turn`` 0.0062 / 0.0295 -> 0.0063 / 0.0366 (the smoothing flattens bumps of
+        the unseen side that the flow had carried round). The Newton iteration's own
+        offsets are no test:
         squash-ball's frame 3 asks 2.6 cells linearly but 6.5 after a step, its offset
         region's volume growing slower than linearly.
     observed_distance : float
