@@ -268,7 +268,9 @@ class Options:
         / 12% -> 0.0026 / 0.0048 / 0.9%, ``touching-spheres`` 0.0029 / 0.0080 -> 0.0027 /
         0.0075, ``elephant-gallop`` 0.0069 / 0.0248 -> 0.0065 / 0.0264; worse:
         ``rigid-turn`` 0.0062 / 0.0295 -> 0.0063 / 0.0366 (the smoothing flattens bumps of
-        the unseen side that the flow had carried round). The Newton iteration's own
+        the unseen side that the flow had carried round; at 502a8b7, smoothing in
+        proportion to the volume error: ``rigid-turn`` 0.0063 / 0.0317, ``squash-ball``
+        0.0027 / 0.0052 / 0.9%, see ``unobserved_smoothing``). The Newton iteration's own
         offsets are no test:
         squash-ball's frame 3 asks 2.6 cells linearly but 6.5 after a step, its offset
         region's volume growing slower than linearly.
