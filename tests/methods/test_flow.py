@@ -643,6 +643,28 @@ def test_redistanced_is_a_signed_distance_without_pockets():
     assert np.allclose(np.linalg.norm(gradient, axis=1), 1.0, atol=0.1)
 
 
+def test_a_flat_piece_touching_the_solid_at_one_vertex_is_dropped():
+    """A closed piece of four faces enclosing nothing (four coplanar points, one of them a
+    vertex of the sphere), as marching cubes left once at resolution 64: it shares no edge
+    with the sphere, so it is a component of its own, below ``min_component``, and the mesh
+    that is left is closed and manifold."""
+    from fourd.methods.flow.post import _drop_small_components, component_volumes
+
+    sphere = trimesh.creation.icosphere(subdivisions=2)
+    tip = int(np.argmax(sphere.vertices[:, 0]))  # (1, 0, 0) lies on the sphere
+    flat = np.array([[1.5, 0.5, 0.0], [1.5, -0.5, 0.0], [2.0, 0.0, 0.0]])
+    vertices = np.vstack([sphere.vertices, flat])
+    n = len(sphere.vertices)
+    p, q, r = n, n + 1, n + 2
+    piece = np.array([[tip, p, q], [tip, q, r], [tip, r, p], [p, r, q]])
+    faces = np.vstack([sphere.faces, piece])
+    labels, volumes = component_volumes(vertices, faces)
+    assert len(volumes) == 2 and abs(volumes).min() < 1e-12
+    kept, kept_faces = _drop_small_components(vertices, faces, 0.02)
+    assert len(kept_faces) == len(sphere.faces)
+    _check_closed_manifold(kept, kept_faces)
+
+
 def test_drop_cavities_keeps_the_solid_and_small_parts():
     """A cavity inside the solid (no outside scanner can see one) is dropped by
     ``drop_cavities``; the outer surface and a separate small-but-kept part stay."""

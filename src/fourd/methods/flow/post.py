@@ -262,14 +262,19 @@ def face_volumes(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
 def component_volumes(vertices, faces) -> tuple[np.ndarray, np.ndarray]:
     """The closed components of a mesh: the component of every face [F] and the signed volume
     each encloses [C] (positive for outward-oriented faces, negative for a cavity's inner
-    surface)."""
-    n = len(vertices)
-    edges = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
-    graph = sp.coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(n, n))
-    count, labels = sp.csgraph.connected_components(graph, directed=False)
-    face_label = labels[faces[:, 0]]
+    surface). Faces belong together when they share an edge, so a piece that touches the
+    rest at a single vertex (marching cubes can leave a flat one, four faces enclosing
+    nothing) is a component of its own and can be dropped by its volume."""
+    n_faces = len(faces)
+    edges = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1)
+    _, edge = np.unique(edges[:, 0] * np.int64(len(vertices)) + edges[:, 1], return_inverse=True)
+    nodes = n_faces + int(edge.max()) + 1
+    face = np.tile(np.arange(n_faces), 3)
+    graph = sp.coo_matrix((np.ones(len(face)), (face, n_faces + edge)), shape=(nodes, nodes))
+    _, labels = sp.csgraph.connected_components(graph, directed=False)
+    _, face_label = np.unique(labels[:n_faces], return_inverse=True)
     signed = face_volumes(vertices, faces)
-    return face_label, np.bincount(face_label, weights=signed, minlength=count)
+    return face_label, np.bincount(face_label, weights=signed)
 
 
 def _drop_small_components(vertices, faces, fraction):
