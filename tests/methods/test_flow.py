@@ -643,11 +643,11 @@ def test_redistanced_is_a_signed_distance_without_pockets():
     assert np.allclose(np.linalg.norm(gradient, axis=1), 1.0, atol=0.1)
 
 
-def test_a_flat_piece_touching_the_solid_at_one_vertex_is_dropped():
-    """A closed piece of four faces enclosing nothing (four coplanar points, one of them a
-    vertex of the sphere), as marching cubes left once at resolution 64: it shares no edge
-    with the sphere, so it is a component of its own, below ``min_component``, and the mesh
-    that is left is closed and manifold."""
+def test_a_flat_piece_touching_the_solid_is_dropped():
+    """Closed pieces enclosing nothing that touch a sphere at one vertex (four coplanar
+    points) or on one edge (a doubled flat triangle; marching cubes once left a doubled quad on
+    two edges at resolution 64): each is a component of its own, below ``min_component``, and
+    the mesh that is left is closed and manifold."""
     from fourd.methods.flow.post import _drop_small_components, component_volumes
 
     sphere = trimesh.creation.icosphere(subdivisions=2)
@@ -658,6 +658,15 @@ def test_a_flat_piece_touching_the_solid_at_one_vertex_is_dropped():
     p, q, r = n, n + 1, n + 2
     piece = np.array([[tip, p, q], [tip, q, r], [tip, r, p], [p, r, q]])
     faces = np.vstack([sphere.faces, piece])
+    labels, volumes = component_volumes(vertices, faces)
+    assert len(volumes) == 2 and abs(volumes).min() < 1e-12
+    kept, kept_faces = _drop_small_components(vertices, faces, 0.02)
+    assert len(kept_faces) == len(sphere.faces)
+    _check_closed_manifold(kept, kept_faces)
+    # a doubled flat triangle on one of the sphere's edges (that edge then has four faces)
+    a, b = sphere.faces[0][:2]
+    vertices = np.vstack([sphere.vertices, 1.5 * sphere.vertices[[a, b]].mean(axis=0)])
+    faces = np.vstack([sphere.faces, [[a, b, n], [b, a, n]]])
     labels, volumes = component_volumes(vertices, faces)
     assert len(volumes) == 2 and abs(volumes).min() < 1e-12
     kept, kept_faces = _drop_small_components(vertices, faces, 0.02)

@@ -262,15 +262,23 @@ def face_volumes(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
 def component_volumes(vertices, faces) -> tuple[np.ndarray, np.ndarray]:
     """The closed components of a mesh: the component of every face [F] and the signed volume
     each encloses [C] (positive for outward-oriented faces, negative for a cavity's inner
-    surface). Faces belong together when they share an edge, so a piece that touches the
-    rest at a single vertex (marching cubes can leave a flat one, four faces enclosing
-    nothing) is a component of its own and can be dropped by its volume."""
+    surface). Faces belong together when they share an edge that no other face has, so a
+    piece that touches the rest only at vertices or along edges of three or more faces is a
+    component of its own and can be dropped by its volume (marching cubes once left a flat
+    doubled quad, four faces enclosing nothing, on two edges of a resolution-64 surface)."""
     n_faces = len(faces)
     edges = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1)
-    _, edge = np.unique(edges[:, 0] * np.int64(len(vertices)) + edges[:, 1], return_inverse=True)
-    nodes = n_faces + int(edge.max()) + 1
+    _, edge, count = np.unique(
+        edges[:, 0] * np.int64(len(vertices)) + edges[:, 1],
+        return_inverse=True,
+        return_counts=True,
+    )
+    nodes = n_faces + len(count)
     face = np.tile(np.arange(n_faces), 3)
-    graph = sp.coo_matrix((np.ones(len(face)), (face, n_faces + edge)), shape=(nodes, nodes))
+    joins = count[edge] == 2
+    graph = sp.coo_matrix(
+        (np.ones(int(joins.sum())), (face[joins], n_faces + edge[joins])), shape=(nodes, nodes)
+    )
     _, labels = sp.csgraph.connected_components(graph, directed=False)
     _, face_label = np.unique(labels[:n_faces], return_inverse=True)
     signed = face_volumes(vertices, faces)
