@@ -95,7 +95,10 @@ class Options:
         32 by default here: on crane, bench at 68be547 / 7ca8ce0, medians of 3, 0.97 s/frame
         with Chamfer / completeness-95 0.0026 / 0.0067 at 32 and 3.5-3.8 s/frame (2.3 GB) with
         0.0030 / 0.0069 at 64; at 7206043, splitting-blob 0.0019 / 0.0031 at 32 and 0.0091 /
-        0.0134 at 64: three capped IRLS iterations decide only about half of a 64 grid).
+        0.0134 at 64: thick objects come out hollow there, as the fit's interior turns
+        slightly positive, so ``deep_inside`` labels nothing, and the motion outruns one
+        cell per slice; 6 IRLS iterations instead of 3 gave 0.0099, and labelling where the
+        fit is below 0.2 with ``time_substeps=0`` 0.0042 / 0.0070 at twice the time).
     neighbourhood : int
         Temporally adjacent cells a cell's material may flow to: 27 (the paper's Figure 2) or
         7 (the cell and its face neighbours; faster, motion only along axes per step).
