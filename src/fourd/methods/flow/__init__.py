@@ -753,9 +753,7 @@ def mass_meshes(
             )
             free = np.clip(np.minimum(distance, (reach + 1.0) * h) / h - reach, 0.0, 1.0)
         if smoothing:
-            strength = _smoothing_strength(
-                vertices, faces, free, target - volumes[i], h=h
-            )
+            strength = _smoothing_strength(vertices, faces, free, target - volumes[i], h=h)
             if strength > 0:
                 vertices = laplacian_smooth(
                     vertices, faces, iterations=smoothing, weights=strength * free
@@ -764,7 +762,7 @@ def mass_meshes(
         shift, moved = 0.0, vertices
         for step in range(steps):
             volume = _mesh_volume(moved, faces)
-            slope = float(np.einsum("ij,ij->", _volume_gradient(moved, faces), direction))
+            slope = _volume_slope(moved, faces, direction)
             if slope <= 0 or abs(volume - target) <= 1e-4 * target:
                 break
             proposal = shift + (target - volume) / slope
@@ -783,6 +781,12 @@ def mass_meshes(
     return out
 
 
+def _volume_slope(vertices: np.ndarray, faces: np.ndarray, direction: np.ndarray) -> float:
+    """Rate of change of the enclosed volume as ``vertices`` move along ``direction`` [N, 3]
+    (input units^2 per unit of offset)."""
+    return float(np.einsum("ij,ij->", _volume_gradient(vertices, faces), direction))
+
+
 def _smoothing_strength(
     vertices: np.ndarray,
     faces: np.ndarray,
@@ -793,13 +797,7 @@ def _smoothing_strength(
 ) -> float:
     """How strongly to smooth a frame's unobserved parts, in [0, 1]: their first (linear)
     offset towards the volume target ``deficit`` away, in flow cells ``h``, at most 1."""
-    slope = float(
-        np.einsum(
-            "ij,ij->",
-            _volume_gradient(vertices, faces),
-            free[:, None] * vertex_normals(vertices, faces),
-        )
-    )
+    slope = _volume_slope(vertices, faces, free[:, None] * vertex_normals(vertices, faces))
     if slope <= 0:
         return 1.0
     return float(min(abs(deficit) / slope / h, 1.0))
