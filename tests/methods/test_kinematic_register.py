@@ -16,6 +16,7 @@ from fourd.methods.kinematic.register import (
     RegisterOptions,
     _farthest_move,
     _nearest,
+    registration_due,
     unexplained_fraction,
 )
 from fourd.methods.kinematic.sliding import slide_step
@@ -90,6 +91,18 @@ def test_a_bending_limb_is_followed():
     assert after.max() < 0.4 * before.max()
 
 
+def test_registration_is_due_on_many_unexplained_points_or_on_fewer_while_motion_goes_on():
+    o = RegisterOptions(threshold=0.03, follow_threshold=0.01, rise=0.01)
+    assert registration_due(0.05, None, o)  # many, whatever came before
+    assert not registration_due(0.02, None, o)  # the first data step: only above threshold
+    assert registration_due(0.02, (True, 0.10), o)  # the previous step registered
+    assert not registration_due(0.005, (True, 0.10), o)  # too few even then
+    assert registration_due(0.025, (False, 0.007), o)  # a rise: a limb starts to move
+    # a slow creep (surface turning into view) is left to the sliding
+    assert not registration_due(0.022, (False, 0.020), o)
+    assert not registration_due(0.022, (False, 0.020), RegisterOptions(follow_threshold=0.03))
+
+
 def test_register_options_are_validated():
     with pytest.raises(ValueError):
         RegisterOptions(iterations=0)
@@ -97,6 +110,8 @@ def test_register_options_are_validated():
         RegisterOptions(weight=0.0)
     with pytest.raises(ValueError):
         RegisterOptions(point_stride=0)
+    with pytest.raises(ValueError):
+        RegisterOptions(follow_threshold=-0.1)
     with pytest.raises(ValueError):
         RegisterOptions(relaxation=1.0)
     with pytest.raises(ValueError):

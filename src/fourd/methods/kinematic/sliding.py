@@ -68,7 +68,7 @@ from fourd.animation import AnimatedMesh
 from fourd.geometry.field import Field4D
 from fourd.geometry.laplacian import cotangent_weights, weights_laplacian
 from fourd.methods.kinematic.arap import arap_energy, arap_rhs, arap_rotations
-from fourd.methods.kinematic.register import ArapIcp, RegisterOptions
+from fourd.methods.kinematic.register import ArapIcp, RegisterOptions, registration_due
 from fourd.progress import progress
 
 log = logging.getLogger("fourd.methods.kinematic.sliding")
@@ -667,12 +667,16 @@ class ConstrainedSolver:
 
 
 class SlideStep(NamedTuple):
-    """Diagnostics of one sliding step."""
+    """Diagnostics of one sliding step (``registered``: the large-motion registration ran
+    and was kept; ``unexplained``: the fraction of the frame's points the rigid prediction
+    left unexplained, nan without a registration or data)."""
 
     time: float
     constrained: int
     energy: float
     max_constraint_residual: float
+    registered: bool = False
+    unexplained: float = float("nan")
 
 
 def _still_normals(field, guess, time, dt, normals, limit):
@@ -704,6 +708,7 @@ def slide_step(
     surface=None,
     registration: ArapIcp | None = None,
     registration_velocity: np.ndarray | None = None,
+    previous_registration: tuple[bool, float] | None = None,
 ) -> tuple[np.ndarray, np.ndarray, SlideStep]:
     """One step of section 5: ``vertices`` at ``time`` -> positions at ``next_time``.
 
@@ -718,9 +723,10 @@ def slide_step(
     the frame's surface where it has points and ``f(., next_time)`` elsewhere.
 
     ``registration`` (optional, with ``surface``): the large-motion registration of the
-    template. It runs after the rigid prediction when that leaves more than its
-    ``threshold`` of the frame's points unexplained, and its result is kept when it explains
-    more of them. It starts from ``vertices + dt * registration_velocity`` when that is
+    template. It runs after the rigid prediction when that leaves enough of the frame's
+    points unexplained (:func:`~.register.registration_due`, given the previous data step's
+    ``previous_registration = (kept, unexplained fraction)``, None for none), and its result
+    is kept when it explains more of them. It starts from ``vertices + dt * registration_velocity`` when that is
     given [N, 3] (the previous step's vertex velocities), else from the prediction.
 
     Returns ``(positions [N, 3], constrained [N] bool, diagnostics)``.
@@ -758,10 +764,10 @@ def slide_step(
             start = moved
             if converged:
                 break
-    registered_step = False
+    registered_step, before = False, float("nan")
     if registration is not None and surface is not None and len(surface.points):
         before = registration.unexplained(start, surface.points)
-        if before > registration.options.threshold:
+        if registration_due(before, previous_registration, registration.options):
             # from the prediction, or from the previous step's motion carried on
             # (RegisterOptions.constant_velocity) when that explains more of the frame
             seed = start
@@ -833,6 +839,8 @@ def slide_step(
         int(solver.constrained.sum()),
         arap_energy(pre, current) if diagnostics else float("nan"),
         float(residual.max()) if residual.size else 0.0,
+        registered_step,
+        before,
     )
     return current, solver.constrained, info
 
@@ -931,6 +939,7 @@ def slide(
         if options.register is not None and surfaces is not None
         else None
     )
+    last_registration = None  # (kept, unexplained fraction) of the previous data step
     for k in progress(range(1, len(times)), desc="sliding", total=len(times) - 1):
         sub = np.linspace(times[k - 1], times[k], options.substeps + 1)
         for s in range(options.substeps):
@@ -957,7 +966,10 @@ def slide(
                     motion if registration is not None and options.register.constant_velocity
                     else None
                 ),
+                previous_registration=last_registration,
             )
+            if surface is not None and np.isfinite(info.unexplained):
+                last_registration = (info.registered, info.unexplained)
             motion = (current - previous) / (sub[s + 1] - sub[s])
             steps.append(info)
         frames[k] = current
