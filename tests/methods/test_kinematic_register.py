@@ -79,6 +79,36 @@ def test_a_shape_moved_by_many_edges_is_registered_onto_its_points():
     assert K.arap_energy(pre, registered) < 0.01
 
 
+def test_a_registration_that_stops_short_is_retried_from_where_it_stopped():
+    """Two stiff iterations leave the moved blob short of its points; the retry continues
+    from there and is kept since it explains more. Without a retry, or with a first pass
+    that already explains the frame, nothing more happens."""
+    blob = MovingBlob()
+    V, F = _sphere_template(blob, resolution=0.15)
+    pre = K.slide_precompute(V, F)
+    shift = np.array([1.2, 0.1, 0.0])
+    rest = blob.surface(6000, 0.0, seed=1)
+    normals = blob.gradient(rest, np.zeros(len(rest)))[:, :3]
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    points = rest + shift
+    expected = V + shift
+    short = dict(iterations=2, refine_iterations=0)
+    once = ArapIcp(pre, F, RegisterOptions(**short, retry_iterations=0))
+    stopped, left = once.register_frame(V, points, normals)
+    assert left > 0.03  # short of the points
+    assert left == pytest.approx(once.unexplained(stopped, points))
+    retried, left_after = ArapIcp(pre, F, RegisterOptions(**short)).register_frame(
+        V, points, normals
+    )
+    assert left_after < 0.5 * left
+    error = lambda x: np.linalg.norm(x - expected, axis=1).mean()  # noqa: E731
+    assert error(retried) < 0.5 * error(stopped)
+    full = ArapIcp(pre, F, RegisterOptions())
+    done, rest_left = full.register_frame(V, points, normals)
+    assert rest_left < 0.01
+    np.testing.assert_array_equal(done, full.register(V, points, normals))
+
+
 def test_a_bending_limb_is_followed():
     truth = synth.scene("bending-arm", frames=6)
     V, F = truth.vertices[0], truth.faces
@@ -112,6 +142,8 @@ def test_register_options_are_validated():
         RegisterOptions(point_stride=0)
     with pytest.raises(ValueError):
         RegisterOptions(follow_threshold=-0.1)
+    with pytest.raises(ValueError):
+        RegisterOptions(retry_radius=0.0)
     with pytest.raises(ValueError):
         RegisterOptions(relaxation=1.0)
     with pytest.raises(ValueError):

@@ -775,8 +775,9 @@ def slide_step(
                 carried = vertices + dt * registration_velocity
                 if registration.unexplained(carried, surface.points) < before:
                     seed = carried
-            registered = registration.register(seed, surface.points, surface.normals)
-            after = registration.unexplained(registered, surface.points)
+            registered, after = registration.register_frame(
+                seed, surface.points, surface.normals
+            )
             # kept only when it explains more of the frame: where the template cannot
             # follow (a shape that splits) it would stretch the template over both parts
             log.debug(
