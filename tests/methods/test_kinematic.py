@@ -495,12 +495,9 @@ def test_the_data_term_removes_the_pose_bias_of_the_implicit():
         K.slide(V, F, lagging, times, surfaces=surfaces[:2])
 
 
-@pytest.mark.slow
-def test_held_out_crane_motion_is_tracked():
-    """Crane frames 90-100 (every second), a stretch no default was tuned on, scanned with the
-    standard protocol: a limb moves up to 15 median edges per frame. Correspondence stays
-    near 1% of the diagonal (0.0101 / 0.0123 measured; 0.0205 / 0.0281 before the
-    registration started from the carried motion and searched 40 edges)."""
+def _kinematic_on_crane(*, frames: int, step: int, start: int = 0, **options) -> dict:
+    """``kinematic`` (with ``options``) on a stretch of the crane capture scanned with the
+    standard protocol, evaluated with 10,000 samples; skips without ../shared/data."""
     from fourd import synth
     from fourd.evaluate.bench import PROTOCOL
     from fourd.evaluate.metrics import evaluate
@@ -508,10 +505,19 @@ def test_held_out_crane_motion_is_tracked():
 
     if shared_data_dir() is None or not (shared_data_dir() / "crane.npz").exists():
         pytest.skip("../shared/data/crane.npz is not available")
-    truth = synth.scene("crane", frames=6, seed=0, start=90, step=2)
+    truth = synth.scene("crane", frames=frames, seed=0, start=start, step=step)
     scans = synth.scan(truth, resolution=256, seed=0, **PROTOCOL)
-    anim = reconstruct(scans, method="kinematic")
-    metrics = evaluate(anim, truth, samples=10000, seed=0)
+    anim = reconstruct(scans, method="kinematic", **options)
+    return evaluate(anim, truth, samples=10000, seed=0)
+
+
+@pytest.mark.slow
+def test_held_out_crane_motion_is_tracked():
+    """Crane frames 90-100 (every second), a stretch no default was tuned on, scanned with the
+    standard protocol: a limb moves up to 15 median edges per frame. Correspondence stays
+    near 1% of the diagonal (0.0101 / 0.0123 measured; 0.0205 / 0.0281 before the
+    registration started from the carried motion and searched 40 edges)."""
+    metrics = _kinematic_on_crane(frames=6, start=90, step=2)
     assert metrics["correspondence_mean"] < 0.015
     assert metrics["correspondence_last"] < 0.02
     assert metrics["chamfer"] < 0.006
@@ -523,17 +529,7 @@ def test_a_limb_that_starts_to_move_is_registered():
     prediction leaves 2.6% of the points unexplained, up from under 1%, below the 3% of
     ``RegisterOptions.threshold``; registering there on the rise keeps the correspondence at
     0.0035 / 0.0049 (0.0044 / 0.0061 measured without: ``follow_threshold=0.03``)."""
-    from fourd import synth
-    from fourd.evaluate.bench import PROTOCOL
-    from fourd.evaluate.metrics import evaluate
-    from fourd.synth.data import shared_data_dir
-
-    if shared_data_dir() is None or not (shared_data_dir() / "crane.npz").exists():
-        pytest.skip("../shared/data/crane.npz is not available")
-    truth = synth.scene("crane", frames=4, seed=0, start=140, step=2)
-    scans = synth.scan(truth, resolution=256, seed=0, **PROTOCOL)
-    anim = reconstruct(scans, method="kinematic")
-    metrics = evaluate(anim, truth, samples=10000, seed=0)
+    metrics = _kinematic_on_crane(frames=4, start=140, step=2)
     assert metrics["correspondence_mean"] < 0.004
     assert metrics["correspondence_last"] < 0.0055
 
@@ -546,17 +542,8 @@ def test_a_still_crane_does_not_creep(still_normals):
     constraint normals from each frame's noisy surface everywhere (``still_normals=0``) the
     standing foot creeps up the leg: measured 0.0013 at frame 1, 0.0044 at frame 8 and 0.0061
     at the last; by default 0.0013, 0.0017 and 0.0020."""
-    from fourd import synth
-    from fourd.evaluate.bench import PROTOCOL
-    from fourd.evaluate.metrics import evaluate
-    from fourd.synth.data import shared_data_dir
-
-    if shared_data_dir() is None or not (shared_data_dir() / "crane.npz").exists():
-        pytest.skip("../shared/data/crane.npz is not available")
-    truth = synth.scene("crane", frames=10, seed=0, step=0)
-    scans = synth.scan(truth, resolution=256, seed=0, **PROTOCOL)
-    anim = reconstruct(scans, method="kinematic", still_normals=still_normals)
-    drift = evaluate(anim, truth, samples=10000, seed=0)["per_frame"]["correspondence"]
+    metrics = _kinematic_on_crane(frames=10, step=0, still_normals=still_normals)
+    drift = metrics["per_frame"]["correspondence"]
     # the last frame lies at the end of the 4D implicit, whose one-sided fit moves it a little
     growth = drift[-2] - drift[1]
     if still_normals == 0:

@@ -31,9 +31,10 @@ It runs only on frames where the ordinary prediction leaves more than ``threshol
 input points unexplained (:func:`unexplained_fraction`), or more than ``follow_threshold``
 while a fast motion goes on or starts (:func:`registration_due`), and its result is kept
 only when it explains more of them (:func:`fourd.methods.kinematic.sliding.slide_step`).
-Run on every frame, the nearest-point pulls act as friction against the tangential motion that the
-space-time constraint recovers on smooth turning shapes (rigid-turn correspondence 0.0016 ->
-0.0069); on a shape that splits in two it would stretch the template over both parts.
+Run on every frame, the nearest-point pulls act as friction against the tangential motion
+that the space-time constraint recovers on smooth turning shapes (rigid-turn correspondence
+0.0016 -> 0.0069); on a shape that splits in two it would stretch the template over both
+parts.
 
 References
 ----------
@@ -446,9 +447,9 @@ class ArapIcp:
         return self.pre.edge_length * start_radius * (end / start_radius) ** fraction
 
     def _step(self, it, iterations, x, points, normals, to_point, to_vertex):
-        """One ARAP-ICP iteration ``it`` (stiff while below ``iterations``) from positions ``x`` [N, 3], given each vertex's
-        nearest point ``to_point`` [N] and each point's nearest vertex ``to_vertex`` [P]
-        (-1: none within the radius)."""
+        """One ARAP-ICP iteration ``it`` (stiff while below ``iterations``) from positions
+        ``x`` [N, 3], given each vertex's nearest point ``to_point`` [N] and each point's
+        nearest vertex ``to_vertex`` [P] (-1: none within the radius)."""
         o = self.options
         refining = it >= iterations
         weight = self.refine_weight if refining else self.weight

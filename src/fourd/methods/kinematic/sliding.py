@@ -726,8 +726,9 @@ def slide_step(
     template. It runs after the rigid prediction when that leaves enough of the frame's
     points unexplained (:func:`~.register.registration_due`, given the previous data step's
     ``previous_registration = (kept, unexplained fraction)``, None for none), and its result
-    is kept when it explains more of them. It starts from ``vertices + dt * registration_velocity`` when that is
-    given [N, 3] (the previous step's vertex velocities), else from the prediction.
+    is kept when it explains more of them. It starts from ``vertices + dt *
+    registration_velocity`` when that is given [N, 3] (the previous step's vertex
+    velocities), else from the prediction.
 
     Returns ``(positions [N, 3], constrained [N] bool, diagnostics)``.
     """
