@@ -94,7 +94,8 @@ class RegisterOptions:
         squash-ball 0.0248 / 0.0167 -> 0.0242 / 0.0150, horse-gallop 0.0089 / 0.0043 ->
         0.0087 / 0.0043; the same on rigid-turn, dfaust-hopping, bending-arm,
         touching-spheres, elephant-gallop and crane-50. The hysteresis alone (no ``rise``)
-        gave crane 0.0076 / 0.0167.
+        gave crane 0.0076 / 0.0167; both at 0.005 crane 0.0073 / 0.0112 and bending-arm
+        0.0186 / 0.0317 (0.0202 / 0.0338), but squash-ball 0.0328 / 0.0457.
     retry_iterations, retry_radius : int, float
         When a registration still leaves more than ``threshold`` of the points unexplained,
         a second one of ``retry_iterations`` stiff iterations from ``retry_radius`` median
