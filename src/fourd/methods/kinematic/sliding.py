@@ -970,7 +970,7 @@ def slide(
                 ),
                 previous_registration=last_registration,
             )
-            if surface is not None and np.isfinite(info.unexplained):
+            if np.isfinite(info.unexplained):  # nan: no data term or no registration
                 last_registration = (info.registered, info.unexplained)
             motion = (current - previous) / (sub[s + 1] - sub[s])
             steps.append(info)
