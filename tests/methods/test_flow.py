@@ -798,3 +798,34 @@ def test_reconstruct_with_diagnostics_reports_the_mass_error(monkeypatch):
     monkeypatch.setattr(flow, "run", lambda seq, options=None: fake)
     result, diagnostics = reconstruct_with_diagnostics(scans, method="flow")
     assert result is meshes and diagnostics == {"mass_conservation_error": 0.017}
+
+
+def test_offset_points_hold_the_fit_negative_inside_a_thick_ball_open_at_the_top():
+    """A ball 64 cells across, never seen from above: without normals the fit's interior is
+    pulled to -1 only at the few seeds and the carved cells' +1 leaks in through the unseen
+    top, so the deep interior sits near zero; with the offset points one cell in along the
+    normals it is clearly negative (see fourd.methods.flow.fit)."""
+    from fourd.geometry.normals import estimate_normals
+    from fourd.methods.flow.fit import fit_implicit
+
+    points = _ellipsoid_scan(np.array([0.5, 0.5, 0.5]), count=20000)
+    grid = build_grid(np.array([[-0.5] * 3, [0.5] * 3]), np.array([0.0]), resolution=64, substeps=1)
+    spacing = point_spacing(points)
+    outside = carve_visual_hull(grid, points, SENSORS, spacing=spacing, margin=1.5 * grid.h)[None]
+    distance = unsigned_distance(grid, points, where=~outside[0])
+    seeds = inside_seeds(distance, outside[0], minimum=1.5 * grid.h)[None]
+    normals = estimate_normals(points, k=16, sensors=SENSORS).normals
+    deep = np.linalg.norm(grid.centres(), axis=-1) < 0.35
+    plain = fit_implicit(grid, [points], outside, seeds).values[0][deep]
+    offset = fit_implicit(grid, [points], outside, seeds, normals=[normals]).values[0][deep]
+    assert np.median(plain) > -0.1
+    assert np.median(offset) < -0.2
+    assert np.mean(offset < 0) > 0.9
+    # the data stay on the zero set
+    from fourd.methods.flow.fit import trilinear
+
+    index, weight, _ = trilinear(grid, points)
+    values = fit_implicit(grid, [points], outside, seeds, normals=[normals]).values[0].ravel()
+    assert np.median(np.abs((values[index] * weight).sum(axis=1))) < 0.1
+    with pytest.raises(ValueError, match="fit_offset"):
+        Options(fit_offset=-1.0)
