@@ -95,10 +95,11 @@ class Options:
         32 by default here: on crane, bench at 68be547 / 7ca8ce0, medians of 3, 0.97 s/frame
         with Chamfer / completeness-95 0.0026 / 0.0067 at 32 and 3.5-3.8 s/frame (2.3 GB) with
         0.0030 / 0.0069 at 64; at 7206043, splitting-blob 0.0019 / 0.0031 at 32 and 0.0091 /
-        0.0134 at 64: thick objects come out hollow there, as the fit's interior turns
-        slightly positive, so ``deep_inside`` labels nothing, and the motion outruns one
-        cell per slice; 6 IRLS iterations instead of 3 gave 0.0099, and labelling where the
-        fit is below 0.2 with ``time_substeps=0`` 0.0042 / 0.0070 at twice the time).
+        0.0134 at 64: thick objects came out hollow there, as the fit's interior turned
+        slightly positive, so ``deep_inside`` labelled nothing (``fit_offset`` since
+        4d3515f: 0.0065 / 0.0125), and the motion outruns one cell per slice; 6 IRLS
+        iterations instead of 3 gave 0.0099, and labelling where the fit is below 0.2 with
+        ``time_substeps=0`` 0.0042 / 0.0070 at twice the time).
     neighbourhood : int
         Temporally adjacent cells a cell's material may flow to: 27 (the paper's Figure 2) or
         7 (the cell and its face neighbours; faster, motion only along axes per step).
@@ -200,7 +201,9 @@ class Options:
         ``splitting-blob`` 0.0098 / 0.0153 -> 0.0073 / 0.0130, ``squash-ball`` (bench 0.0085
         / 0.0271) -> 0.0072 / 0.0185, ``touching-spheres`` 0.0101 / 0.0297 -> 0.0058 /
         0.0174, ``crane`` 0.0042 / 0.0080 -> 0.0039 / 0.0072, ``dfaust-hopping`` 0.0043 /
-        0.0129 -> 0.0043 / 0.0128; at 48, ``touching-spheres`` 0.0052 / 0.0181 -> 0.0045 /
+        0.0129 -> 0.0043 / 0.0128 (bench at 4d3515f, 60k samples, one run: ``splitting-blob``
+        0.0090 / 0.0149 -> 0.0065 / 0.0125, ``crane`` 0.0033 / 0.0074 -> 0.0030 / 0.0065,
+        ``dfaust-hopping`` 0.0033 / 0.0124 -> 0.0033 / 0.0123, the same s/frame); at 48, ``touching-spheres`` 0.0052 / 0.0181 -> 0.0045 /
         0.0110. At 32 the fit's interior is already mostly negative and a cell is coarse
         next to the gaps between parts: ``touching-spheres`` 0.0039 / 0.0085 -> 0.0052 /
         0.0159, ``waving-sheet`` 0.0109 / 0.0128 -> 0.0145 / 0.0072 (with offset points out
