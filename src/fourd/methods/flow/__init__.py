@@ -96,8 +96,8 @@ class Options:
         with Chamfer / completeness-95 0.0026 / 0.0067 at 32 and 3.5-3.8 s/frame (2.3 GB) with
         0.0030 / 0.0069 at 64; at 7206043, splitting-blob 0.0019 / 0.0031 at 32 and 0.0091 /
         0.0134 at 64: thick objects came out hollow there, as the fit's interior turned
-        slightly positive, so ``deep_inside`` labelled nothing (``fit_offset`` since
-        4d3515f: 0.0065 / 0.0125), and the motion outruns one cell per slice; 6 IRLS
+        slightly positive, so ``deep_inside`` labelled nothing (with ``fit_offset`` and
+        ``deep_inside`` 2 at 61f29dd: 0.0030 / 0.0056), and the motion outruns one cell per slice; 6 IRLS
         iterations instead of 3 gave 0.0099, and labelling where the fit is below 0.2 with
         ``time_substeps=0`` 0.0042 / 0.0070 at twice the time).
     neighbourhood : int
@@ -203,8 +203,8 @@ class Options:
         0.0174, ``crane`` 0.0042 / 0.0080 -> 0.0039 / 0.0072, ``dfaust-hopping`` 0.0043 /
         0.0129 -> 0.0043 / 0.0128 (bench at 4d3515f, 60k samples, one run: ``splitting-blob``
         0.0090 / 0.0149 -> 0.0065 / 0.0125, ``crane`` 0.0033 / 0.0074 -> 0.0030 / 0.0065,
-        ``dfaust-hopping`` 0.0033 / 0.0124 -> 0.0033 / 0.0123, the same s/frame); at 48, ``touching-spheres`` 0.0052 / 0.0181 -> 0.0045 /
-        0.0110. At 32 the fit's interior is already mostly negative and a cell is coarse
+        ``dfaust-hopping`` 0.0033 / 0.0124 -> 0.0033 / 0.0123, the same s/frame); at 48,
+        ``touching-spheres`` 0.0052 / 0.0181 -> 0.0045 / 0.0110. At 32 the fit's interior is already mostly negative and a cell is coarse
         next to the gaps between parts: ``touching-spheres`` 0.0039 / 0.0085 -> 0.0052 /
         0.0159, ``waving-sheet`` 0.0109 / 0.0128 -> 0.0145 / 0.0072 (with offset points out
         along the normal too, at +1/2: 0.0071 / 0.0223 and 0.0146 / 0.0072).
@@ -212,8 +212,8 @@ class Options:
         Cells where the implicit fit is negative and that lie at least this many flow cells
         from every carved and every data cell are labelled inside too (0: only the fit's
         local minima, as the paper; None: 4 below ``resolution`` 48, 2 from 48 on, see
-        below). A deviation for thick objects: the paper runs IRLS
-        until 90-95% of the cells are decided, this method stops after ``max_iterations``,
+        below). A deviation for thick objects: the paper runs IRLS until 90-95% of the
+        cells are decided, this method stops after ``max_iterations``,
         and the interior of a thick object far from the few seeds stays undecided, near 0
         where no data holds it up (``rigid-turn``, a ball about 15 cells in radius: the
         local minima are no cell, the seeds about 300 per slice, and a pit from the unseen
@@ -227,8 +227,8 @@ class Options:
         the data is twice as many cells as at 32, and the three capped IRLS iterations left a
         pit from ``splitting-blob``'s unseen side (``exp``, frame 0, volume / mean distance to
         the truth: 0.79 / 0.0178 of the diagonal with 4 cells, 0.97 / 0.0029 with 2).
-Bench at 4d3515f (60k samples, single runs), Chamfer / completeness-95 at 64,
-        4 -> 2 cells: ``splitting-blob`` 0.0065 / 0.0125 -> 0.0030 / 0.0056, ``squash-ball``
+        Bench at 4d3515f (60k samples, single runs), Chamfer / completeness-95 at 64, 4 -> 2
+        cells: ``splitting-blob`` 0.0065 / 0.0125 -> 0.0030 / 0.0056, ``squash-ball``
         0.0062 / 0.0182 -> 0.0036 / 0.0075 (volume change 1.1% -> 1.4%),
         ``touching-spheres`` 0.0047 / 0.0172 -> 0.0036 / 0.0118, ``dfaust-hopping`` 0.0033 /
         0.0123 -> 0.0033 / 0.0124, ``crane`` 0.0030 / 0.0065 -> 0.0032 / 0.0066 (3 cells:

@@ -152,7 +152,7 @@ def fit_implicit(
         cell = grid.cell_of(pts)
         key = (cell[:, 0] * grid.shape[1] + cell[:, 1]) * grid.shape[2] + cell[:, 2]
         _, inverse, counts = np.unique(key, return_inverse=True, return_counts=True)
-        # the points at value 0; with normals also offset points at +-offset_value
+        # the points at value 0; with normals also the offset points in, at -offset_value
         samples = [(pts, 0.0, 1.0)]  # (where, value, weight per point)
         if normals is not None and normals[s] is not None and offset > 0:
             samples.append((pts - offset * grid.h * normals[s], -offset_value, offset_weight))
