@@ -536,18 +536,27 @@ def test_a_turning_thick_ball_keeps_its_interior():
     with only those the capped IRLS leaves a pit from the unseen underside into the ball (0.90
     of the truth's volume, the 99th percentile of the distance to the truth 0.15 of its
     diagonal); with the fit's deep interior labelled too, 0.945 and 0.09."""
+    for volume, distance in _turning_ball_frames(scan_resolution=96, resolution=24):
+        assert volume > 0.93
+        assert np.percentile(distance, 99) < 0.12
+
+
+def _turning_ball_frames(*, scan_resolution: int, resolution: int):
+    """rigid-turn (3 frames) scanned at ``scan_resolution`` by three cameras looking down on
+    it, reconstructed at flow ``resolution``: per frame (after checking it closed and
+    manifold) the volume against the truth's and the distances of the vertices to the truth,
+    in truth diagonals."""
     from fourd.synth import scan, scene
 
     truth = scene("rigid-turn", frames=3)
-    scans = scan(truth, cameras=3, resolution=96, noise=0.002, outliers=0.02)
-    result = reconstruct(scans, Options(resolution=24))
+    scans = scan(truth, cameras=3, resolution=scan_resolution, noise=0.002, outliers=0.02)
+    result = reconstruct(scans, Options(resolution=resolution))
     for i, (v, f) in enumerate(result.meshes):
         mesh = _check_closed_manifold(v, f)
         true_mesh = trimesh.Trimesh(truth.vertices[i], truth.faces, process=False)
-        assert mesh.volume / true_mesh.volume > 0.93
         _, distance, _ = trimesh.proximity.closest_point(true_mesh, v)
         diagonal = np.linalg.norm(np.ptp(truth.vertices[i], axis=0))
-        assert np.percentile(distance, 99) < 0.12 * diagonal
+        yield mesh.volume / true_mesh.volume, distance / diagonal
 
 
 def test_regularize_towards_is_validated():
@@ -837,16 +846,7 @@ def test_a_thick_ball_at_resolution_48_is_solid():
     offset points and deep interior labelled 2 cells under the data (the defaults from 48
     on), each frame keeps 0.985 of the truth's volume; without them (``fit_offset=0``,
     ``deep_inside=4``, the defaults at 32) the ball came out hollow, 0.26 of its volume."""
-    from fourd.synth import scan, scene
-
-    truth = scene("rigid-turn", frames=3)
-    scans = scan(truth, cameras=3, resolution=128, noise=0.002, outliers=0.02)
-    result = reconstruct(scans, Options(resolution=48))
-    for i, (v, f) in enumerate(result.meshes):
-        mesh = _check_closed_manifold(v, f)
-        true_mesh = trimesh.Trimesh(truth.vertices[i], truth.faces, process=False)
-        assert mesh.volume / true_mesh.volume > 0.95
-        _, distance, _ = trimesh.proximity.closest_point(true_mesh, v)
-        diagonal = np.linalg.norm(np.ptp(truth.vertices[i], axis=0))
-        assert np.mean(distance) < 0.004 * diagonal
-        assert np.percentile(distance, 99) < 0.05 * diagonal
+    for volume, distance in _turning_ball_frames(scan_resolution=128, resolution=48):
+        assert volume > 0.95
+        assert np.mean(distance) < 0.004
+        assert np.percentile(distance, 99) < 0.05

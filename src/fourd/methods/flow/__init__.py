@@ -591,7 +591,8 @@ def run(seq: PointCloudSequence, options: Options | None = None) -> FlowResult:
     for s, pts in enumerate(slice_points):
         if pts is None:
             continue
-        normals = pca_normals(pts, 16).normals
+        # the PCA directions (the fit's offset points already have them), signed by the fit
+        normals = pca_normals(pts, 16).normals if fit_normals is None else fit_normals[s].copy()
         gradient = fit_gradient(grid, fit.values[s], pts)
         flip = np.einsum("ij,ij->i", normals, gradient) < 0
         normals[flip] *= -1
