@@ -69,6 +69,9 @@ from fourd.sequence import PointCloudSequence
 log = logging.getLogger("fourd.methods.flow")
 
 MIN_FRAMES = 2
+#: From this ``resolution`` on a thick object is many cells thick: the automatic
+#: ``fit_offset`` and ``deep_inside`` switch to their fine-grid values (see :class:`Options`).
+FINE_RESOLUTION = 48
 
 __all__ = [
     "MIN_FRAMES",
@@ -572,7 +575,7 @@ def run(seq: PointCloudSequence, options: Options | None = None) -> FlowResult:
     fit_normals = None
     fit_offset = options.fit_offset
     if fit_offset is None:
-        fit_offset = 1.0 if options.resolution >= 48 else 0.0
+        fit_offset = 1.0 if options.resolution >= FINE_RESOLUTION else 0.0
     if fit_offset > 0:
         fit_normals = [
             None if pts is None else estimate_normals(pts, k=16, sensors=slice_sensors[s]).normals
@@ -584,7 +587,7 @@ def run(seq: PointCloudSequence, options: Options | None = None) -> FlowResult:
     fit_inside, fit_outside = fit_labels(fit.values, outside | data, level=options.fit_level)
     depth = options.deep_inside
     if depth is None:
-        depth = 2.0 if options.resolution >= 48 else 4.0
+        depth = 2.0 if options.resolution >= FINE_RESOLUTION else 4.0
     if depth > 0:
         fit_inside |= deep_inside(fit.values, outside | data, distance=depth)
     slice_normals: list[np.ndarray | None] = [None] * S
