@@ -252,7 +252,23 @@ class Options:
         from 0.0054 / 0.0176 to 0.0034 / 0.0069, dfaust-hopping from 0.0048 / 0.0196 to
         0.0040 / 0.0111, splitting-blob from 0.0034 / 0.0077 to 0.0028 / 0.0050; squash-ball
         (6 frames) 0.0107 / 0.039 -> 0.0100 / 0.019 but its accuracy drops (0.012 -> 0.015).
-        0.02 is no better. Default 0.1 (0.5 before).
+        0.02 is no better. Default 0.1 (0.5 before; those figures were with ``time_smoothness``
+        1).
+    time_smoothness : float
+        Weight of the Laplace term's temporal edges between two slices that both have data,
+        relative to its spatial edges (the paper's 4D Laplace solve: 1). Edges touching a
+        slice without data (a missing frame, a sub-step slice) keep weight 1, so such slices
+        are still filled from their neighbours. Where a part moves by more than its thickness
+        per frame, the temporal edges pull its data nodes towards the outside values of the
+        neighbouring frames, and the part is lost: ``crane`` at resolution 64, frame 15, had
+        the field at +0.9 cells on the arm's data points and the mesh ended at the elbows
+        (``exp`` runs, 20k samples, Chamfer / completeness-95, 1 -> 0): ``crane`` at 64 0.0040
+        / 0.0072 -> 0.0030 / 0.0054 (0.25: 0.0031 / 0.0055); at 32 ``crane`` 0.0034 / 0.0072
+        -> 0.0032 / 0.0062, ``horse-gallop`` 0.0092 / 0.0923 -> 0.0071 / 0.0538 (0.1: 0.0074
+        / 0.0625), ``touching-spheres`` 0.0039 / 0.0085 -> 0.0037 / 0.0079, ``squash-ball``
+        0.0038 / 0.0068 -> 0.0036 / 0.0066, ``dfaust-hopping``, ``splitting-blob`` and
+        ``bending-arm`` within 0.0001 / 0.0002; worse: ``waving-sheet`` 0.0109 / 0.0128 ->
+        0.0115 / 0.0115 and ``rigid-turn`` completeness-95 0.0319 -> 0.0324. Default 0.
     min_component : float
         Closed components with volume below this fraction of the frame's largest are dropped.
     hull_trim : bool
@@ -367,6 +383,7 @@ class Options:
     refine: int = 2
     band: float = 2.0
     smoothness: float = 0.1
+    time_smoothness: float = 0.0
     min_component: float = 0.02
     cavities: bool = False
     hull_trim: bool = True
@@ -413,7 +430,7 @@ class Options:
                 f"observed_distance, level_limit and unobserved_smoothing must not be negative, "
                 f"got {self.observed_distance}, {self.level_limit}, {self.unobserved_smoothing}"
             )
-        for name in ("regularization", "softness", "band", "smoothness", "gamma"):
+        for name in ("regularization", "softness", "band", "smoothness", "time_smoothness", "gamma"):
             if getattr(self, name) < 0 or (name in ("band", "gamma") and getattr(self, name) == 0):
                 raise ValueError(f"{name} must be positive, got {getattr(self, name)}")
         object.__setattr__(self, "missing_frames", tuple(int(i) for i in self.missing_frames))
@@ -664,6 +681,7 @@ def run(seq: PointCloudSequence, options: Options | None = None) -> FlowResult:
         refine=options.refine,
         band=options.band,
         smoothness=options.smoothness,
+        time_weight=options.time_smoothness,
     )
     mass = irls.x[grid.frame_slice].reshape(len(seq), -1).sum(axis=1) * h**3
     meshes = [

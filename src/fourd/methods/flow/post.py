@@ -13,7 +13,10 @@ as boundary conditions of the Laplace system). Targets ``s`` are signed distance
 data (distance to the tangent planes of the nearest oriented data points) on nodes near data,
 weight 1, and from the flow solution on nodes deep inside or outside, weighted by depth;
 nodes near the surface without data are unknown (weight 0) and filled by the Laplace term.
-Temporal edges let data of neighbouring frames shape frames without data.
+``tau_e`` is 1 on spatial edges and on temporal edges that touch a slice without data (they
+let data of neighbouring frames shape frames without data), and ``time_weight`` on temporal
+edges between two slices with data (the method's ``time_smoothness``, 0 by default: a part
+that moves by more than its thickness per frame would be pulled off its own data).
 
 The result is a :class:`FlowField` (a :class:`fourd.geometry.field.Field4D`), contoured per
 time slice with marching cubes.
@@ -152,7 +155,8 @@ def implicit_function(
     rtol: float = 1e-5,
 ) -> FlowField:
     """Build the 4D implicit function from the flow solution ``x`` [S, X, Y, Z] and the data
-    (per slice points [P, 3] and oriented normals, or None); see the module docstring."""
+    (per slice points [P, 3] and oriented normals, or None); see the module docstring for
+    ``time_weight``."""
     h = grid.h
     hf = h / refine
     S = grid.slices
@@ -224,18 +228,25 @@ def implicit_function(
     columns = np.full((m, 9), -1, dtype=np.int64)
     entries = np.zeros((m, 9))
     diagonal = omega + 1e-8
+    # temporal edge (s, s + 1): time_weight between two slices with data, 1 where one has none
+    has_data = np.array([p is not None and len(p) > 0 for p in points])
+    edge_time_weight = np.where(has_data[:-1] & has_data[1:], time_weight, 1.0)
     for slot, (axis, direction) in enumerate(order):
-        weight = smoothness * (time_weight if axis == 0 else 1.0)
         ok = (coord4[:, axis] + direction >= 0) & (coord4[:, axis] + direction < shape4[axis])
         rows = np.flatnonzero(ok)
+        if axis == 0:
+            edge = coord4[rows, 0] + min(direction, 0)
+            weight = smoothness * edge_time_weight[edge]
+        else:
+            weight = np.full(len(rows), smoothness)
         b = unknown[rows] + direction * strides[axis]
         cb = col[b]
         inner = cb >= 0
         diagonal[rows] += weight
         slot_index = slot if slot < 4 else slot + 1
         columns[rows[inner], slot_index] = cb[inner]
-        entries[rows[inner], slot_index] = -weight
-        rhs[rows[~inner]] += weight * base_flat[b[~inner]]
+        entries[rows[inner], slot_index] = -weight[inner]
+        rhs[rows[~inner]] += weight[~inner] * base_flat[b[~inner]]
     columns[:, 4] = np.arange(m)
     entries[:, 4] = diagonal
     matrix = csr_from_rows(columns, entries, m)
