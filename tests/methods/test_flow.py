@@ -800,6 +800,24 @@ def test_mass_levels_auto_leaves_volumes_that_the_unseen_parts_cannot_explain():
 
 
 
+def test_mass_meshes_measure_what_is_observed_in_observed_cells():
+    """Data 0.02 off the seen upper halves (scan noise, gaps between scan lines): with flow
+    cells of 0.025 as the unit the seen halves count as partly unobserved and move; in cells
+    of 0.05 (``observed_cell``, what ``run`` passes above resolution 32) they stay."""
+    from fourd.methods.flow import mass_meshes
+
+    sphere = trimesh.creation.icosphere(subdivisions=4)
+    meshes = [(r * sphere.vertices, sphere.faces) for r in (0.5, 0.55)]
+    points = [1.04 * v[v[:, 2] > 0] for v, _ in meshes]
+    common = {"h": 0.025, "reach": 0.5, "limit": 40.0, "smoothing": 0}
+    fine = mass_meshes(meshes, points, np.ones(2), **common)
+    coarse = mass_meshes(meshes, points, np.ones(2), **common, observed_cell=0.05)
+    for (v, _), (w, _), (u, _) in zip(meshes, fine, coarse, strict=True):
+        seen = v[:, 2] > 0.05
+        assert np.abs(u[seen] - v[seen]).max() < 1e-12
+        assert np.abs(w[seen] - v[seen]).max() > 1e-3
+
+
 def test_mass_meshes_smooth_a_dent_out_of_a_frame_whose_volume_is_off():
     """A sphere (radius 0.5) whose unseen bottom cap is pushed 0.2 inwards, a pit, next to a
     frame of radius 0.56 with the same mass: the pitted frame's unseen half must move out by
