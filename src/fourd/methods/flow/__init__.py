@@ -72,6 +72,9 @@ MIN_FRAMES = 2
 #: From this ``resolution`` on a thick object is many cells thick: the automatic
 #: ``fit_offset`` and ``deep_inside`` switch to their fine-grid values (see :class:`Options`).
 FINE_RESOLUTION = 48
+#: ``mass_levels`` tells observed from unobserved parts in cells of this resolution, or in the
+#: grid's own where it is coarser (see ``Options.observed_distance``).
+OBSERVED_RESOLUTION = 32
 
 __all__ = [
     "MIN_FRAMES",
@@ -706,7 +709,7 @@ def run(seq: PointCloudSequence, options: Options | None = None) -> FlowResult:
             mass,
             h=h,
             reach=options.observed_distance,
-            observed_cell=h * max(1.0, options.resolution / 32),
+            observed_cell=h * max(1.0, options.resolution / OBSERVED_RESOLUTION),
             limit=options.level_limit,
             smoothing=options.unobserved_smoothing,
             all_or_nothing=options.mass_levels == "auto",
