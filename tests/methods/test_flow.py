@@ -629,7 +629,12 @@ def test_coherent_animation_is_closed_on_the_surface_and_returns():
     cycle per frame left the vertices 0.049 radii from their start at the return (0.030
     without it); at 8 frames 0.037 (0.016 without it). The same code measures 0.040 with the
     dependencies that resolved on 2026-11-23 (numpy 2.4.6, scipy 1.17.1, scikit-image 0.26.0,
-    trimesh 5.2.0, numba 0.68.1), hence the bound of 0.045."""
+    trimesh 5.2.0, numba 0.68.1). On this 16-cell grid the figure moves by +-0.01 with the
+    details of the postprocessing's field: since b1c0621 (no temporal Laplace edges between
+    frames with data, ``time_smoothness=0``) it is 0.049, with ``time_smoothness`` 1 0.040 and
+    with 0.1 0.059, while the benchmark's correspondence improved a little (crane 0.0090 /
+    0.0115 -> 0.0089 / 0.0114, dfaust-hopping 0.0062 / 0.0098 -> 0.0060 / 0.0093); hence the
+    bound of 0.055 (0.045 before b1c0621)."""
     frames, radius = 8, 0.5
     seq, _ = _squash_sequence(frames, radius=radius, hole=False)
     anim = reconstruct(seq, Options(**FAST, coherent=True))
@@ -641,7 +646,7 @@ def test_coherent_animation_is_closed_on_the_surface_and_returns():
         off_surface = np.abs(np.linalg.norm(anim.vertices[t] / radii, axis=1) - 1.0)
         assert off_surface.mean() < 0.025, (t, off_surface.mean())
     returned = np.linalg.norm(anim.vertices[4] - anim.vertices[0], axis=1) / radius
-    assert returned.mean() < 0.045, returned.mean()
+    assert returned.mean() < 0.055, returned.mean()
 
 
 @pytest.mark.slow
