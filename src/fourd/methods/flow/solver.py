@@ -23,7 +23,8 @@ warm-started from the previous iterate (an inexact solve, see the method's repor
 inconsistent at times (the paper's Discussion: "they are satisfied in a least squares
 sense"); a small ``eps`` makes that explicit and keeps ``K`` non-singular.
 
-Nothing here forms a dense matrix or factorises ``K``.
+Nothing here forms a dense matrix or factorises ``K``; MINRES applies ``K`` through ``A`` and
+``B`` (:func:`_saddle_operator`) without assembling it.
 """
 
 from __future__ import annotations
@@ -94,6 +95,27 @@ _AMG_SETUP = {"max_coarse": 500, "interpolation": "direct"}
 _SYMMETRIC = ("gauss_seidel", {"sweep": "symmetric"})
 _PRESMOOTHERS = [_SYMMETRIC, ("gauss_seidel", {"sweep": "forward"})]
 _POSTSMOOTHERS = [_SYMMETRIC, ("gauss_seidel", {"sweep": "backward"})]
+
+
+def _saddle_operator(A: sp.csr_matrix, B: sp.csr_matrix, softness: float) -> LinearOperator:
+    """``[[A, B^T], [B, -softness I]]`` as products with ``A``, ``B`` and ``B^T`` (a view):
+    the same products as :func:`saddle_matrix`'s, without a third copy of ``A`` and ``B``
+    (squash-ball at resolution 64: 7.9 million unknowns, 2.3 million constraints)."""
+    n, m = A.shape[0], B.shape[0]
+    BT = B.T
+
+    def matvec(z):
+        z = np.asarray(z).ravel()
+        u, multipliers = z[:n], z[n:]
+        out = np.empty(n + m)
+        out[:n] = A @ u
+        out[:n] += BT @ multipliers
+        out[n:] = B @ u
+        if softness:
+            out[n:] -= softness * multipliers
+        return out
+
+    return LinearOperator((n + m, n + m), matvec=matvec, rmatvec=matvec, dtype=float)
 
 
 def _multilevel(levels: list, A: sp.csr_matrix) -> MultilevelSolver:
@@ -280,7 +302,7 @@ def solve_saddle(
     A = sp.csr_matrix(A)
     B = sp.csr_matrix(B)
     n, m = A.shape[0], B.shape[0]
-    K = saddle_matrix(A, B, softness)
+    K = _saddle_operator(A, B, softness)
     b = np.concatenate([f, g])
     # the V-cycle works in single precision, so its matrix is formed in it (3.0 -> 0.8 s on
     # the captured crane system at resolution 64, the same entries)
