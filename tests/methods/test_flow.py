@@ -33,7 +33,7 @@ from fourd.methods.flow.grid import (
 )
 from fourd.methods.flow.irls import _previous_unknowns
 from fourd.methods.flow.post import drop_cavities, implicit_function
-from fourd.methods.flow.solver import amg_hierarchy, saddle_matrix, v_cycle
+from fourd.methods.flow.solver import _saddle_operator, amg_hierarchy, saddle_matrix, v_cycle
 from fourd.methods.flow.sparse import csr_hstack, csr_product
 from fourd.methods.flow.system import build_system, neighbourhood
 
@@ -316,6 +316,8 @@ def test_csr_hstack_and_saddle_matrix_match_scipy():
         lower = -softness * sp.identity(12) if softness else sp.csr_matrix((12, 12))
         expected = sp.bmat([[A, B.T], [B, lower]])
         assert abs(saddle_matrix(A, B, softness) - expected).max() == 0
+        z = np.random.default_rng(0).normal(size=42)
+        assert np.allclose(_saddle_operator(A, B, softness) @ z, expected @ z, atol=1e-12)
 
 
 def test_amg_hierarchy_is_pyamgs_and_a_symmetric_v_cycle():
