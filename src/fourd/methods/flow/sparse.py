@@ -154,39 +154,3 @@ def csr_from_rows(columns: np.ndarray, values: np.ndarray, n_cols: int) -> sp.cs
     indptr = np.zeros(len(columns) + 1, dtype=np.int64)
     np.cumsum(present.sum(axis=1), out=indptr[1:])
     return sp.csr_matrix((values[present], columns[present], indptr), shape=(len(columns), n_cols))
-
-
-def csr_hstack(blocks: list) -> sp.csr_matrix:
-    """``[B_0, B_1, ...]`` side by side (sparse blocks with the same number of rows), as CSR,
-    without scipy's detour through COO (which takes seconds for the flow's saddle-point
-    matrix at resolution 64).
-
-    Examples
-    --------
-    >>> import scipy.sparse as sp
-    >>> a, b = sp.random(5, 3, density=0.5, random_state=0), sp.random(5, 4, density=0.5)
-    >>> bool((csr_hstack([a, b]) != sp.hstack([a, b])).nnz == 0)
-    True
-    """
-    blocks = [sp.csr_matrix(block) for block in blocks]
-    rows = {block.shape[0] for block in blocks}
-    if len(rows) != 1:
-        raise ValueError(f"blocks with different row counts {sorted(rows)}")
-    n = rows.pop()
-    widths = [block.shape[1] for block in blocks]
-    indptr = np.sum([block.indptr.astype(np.int64) for block in blocks], axis=0)
-    nnz = int(indptr[-1])
-    index_type = np.int32 if max(nnz, sum(widths)) < np.iinfo(np.int32).max else np.int64
-    indices = np.empty(nnz, index_type)
-    data = np.empty(nnz, np.result_type(*[block.dtype for block in blocks]))
-    before = np.zeros(n, np.int64)  # entries of the earlier blocks in each row
-    offset = 0
-    for block, width in zip(blocks, widths, strict=True):
-        counts = np.diff(block.indptr)
-        row = np.repeat(np.arange(n), counts)
-        at = np.arange(block.nnz) - block.indptr[row] + indptr[row] + before[row]
-        indices[at] = block.indices + offset
-        data[at] = block.data
-        before += counts
-        offset += width
-    return sp.csr_matrix((data, indices, indptr.astype(index_type)), shape=(n, offset))
