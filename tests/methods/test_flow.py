@@ -34,7 +34,13 @@ from fourd.methods.flow.grid import (
 from fourd.methods.flow.irls import _previous_unknowns
 from fourd.methods.flow.post import drop_cavities, implicit_function
 from fourd.methods.flow.solver import _saddle_operator, amg_hierarchy, v_cycle
-from fourd.methods.flow.sparse import csr_product
+from fourd.methods.flow.sparse import (
+    csr_product,
+    galerkin_product,
+    strong_connections,
+    transpose_pattern,
+    truncate_rows,
+)
 from fourd.methods.flow.system import build_system, neighbourhood
 
 # cameras below the object: the top is never seen (a persistent hole), consistently with carving
@@ -268,6 +274,58 @@ def test_csr_product_matches_scipy():
     assert abs(fused - (b.T @ b + addend)).max() <= 1e-5 * abs(fused).max()
     with pytest.raises(ValueError, match="addend"):
         csr_product(b.T, b, add=a)
+
+
+def test_galerkin_product_strong_connections_and_transpose_pattern_match_scipy():
+    """The set-up kernels of the V-cycle's hierarchy: ``R A P`` without ``A P``, the
+    classical strong connections (pyamg's pattern less the diagonal, A's values, columns
+    increasing) and a values-free transpose."""
+    from pyamg.strength import classical_strength_of_connection
+
+    rng = np.random.default_rng(1)
+    a = sp.random(600, 600, density=0.02, random_state=4, format="csr")
+    a = (a + a.T + sp.diags(rng.random(600) + 1.0)).tocsr()
+    a.indices = a.indices.copy()
+    for i in range(0, 600, 7):  # unsorted rows, as csr_product gives them
+        a.indices[a.indptr[i] : a.indptr[i + 1]] = a.indices[a.indptr[i] : a.indptr[i + 1]][::-1]
+        a.data[a.indptr[i] : a.indptr[i + 1]] = a.data[a.indptr[i] : a.indptr[i + 1]][::-1]
+    a.has_sorted_indices = False
+    p = sp.random(600, 90, density=0.03, random_state=5, format="csr")
+    product = galerkin_product(p.T, a, p)
+    expected = (p.T @ a @ p).tocsr()
+    assert product.shape == (90, 90)
+    assert abs(product - expected).max() <= 1e-12 * abs(expected).max()
+    assert galerkin_product(sp.csr_matrix((3, 5)), sp.csr_matrix((5, 5)), sp.csr_matrix((5, 3))).nnz == 0
+    with pytest.raises(ValueError, match="do not match"):
+        galerkin_product(p, a, p)
+
+    strong = strong_connections(a, 0.25)
+    reference = classical_strength_of_connection(sp.csr_matrix(a), theta=0.25).tocsr()
+    reference.setdiag(0)
+    reference.eliminate_zeros()
+    reference.sort_indices()
+    assert np.array_equal(strong.indptr, reference.indptr)
+    assert np.array_equal(strong.indices, reference.indices)
+    assert np.all(strong.diagonal() == 0)
+    assert np.array_equal(strong.data, np.asarray(sp.csr_matrix(a)[strong.nonzero()]).ravel())
+    assert all(np.all(np.diff(strong.indices[strong.indptr[i] : strong.indptr[i + 1]]) > 0)
+               for i in range(600))
+
+    indptr, indices = transpose_pattern(strong)
+    transposed = strong.T.tocsr()
+    assert np.array_equal(indptr, transposed.indptr)
+    assert np.array_equal(indices, transposed.indices)
+
+    for entries in (1, 2):
+        truncated = truncate_rows(p, entries)
+        counts = np.diff(truncated.indptr)
+        assert np.array_equal(counts, np.minimum(np.diff(p.indptr), entries))
+        assert np.allclose(truncated.sum(axis=1), p.sum(axis=1))
+        kept = np.asarray(abs(truncated).max(axis=1).todense()).ravel()
+        assert np.allclose(kept > 0, np.asarray(abs(p).max(axis=1).todense()).ravel() > 0)
+        # the kept columns are each row's largest
+        rows = np.repeat(np.arange(p.shape[0]), counts)
+        assert np.all(abs(p[rows, truncated.indices]).A1 >= np.sort(abs(p).toarray(), axis=1)[rows, -entries] - 1e-15)
 
 
 def test_saddle_solve_releases_its_hierarchy_without_the_garbage_collector(monkeypatch):

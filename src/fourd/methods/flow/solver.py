@@ -11,7 +11,8 @@ worse on ``A + B^T B``) or by an incomplete factorisation with drop
 tolerance 0.01 (``inner="cg-ilu"``, the paper's choice; scipy has no incomplete Cholesky,
 so its ILU stands in), to ``inner_rtol`` (1e-6 in the paper). ``inner="amg"`` replaces the
 inner CG by one symmetric AMG V-cycle, a fixed SPD approximation of the inverse (cheaper
-per step, more outer iterations).
+per step, more outer iterations); its hierarchy keeps one entry per row of each
+interpolation (:data:`INTERPOLATION_ENTRIES`), so its coarse matrices stay sparse.
 
 Measured (small test system, 7.9k unknowns): ``cg-amg`` 7 MINRES iterations, residual 2e-6,
 10 s; ``cg-ilu`` did not finish in 5 minutes (scipy's ``spilu`` set-up is slow on this
@@ -36,14 +37,18 @@ from typing import Literal, NamedTuple
 import numpy as np
 import pyamg
 import scipy.sparse as sp
-from pyamg.classical.interpolate import direct_interpolation
-from pyamg.classical.split import RS as rs_splitting
+from pyamg import amg_core
 from pyamg.multilevel import MultilevelSolver
 from pyamg.relaxation.smoothing import change_smoothers
-from pyamg.strength import classical_strength_of_connection
 from scipy.sparse.linalg import LinearOperator, cg, minres, spilu
 
-from fourd.methods.flow.sparse import csr_product
+from fourd.methods.flow.sparse import (
+    csr_product,
+    galerkin_product,
+    strong_connections,
+    transpose_pattern,
+    truncate_rows,
+)
 
 log = logging.getLogger("fourd.methods.flow.solver")
 
@@ -76,6 +81,16 @@ class SaddleSolution(NamedTuple):
 # resolution 64 (1.7M unknowns) the set-up takes 8.4 s instead of 13.5 s and 60 MINRES steps
 # reach a relative residual of 2.5e-2 instead of 2.6e-2, at the same cost per step.
 _AMG_SETUP = {"max_coarse": 500, "interpolation": "direct"}
+
+#: Entries kept per row of the V-cycle's interpolations (:func:`amg_hierarchy`): one, the
+#: strongest coarse neighbour's, scaled to the row's sum. Direct interpolation gives the
+#: fine points of these systems about two, and the coarse matrices grow dense with them (80
+#: nonzeros per row on the first coarse level of squash-ball at resolution 64). Measured on
+#: the first flow systems at resolution 64 (40 MINRES steps, all entries -> one): squash-ball
+#: (7.9M unknowns) 109 -> 76 s, residual 1.76e-2 -> 1.74e-2, first coarse level 87M -> 35M
+#: nonzeros, the solve's peak 4.15 -> 3.39 GB (0.7 GB of input included); crane 18.7 -> 12.9 s, 2.85e-2 ->
+#: 2.81e-2; dfaust-hopping 21.4 -> 14.3-15.5 s, 8.52e-3 -> 8.47e-3.
+INTERPOLATION_ENTRIES = 1
 
 # Symmetric Gauss-Seidel (a forward and a backward sweep) before and after the coarse
 # correction on the finest level, one forward sweep before and one backward after on the
@@ -122,30 +137,83 @@ def _multilevel(levels: list, A: sp.csr_matrix) -> MultilevelSolver:
 
 def _level(A: sp.csr_matrix, P: sp.csr_matrix):
     """One level of a hierarchy and the next coarser matrix, the Galerkin product ``P^T A P``
-    (on all cores, :func:`.sparse.csr_product`)."""
+    (on all cores, without ``A P``: :func:`.sparse.galerkin_product`)."""
     level = MultilevelSolver.Level()
     level.A, level.P, level.R = A, P, P.T.tocsr()
-    return level, csr_product(level.R, csr_product(A, P))
+    return level, galerkin_product(level.R, A, P)
 
 
-def amg_hierarchy(S: sp.csr_matrix, *, max_coarse: int = 500, max_levels: int = 10):
+def _direct_interpolation(A: sp.csr_matrix, theta: float) -> sp.csr_matrix | None:
+    """Ruge-Stueben splitting and direct interpolation [n, coarse] of ``A`` [n, n] (None if
+    every or no point would be coarse): what pyamg's ``classical_strength_of_connection``,
+    ``RS`` and ``direct_interpolation`` compute, through its kernels, with one copy of the
+    strong connections (:func:`.sparse.strong_connections`) and a pattern-only transpose
+    instead of four full copies of ``A``. Squash-ball's first flow system at resolution 64
+    (7.9M unknowns, 121M nonzeros, float32): the hierarchy's set-up peaked 3.2 GB above
+    the matrix with pyamg's functions, 1.4 GB with these (and in 31 s instead of 36)."""
+    n = A.shape[0]
+    index = np.int32
+    if A.nnz >= np.iinfo(index).max:
+        raise ValueError(f"{A.nnz} nonzeros: beyond the AMG kernels' 32-bit indices")
+    A = sp.csr_matrix(
+        (A.data, A.indices.astype(index, copy=False), A.indptr.astype(index, copy=False)),
+        shape=A.shape,
+    )
+    strong = strong_connections(A, theta)
+    splitting = np.empty(n, index)
+    transposed_indptr, transposed_indices = transpose_pattern(strong)
+    amg_core.rs_cf_splitting(
+        n,
+        strong.indptr,
+        strong.indices,
+        transposed_indptr,
+        transposed_indices,
+        np.zeros(n, index),
+        splitting,
+    )
+    del transposed_indptr, transposed_indices
+    coarse = int(splitting.sum())
+    if coarse == 0 or coarse == n:
+        return None
+    indptr = np.empty(n + 1, index)
+    amg_core.rs_direct_interpolation_pass1(n, strong.indptr, strong.indices, splitting, indptr)
+    indices = np.empty(indptr[-1], index)
+    data = np.empty(indptr[-1], A.dtype)
+    amg_core.rs_direct_interpolation_pass2(
+        n, A.indptr, A.indices, A.data, strong.indptr, strong.indices, strong.data,
+        splitting, indptr, indices, data,
+    )
+    return sp.csr_matrix((data, indices, indptr), shape=(n, coarse))
+
+
+def amg_hierarchy(
+    S: sp.csr_matrix,
+    *,
+    max_coarse: int = 500,
+    max_levels: int = 10,
+    interpolation_entries: int | None = None,
+):
     """The Ruge-Stueben AMG hierarchy of ``S`` [n, n] (SPD) for the V-cycle of ``inner="amg"``.
 
     What ``pyamg.ruge_stuben_solver(S, max_coarse=500, interpolation="direct")`` builds
     (classical strength of connection with threshold 0.25, RS splitting, direct
-    interpolation), with the Galerkin products on all cores: on a captured dfaust-hopping
-    system at resolution 64 (2.1M unknowns, 2 cores) the first level's product takes 2.0 s
-    instead of 4.3 s. The entries agree to single-precision rounding (summation order).
+    interpolation), in less memory (:func:`_direct_interpolation`) and with the Galerkin
+    products on all cores: on a captured dfaust-hopping system at resolution 64 (2.1M
+    unknowns, 2 cores) the first level's product takes 2.0 s instead of 4.3 s. The entries
+    agree to single-precision rounding (summation order).
+
+    ``interpolation_entries``: keep only this many largest entries of each row of every
+    interpolation (:func:`.sparse.truncate_rows`; None: all, pyamg's hierarchy).
     Smoothers: :data:`_PRESMOOTHERS` / :data:`_POSTSMOOTHERS`."""
     levels = []
     A = sp.csr_matrix(S)
     while len(levels) + 1 < max_levels and A.shape[0] > max_coarse:
-        strength = classical_strength_of_connection(A, theta=0.25)
-        splitting = rs_splitting(strength)
-        coarse = int(splitting.sum())
-        if coarse == 0 or coarse == len(splitting):
+        P = _direct_interpolation(A, theta=0.25)
+        if P is None:
             break
-        level, A = _level(A, direct_interpolation(A, strength, splitting))
+        if interpolation_entries is not None:
+            P = truncate_rows(P, interpolation_entries)
+        level, A = _level(A, P)
         levels.append(level)
     return _multilevel(levels, A)
 
@@ -216,7 +284,11 @@ def _inner_operator(
         # MINRES step with the same residual (captured crane system: 60 steps 9.3 -> 7.8 s,
         # residual 1.1e-2 both)
         if reuse is None:
-            ml = amg_hierarchy(S, max_coarse=_AMG_SETUP["max_coarse"])
+            ml = amg_hierarchy(
+                S,
+                max_coarse=_AMG_SETUP["max_coarse"],
+                interpolation_entries=INTERPOLATION_ENTRIES,
+            )
         else:
             ml = restricted_hierarchy(S, *reuse)
 
