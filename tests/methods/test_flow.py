@@ -33,7 +33,12 @@ from fourd.methods.flow.grid import (
 )
 from fourd.methods.flow.irls import _previous_unknowns
 from fourd.methods.flow.post import drop_cavities, implicit_function
-from fourd.methods.flow.solver import _saddle_operator, amg_hierarchy, v_cycle
+from fourd.methods.flow.solver import (
+    _saddle_operator,
+    amg_hierarchy,
+    minres_inplace,
+    v_cycle,
+)
 from fourd.methods.flow.sparse import (
     csr_product,
     galerkin_product,
@@ -135,6 +140,8 @@ def test_options_validated_through_registry():
         method_options("flow", {"neighbourhood": "9"})
     with pytest.raises(InputError):
         method_options("flow", {"inner": "lu"})
+    with pytest.raises(InputError, match="interpolation_entries"):
+        method_options("flow", {"interpolation_entries": "-1"})
 
 
 def test_system_quadratic_is_the_energy():
@@ -311,7 +318,7 @@ def test_galerkin_product_strong_connections_and_transpose_pattern_match_scipy()
     assert all(np.all(np.diff(strong.indices[strong.indptr[i] : strong.indptr[i + 1]]) > 0)
                for i in range(600))
 
-    indptr, indices = transpose_pattern(strong)
+    indptr, indices = transpose_pattern(strong.indptr, strong.indices, 600)
     transposed = strong.T.tocsr()
     assert np.array_equal(indptr, transposed.indptr)
     assert np.array_equal(indices, transposed.indices)
@@ -364,6 +371,40 @@ def _saddle_matrix(A, B, softness=0.0):
     m = B.shape[0]
     lower = -softness * sp.identity(m) if softness else sp.csr_matrix((m, m))
     return sp.bmat([[A, B.T], [B, lower]], format="csr")
+
+
+def test_minres_inplace_follows_scipys_minres():
+    """The in-place MINRES takes scipy's steps: the same iterate after the first steps on a
+    preconditioned symmetric indefinite system (later ones part by rounding as Lanczos
+    loses orthogonality: 1e-14 after 10 steps, 4e-4 after 30 here), and it stops with a
+    small residual where scipy's reports convergence."""
+    from scipy.sparse.linalg import minres
+
+    a = sp.random(60, 50, density=0.1, random_state=0, format="csr")
+    A = (a.T @ a + sp.identity(50)).tocsr()
+    B = sp.random(15, 50, density=0.2, random_state=2, format="csr")
+    K = _saddle_matrix(A, B, 1e-3).tocsr()
+    diagonal = np.concatenate([A.diagonal() + np.asarray(B.multiply(B).sum(axis=0)).ravel(),
+                               np.ones(15)])
+    b = np.random.default_rng(3).normal(size=65)
+    x0 = np.random.default_rng(4).normal(size=65)
+    for steps in (1, 5, 10):
+        expected, _ = minres(K, b, x0=x0, rtol=1e-12, maxiter=steps,
+                             M=sp.diags(1.0 / diagonal))
+        x = x0.copy()
+        taken = minres_inplace(lambda z, out: np.copyto(out, K @ z),
+                               lambda r, out: np.divide(r, diagonal, out=out), b, x,
+                               rtol=1e-12, maxiter=steps)
+        assert taken == steps
+        assert np.allclose(x, expected, rtol=0, atol=1e-9 * abs(expected).max())
+    counted = []
+    x = np.zeros(65)
+    taken = minres_inplace(lambda z, out: np.copyto(out, K @ z),
+                           lambda r, out: np.divide(r, diagonal, out=out), b, x, rtol=1e-8,
+                           maxiter=500, callback=counted.append)
+    _, info = minres(K, b, rtol=1e-8, maxiter=500, M=sp.diags(1.0 / diagonal))
+    assert info == 0 and len(counted) == taken < 500
+    assert np.linalg.norm(b - K @ x) <= 1e-6 * np.linalg.norm(b)
 
 
 def test_saddle_operator_matches_the_assembled_matrix():

@@ -11,8 +11,8 @@ worse on ``A + B^T B``) or by an incomplete factorisation with drop
 tolerance 0.01 (``inner="cg-ilu"``, the paper's choice; scipy has no incomplete Cholesky,
 so its ILU stands in), to ``inner_rtol`` (1e-6 in the paper). ``inner="amg"`` replaces the
 inner CG by one symmetric AMG V-cycle, a fixed SPD approximation of the inverse (cheaper
-per step, more outer iterations); its hierarchy keeps one entry per row of each
-interpolation (:data:`INTERPOLATION_ENTRIES`), so its coarse matrices stay sparse.
+per step, more outer iterations); its hierarchy can keep only the largest entries of
+each interpolation row (``interpolation_entries``: sparser coarse matrices, cheaper steps).
 
 Measured (small test system, 7.9k unknowns): ``cg-amg`` 7 MINRES iterations, residual 2e-6,
 10 s; ``cg-ilu`` did not finish in 5 minutes (scipy's ``spilu`` set-up is slow on this
@@ -25,7 +25,8 @@ inconsistent at times (the paper's Discussion: "they are satisfied in a least sq
 sense"); a small ``eps`` makes that explicit and keeps ``K`` non-singular.
 
 Nothing here forms a dense matrix or factorises ``K``; MINRES applies ``K`` through ``A`` and
-``B`` (:func:`_saddle_operator`) without assembling it.
+``B`` (:func:`_saddle_apply`) without assembling it, in a MINRES that updates its vectors in
+place (:func:`minres_inplace`).
 """
 
 from __future__ import annotations
@@ -40,12 +41,14 @@ import scipy.sparse as sp
 from pyamg import amg_core
 from pyamg.multilevel import MultilevelSolver
 from pyamg.relaxation.smoothing import change_smoothers
-from scipy.sparse.linalg import LinearOperator, cg, minres, spilu
+from scipy.linalg.blas import daxpy as _daxpy
+from scipy.sparse.linalg import LinearOperator, cg, spilu
 
 from fourd.methods.flow.sparse import (
     csr_product,
     galerkin_product,
-    strong_connections,
+    strong_pattern,
+    strong_values,
     transpose_pattern,
     truncate_rows,
 )
@@ -82,15 +85,6 @@ class SaddleSolution(NamedTuple):
 # reach a relative residual of 2.5e-2 instead of 2.6e-2, at the same cost per step.
 _AMG_SETUP = {"max_coarse": 500, "interpolation": "direct"}
 
-#: Entries kept per row of the V-cycle's interpolations (:func:`amg_hierarchy`): one, the
-#: strongest coarse neighbour's, scaled to the row's sum. Direct interpolation gives the
-#: fine points of these systems about two, and the coarse matrices grow dense with them (80
-#: nonzeros per row on the first coarse level of squash-ball at resolution 64). Measured on
-#: the first flow systems at resolution 64 (40 MINRES steps, all entries -> one): squash-ball
-#: (7.9M unknowns) 109 -> 76 s, residual 1.76e-2 -> 1.74e-2, first coarse level 87M -> 35M
-#: nonzeros, the solve's peak 4.15 -> 3.39 GB (0.7 GB of input included); crane 18.7 -> 12.9 s, 2.85e-2 ->
-#: 2.81e-2; dfaust-hopping 21.4 -> 14.3-15.5 s, 8.52e-3 -> 8.47e-3.
-INTERPOLATION_ENTRIES = 1
 
 # Symmetric Gauss-Seidel (a forward and a backward sweep) before and after the coarse
 # correction on the finest level, one forward sweep before and one backward after on the
@@ -105,6 +99,19 @@ _PRESMOOTHERS = [_SYMMETRIC, ("gauss_seidel", {"sweep": "forward"})]
 _POSTSMOOTHERS = [_SYMMETRIC, ("gauss_seidel", {"sweep": "backward"})]
 
 
+def _saddle_apply(A, B, BT, softness: float, z: np.ndarray, out: np.ndarray) -> np.ndarray:
+    """``out = [[A, B^T], [B, -softness I]] z`` (``A`` [n, n], ``B`` [m, n], ``BT`` its
+    transpose); returns ``out``."""
+    n = A.shape[0]
+    u, multipliers = z[:n], z[n:]
+    out[:n] = A @ u
+    out[:n] += BT @ multipliers
+    out[n:] = B @ u
+    if softness:
+        out[n:] -= softness * multipliers
+    return out
+
+
 def _saddle_operator(A: sp.csr_matrix, B: sp.csr_matrix, softness: float) -> LinearOperator:
     """``[[A, B^T], [B, -softness I]]`` as products with ``A``, ``B`` and ``B^T`` (a view):
     never assembled: a third copy of ``A`` and ``B`` (squash-ball at resolution 64, 7.9
@@ -113,17 +120,97 @@ def _saddle_operator(A: sp.csr_matrix, B: sp.csr_matrix, softness: float) -> Lin
     BT = B.T
 
     def matvec(z):
-        z = np.asarray(z).ravel()
-        u, multipliers = z[:n], z[n:]
-        out = np.empty(n + m)
-        out[:n] = A @ u
-        out[:n] += BT @ multipliers
-        out[n:] = B @ u
-        if softness:
-            out[n:] -= softness * multipliers
-        return out
+        return _saddle_apply(A, B, BT, softness, np.asarray(z).ravel(), np.empty(n + m))
 
     return LinearOperator((n + m, n + m), matvec=matvec, rmatvec=matvec, dtype=float)
+
+
+def minres_inplace(apply_K, apply_M, b: np.ndarray, x: np.ndarray, *, rtol: float,
+                   maxiter: int, callback=None) -> int:
+    """Preconditioned MINRES (Paige and Saunders 1975) for ``K x = b``, ``K`` [N, N]
+    symmetric, ``M`` symmetric positive definite, from ``x`` [N] (float64, updated in place).
+
+    ``apply_K(z, out)`` and ``apply_M(r, out)`` write ``K z`` and ``M^-1 r`` into ``out``.
+    The recurrence and the stopping tests are scipy's ``minres`` (``||r||_M / (||K|| ||x||)``
+    or ``||K r|| / (||K|| ||r||)`` estimated below ``rtol``, ``x`` at machine precision, or
+    ``maxiter`` steps), with eight vectors updated in place instead of new arrays every
+    step: on squash-ball's first flow system at resolution 64 (10.2M unknowns) the solve's
+    peak memory went 4.15 -> 3.98 GB, its iterates the same. Returns the number of steps
+    taken."""
+    eps = np.finfo(float).eps
+    size = len(b)
+    r1 = np.empty(size)
+    apply_K(x, r1)
+    np.subtract(b, r1, out=r1)
+    y = np.empty(size)
+    apply_M(r1, y)
+    beta1 = float(r1 @ y)
+    if beta1 < 0:
+        raise ValueError("MINRES: the preconditioner is not positive definite")
+    if beta1 == 0:
+        return 0
+    beta1 = np.sqrt(beta1)
+    r2 = r1.copy()
+    v, w, w1, w2 = np.empty(size), np.zeros(size), np.zeros(size), np.zeros(size)
+    oldb, beta, dbar, epsln, phibar = 0.0, beta1, 0.0, 0.0, beta1
+    cs, sn, tnorm2, gmax, gmin = -1.0, 0.0, 0.0, 0.0, np.finfo(float).max
+    steps = 0
+    while steps < maxiter:
+        steps += 1
+        np.multiply(y, 1.0 / beta, out=v)
+        apply_K(v, y)  # y = K v (the preconditioned vector is no longer needed)
+        if steps >= 2:
+            _axpy(r1, y, -beta / oldb)
+        alfa = float(v @ y)
+        _axpy(r2, y, -alfa / beta)
+        r1, r2, y = r2, y, r1  # the oldest residual's buffer takes M^-1 r2
+        apply_M(r2, y)
+        oldb, beta = beta, float(r2 @ y)
+        if beta < 0:
+            raise ValueError("MINRES: the preconditioner is not positive definite")
+        beta = np.sqrt(beta)
+        tnorm2 += alfa**2 + oldb**2 + beta**2
+        exhausted = steps == 1 and beta / beta1 <= 10 * eps
+        # the previous plane rotation, then the next one
+        oldeps = epsln
+        delta = cs * dbar + sn * alfa
+        gbar = sn * dbar - cs * alfa
+        epsln = sn * beta
+        dbar = -cs * beta
+        root = np.hypot(gbar, dbar)
+        gamma = max(np.hypot(gbar, beta), eps)
+        cs, sn = gbar / gamma, beta / gamma
+        phi, phibar = cs * phibar, sn * phibar
+        w1, w2, w = w2, w, w1  # w = (v - oldeps w1 - delta w2) / gamma in the oldest's buffer
+        np.multiply(v, 1.0 / gamma, out=w)
+        _axpy(w1, w, -oldeps / gamma)
+        _axpy(w2, w, -delta / gamma)
+        _axpy(w, x, phi)
+        gmax, gmin = max(gmax, gamma), min(gmin, gamma)
+        if callback is not None:
+            callback(x)
+        anorm = np.sqrt(tnorm2)
+        xnorm = float(np.linalg.norm(x))
+        test1 = np.inf if xnorm == 0 or anorm == 0 else phibar / (anorm * xnorm)
+        test2 = np.inf if anorm == 0 else root / anorm
+        if (
+            exhausted
+            or test1 <= rtol
+            or test2 <= rtol
+            or 1 + test1 <= 1
+            or 1 + test2 <= 1
+            or gmax / gmin >= 0.1 / eps
+            or anorm * xnorm * eps >= beta1
+        ):
+            break
+    return steps
+
+
+def _axpy(source: np.ndarray, target: np.ndarray, factor: float) -> None:
+    """``target += factor * source`` in place (BLAS, no temporary)."""
+    result = _daxpy(source, target, a=factor)
+    if result is not target:  # BLAS wrote a copy (target not contiguous float64)
+        target[...] = result
 
 
 def _multilevel(levels: list, A: sp.csr_matrix) -> MultilevelSolver:
@@ -149,8 +236,9 @@ def _direct_interpolation(A: sp.csr_matrix, theta: float) -> sp.csr_matrix | Non
     ``RS`` and ``direct_interpolation`` compute, through its kernels, with one copy of the
     strong connections (:func:`.sparse.strong_connections`) and a pattern-only transpose
     instead of four full copies of ``A``. Squash-ball's first flow system at resolution 64
-    (7.9M unknowns, 121M nonzeros, float32): the hierarchy's set-up peaked 3.2 GB above
-    the matrix with pyamg's functions, 1.4 GB with these (and in 31 s instead of 36)."""
+    (7.9M unknowns, 121M nonzeros, float32; with the saddle system and its right side
+    loaded): the hierarchy's set-up peaked at 5.1 GB with pyamg's functions, at 3.2 GB
+    with these, no more than the finished hierarchy holds (and in 31 s instead of 36)."""
     n = A.shape[0]
     index = np.int32
     if A.nnz >= np.iinfo(index).max:
@@ -159,13 +247,15 @@ def _direct_interpolation(A: sp.csr_matrix, theta: float) -> sp.csr_matrix | Non
         (A.data, A.indices.astype(index, copy=False), A.indptr.astype(index, copy=False)),
         shape=A.shape,
     )
-    strong = strong_connections(A, theta)
+    # the splitting takes the pattern and its transpose, the interpolation the pattern with
+    # A's values: never all three at once
+    strong_indptr, strong_indices = strong_pattern(A, theta)
+    transposed_indptr, transposed_indices = transpose_pattern(strong_indptr, strong_indices, n)
     splitting = np.empty(n, index)
-    transposed_indptr, transposed_indices = transpose_pattern(strong)
     amg_core.rs_cf_splitting(
         n,
-        strong.indptr,
-        strong.indices,
+        strong_indptr,
+        strong_indices,
         transposed_indptr,
         transposed_indices,
         np.zeros(n, index),
@@ -175,12 +265,13 @@ def _direct_interpolation(A: sp.csr_matrix, theta: float) -> sp.csr_matrix | Non
     coarse = int(splitting.sum())
     if coarse == 0 or coarse == n:
         return None
+    strong_data = strong_values(A, theta, strong_indptr, strong_indices)
     indptr = np.empty(n + 1, index)
-    amg_core.rs_direct_interpolation_pass1(n, strong.indptr, strong.indices, splitting, indptr)
+    amg_core.rs_direct_interpolation_pass1(n, strong_indptr, strong_indices, splitting, indptr)
     indices = np.empty(indptr[-1], index)
     data = np.empty(indptr[-1], A.dtype)
     amg_core.rs_direct_interpolation_pass2(
-        n, A.indptr, A.indices, A.data, strong.indptr, strong.indices, strong.data,
+        n, A.indptr, A.indices, A.data, strong_indptr, strong_indices, strong_data,
         splitting, indptr, indices, data,
     )
     return sp.csr_matrix((data, indices, indptr), shape=(n, coarse))
@@ -277,6 +368,7 @@ def _inner_operator(
     counter: list[int],
     inner_maxiter: int,
     reuse: tuple[tuple, np.ndarray] | None = None,
+    interpolation_entries: int | None = None,
 ):
     n = S.shape[0]
     if inner == "amg":
@@ -287,7 +379,7 @@ def _inner_operator(
             ml = amg_hierarchy(
                 S,
                 max_coarse=_AMG_SETUP["max_coarse"],
-                interpolation_entries=INTERPOLATION_ENTRIES,
+                interpolation_entries=interpolation_entries,
             )
         else:
             ml = restricted_hierarchy(S, *reuse)
@@ -334,6 +426,7 @@ def solve_saddle(
     inner_maxiter: int = 200,
     x0: np.ndarray | None = None,
     reuse: tuple[tuple, np.ndarray] | None = None,
+    interpolation_entries: int | None = None,
 ) -> SaddleSolution:
     """Solve ``[[A, B^T], [B, -softness I]] [u; lambda] = [f; g]`` by preconditioned MINRES.
 
@@ -354,6 +447,14 @@ def solve_saddle(
         Measured on the captured crane systems at resolution 64 (IRLS iterations 1 and 2
         from iteration 0's hierarchy): set-up 8.5-9.0 -> 4.1 s and 7.6 -> 3.7 s, residual
         after 40 steps 3.79e-2 -> 3.76e-2 and 3.94e-2 -> 3.92e-2.
+    interpolation_entries : int, optional
+        With ``inner="amg"``: keep only this many largest entries per row of every AMG
+        interpolation (:func:`amg_hierarchy`; None: all). Measured on the first flow systems
+        at resolution 64 (40 MINRES steps, all entries -> one): squash-ball (7.9M unknowns)
+        109 -> 76 s, residual 1.76e-2 -> 1.74e-2, first coarse level 87M -> 35M nonzeros,
+        the solve's peak 4.0 -> 3.2 GB (0.7 GB of input included); crane 18.7 -> 12.9 s,
+        2.85e-2 -> 2.81e-2; dfaust-hopping 21.4 -> 14.3-15.5 s, 8.52e-3 -> 8.47e-3. But the
+        flow method's squash-ball output came out worse with it (``Options``).
 
     Examples
     --------
@@ -367,7 +468,7 @@ def solve_saddle(
     A = sp.csr_matrix(A)
     B = sp.csr_matrix(B)
     n, m = A.shape[0], B.shape[0]
-    K = _saddle_operator(A, B, softness)
+    BT = B.T
     b = np.concatenate([f, g])
     # the V-cycle works in single precision, so its matrix is formed in it (3.0 -> 0.8 s on
     # the captured crane system at resolution 64, the same entries)
@@ -376,16 +477,26 @@ def solve_saddle(
     if gamma != 1.0:
         B_inner = B_inner * precision(1.0 / np.sqrt(gamma))
     S = csr_product(B_inner.T, B_inner, add=A.astype(precision))
+    del B_inner
     counter = [0]
     inner_apply, interpolations = _inner_operator(
-        S, inner, inner_rtol, counter, inner_maxiter, reuse if inner == "amg" else None
+        S,
+        inner,
+        inner_rtol,
+        counter,
+        inner_maxiter,
+        reuse if inner == "amg" else None,
+        interpolation_entries,
     )
 
-    def precondition(r):
-        r = np.asarray(r).ravel()
-        return np.concatenate([inner_apply(r[:n]), r[n:] / gamma])
+    def apply_K(z, out):
+        return _saddle_apply(A, B, BT, softness, z, out)
 
-    M = LinearOperator((n + m, n + m), matvec=precondition, dtype=float)
+    def apply_M(r, out):
+        out[:n] = inner_apply(r[:n])
+        np.multiply(r[n:], 1.0 / gamma, out=out[n:])
+        return out
+
     outer = [0]
 
     def tick(_):
@@ -395,18 +506,23 @@ def solve_saddle(
         return SaddleSolution(
             np.zeros(n), np.zeros(m), 0, 0, 0.0, True, time.perf_counter() - start, interpolations
         )
-    # scipy's MINRES measures convergence in the preconditioned norm, against an estimate of
+    # MINRES measures convergence in the preconditioned norm, against an estimate of
     # ||K|| ||z||; restart from the iterate until the true relative residual is below rtol.
     norm_b = max(np.linalg.norm(b), 1e-300)
-    z = np.zeros(n + m) if x0 is None else np.asarray(x0, float).copy()
-    residual = float(np.linalg.norm(b - K @ z) / norm_b)
-    info = 1
+    z = np.zeros(n + m) if x0 is None else np.array(x0, dtype=float)
+    work = np.empty(n + m)
+
+    def true_residual():
+        np.subtract(b, apply_K(z, work), out=work)
+        return float(np.linalg.norm(work) / norm_b)
+
+    residual = true_residual()
     while residual > rtol and outer[0] < maxiter:
         before = outer[0]
-        z, info = minres(
-            K, b, x0=z, rtol=rtol * 0.5, maxiter=maxiter - outer[0], M=M, callback=tick
+        minres_inplace(
+            apply_K, apply_M, b, z, rtol=rtol * 0.5, maxiter=maxiter - outer[0], callback=tick
         )
-        new_residual = float(np.linalg.norm(b - K @ z) / norm_b)
+        new_residual = true_residual()
         if outer[0] == before or new_residual > 0.999 * residual:
             residual = new_residual
             break

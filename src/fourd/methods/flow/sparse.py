@@ -230,30 +230,52 @@ def galerkin_product(R: sp.spmatrix, A: sp.spmatrix, P: sp.spmatrix) -> sp.csr_m
 
 
 @numba.njit(cache=True, parallel=True)
-def _strong_rows(indptr, indices, data, theta, out_indptr, out_indices, out_data, fill):
-    """Count (``fill`` False: into ``out_indptr[i + 1]``) or store row ``i``'s strong
-    connections (from ``out_indptr[i]``, columns increasing: the RS splitting's choices
-    depend on the order, and pyamg's reach it sorted)."""
+def _strong_rows(indptr, indices, data, theta, out_indptr, out_indices, out_data, step):
+    """Row ``i``'s strong connections: step 0 counts them (into ``out_indptr[i + 1]``),
+    step 1 stores their columns from ``out_indptr[i]``, increasing (the RS splitting's
+    choices depend on the order, and pyamg's reach it sorted), step 2 their values at the
+    stored columns' places."""
     for i in numba.prange(len(indptr) - 1):
         biggest = 0.0
         for jj in range(indptr[i], indptr[i + 1]):
             if indices[jj] != i:
                 biggest = max(biggest, abs(data[jj]))
         threshold = theta * biggest
-        end = out_indptr[i] if fill else 0
+        start = out_indptr[i] if step > 0 else 0
+        end = start
         for jj in range(indptr[i], indptr[i + 1]):
             value = data[jj]
             if indices[jj] != i and value != 0 and abs(value) >= threshold:
-                if fill:
+                if step == 1:
                     out_indices[end] = indices[jj]
-                    out_data[end] = value
+                elif step == 2:
+                    row = out_indices[start : out_indptr[i + 1]]
+                    out_data[start + np.searchsorted(row, indices[jj])] = value
                 end += 1
-        if fill:
-            order = np.argsort(out_indices[out_indptr[i] : end])
-            out_indices[out_indptr[i] : end] = out_indices[out_indptr[i] : end][order]
-            out_data[out_indptr[i] : end] = out_data[out_indptr[i] : end][order]
-        else:
+        if step == 0:
             out_indptr[i + 1] = end
+        elif step == 1:
+            out_indices[start:end] = np.sort(out_indices[start:end])
+
+
+def strong_pattern(A: sp.spmatrix, theta: float) -> tuple[np.ndarray, np.ndarray]:
+    """The pattern ``(indptr, indices)`` of :func:`strong_connections` (``A`` CSR), without
+    values."""
+    indptr = np.zeros(A.shape[0] + 1, np.int64)
+    no_data = np.empty(0, A.dtype)
+    _strong_rows(A.indptr, A.indices, A.data, theta, indptr, indptr[:0], no_data, 0)
+    np.cumsum(indptr, out=indptr)
+    indices = np.empty(indptr[-1], A.indices.dtype)
+    _strong_rows(A.indptr, A.indices, A.data, theta, indptr, indices, no_data, 1)
+    return indptr.astype(A.indptr.dtype, copy=False), indices
+
+
+def strong_values(A: sp.spmatrix, theta: float, indptr: np.ndarray, indices: np.ndarray):
+    """``A``'s values [nnz] at the strong pattern ``(indptr, indices)`` of
+    :func:`strong_pattern` (the same ``A`` and ``theta``)."""
+    data = np.empty(len(indices), A.dtype)
+    _strong_rows(A.indptr, A.indices, A.data, theta, indptr, indices, data, 2)
+    return data
 
 
 def strong_connections(A: sp.spmatrix, theta: float) -> sp.csr_matrix:
@@ -266,16 +288,8 @@ def strong_connections(A: sp.spmatrix, theta: float) -> sp.csr_matrix:
     interpolation take, and each of them makes another copy of it (``remove_diagonal``
     through COO, ``C.multiply(A)``)."""
     A = sp.csr_matrix(A)
-    indptr = np.zeros(A.shape[0] + 1, np.int64)
-    no_indices, no_data = np.empty(0, A.indices.dtype), np.empty(0, A.dtype)
-    _strong_rows(A.indptr, A.indices, A.data, theta, indptr, no_indices, no_data, False)
-    np.cumsum(indptr, out=indptr)
-    indices = np.empty(indptr[-1], A.indices.dtype)
-    data = np.empty(indptr[-1], A.dtype)
-    _strong_rows(A.indptr, A.indices, A.data, theta, indptr, indices, data, True)
-    return sp.csr_matrix(
-        (data, indices, indptr.astype(A.indptr.dtype, copy=False)), shape=A.shape
-    )
+    indptr, indices = strong_pattern(A, theta)
+    return sp.csr_matrix((strong_values(A, theta, indptr, indices), indices, indptr), shape=A.shape)
 
 
 @numba.njit(cache=True, parallel=True)
@@ -329,14 +343,15 @@ def _transpose_pattern(indptr, indices, out_indptr, out_indices):
             out_indptr[j] += 1
 
 
-def transpose_pattern(A: sp.spmatrix, n_cols: int | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """The CSR pattern ``(indptr, indices)`` of ``A.T`` [m, n], without values, each row's
-    columns increasing (what ``A.T.tocsr()`` gives, at a third of its memory)."""
-    A = sp.csr_matrix(A)
-    m = A.shape[1] if n_cols is None else n_cols
-    out_indptr = np.zeros(m + 2, A.indptr.dtype)
-    out_indices = np.empty(A.nnz, A.indices.dtype)
-    _transpose_pattern(A.indptr, A.indices, out_indptr, out_indices)
+def transpose_pattern(
+    indptr: np.ndarray, indices: np.ndarray, n_cols: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """The CSR pattern ``(indptr, indices)`` of the transpose [n_cols, n] of the CSR pattern
+    ``(indptr, indices)`` [n, n_cols], without values, each row's columns increasing (what
+    ``A.T.tocsr()`` gives, at a third of its memory)."""
+    out_indptr = np.zeros(n_cols + 2, indptr.dtype)
+    out_indices = np.empty(len(indices), indices.dtype)
+    _transpose_pattern(indptr, indices, out_indptr, out_indices)
     return out_indptr[:-1].copy(), out_indices
 
 
