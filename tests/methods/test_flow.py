@@ -42,7 +42,8 @@ from fourd.methods.flow.solver import (
 from fourd.methods.flow.sparse import (
     csr_product,
     galerkin_product,
-    strong_connections,
+    strong_pattern,
+    strong_values,
     transpose_pattern,
     truncate_rows,
 )
@@ -306,7 +307,11 @@ def test_galerkin_product_strong_connections_and_transpose_pattern_match_scipy()
     with pytest.raises(ValueError, match="do not match"):
         galerkin_product(p, a, p)
 
-    strong = strong_connections(a, 0.25)
+    strong_indptr, strong_indices = strong_pattern(a, 0.25)
+    strong = sp.csr_matrix(
+        (strong_values(a, 0.25, strong_indptr, strong_indices), strong_indices, strong_indptr),
+        shape=a.shape,
+    )
     reference = classical_strength_of_connection(sp.csr_matrix(a), theta=0.25).tocsr()
     reference.setdiag(0)
     reference.eliminate_zeros()

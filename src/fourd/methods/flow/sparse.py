@@ -259,8 +259,16 @@ def _strong_rows(indptr, indices, data, theta, out_indptr, out_indices, out_data
 
 
 def strong_pattern(A: sp.spmatrix, theta: float) -> tuple[np.ndarray, np.ndarray]:
-    """The pattern ``(indptr, indices)`` of :func:`strong_connections` (``A`` CSR), without
-    values."""
+    """The classical (Ruge-Stueben) strong connections of ``A`` [n, n] (CSR): entry
+    ``j != i`` of row ``i`` when ``a_ij != 0`` and ``|a_ij| >= theta max_{k != i} |a_ik|``,
+    as a CSR pattern ``(indptr, indices)`` without values (``A``'s index type, each row's
+    columns increasing, no diagonal).
+
+    The pattern of ``pyamg.strength.classical_strength_of_connection(A, theta)`` (norm
+    ``"abs"``) less its diagonal: what pyamg's RS splitting takes, after copying it twice
+    (``remove_diagonal`` through COO, the transpose with values). With
+    :func:`strong_values`, what its direct interpolation takes (after ``C.multiply(A)``,
+    another copy)."""
     indptr = np.zeros(A.shape[0] + 1, np.int64)
     no_data = np.empty(0, A.dtype)
     _strong_rows(A.indptr, A.indices, A.data, theta, indptr, indptr[:0], no_data, 0)
@@ -276,20 +284,6 @@ def strong_values(A: sp.spmatrix, theta: float, indptr: np.ndarray, indices: np.
     data = np.empty(len(indices), A.dtype)
     _strong_rows(A.indptr, A.indices, A.data, theta, indptr, indices, data, 2)
     return data
-
-
-def strong_connections(A: sp.spmatrix, theta: float) -> sp.csr_matrix:
-    """The classical (Ruge-Stueben) strong connections of ``A`` [n, n]: entry ``j != i`` of
-    row ``i`` when ``a_ij != 0`` and ``|a_ij| >= theta max_{k != i} |a_ik|``, holding
-    ``a_ij`` (CSR, ``A``'s index type, each row's columns increasing, no diagonal).
-
-    The pattern of ``pyamg.strength.classical_strength_of_connection(A, theta)`` (norm
-    ``"abs"``) less its diagonal, with ``A``'s values: what pyamg's RS splitting and direct
-    interpolation take, and each of them makes another copy of it (``remove_diagonal``
-    through COO, ``C.multiply(A)``)."""
-    A = sp.csr_matrix(A)
-    indptr, indices = strong_pattern(A, theta)
-    return sp.csr_matrix((strong_values(A, theta, indptr, indices), indices, indptr), shape=A.shape)
 
 
 @numba.njit(cache=True, parallel=True)
