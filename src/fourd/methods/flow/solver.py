@@ -35,13 +35,13 @@ import logging
 import time
 from typing import Literal, NamedTuple
 
+import numba
 import numpy as np
 import pyamg
 import scipy.sparse as sp
 from pyamg import amg_core
 from pyamg.multilevel import MultilevelSolver
 from pyamg.relaxation.smoothing import change_smoothers
-from scipy.linalg.blas import daxpy as _daxpy
 from scipy.sparse.linalg import LinearOperator, cg, spilu
 
 from fourd.methods.flow.sparse import (
@@ -205,11 +205,14 @@ def minres_inplace(apply_K, apply_M, b: np.ndarray, x: np.ndarray, *, rtol: floa
     return steps
 
 
+@numba.njit(cache=True)
 def _axpy(source: np.ndarray, target: np.ndarray, factor: float) -> None:
-    """``target += factor * source`` in place (BLAS, no temporary)."""
-    result = _daxpy(source, target, a=factor)
-    if result is not target:  # BLAS wrote a copy (target not contiguous float64)
-        target[...] = result
+    """``target += factor * source`` in place, without a temporary. Not BLAS's ``daxpy``:
+    OpenBLAS's threads keep spinning after it returns and slowed the single-threaded
+    smoother that follows (crane at resolution 32, first solve: 6.1 s against 4.1 s with
+    scipy's MINRES)."""
+    for i in range(len(target)):
+        target[i] += factor * source[i]
 
 
 def _multilevel(levels: list, A: sp.csr_matrix) -> MultilevelSolver:
