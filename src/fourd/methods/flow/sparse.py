@@ -1,11 +1,13 @@
-"""Sparse matrix products on all cores, for the AMG set-up of the flow solver.
+"""Sparse matrix products on all cores, and the other kernels of the AMG set-up of the flow
+solver.
 
 Why: scipy's sparse product runs on one core, and the set-up of the flow's V-cycle is mostly
 products (``B^T B`` and the Galerkin products ``P^T A P`` of every level): about 20% of the
-flow stage at resolution 64. :func:`csr_product` is Gustavson's row-by-row product, rows
-split into chunks that run in parallel; each thread keeps one dense marker of the output
-columns. Two passes: the row lengths, then the entries. Column indices within a row come in
-first-touch order (not sorted), as from scipy.
+flow stage at resolution 64. :func:`csr_product` and :func:`galerkin_product` are
+Gustavson's row-by-row product (of ``R A P + D``, :func:`_triple_product`), rows split into
+chunks that run in parallel; each thread keeps one dense marker of the output columns. Two
+passes: the row lengths, then the entries. Column indices within a row come in first-touch
+order (not sorted), as from scipy.
 """
 
 from __future__ import annotations
@@ -16,31 +18,6 @@ import scipy.sparse as sp
 
 #: Chunks per thread (rows are uneven: the coarse levels are denser towards some rows).
 CHUNKS_PER_THREAD = 8
-
-
-@numba.njit(cache=True, parallel=True)
-def _row_lengths(
-    a_indptr, a_indices, b_indptr, b_indices, d_indptr, d_indices, bounds, last_row,
-):
-    lengths = np.zeros(len(a_indptr) - 1, np.int64)
-    for c in numba.prange(len(bounds) - 1):
-        marker = last_row[numba.get_thread_id()]
-        for i in range(bounds[c], bounds[c + 1]):
-            count = 0
-            for dd in range(d_indptr[i], d_indptr[i + 1]):
-                col = d_indices[dd]
-                if marker[col] != i:
-                    marker[col] = i
-                    count += 1
-            for jj in range(a_indptr[i], a_indptr[i + 1]):
-                k = a_indices[jj]
-                for kk in range(b_indptr[k], b_indptr[k + 1]):
-                    col = b_indices[kk]
-                    if marker[col] != i:
-                        marker[col] = i
-                        count += 1
-            lengths[i] = count
-    return lengths
 
 
 @numba.njit(cache=True, inline="always")
@@ -55,29 +32,6 @@ def _add(i, col, value, end, marker, at, c_indices, c_data):
         return end + 1
     c_data[at[col]] += value
     return end
-
-
-@numba.njit(cache=True, parallel=True)
-def _fill(
-    a_indptr, a_indices, a_data, b_indptr, b_indices, b_data, d_indptr, d_indices, d_data,
-    bounds, last_row, position, c_indptr, c_indices, c_data,
-):
-    for c in numba.prange(len(bounds) - 1):
-        thread = numba.get_thread_id()
-        # marker[col] == i: column col of row i is already at position[col]
-        marker = last_row[thread]
-        at = position[thread]
-        for i in range(bounds[c], bounds[c + 1]):
-            end = c_indptr[i]
-            for dd in range(d_indptr[i], d_indptr[i + 1]):
-                end = _add(i, d_indices[dd], d_data[dd], end, marker, at, c_indices, c_data)
-            for jj in range(a_indptr[i], a_indptr[i + 1]):
-                k = a_indices[jj]
-                value = a_data[jj]
-                for kk in range(b_indptr[k], b_indptr[k + 1]):
-                    end = _add(
-                        i, b_indices[kk], value * b_data[kk], end, marker, at, c_indices, c_data
-                    )
 
 
 def _row_bounds(indptr: np.ndarray, chunks: int) -> np.ndarray:
@@ -115,38 +69,28 @@ def csr_product(
     if add.shape != (n, m):
         raise ValueError(f"the addend's shape {add.shape} is not the product's {(n, m)}")
     dtype = np.result_type(a.dtype, b.dtype, add.dtype)
-    if n == 0 or m == 0:
-        return sp.csr_matrix((n, m), dtype=dtype)
-    arrays = (
-        a.indptr, a.indices, a.data.astype(dtype, copy=False),
-        b.indptr, b.indices, b.data.astype(dtype, copy=False),
-        add.indptr, add.indices, add.data.astype(dtype, copy=False),
-    )
-    threads = numba.get_num_threads()
-    bounds = _row_bounds(a.indptr + add.indptr, CHUNKS_PER_THREAD * threads)
-    # one marker per thread, allocated once here (not per chunk inside the worker threads,
-    # whose malloc arenas keep what they freed)
-    last_row = np.full((threads, m), -1, np.int64)
-    lengths = _row_lengths(*arrays[0:2], *arrays[3:5], *arrays[6:8], bounds, last_row)
-    indptr = np.zeros(n + 1, np.int64)
-    np.cumsum(lengths, out=indptr[1:])
-    index_type = np.int32 if indptr[-1] < np.iinfo(np.int32).max and m < 2**31 else np.int64
-    indices = np.empty(indptr[-1], index_type)
-    data = np.empty(indptr[-1], dtype)
-    last_row.fill(-1)
-    _fill(*arrays, bounds, last_row, np.empty((threads, m), np.int64), indptr, indices, data)
-    return sp.csr_matrix((data, indices, indptr.astype(index_type, copy=False)), shape=(n, m))
+    # I a b + add: one pass of the identity's single entry per row
+    rows = np.arange(n + 1, dtype=a.indptr.dtype)
+    identity = sp.csr_matrix((np.ones(n, dtype), rows[:-1], rows), shape=(n, n))
+    return _triple_product(identity, a, b, add, dtype, a.indptr + add.indptr)
 
 
 @numba.njit(cache=True, parallel=True)
 def _triple_lengths(
-    r_indptr, r_indices, a_indptr, a_indices, p_indptr, p_indices, bounds, last_row
+    r_indptr, r_indices, a_indptr, a_indices, p_indptr, p_indices, d_indptr, d_indices,
+    bounds, last_row,
 ):
+    """The row lengths of ``R A P + D``."""
     lengths = np.zeros(len(r_indptr) - 1, np.int64)
     for c in numba.prange(len(bounds) - 1):
         marker = last_row[numba.get_thread_id()]
         for row in range(bounds[c], bounds[c + 1]):
             count = 0
+            for dd in range(d_indptr[row], d_indptr[row + 1]):
+                col = d_indices[dd]
+                if marker[col] != row:
+                    marker[col] = row
+                    count += 1
             for ii in range(r_indptr[row], r_indptr[row + 1]):
                 i = r_indices[ii]
                 for kk in range(a_indptr[i], a_indptr[i + 1]):
@@ -163,14 +107,18 @@ def _triple_lengths(
 @numba.njit(cache=True, parallel=True)
 def _triple_fill(
     r_indptr, r_indices, r_data, a_indptr, a_indices, a_data, p_indptr, p_indices, p_data,
-    bounds, last_row, position, c_indptr, c_indices, c_data,
+    d_indptr, d_indices, d_data, bounds, last_row, position, c_indptr, c_indices, c_data,
 ):
+    """The entries of ``R A P + D`` into rows of the lengths of :func:`_triple_lengths`."""
     for c in numba.prange(len(bounds) - 1):
         thread = numba.get_thread_id()
+        # marker[col] == row: column col of this row is already at position[col]
         marker = last_row[thread]
         at = position[thread]
         for row in range(bounds[c], bounds[c + 1]):
             end = c_indptr[row]
+            for dd in range(d_indptr[row], d_indptr[row + 1]):
+                end = _add(row, d_indices[dd], d_data[dd], end, marker, at, c_indices, c_data)
             for ii in range(r_indptr[row], r_indptr[row + 1]):
                 i = r_indices[ii]
                 r = r_data[ii]
@@ -181,6 +129,39 @@ def _triple_fill(
                         end = _add(
                             row, p_indices[pp], ra * p_data[pp], end, marker, at, c_indices, c_data
                         )
+
+
+def _triple_product(R, A, P, D, dtype, work: np.ndarray) -> sp.csr_matrix:
+    """``R @ A @ P + D`` (CSR, shapes checked by the caller) in ``dtype``, rows split into
+    chunks of about equal ``work`` (cumulative per row, [rows + 1]) that run in parallel;
+    each thread keeps one dense marker of the output columns. Two passes: the row lengths,
+    then the entries."""
+    rows, m = R.shape[0], P.shape[1]
+    if rows == 0 or m == 0:
+        return sp.csr_matrix((rows, m), dtype=dtype)
+    threads = numba.get_num_threads()
+    bounds = _row_bounds(work, CHUNKS_PER_THREAD * threads)
+    # one marker per thread, allocated once here (not per chunk inside the worker threads,
+    # whose malloc arenas keep what they freed)
+    last_row = np.full((threads, m), -1, np.int64)
+    lengths = _triple_lengths(
+        R.indptr, R.indices, A.indptr, A.indices, P.indptr, P.indices, D.indptr, D.indices,
+        bounds, last_row,
+    )
+    indptr = np.zeros(rows + 1, np.int64)
+    np.cumsum(lengths, out=indptr[1:])
+    index_type = np.int32 if indptr[-1] < np.iinfo(np.int32).max and m < 2**31 else np.int64
+    indices = np.empty(indptr[-1], index_type)
+    data = np.empty(indptr[-1], dtype)
+    last_row.fill(-1)
+    _triple_fill(
+        R.indptr, R.indices, R.data.astype(dtype, copy=False),
+        A.indptr, A.indices, A.data.astype(dtype, copy=False),
+        P.indptr, P.indices, P.data.astype(dtype, copy=False),
+        D.indptr, D.indices, D.data.astype(dtype, copy=False),
+        bounds, last_row, np.empty((threads, m), np.int64), indptr, indices, data,
+    )
+    return sp.csr_matrix((data, indices, indptr.astype(index_type, copy=False)), shape=(rows, m))
 
 
 def galerkin_product(R: sp.spmatrix, A: sp.spmatrix, P: sp.spmatrix) -> sp.csr_matrix:
@@ -199,34 +180,14 @@ def galerkin_product(R: sp.spmatrix, A: sp.spmatrix, P: sp.spmatrix) -> sp.csr_m
     True
     """
     R, A, P = sp.csr_matrix(R), sp.csr_matrix(A), sp.csr_matrix(P)
-    nc, m = R.shape[0], P.shape[1]
     if R.shape[1] != A.shape[0] or A.shape[1] != P.shape[0]:
         raise ValueError(f"shapes {R.shape}, {A.shape} and {P.shape} do not match")
     dtype = np.result_type(R.dtype, A.dtype, P.dtype)
-    if nc == 0 or m == 0:
-        return sp.csr_matrix((nc, m), dtype=dtype)
-    threads = numba.get_num_threads()
     # a coarse row's work is about its fine rows' nonzeros in A
     work = np.zeros(R.nnz + 1, np.int64)
     np.cumsum(np.diff(A.indptr)[R.indices], out=work[1:])
-    bounds = _row_bounds(work[R.indptr], CHUNKS_PER_THREAD * threads)
-    last_row = np.full((threads, m), -1, np.int64)
-    lengths = _triple_lengths(
-        R.indptr, R.indices, A.indptr, A.indices, P.indptr, P.indices, bounds, last_row
-    )
-    indptr = np.zeros(nc + 1, np.int64)
-    np.cumsum(lengths, out=indptr[1:])
-    index_type = np.int32 if indptr[-1] < np.iinfo(np.int32).max and m < 2**31 else np.int64
-    indices = np.empty(indptr[-1], index_type)
-    data = np.empty(indptr[-1], dtype)
-    last_row.fill(-1)
-    _triple_fill(
-        R.indptr, R.indices, R.data.astype(dtype, copy=False),
-        A.indptr, A.indices, A.data.astype(dtype, copy=False),
-        P.indptr, P.indices, P.data.astype(dtype, copy=False),
-        bounds, last_row, np.empty((threads, m), np.int64), indptr, indices, data,
-    )
-    return sp.csr_matrix((data, indices, indptr.astype(index_type, copy=False)), shape=(nc, m))
+    nothing = sp.csr_matrix((R.shape[0], P.shape[1]), dtype=dtype)
+    return _triple_product(R, A, P, nothing, dtype, work[R.indptr])
 
 
 @numba.njit(cache=True, parallel=True)
