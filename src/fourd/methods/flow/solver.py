@@ -100,7 +100,9 @@ _POSTSMOOTHERS = [_SYMMETRIC, ("gauss_seidel", {"sweep": "backward"})]
 
 def _saddle_apply(A, B, BT, softness: float, z: np.ndarray, out: np.ndarray) -> np.ndarray:
     """``out = [[A, B^T], [B, -softness I]] z`` (``A`` [n, n], ``B`` [m, n], ``BT`` its
-    transpose); returns ``out``."""
+    transpose, e.g. the view ``B.T``); returns ``out``. Never assembled: a third copy of
+    ``A`` and ``B`` (squash-ball at resolution 64, 7.9 million unknowns and 2.3 million
+    constraints: peak memory 6.48 -> 5.79 GB at a00735a)."""
     n = A.shape[0]
     u, multipliers = z[:n], z[n:]
     out[:n] = A @ u
@@ -109,19 +111,6 @@ def _saddle_apply(A, B, BT, softness: float, z: np.ndarray, out: np.ndarray) -> 
     if softness:
         out[n:] -= softness * multipliers
     return out
-
-
-def _saddle_operator(A: sp.csr_matrix, B: sp.csr_matrix, softness: float) -> LinearOperator:
-    """``[[A, B^T], [B, -softness I]]`` as products with ``A``, ``B`` and ``B^T`` (a view):
-    never assembled: a third copy of ``A`` and ``B`` (squash-ball at resolution 64, 7.9
-    million unknowns and 2.3 million constraints: peak memory 6.48 -> 5.79 GB)."""
-    n, m = A.shape[0], B.shape[0]
-    BT = B.T
-
-    def matvec(z):
-        return _saddle_apply(A, B, BT, softness, np.asarray(z).ravel(), np.empty(n + m))
-
-    return LinearOperator((n + m, n + m), matvec=matvec, rmatvec=matvec, dtype=float)
 
 
 def minres_inplace(apply_K, apply_M, b: np.ndarray, x: np.ndarray, *, rtol: float,
