@@ -37,6 +37,7 @@ from fourd.methods.flow.solver import (
     _saddle_apply,
     amg_hierarchy,
     minres_inplace,
+    normal_finest,
     v_cycle,
 )
 from fourd.methods.flow.sparse import (
@@ -447,6 +448,12 @@ def test_amg_hierarchy_is_pyamgs_and_a_symmetric_v_cycle():
     assert np.allclose(v_cycle(mine, x), cycle.matvec(x), rtol=0, atol=1e-12 * abs(x).max())
     assert abs(x @ cycle.matvec(y) - y @ cycle.matvec(x)) <= 1e-9 * abs(x @ cycle.matvec(x))
     assert x @ cycle.matvec(x) > 0
+    # the finest level swept through A and B^T (without S) takes the same steps
+    finest = normal_finest(system.A, system.B.T)
+    assert np.allclose(finest.diagonal, S.diagonal(), rtol=1e-12)
+    expected = cycle.matvec(x)
+    mine.levels[0].A = None
+    assert np.allclose(v_cycle(mine, x, finest), expected, rtol=0, atol=1e-10 * abs(x).max())
 
 
 @pytest.mark.parametrize("inner", ["cg-amg", "amg"])  # "amg": a one-level hierarchy here
