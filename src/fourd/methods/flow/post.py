@@ -167,14 +167,18 @@ def implicit_function(
     base = np.empty((S, *fine_shape), dtype=np.float32)
     for s in range(S):
         base[s] = ndimage.map_coordinates(coarse[s], coords, order=1, mode="nearest")
-    in_band = np.abs(base) < band * h
+    del coords, coarse
     n_nodes = base.size
-    unknown = np.flatnonzero(in_band.ravel())
+    unknown = np.flatnonzero((np.abs(base) < band * h).ravel())
     m = len(unknown)
     if m == 0:
         return FlowField(base, origin, hf, grid.times)
-    col = np.full(n_nodes, -1, dtype=np.int64)
-    col[unknown] = np.arange(m)
+    # 32-bit node and column indices where they fit: squash-ball at resolution 64 has 44M fine
+    # nodes and millions of band nodes, and this function held most of the method's memory
+    index = np.int32 if n_nodes < np.iinfo(np.int32).max else np.int64
+    unknown = unknown.astype(index)
+    col = np.full(n_nodes, -1, dtype=index)
+    col[unknown] = np.arange(m, dtype=index)
     omega = np.zeros(m)
     target = np.zeros(m)
     # flow targets, weighted by depth
@@ -185,9 +189,7 @@ def implicit_function(
     # data targets
     per_slice = int(np.prod(fine_shape))
     slice_of = unknown // per_slice
-    node_index = unknown % per_slice
-    ijk = np.stack(np.unravel_index(node_index, fine_shape), axis=1)
-    positions = origin + hf * ijk
+    positions = origin + hf * np.stack(np.unravel_index(unknown % per_slice, fine_shape), axis=1)
     for s in range(S):
         if points[s] is None or len(points[s]) == 0:
             continue
@@ -216,6 +218,7 @@ def implicit_function(
         around = (nearest >= 1.5 * hf) & (nearest < 1.5 * h)
         omega[mine[around]] = 0.0
         target[mine[around]] = 0.0
+    del positions, slice_of
     # Laplace term on 4D edges: one CSR row per band node, its entries in column order
     # (the 4D neighbours at -stride, the node itself, the neighbours at +stride; the column
     # map is monotone in the node index)
@@ -223,9 +226,9 @@ def implicit_function(
     strides = np.array([per_slice, fine_shape[1] * fine_shape[2], fine_shape[2], 1], dtype=np.int64)
     shape4 = (S, *fine_shape)
     base_flat = base.ravel()
-    coord4 = np.stack(np.unravel_index(unknown, shape4), axis=1)
+    coord4 = np.stack(np.unravel_index(unknown, shape4), axis=1).astype(index)
     order = [(axis, -1) for axis in range(4)] + [(axis, 1) for axis in reversed(range(4))]
-    columns = np.full((m, 9), -1, dtype=np.int64)
+    columns = np.full((m, 9), -1, dtype=index)
     entries = np.zeros((m, 9))
     diagonal = omega + 1e-8
     # temporal edge (s, s + 1): time_weight between two slices with data, 1 where one has none
@@ -247,9 +250,11 @@ def implicit_function(
         columns[rows[inner], slot_index] = cb[inner]
         entries[rows[inner], slot_index] = -weight[inner]
         rhs[rows[~inner]] += weight[~inner] * base_flat[b[~inner]]
+    del coord4, col
     columns[:, 4] = np.arange(m)
     entries[:, 4] = diagonal
     matrix = csr_from_rows(columns, entries, m)
+    del columns, entries
     # diagonally dominant wherever a node has a target: Jacobi-preconditioned CG needs a few
     # dozen steps (crane, 1.1M band nodes: 0.9 s against 13 s for smoothed-aggregation AMG,
     # 11 s of it the set-up)
