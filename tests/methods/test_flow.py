@@ -38,6 +38,7 @@ from fourd.methods.flow.solver import (
     amg_hierarchy,
     minres_inplace,
     normal_finest,
+    restrict_interpolations,
     v_cycle,
 )
 from fourd.methods.flow.sparse import (
@@ -246,8 +247,12 @@ def test_minres_reusing_an_earlier_interpolation_solves_the_smaller_system():
     rows = _previous_unknowns(second, first.free, first.flows)
     assert rows is not None and len(rows) == second.A.shape[0] < first.A.shape[0]
     fresh = solve_saddle(second.A, second.B, second.f, second.g, **settings)
+    restricted = restrict_interpolations(earlier.interpolations, rows)
+    assert restricted[0].shape[0] == len(rows)
+    for finer, coarser in zip(restricted[:-1], restricted[1:], strict=True):
+        assert finer.shape[1] == coarser.shape[0]
     reused = solve_saddle(
-        second.A, second.B, second.f, second.g, reuse=(earlier.interpolations, rows), **settings
+        second.A, second.B, second.f, second.g, reuse=restricted, **settings
     )
     assert reused.residual <= 1.5 * fresh.residual and reused.residual < 5e-3
     K = _saddle_matrix(second.A, second.B, 1e-3).tocsc()

@@ -650,7 +650,6 @@ def run(seq: PointCloudSequence, options: Options | None = None) -> FlowResult:
     value[outside | fit_outside] = 0.0
     value[data | seeds | fit_inside] = 1.0
     region = ~outside
-    weights = _outward_weights(grid, slice_points, slice_normals, options.outward_cosine)
     log.info(
         "flow grid %s x %d slices, cell %.4g; %.1f%% of cells labelled outside, %d data cells, "
         "%d inside seeds",
@@ -677,7 +676,8 @@ def run(seq: PointCloudSequence, options: Options | None = None) -> FlowResult:
     try:
         irls: IRLSResult = run_irls(
             value,
-            weights,
+            # not held here: the IRLS replaces it after its first solve
+            _outward_weights(grid, slice_points, slice_normals, options.outward_cosine),
             offsets,
             region,
             alpha=options.alpha,

@@ -24,7 +24,7 @@ from typing import NamedTuple
 import numpy as np
 
 from fourd.methods.flow.grid import speed_prune
-from fourd.methods.flow.solver import SaddleSolution, solve_saddle
+from fourd.methods.flow.solver import restrict_interpolations, solve_saddle
 from fourd.methods.flow.system import Flows, build_system, flow_lookup
 
 log = logging.getLogger("fourd.methods.flow.irls")
@@ -149,12 +149,14 @@ def run_irls(
     history = []
     previous_flows, previous_v = None, None
     previous_free, previous_interpolations = None, None
+    system, solution = None, None
     band = clamp
     iterations = 0
     for iteration in range(max_iterations):
         alive = speed_prune(value != 0, full=full, keep=value == 1)
         value[~alive] = 0.0
         x[~alive] = 0.0
+        system = None  # the previous system is not needed while the next one is built
         system = build_system(value, weights, offsets, alpha=alpha, reg=reg)
         n_x = len(system.free)
         decided_before = int((~np.isnan(value) & region).sum())
@@ -170,10 +172,15 @@ def run_irls(
         if reuse_interpolation and previous_interpolations is not None:
             rows = _previous_unknowns(system, previous_free, previous_flows)
             if rows is not None:
-                reuse = (previous_interpolations, rows)
-        solution: SaddleSolution = solve_saddle(
-            system.A, system.B, f, system.g, x0=start, reuse=reuse, **solver_options
+                reuse = restrict_interpolations(previous_interpolations, rows)
+        # the previous solve's vectors, flows and interpolation are not needed in this one
+        # (squash-ball at resolution 64: 0.5 GB)
+        previous_flows = previous_v = previous_interpolations = solution = None
+        solution = solve_saddle(
+            system.A, system.B, f, system.g, x0=start, reuse=reuse, overwrite_x0=True,
+            **solver_options,
         )
+        del start, reuse
         previous_free, previous_interpolations = system.free, solution.interpolations
         iterations += 1
         xs = solution.u[:n_x]

@@ -221,8 +221,9 @@ def _level(A: sp.csr_matrix, P: sp.csr_matrix):
     """One level of a hierarchy and the next coarser matrix, the Galerkin product ``P^T A P``
     (on all cores, without ``A P``: :func:`.sparse.galerkin_product`)."""
     level = MultilevelSolver.Level()
-    level.A, level.P, level.R = A, P, P.T.tocsr()
-    return level, galerkin_product(level.R, A, P)
+    # the restriction is P's transpose as a view, not a second copy of P
+    level.A, level.P, level.R = A, P, P.T
+    return level, galerkin_product(P.T.tocsr(), A, P)
 
 
 def _direct_interpolation(A: sp.csr_matrix, theta: float) -> sp.csr_matrix | None:
@@ -305,27 +306,37 @@ def amg_hierarchy(
     return _multilevel(levels, A)
 
 
-def restricted_hierarchy(
-    S: sp.csr_matrix, interpolations: tuple, rows: np.ndarray
-) -> MultilevelSolver:
-    """An AMG hierarchy for ``S`` [n, n] from an earlier one's interpolation operators
-    (finest first).
+def restrict_interpolations(interpolations: tuple, rows: np.ndarray) -> tuple:
+    """An earlier hierarchy's interpolation operators (finest first) restricted to a subset
+    of its finest unknowns, for :func:`restricted_hierarchy`.
 
-    ``rows`` [n]: the index of each of ``S``'s unknowns among the earlier finest level's.
-    Each level's interpolation keeps those rows and the coarse columns they still use; the
-    coarse matrices are the Galerkin products ``P^T A P`` with ``S`` (so the V-cycle stays a
-    symmetric positive definite preconditioner). Skips the strength, splitting and
+    ``rows`` [n]: the index of each new unknown among the earlier finest level's. Each level
+    keeps those rows and the coarse columns they still use, which are the next level's rows;
+    the chain stops at a level with no column left."""
+    restricted = []
+    for P in interpolations:
+        P = sp.csr_matrix(P)[rows]
+        used = np.flatnonzero(np.bincount(P.indices, minlength=P.shape[1]))
+        if len(used) == 0:  # nothing left to interpolate from
+            break
+        restricted.append(P[:, used].tocsr())
+        rows = used
+    return tuple(restricted)
+
+
+def restricted_hierarchy(S: sp.csr_matrix, interpolations: tuple) -> MultilevelSolver:
+    """An AMG hierarchy for ``S`` [n, n] from given interpolation operators (finest first,
+    the first with ``n`` rows, each next one's rows the previous one's columns: e.g.
+    :func:`restrict_interpolations` of an earlier hierarchy's).
+
+    The coarse matrices are the Galerkin products ``P^T A P`` with ``S`` (so the V-cycle
+    stays a symmetric positive definite preconditioner). Skips the strength, splitting and
     interpolation set-up of every level."""
     levels = []
     A = S
     for P in interpolations:
-        P = sp.csr_matrix(P)[rows]
-        used = np.flatnonzero(np.bincount(P.indices, minlength=P.shape[1]))
-        if len(used) == 0:  # nothing left to interpolate from: A is the coarsest level
-            break
-        level, A = _level(A, P[:, used].tocsr())
+        level, A = _level(A, P)
         levels.append(level)
-        rows = used
     return _multilevel(levels, A)
 
 
@@ -485,8 +496,9 @@ def solve_saddle(
     maxiter: int = 300,
     inner_maxiter: int = 200,
     x0: np.ndarray | None = None,
-    reuse: tuple[tuple, np.ndarray] | None = None,
+    reuse: tuple | None = None,
     interpolation_entries: int | None = None,
+    overwrite_x0: bool = False,
 ) -> SaddleSolution:
     """Solve ``[[A, B^T], [B, -softness I]] [u; lambda] = [f; g]`` by preconditioned MINRES.
 
@@ -500,10 +512,11 @@ def solve_saddle(
         Outer tolerance (the paper uses 1e-3 to 1e-5).
     x0 : ndarray [n + m], optional
         Starting guess (e.g. the previous IRLS iterate).
-    reuse : (interpolations, rows), optional
-        With ``inner="amg"``: an earlier solve's :attr:`SaddleSolution.interpolations` and, for
-        each of the ``n`` primal unknowns, its index among that solve's; the V-cycle then
-        keeps its interpolation (:func:`restricted_hierarchy`) instead of a new set-up.
+    reuse : tuple of sparse matrices, optional
+        With ``inner="amg"``: interpolation operators for ``A + B^T B`` (finest first, the
+        first with ``n`` rows), e.g. an earlier solve's :attr:`SaddleSolution.interpolations`
+        restricted to this system's unknowns by :func:`restrict_interpolations`; the V-cycle
+        then keeps them (:func:`restricted_hierarchy`) instead of a new set-up.
         Measured on the captured crane systems at resolution 64 (IRLS iterations 1 and 2
         from iteration 0's hierarchy): set-up 8.5-9.0 -> 4.1 s and 7.6 -> 3.7 s, residual
         after 40 steps 3.79e-2 -> 3.76e-2 and 3.94e-2 -> 3.92e-2.
@@ -515,6 +528,8 @@ def solve_saddle(
         the solve's peak 4.0 -> 3.2 GB (0.7 GB of input included); crane 18.7 -> 12.9 s,
         2.85e-2 -> 2.81e-2; dfaust-hopping 21.4 -> 14.3-15.5 s, 8.52e-3 -> 8.47e-3. But the
         flow method's squash-ball output came out worse with it (``Options``).
+    overwrite_x0 : bool
+        Iterate in ``x0``'s memory (float64 [n + m]) instead of a copy.
 
     Examples
     --------
@@ -529,7 +544,6 @@ def solve_saddle(
     B = sp.csr_matrix(B)
     n, m = A.shape[0], B.shape[0]
     BT = B.T
-    b = np.concatenate([f, g])
     # the V-cycle works in single precision, so its matrix is formed in it (3.0 -> 0.8 s on
     # the captured crane system at resolution 64, the same entries)
     precision = np.float32 if inner == "amg" else np.float64
@@ -549,7 +563,7 @@ def solve_saddle(
                 S, max_coarse=_AMG_SETUP["max_coarse"], interpolation_entries=interpolation_entries
             )
         else:
-            ml = restricted_hierarchy(S, *reuse)
+            ml = restricted_hierarchy(S, reuse)
         interpolations = tuple(level.P for level in ml.levels[:-1])
         finest = None
         if len(ml.levels) > 1:
@@ -577,6 +591,7 @@ def solve_saddle(
         np.multiply(r[n:], 1.0 / gamma, out=out[n:])
         return out
 
+    b = np.concatenate([f, g])  # after the set-up, whose peak is the solve's
     outer = [0]
 
     def tick(_):
@@ -589,11 +604,17 @@ def solve_saddle(
     # MINRES measures convergence in the preconditioned norm, against an estimate of
     # ||K|| ||z||; restart from the iterate until the true relative residual is below rtol.
     norm_b = max(np.linalg.norm(b), 1e-300)
-    z = np.zeros(n + m) if x0 is None else np.array(x0, dtype=float)
-    work = np.empty(n + m)
+    if x0 is None:
+        z = np.zeros(n + m)
+    elif overwrite_x0 and isinstance(x0, np.ndarray) and x0.dtype == np.float64:
+        z = x0
+    else:
+        z = np.array(x0, dtype=float)
 
     def true_residual():
-        np.subtract(b, apply_K(z, work), out=work)
+        # a temporary: MINRES holds eight vectors of this size while it runs
+        work = apply_K(z, np.empty(n + m))
+        np.subtract(b, work, out=work)
         return float(np.linalg.norm(work) / norm_b)
 
     residual = true_residual()
