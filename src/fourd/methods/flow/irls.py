@@ -24,7 +24,7 @@ from typing import NamedTuple
 import numpy as np
 
 from fourd.methods.flow.grid import speed_prune
-from fourd.methods.flow.solver import restrict_interpolations, solve_saddle
+from fourd.methods.flow.solver import release_free_heap, restrict_interpolations, solve_saddle
 from fourd.methods.flow.system import Flows, build_system, flow_lookup
 
 log = logging.getLogger("fourd.methods.flow.irls")
@@ -176,6 +176,7 @@ def run_irls(
         # the previous solve's vectors, flows and interpolation are not needed in this one
         # (squash-ball at resolution 64: 0.5 GB)
         previous_flows = previous_v = previous_interpolations = solution = None
+        release_free_heap()
         solution = solve_saddle(
             system.A, system.B, f, system.g, x0=start, reuse=reuse, overwrite_x0=True,
             **solver_options,

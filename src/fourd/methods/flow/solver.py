@@ -37,6 +37,7 @@ and ``B^T``'s column indices, then ``B^T x`` is formed again after the coarse co
 
 from __future__ import annotations
 
+import ctypes
 import logging
 import time
 from typing import Literal, NamedTuple
@@ -102,6 +103,25 @@ _AMG_SETUP = {"max_coarse": 500, "interpolation": "direct"}
 _SYMMETRIC = ("gauss_seidel", {"sweep": "symmetric"})
 _PRESMOOTHERS = [_SYMMETRIC, ("gauss_seidel", {"sweep": "forward"})]
 _POSTSMOOTHERS = [_SYMMETRIC, ("gauss_seidel", {"sweep": "backward"})]
+
+
+def _load_malloc_trim():
+    try:
+        return ctypes.CDLL("libc.so.6").malloc_trim
+    except (OSError, AttributeError):  # not glibc
+        return None
+
+
+_MALLOC_TRIM = _load_malloc_trim()
+
+
+def release_free_heap() -> None:
+    """Give the C heap's freed pages back to the system (glibc's ``malloc_trim``; nothing
+    elsewhere). Arrays under glibc's mmap threshold (up to 32 MiB) live on the heap, and the
+    holes they leave stay resident: squash-ball at resolution 64 peaked 0.3 GiB higher in its
+    second IRLS iteration's AMG set-up than in its first, with the same arrays alive."""
+    if _MALLOC_TRIM is not None:
+        _MALLOC_TRIM(0)
 
 
 def _saddle_apply(A, B, BT, softness: float, z: np.ndarray, out: np.ndarray) -> np.ndarray:
@@ -573,6 +593,7 @@ def solve_saddle(
             # precision, and S is freed
             ml.levels[0].A = None
             del S
+            release_free_heap()
             # B^T in single precision: its entries are +-1 in the flow systems (exact), and
             # the sweeps read less
             C = (BT if gamma == 1.0 else BT * (1.0 / np.sqrt(gamma))).tocsr().astype(np.float32)
