@@ -149,7 +149,6 @@ def run_irls(
     history = []
     previous_flows, previous_v = None, None
     previous_free, previous_interpolations = None, None
-    system, solution = None, None
     band = clamp
     iterations = 0
     for iteration in range(max_iterations):

@@ -589,8 +589,8 @@ def solve_saddle(
         interpolations = tuple(level.P for level in ml.levels[:-1])
         finest = None
         if len(ml.levels) > 1:
-            # the finest level sweeps A + B^T B / gamma through A and B^T, in double
-            # precision, and S is freed
+            # the finest level sweeps A + B^T B / gamma through A and B^T (in b's double
+            # precision), and S is freed
             ml.levels[0].A = None
             del S
             release_free_heap()
