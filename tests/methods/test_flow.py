@@ -44,6 +44,7 @@ from fourd.methods.flow.solver import (
 from fourd.methods.flow.sparse import (
     csr_product,
     galerkin_product,
+    principal_submatrix,
     strong_pattern,
     strong_values,
     transpose_pattern,
@@ -260,8 +261,32 @@ def test_minres_reusing_an_earlier_interpolation_solves_the_smaller_system():
     cells = len(second.free)
     for solution in (fresh, reused):
         assert np.abs(solution.u[:cells] - exact[:cells]).max() < 0.03
+    # with the earlier coarse matrices too (restricted, no Galerkin products): still an SPD
+    # preconditioner, and on a system this close to the earlier one as good
+    interpolations, coarse = restrict_interpolations(
+        earlier.interpolations, rows, earlier.coarse_matrices
+    )
+    assert len(coarse) == len(interpolations)
+    for P, matrix in zip(interpolations, coarse, strict=True):
+        assert matrix.shape == (P.shape[1], P.shape[1])
+        assert abs(matrix - matrix.T).max() <= 1e-6 * abs(matrix).max()
+    frozen = solve_saddle(
+        second.A, second.B, second.f, second.g, reuse=interpolations, reuse_coarse=coarse,
+        **settings,
+    )
+    assert frozen.residual <= 1.5 * fresh.residual and frozen.residual < 5e-3
+    assert np.abs(frozen.u[:cells] - exact[:cells]).max() < 0.03
     # a system with an unknown the earlier one did not have cannot reuse it
     assert _previous_unknowns(first, second.free, second.flows) is None
+
+
+def test_principal_submatrix_matches_scipy_slicing():
+    matrix = sp.random(400, 400, density=0.03, random_state=3, format="csr", dtype=np.float32)
+    keep = np.sort(np.random.default_rng(1).choice(400, 150, replace=False))
+    sub = principal_submatrix(matrix, keep)
+    assert sub.shape == (150, 150) and sub.dtype == np.float32
+    assert abs(sub - matrix[keep][:, keep]).max() == 0
+    assert principal_submatrix(matrix, np.zeros(0, dtype=np.int64)).shape == (0, 0)
 
 
 def test_csr_product_matches_scipy():

@@ -187,11 +187,36 @@ class Options:
         completeness-95 at 60 and 40: crane 0.0026 / 0.0066 both, dfaust-hopping 0.0031 /
         0.0111 and 0.0031 / 0.0112, squash-ball 0.0040 / 0.0133 and 0.0041 / 0.0134); 30 gave
         squash-ball 0.0054 / 0.0110.
+    later_outer : int
+        MINRES iteration limit of the IRLS solves after the first, which start from the
+        previous solve's values and flows (0: ``max_outer``). Default 10: the later solves
+        only refine, and the output did not change (``exp`` runs, 20k samples, Chamfer /
+        completeness-95, 40 -> 10 later steps): at 32 crane 0.0032 / 0.0062 -> 0.0033 /
+        0.0062 (0.81 -> 0.64 s/frame), squash-ball 0.0036 / 0.0066 -> 0.0033 / 0.0062
+        (2.56 -> 1.90), dfaust-hopping 0.0040 / 0.0114 -> 0.0041 / 0.0116 (1.04 -> 0.84),
+        splitting-blob 0.0027 / 0.0050 -> 0.0025 / 0.0050 (0.79 -> 0.62); at 64 crane
+        0.0029 / 0.0057 -> 0.0030 / 0.0060 (2.96 -> 2.26), squash-ball 0.0040 / 0.0079 ->
+        0.0039 / 0.0074 (15.7 -> 11.5 s/frame; its later solves 79 and 72 s -> 35 s each,
+        of which about 25 s are the set-up). 20 measured the same figures. One IRLS
+        iteration instead of three gave the same figures at 32 too (squash-ball 0.0032 /
+        0.0062 at 1.30 s/frame), but without any reweighting the sub-linear continuity norm
+        of the paper would be gone, so the loop stays.
     reuse_interpolation : bool
         With ``inner="amg"``, IRLS iterations after the first keep the previous V-cycle's
         AMG interpolation, restricted to the unknowns still free, and only recompute the
         coarse matrices (half the set-up; the same MINRES residual on the captured crane
         systems, see :func:`.solver.solve_saddle`). False: a new set-up every iteration.
+    reuse_coarse : bool
+        With ``reuse_interpolation``: keep the previous solve's coarse matrices too (restricted
+        to the unknowns still free), so that the later solves never form ``A + B^T B`` nor
+        its Galerkin products; only the finest level's sweeps see the new system (see
+        :func:`.solver.solve_saddle` ``reuse_coarse``). The same residual after 10 steps
+        (crane at 32: 3.3e-2 -> 3.4e-2; squash-ball 2.5e-2 both) and the same figures, the
+        later solves twice as fast (crane at 32 0.64 -> 0.57 s/frame, squash-ball 1.84 ->
+        1.61; squash-ball at 64 11.5 -> 10.1-10.5 s/frame, later solves 35 -> 17 s). Off by
+        default because the coarse matrices stay alive while the next system is built, whose
+        assembly is the heaviest moment then: squash-ball at 64 peaked at 4.8 GiB with it
+        against 3.8 without (``exp`` harness).
     interpolation_entries : int
         With ``inner="amg"``: keep only this many largest entries per row of the V-cycle's
         AMG interpolations (0: all, the default). One entry keeps the coarse matrices
@@ -395,7 +420,9 @@ class Options:
     inner_rtol: float = 1e-6
     inner: Literal["cg-amg", "cg-ilu", "amg"] = "amg"
     max_outer: int = 40
+    later_outer: int = 10
     reuse_interpolation: bool = True
+    reuse_coarse: bool = False
     interpolation_entries: int = 0
     outward_cosine: float = 0.5
     fit_level: float = 0.5
@@ -418,6 +445,8 @@ class Options:
     def __post_init__(self):
         if self.resolution < 4:
             raise ValueError(f"resolution must be at least 4, got {self.resolution}")
+        if self.later_outer < 0:
+            raise ValueError(f"later_outer must be 0 (max_outer) or more, got {self.later_outer}")
         if self.interpolation_entries < 0:
             raise ValueError(
                 f"interpolation_entries must be 0 (all) or more, got {self.interpolation_entries}"
@@ -692,6 +721,8 @@ def run(seq: PointCloudSequence, options: Options | None = None) -> FlowResult:
             guess=(fit.values < 0).astype(float),
             regularize_towards=options.regularize_towards,
             reuse_interpolation=options.reuse_interpolation,
+            reuse_coarse=options.reuse_coarse,
+            later_maxiter=options.later_outer or None,
             progress=bar,
         )
     finally:

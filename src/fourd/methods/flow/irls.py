@@ -114,6 +114,8 @@ def run_irls(
     guess: np.ndarray | None = None,
     regularize_towards: str = "zero",
     reuse_interpolation: bool = True,
+    reuse_coarse: bool = False,
+    later_maxiter: int | None = None,
     progress=None,
 ) -> IRLSResult:
     """Run the IRLS loop from the initial labels.
@@ -139,6 +141,13 @@ def run_irls(
         From the second iteration on, the inner V-cycle keeps the previous solve's AMG
         interpolation, restricted to the unknowns still free (see
         :func:`.solver.restricted_hierarchy`); a new set-up only if an unknown is new.
+    reuse_coarse : bool
+        With ``reuse_interpolation``: keep the previous solve's coarse matrices too
+        (restricted, :func:`.solver.frozen_hierarchy`) instead of forming ``A + B^T B`` and
+        its Galerkin products again.
+    later_maxiter : int, optional
+        MINRES iteration limit of the solves after the first (warm-started from the previous
+        iterate); None: ``solver_options["maxiter"]``.
     """
     if regularize_towards not in ("zero", "previous"):
         raise ValueError(f"regularize_towards must be zero or previous, got {regularize_towards!r}")
@@ -148,7 +157,7 @@ def run_irls(
     x = np.where(np.isnan(value), 0.5 if guess is None else guess, value)
     history = []
     previous_flows, previous_v = None, None
-    previous_free, previous_interpolations = None, None
+    previous_free, previous_interpolations, previous_coarse = None, None, None
     band = clamp
     iterations = 0
     for iteration in range(max_iterations):
@@ -167,21 +176,32 @@ def run_irls(
             # F_r = reg * sum (x - x_start)^2 + reg * sum v^2: the same matrix, another right side
             f = f.copy()
             f[:n_x] += reg * start[:n_x]
-        reuse = None
+        reuse = reuse_matrices = None
         if reuse_interpolation and previous_interpolations is not None:
             rows = _previous_unknowns(system, previous_free, previous_flows)
-            if rows is not None:
+            if rows is not None and previous_coarse is not None:
+                reuse, reuse_matrices = restrict_interpolations(
+                    previous_interpolations, rows, previous_coarse
+                )
+            elif rows is not None:
                 reuse = restrict_interpolations(previous_interpolations, rows)
-        # the previous solve's vectors, flows and interpolation are not needed in this one
+        # the previous solve's vectors, flows and hierarchy are not needed in this one
         # (squash-ball at resolution 64: 0.5 GB)
-        previous_flows = previous_v = previous_interpolations = solution = None
+        previous_flows = previous_v = previous_interpolations = previous_coarse = None
+        solution = None
         release_free_heap()
+        options = dict(solver_options)
+        if iteration > 0 and later_maxiter is not None:
+            options["maxiter"] = later_maxiter
         solution = solve_saddle(
-            system.A, system.B, f, system.g, x0=start, reuse=reuse, overwrite_x0=True,
-            **solver_options,
+            system.A, system.B, f, system.g, x0=start, reuse=reuse, reuse_coarse=reuse_matrices,
+            overwrite_x0=True, **options,
         )
-        del start, reuse
+        del start, reuse, reuse_matrices
         previous_free, previous_interpolations = system.free, solution.interpolations
+        if reuse_coarse:
+            previous_coarse = solution.coarse_matrices
+        solution = solution._replace(interpolations=None, coarse_matrices=None)
         iterations += 1
         xs = solution.u[:n_x]
         x.ravel()[system.free] = xs

@@ -54,6 +54,7 @@ from scipy.sparse.linalg import LinearOperator, cg, spilu
 from fourd.methods.flow.sparse import (
     csr_product,
     galerkin_product,
+    principal_submatrix,
     strong_pattern,
     strong_values,
     transpose_pattern,
@@ -75,6 +76,9 @@ class SaddleSolution(NamedTuple):
     seconds : wall time of setup + solve.
     interpolations : the interpolation operators of the inner V-cycle's AMG hierarchy, finest
         first (``inner="amg"``; else None), for :func:`solve_saddle`'s ``reuse`` later.
+    coarse_matrices : that hierarchy's coarse matrices, the first coarse level's first and
+        the coarsest last (``inner="amg"`` with more than one level; else None), for
+        :func:`solve_saddle`'s ``reuse_coarse`` later.
     """
 
     u: np.ndarray
@@ -85,6 +89,7 @@ class SaddleSolution(NamedTuple):
     converged: bool
     seconds: float
     interpolations: tuple | None = None
+    coarse_matrices: tuple | None = None
 
 
 # Direct interpolation instead of pyamg's default classical one: on a captured crane system at
@@ -328,22 +333,49 @@ def amg_hierarchy(
     return _multilevel(levels, A)
 
 
-def restrict_interpolations(interpolations: tuple, rows: np.ndarray) -> tuple:
+def restrict_interpolations(
+    interpolations: tuple, rows: np.ndarray, coarse_matrices: tuple | None = None
+) -> tuple:
     """An earlier hierarchy's interpolation operators (finest first) restricted to a subset
     of its finest unknowns, for :func:`restricted_hierarchy`.
 
     ``rows`` [n]: the index of each new unknown among the earlier finest level's. Each level
     keeps those rows and the coarse columns they still use, which are the next level's rows;
-    the chain stops at a level with no column left."""
-    restricted = []
-    for P in interpolations:
+    the chain stops at a level with no column left.
+
+    With ``coarse_matrices`` (the earlier hierarchy's, :attr:`SaddleSolution.coarse_matrices`)
+    returns ``(interpolations, coarse matrices)``, each coarse matrix restricted to the rows
+    and columns its level keeps (principal submatrices: still symmetric positive definite),
+    for :func:`solve_saddle`'s ``reuse_coarse``."""
+    restricted, coarse = [], []
+    for level, P in enumerate(interpolations):
         P = sp.csr_matrix(P)[rows]
         used = np.flatnonzero(np.bincount(P.indices, minlength=P.shape[1]))
         if len(used) == 0:  # nothing left to interpolate from
             break
         restricted.append(P[:, used].tocsr())
+        if coarse_matrices is not None:
+            coarse.append(principal_submatrix(coarse_matrices[level], used))
         rows = used
-    return tuple(restricted)
+    if coarse_matrices is None:
+        return tuple(restricted)
+    return tuple(restricted), tuple(coarse)
+
+
+def frozen_hierarchy(interpolations: tuple, coarse_matrices: tuple) -> MultilevelSolver:
+    """An AMG hierarchy from given interpolation operators and coarse matrices (finest first,
+    as :func:`restrict_interpolations` returns them with ``coarse_matrices``) without a
+    finest matrix: for :func:`v_cycle` with ``finest``. The V-cycle is symmetric positive
+    definite as long as every coarse matrix is, whether or not it is the Galerkin product
+    of the finest matrix in use."""
+    levels = []
+    for P in interpolations:
+        level = MultilevelSolver.Level()
+        level.A, level.P, level.R = None, P, P.T
+        levels.append(level)
+    for level, A in zip(levels[1:], coarse_matrices[:-1], strict=True):
+        level.A = A
+    return _multilevel(levels, coarse_matrices[-1])
 
 
 def restricted_hierarchy(S: sp.csr_matrix, interpolations: tuple) -> MultilevelSolver:
@@ -519,6 +551,7 @@ def solve_saddle(
     inner_maxiter: int = 200,
     x0: np.ndarray | None = None,
     reuse: tuple | None = None,
+    reuse_coarse: tuple | None = None,
     interpolation_entries: int | None = None,
     overwrite_x0: bool = False,
 ) -> SaddleSolution:
@@ -542,6 +575,14 @@ def solve_saddle(
         Measured on the captured crane systems at resolution 64 (IRLS iterations 1 and 2
         from iteration 0's hierarchy): set-up 8.5-9.0 -> 4.1 s and 7.6 -> 3.7 s, residual
         after 40 steps 3.79e-2 -> 3.76e-2 and 3.94e-2 -> 3.92e-2.
+    reuse_coarse : tuple of sparse matrices, optional
+        With ``reuse``: the coarse matrices to go with it (an earlier solve's
+        :attr:`SaddleSolution.coarse_matrices`, restricted by
+        :func:`restrict_interpolations`). The V-cycle then keeps them too
+        (:func:`frozen_hierarchy`) and ``A + B^T B`` is never formed: only the finest
+        level's sweeps see this system, the coarse correction is the earlier system's. Still
+        a symmetric positive definite preconditioner, a weaker one the more the systems
+        differ; the set-up is a few restrictions instead of the Galerkin products.
     interpolation_entries : int, optional
         With ``inner="amg"``: keep only this many largest entries per row of every AMG
         interpolation (:func:`amg_hierarchy`; None: all). Measured on the first flow systems
@@ -566,17 +607,20 @@ def solve_saddle(
     B = sp.csr_matrix(B)
     n, m = A.shape[0], B.shape[0]
     BT = B.T
-    # the V-cycle works in single precision, so its matrix is formed in it (3.0 -> 0.8 s on
-    # the captured crane system at resolution 64, the same entries)
-    precision = np.float32 if inner == "amg" else np.float64
-    B_inner = B.astype(precision)
-    if gamma != 1.0:
-        B_inner = B_inner * precision(1.0 / np.sqrt(gamma))
-    S = csr_product(B_inner.T, B_inner, add=A.astype(precision))
-    del B_inner
     counter = [0]
-    interpolations = None
-    if inner == "amg":
+    interpolations = coarse_matrices = None
+    if inner == "amg" and reuse and reuse_coarse is not None:
+        ml = frozen_hierarchy(reuse, reuse_coarse)
+        interpolations, coarse_matrices = tuple(reuse), tuple(reuse_coarse)
+        finest = normal_finest(A, _normal_factor(BT, gamma))
+
+        def inner_apply(r):
+            counter[0] += 1
+            return v_cycle(ml, r, finest)
+
+    else:
+        S = _inner_matrix(A, B, gamma, np.float32 if inner == "amg" else np.float64)
+    if inner == "amg" and interpolations is None:
         # one V-cycle is a rough inverse anyway: on the coarse levels, in single precision,
         # it costs 16% less per MINRES step with the same residual (captured crane system:
         # 60 steps 9.3 -> 7.8 s, residual 1.1e-2 both)
@@ -587,6 +631,7 @@ def solve_saddle(
         else:
             ml = restricted_hierarchy(S, reuse)
         interpolations = tuple(level.P for level in ml.levels[:-1])
+        coarse_matrices = tuple(level.A for level in ml.levels[1:]) or None
         finest = None
         if len(ml.levels) > 1:
             # the finest level sweeps A + B^T B / gamma through A and B^T (in b's double
@@ -594,10 +639,7 @@ def solve_saddle(
             ml.levels[0].A = None
             del S
             release_free_heap()
-            # B^T in single precision: its entries are +-1 in the flow systems (exact), and
-            # the sweeps read less
-            C = (BT if gamma == 1.0 else BT * (1.0 / np.sqrt(gamma))).tocsr().astype(np.float32)
-            finest = normal_finest(A, C)
+            finest = normal_finest(A, _normal_factor(BT, gamma))
 
         def inner_apply(r):
             counter[0] += 1
@@ -605,7 +647,7 @@ def solve_saddle(
                 return v_cycle(ml, r.astype(np.float32)).astype(np.float64)
             return v_cycle(ml, r, finest)
 
-    else:
+    elif inner != "amg":
         inner_apply = _inner_operator(S, inner, inner_rtol, counter, inner_maxiter)
 
     def apply_K(z, out):
@@ -624,7 +666,8 @@ def solve_saddle(
 
     if np.linalg.norm(b) == 0 and x0 is None:
         return SaddleSolution(
-            np.zeros(n), np.zeros(m), 0, 0, 0.0, True, time.perf_counter() - start, interpolations
+            np.zeros(n), np.zeros(m), 0, 0, 0.0, True, time.perf_counter() - start,
+            interpolations, coarse_matrices,
         )
     # MINRES measures convergence in the preconditioned norm, against an estimate of
     # ||K|| ||z||; restart from the iterate until the true relative residual is below rtol.
@@ -665,5 +708,22 @@ def solve_saddle(
         seconds,
     )
     return SaddleSolution(
-        z[:n], z[n:], outer[0], counter[0], residual, info == 0, seconds, interpolations
+        z[:n], z[n:], outer[0], counter[0], residual, info == 0, seconds, interpolations,
+        coarse_matrices,
     )
+
+
+def _inner_matrix(A: sp.csr_matrix, B: sp.csr_matrix, gamma: float, precision) -> sp.csr_matrix:
+    """``A + B^T B / gamma`` in ``precision`` (the V-cycle works in single precision, so its
+    matrix is formed in it: 3.0 -> 0.8 s on the captured crane system at resolution 64, the
+    same entries)."""
+    B_inner = B.astype(precision)
+    if gamma != 1.0:
+        B_inner = B_inner * precision(1.0 / np.sqrt(gamma))
+    return csr_product(B_inner.T, B_inner, add=A.astype(precision))
+
+
+def _normal_factor(BT: sp.spmatrix, gamma: float) -> sp.csr_matrix:
+    """``C = B^T / sqrt(gamma)`` of the finest level's ``A + C C^T``, in single precision:
+    its entries are +-1 in the flow systems (exact), and the sweeps read less."""
+    return (BT if gamma == 1.0 else BT * (1.0 / np.sqrt(gamma))).tocsr().astype(np.float32)

@@ -326,3 +326,49 @@ def csr_from_rows(columns: np.ndarray, values: np.ndarray, n_cols: int) -> sp.cs
     indptr = np.zeros(len(columns) + 1, dtype=np.int64)
     np.cumsum(present.sum(axis=1), out=indptr[1:])
     return sp.csr_matrix((values[present], columns[present], indptr), shape=(len(columns), n_cols))
+
+
+@numba.njit(cache=True)
+def _principal_lengths(indptr, indices, keep, new_index, lengths):
+    for r in range(len(keep)):
+        row = keep[r]
+        count = 0
+        for p in range(indptr[row], indptr[row + 1]):
+            if new_index[indices[p]] >= 0:
+                count += 1
+        lengths[r + 1] = count
+
+
+@numba.njit(cache=True)
+def _principal_fill(indptr, indices, data, keep, new_index, out_indptr, out_indices, out_data):
+    for r in range(len(keep)):
+        row = keep[r]
+        at = out_indptr[r]
+        for p in range(indptr[row], indptr[row + 1]):
+            column = new_index[indices[p]]
+            if column >= 0:
+                out_indices[at] = column
+                out_data[at] = data[p]
+                at += 1
+
+
+def principal_submatrix(A: sp.spmatrix, keep: np.ndarray) -> sp.csr_matrix:
+    """``A[keep][:, keep]`` of a square CSR matrix ``A`` [n, n] for sorted, distinct ``keep``
+    [k], with 32-bit indices where they fit and no intermediate copy: scipy's two slices
+    held both copies and a 64-bit column map, about three times the result (squash-ball's
+    first coarse level at resolution 64).
+    """
+    A = sp.csr_matrix(A)
+    keep = np.asarray(keep, dtype=np.int64)
+    new_index = np.full(A.shape[0], -1, dtype=np.int64)
+    new_index[keep] = np.arange(len(keep))
+    lengths = np.zeros(len(keep) + 1, dtype=np.int64)
+    _principal_lengths(A.indptr, A.indices, keep, new_index, lengths)
+    indptr = np.cumsum(lengths)
+    index = np.int32 if indptr[-1] < np.iinfo(np.int32).max else np.int64
+    indices = np.empty(indptr[-1], dtype=index)
+    data = np.empty(indptr[-1], dtype=A.dtype)
+    _principal_fill(A.indptr, A.indices, A.data, keep, new_index, indptr, indices, data)
+    return sp.csr_matrix(
+        (data, indices, indptr.astype(index, copy=False)), shape=(len(keep), len(keep))
+    )
