@@ -190,12 +190,12 @@ def run_irls(
         previous_flows = previous_v = previous_interpolations = previous_coarse = None
         solution = None
         release_free_heap()
-        options = dict(solver_options)
+        solve_options = dict(solver_options)
         if iteration > 0 and later_maxiter is not None:
-            options["maxiter"] = later_maxiter
+            solve_options["maxiter"] = later_maxiter
         solution = solve_saddle(
             system.A, system.B, f, system.g, x0=start, reuse=reuse, reuse_coarse=reuse_matrices,
-            overwrite_x0=True, **options,
+            overwrite_x0=True, **solve_options,
         )
         del start, reuse, reuse_matrices
         previous_free, previous_interpolations = system.free, solution.interpolations

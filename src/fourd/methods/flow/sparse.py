@@ -354,9 +354,8 @@ def _principal_fill(indptr, indices, data, keep, new_index, out_indptr, out_indi
 
 def principal_submatrix(A: sp.spmatrix, keep: np.ndarray) -> sp.csr_matrix:
     """``A[keep][:, keep]`` of a square CSR matrix ``A`` [n, n] for sorted, distinct ``keep``
-    [k], with 32-bit indices where they fit and no intermediate copy: scipy's two slices
-    held both copies and a 64-bit column map, about three times the result (squash-ball's
-    first coarse level at resolution 64).
+    [k], in two passes over the kept rows (lengths, then entries) and with 32-bit indices
+    where they fit, instead of scipy's row slice followed by a column slice of that copy.
     """
     A = sp.csr_matrix(A)
     keep = np.asarray(keep, dtype=np.int64)
