@@ -609,37 +609,32 @@ def solve_saddle(
     BT = B.T
     counter = [0]
     interpolations = coarse_matrices = None
-    if inner == "amg" and reuse and reuse_coarse is not None:
-        ml = frozen_hierarchy(reuse, reuse_coarse)
-        interpolations, coarse_matrices = tuple(reuse), tuple(reuse_coarse)
-        finest = normal_finest(A, _normal_factor(BT, gamma))
-
-        def inner_apply(r):
-            counter[0] += 1
-            return v_cycle(ml, r, finest)
-
-    else:
-        S = _inner_matrix(A, B, gamma, np.float32 if inner == "amg" else np.float64)
-    if inner == "amg" and interpolations is None:
-        # one V-cycle is a rough inverse anyway: on the coarse levels, in single precision,
-        # it costs 16% less per MINRES step with the same residual (captured crane system:
-        # 60 steps 9.3 -> 7.8 s, residual 1.1e-2 both)
-        if reuse is None:
-            ml = amg_hierarchy(
-                S, max_coarse=_AMG_SETUP["max_coarse"], interpolation_entries=interpolation_entries
-            )
+    if inner == "amg":
+        if reuse and reuse_coarse is not None:
+            ml = frozen_hierarchy(reuse, reuse_coarse)
+            finest = normal_finest(A, _normal_factor(BT, gamma))
         else:
-            ml = restricted_hierarchy(S, reuse)
+            # one V-cycle is a rough inverse anyway: on the coarse levels, in single
+            # precision, it costs 16% less per MINRES step with the same residual (captured
+            # crane system: 60 steps 9.3 -> 7.8 s, residual 1.1e-2 both)
+            S = _inner_matrix(A, B, gamma, np.float32)
+            if reuse is None:
+                ml = amg_hierarchy(
+                    S, max_coarse=_AMG_SETUP["max_coarse"],
+                    interpolation_entries=interpolation_entries,
+                )
+            else:
+                ml = restricted_hierarchy(S, reuse)
+            finest = None
+            if len(ml.levels) > 1:
+                # the finest level sweeps A + B^T B / gamma through A and B^T (in b's double
+                # precision), and S is freed
+                ml.levels[0].A = None
+                del S
+                release_free_heap()
+                finest = normal_finest(A, _normal_factor(BT, gamma))
         interpolations = tuple(level.P for level in ml.levels[:-1])
         coarse_matrices = tuple(level.A for level in ml.levels[1:]) or None
-        finest = None
-        if len(ml.levels) > 1:
-            # the finest level sweeps A + B^T B / gamma through A and B^T (in b's double
-            # precision), and S is freed
-            ml.levels[0].A = None
-            del S
-            release_free_heap()
-            finest = normal_finest(A, _normal_factor(BT, gamma))
 
         def inner_apply(r):
             counter[0] += 1
@@ -647,7 +642,8 @@ def solve_saddle(
                 return v_cycle(ml, r.astype(np.float32)).astype(np.float64)
             return v_cycle(ml, r, finest)
 
-    elif inner != "amg":
+    else:
+        S = _inner_matrix(A, B, gamma, np.float64)
         inner_apply = _inner_operator(S, inner, inner_rtol, counter, inner_maxiter)
 
     def apply_K(z, out):
