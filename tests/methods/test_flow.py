@@ -42,6 +42,7 @@ from fourd.methods.flow.solver import (
     v_cycle,
 )
 from fourd.methods.flow.sparse import (
+    csr_from_entries,
     csr_product,
     galerkin_product,
     principal_submatrix,
@@ -287,6 +288,28 @@ def test_principal_submatrix_matches_scipy_slicing():
     assert sub.shape == (150, 150) and sub.dtype == np.float32
     assert abs(sub - matrix[keep][:, keep]).max() == 0
     assert principal_submatrix(matrix, np.zeros(0, dtype=np.int64)).shape == (0, 0)
+
+
+def test_csr_from_entries_matches_scipy_coo():
+    """The counting-sort assembly: scipy's matrix from the same triplets, entries of a row in
+    the order given, rows ``-1`` skipped, 32-bit indices, and an entry outside the shape named."""
+    rng = np.random.default_rng(3)
+    positions = rng.choice(300 * 200, 2000, replace=False)
+    rows, columns = positions // 200, positions % 200
+    values = rng.normal(size=2000)
+    rows[::9] = -1
+    matrix = csr_from_entries(rows, columns, values, (300, 200))
+    kept = rows >= 0
+    expected = sp.coo_matrix((values[kept], (rows[kept], columns[kept])), shape=(300, 200))
+    assert matrix.shape == (300, 200) and matrix.indices.dtype == np.int32
+    assert matrix.nnz == kept.sum() and abs(matrix - expected).max() == 0
+    first_row = np.flatnonzero(rows == rows[kept][0])
+    start = matrix.indptr[rows[kept][0]]
+    assert list(matrix.indices[start : start + len(first_row)]) == list(columns[first_row])
+    with pytest.raises(ValueError, match="column 200 of entry 1"):
+        csr_from_entries(np.array([0, 1]), np.array([0, 200]), np.ones(2), (300, 200))
+    with pytest.raises(ValueError, match="row index"):
+        csr_from_entries(np.array([300]), np.array([0]), np.ones(1), (300, 200))
 
 
 def test_csr_product_matches_scipy():

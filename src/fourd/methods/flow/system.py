@@ -28,7 +28,7 @@ from typing import NamedTuple
 import numpy as np
 import scipy.sparse as sp
 
-from fourd.methods.flow.sparse import csr_from_rows, csr_product
+from fourd.methods.flow.sparse import csr_from_entries
 
 
 def neighbourhood(size: int) -> np.ndarray:
@@ -109,12 +109,25 @@ class System(NamedTuple):
 
 def _gram(first: np.ndarray, second: np.ndarray, weight: np.ndarray, n: int, reg: float):
     """``D^T diag(weight) D + reg I`` [n, n] (CSR) for the operator ``D`` whose row ``k`` is
-    ``+1`` at unknown ``first[k]`` and ``-1`` at ``second[k]`` (either ``-1``: no entry)."""
-    columns = np.stack([first, second], axis=1)
-    signs = np.broadcast_to(np.array([1.0, -1.0]), columns.shape)
-    D = csr_from_rows(columns, signs, n)
-    weighted = csr_from_rows(columns, signs * weight[:, None], n)
-    return csr_product(weighted.T, D, add=reg * sp.identity(n, format="csr"))
+    ``+1`` at unknown ``first[k]`` and ``-1`` at ``second[k]`` (either ``-1``: no entry).
+
+    Every pair of unknowns shares at most one term (a face, or a flow and its successor), so
+    the off-diagonal entries are the terms' ``-weight`` placed directly, without a product.
+    """
+    diagonal = np.full(n, float(reg))
+    for column in (first, second):
+        present = column >= 0
+        diagonal += np.bincount(column[present], weight[present], minlength=n)
+    both = np.flatnonzero((first >= 0) & (second >= 0))
+    index = np.int32 if n < np.iinfo(np.int32).max else np.int64
+    a, b = first[both].astype(index), second[both].astype(index)
+    w = -weight[both]
+    del both
+    cells = np.arange(n, dtype=index)
+    rows = np.concatenate([cells, a, b])
+    columns = np.concatenate([cells, b, a])
+    del cells, a, b
+    return csr_from_entries(rows, columns, np.concatenate([diagonal, w, w]), (n, n))
 
 
 def build_system(
@@ -156,8 +169,7 @@ def build_system(
 
     # Every term of F but the regulariser is a weighted square of a difference of at most two
     # unknowns: one row of an operator D [terms, n] with +1 / -1 at the unknowns (none at a
-    # fixed cell) and weight w, so that A = D^T W D + reg I, one parallel product
-    # (:func:`.sparse.csr_product`) instead of twelve triplet lists for scipy's COO.
+    # fixed cell) and weight w, so that A = D^T W D + reg I (:func:`_gram`).
     first, second, term_weight = [], [], []
 
     # continuity (5): faces with at least one free cell; a fixed neighbour's value goes to f
@@ -201,10 +213,11 @@ def build_system(
         first.append(single)
         second.append(np.full(len(single), -1, dtype=np.int64))
         term_weight.append(np.full(len(first[-2]) + len(single), mom))
+        del d, shift, t_src, successor, predecessor, pair, lonely_out, lonely_in, single
 
-    A = _gram(
-        np.concatenate(first), np.concatenate(second), np.concatenate(term_weight), n, reg
-    )
+    first, second, term_weight = (np.concatenate(t) for t in (first, second, term_weight))
+    A = _gram(first, second, term_weight, n, reg)
+    del first, second, term_weight
 
     # incompressibility: out rows (t < S-1) and in rows (t > 0) for every living cell
     alive_cells = np.flatnonzero(alive)
@@ -216,20 +229,32 @@ def build_system(
     row_of_in = np.full(n_cells, -1, dtype=np.int64)
     row_of_in[in_cells] = len(out_cells) + np.arange(len(in_cells))
     m_all = len(out_cells) + len(in_cells)
-    # B column by column (the rows of its transpose): a free cell's column has -1 in its out and in rows (where they
-    # exist), a flow's column +1 in its source's out row and its target's in row
-    cell_rows = np.stack([row_of_out[free], row_of_in[free]], axis=1)
-    flow_rows = np.stack([row_of_out[flows.source], row_of_in[flows.target]], axis=1)
-    table = np.concatenate([cell_rows, flow_rows])
-    signs = np.concatenate([np.full(cell_rows.shape, -1.0), np.ones(flow_rows.shape)])
-    B = csr_from_rows(table, signs, m_all).T.tocsr()
+    # B's column of a free cell has -1 in the cell's out and in rows (where they exist), a
+    # flow's column +1 in its source's out row and its target's in row; a row without a flow
+    # whose cell is fixed is dropped (infeasible when its value is not zero).
     cells = np.concatenate([out_cells, in_cells])
     is_free = free_mask[cells]
     g_all = np.where(is_free, 0.0, fixed_value[cells])
-    flow_count = np.bincount(flow_rows.ravel(), minlength=m_all)
-    has_flow = flow_count > 0
+    flow_out, flow_in = row_of_out[flows.source], row_of_in[flows.target]
+    has_flow = np.zeros(m_all, dtype=bool)
+    has_flow[flow_out] = True
+    has_flow[flow_in] = True
     infeasible = int((~has_flow & ~is_free).sum())
     keep = has_flow | is_free
-    B = B[keep]
     g = g_all[keep]
+    index = np.int32 if max(n, m_all) < np.iinfo(np.int32).max else np.int64
+    new_row = np.full(m_all + 1, -1, dtype=index)  # the last one is row -1's
+    new_row[np.flatnonzero(keep)] = np.arange(int(keep.sum()), dtype=index)
+    del cells, is_free, g_all, has_flow, keep
+    rows = np.empty((n, 2), dtype=index)
+    rows[:n_x, 0] = new_row[row_of_out[free]]
+    rows[:n_x, 1] = new_row[row_of_in[free]]
+    rows[n_x:, 0] = new_row[flow_out]
+    rows[n_x:, 1] = new_row[flow_in]
+    del flow_out, flow_in, row_of_out, row_of_in
+    values = np.empty((n, 2))
+    values[:n_x] = -1.0
+    values[n_x:] = 1.0
+    columns = np.repeat(np.arange(n, dtype=index), 2)
+    B = csr_from_entries(rows.ravel(), columns, values.ravel(), (len(g), n))
     return System(A, B, f, g, free, flows, infeasible)
