@@ -48,8 +48,10 @@ from fourd.methods.flow.sparse import (
     principal_submatrix,
     strong_pattern,
     strong_values,
+    submatrix,
     transpose_pattern,
     truncate_rows,
+    used_columns,
 )
 from fourd.methods.flow.system import build_system, neighbourhood
 
@@ -281,13 +283,19 @@ def test_minres_reusing_an_earlier_interpolation_solves_the_smaller_system():
     assert _previous_unknowns(first, second.free, second.flows) is None
 
 
-def test_principal_submatrix_matches_scipy_slicing():
+def test_submatrices_match_scipy_slicing():
     matrix = sp.random(400, 400, density=0.03, random_state=3, format="csr", dtype=np.float32)
     keep = np.sort(np.random.default_rng(1).choice(400, 150, replace=False))
     sub = principal_submatrix(matrix, keep)
     assert sub.shape == (150, 150) and sub.dtype == np.float32
     assert abs(sub - matrix[keep][:, keep]).max() == 0
     assert principal_submatrix(matrix, np.zeros(0, dtype=np.int64)).shape == (0, 0)
+    rows = np.random.default_rng(2).permutation(400)[:90]  # any order, as an IRLS step gives
+    columns = used_columns(matrix, rows)
+    assert set(columns) == set(matrix[rows].indices) and (np.diff(columns) > 0).all()
+    rectangular = submatrix(matrix, rows, columns)
+    assert rectangular.shape == (90, len(columns))
+    assert abs(rectangular - matrix[rows][:, columns]).max() == 0
 
 
 def test_csr_from_entries_matches_scipy_coo():

@@ -179,12 +179,18 @@ def run_irls(
         reuse = reuse_matrices = None
         if reuse_interpolation and previous_interpolations is not None:
             rows = _previous_unknowns(system, previous_free, previous_flows)
-            if rows is not None and previous_coarse is not None:
+            # lists that restrict_interpolations empties as it goes: each earlier level is
+            # freed once restricted
+            interpolations = list(previous_interpolations)
+            coarse = None if previous_coarse is None else list(previous_coarse)
+            previous_interpolations = previous_coarse = None
+            if rows is not None and coarse is not None:
                 reuse, reuse_matrices = restrict_interpolations(
-                    previous_interpolations, rows, previous_coarse
+                    interpolations, rows, coarse, consume=True
                 )
             elif rows is not None:
-                reuse = restrict_interpolations(previous_interpolations, rows)
+                reuse = restrict_interpolations(interpolations, rows, consume=True)
+            del interpolations, coarse
         # the previous solve's vectors, flows and hierarchy are not needed in this one
         # (squash-ball at resolution 64: 0.5 GB)
         previous_flows = previous_v = previous_interpolations = previous_coarse = None

@@ -57,8 +57,10 @@ from fourd.methods.flow.sparse import (
     principal_submatrix,
     strong_pattern,
     strong_values,
+    submatrix,
     transpose_pattern,
     truncate_rows,
+    used_columns,
 )
 
 log = logging.getLogger("fourd.methods.flow.solver")
@@ -334,7 +336,11 @@ def amg_hierarchy(
 
 
 def restrict_interpolations(
-    interpolations: tuple, rows: np.ndarray, coarse_matrices: tuple | None = None
+    interpolations: tuple | list,
+    rows: np.ndarray,
+    coarse_matrices: tuple | list | None = None,
+    *,
+    consume: bool = False,
 ) -> tuple:
     """An earlier hierarchy's interpolation operators (finest first) restricted to a subset
     of its finest unknowns, for :func:`restricted_hierarchy`.
@@ -349,11 +355,10 @@ def restrict_interpolations(
     for :func:`solve_saddle`'s ``reuse_coarse``."""
     restricted, coarse = [], []
     for level, P in enumerate(interpolations):
-        P = sp.csr_matrix(P)[rows]
-        used = np.flatnonzero(np.bincount(P.indices, minlength=P.shape[1]))
+        used = used_columns(P, rows)
         if len(used) == 0:  # nothing left to interpolate from
             break
-        restricted.append(P[:, used].tocsr())
+        restricted.append(submatrix(P, rows, used))
         if coarse_matrices is not None:
             coarse.append(principal_submatrix(coarse_matrices[level], used))
         rows = used

@@ -382,45 +382,68 @@ def csr_from_entries(
 
 
 @numba.njit(cache=True)
-def _principal_lengths(indptr, indices, keep, new_index, lengths):
-    for r in range(len(keep)):
-        row = keep[r]
+def _submatrix_lengths(indptr, indices, rows, new_column, lengths):
+    for r in range(len(rows)):
+        row = rows[r]
         count = 0
         for p in range(indptr[row], indptr[row + 1]):
-            if new_index[indices[p]] >= 0:
+            if new_column[indices[p]] >= 0:
                 count += 1
         lengths[r + 1] = count
 
 
 @numba.njit(cache=True)
-def _principal_fill(indptr, indices, data, keep, new_index, out_indptr, out_indices, out_data):
-    for r in range(len(keep)):
-        row = keep[r]
+def _submatrix_fill(indptr, indices, data, rows, new_column, out_indptr, out_indices, out_data):
+    for r in range(len(rows)):
+        row = rows[r]
         at = out_indptr[r]
         for p in range(indptr[row], indptr[row + 1]):
-            column = new_index[indices[p]]
+            column = new_column[indices[p]]
             if column >= 0:
                 out_indices[at] = column
                 out_data[at] = data[p]
                 at += 1
 
 
-def principal_submatrix(A: sp.spmatrix, keep: np.ndarray) -> sp.csr_matrix:
-    """``A[keep][:, keep]`` of a square CSR matrix ``A`` [n, n] for sorted, distinct ``keep``
-    [k], in two passes over the kept rows (lengths, then entries) and with 32-bit indices
-    where they fit, instead of scipy's row slice followed by a column slice of that copy.
-    """
+def submatrix(A: sp.spmatrix, rows: np.ndarray, columns: np.ndarray) -> sp.csr_matrix:
+    """``A[rows][:, columns]`` of a CSR matrix ``A`` [n, m] for distinct ``rows`` [r] (any
+    order) and sorted, distinct ``columns`` [c], in two passes over the kept rows (lengths,
+    then entries) and with 32-bit indices where they fit: no intermediate copy, where
+    scipy's row slice copies ``A``'s rows before its column slice copies them again."""
     A = sp.csr_matrix(A)
-    keep = np.asarray(keep, dtype=np.int64)
-    new_index = np.full(A.shape[0], -1, dtype=np.int64)
-    new_index[keep] = np.arange(len(keep))
-    lengths = np.zeros(len(keep) + 1, dtype=np.int64)
-    _principal_lengths(A.indptr, A.indices, keep, new_index, lengths)
+    rows = np.asarray(rows, dtype=np.int64)
+    new_column = np.full(A.shape[1], -1, dtype=np.int64)
+    new_column[np.asarray(columns, dtype=np.int64)] = np.arange(len(columns))
+    lengths = np.zeros(len(rows) + 1, dtype=np.int64)
+    _submatrix_lengths(A.indptr, A.indices, rows, new_column, lengths)
     indptr = np.cumsum(lengths)
-    index = np.int32 if indptr[-1] < np.iinfo(np.int32).max else np.int64
+    del lengths
+    index = np.int32 if max(indptr[-1], len(rows), len(columns)) < np.iinfo(np.int32).max else np.int64
     indices = np.empty(indptr[-1], dtype=index)
     data = np.empty(indptr[-1], dtype=A.dtype)
-    _principal_fill(A.indptr, A.indices, A.data, keep, new_index, indptr, indices, data)
+    _submatrix_fill(A.indptr, A.indices, A.data, rows, new_column, indptr, indices, data)
     return sp.csr_matrix(
-        (data, indices, indptr.astype(index, copy=False)), shape=(len(keep), len(keep))
+        (data, indices, indptr.astype(index, copy=False)), shape=(len(rows), len(columns))
     )
+
+
+def principal_submatrix(A: sp.spmatrix, keep: np.ndarray) -> sp.csr_matrix:
+    """``A[keep][:, keep]`` of a square CSR matrix ``A`` [n, n] for sorted, distinct ``keep``
+    [k] (:func:`submatrix`)."""
+    return submatrix(A, keep, keep)
+
+
+@numba.njit(cache=True)
+def _mark_columns(indptr, indices, rows, used):
+    for r in range(len(rows)):
+        row = rows[r]
+        for p in range(indptr[row], indptr[row + 1]):
+            used[indices[p]] = True
+
+
+def used_columns(A: sp.spmatrix, rows: np.ndarray) -> np.ndarray:
+    """Sorted indices of the columns of CSR ``A`` [n, m] with an entry in any of ``rows``."""
+    A = sp.csr_matrix(A)
+    used = np.zeros(A.shape[1], dtype=bool)
+    _mark_columns(A.indptr, A.indices, np.asarray(rows, dtype=np.int64), used)
+    return np.flatnonzero(used)

@@ -25,6 +25,7 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
+import numba
 import numpy as np
 import scipy.sparse as sp
 
@@ -47,6 +48,8 @@ class Flows(NamedTuple):
 
     source, target : int64 [V], flat 4D cell indices (target is in the next slice).
     offset : int64 [V], index into the neighbourhood offsets.
+
+    Ordered by offset, then source (:func:`flow_lookup` relies on it).
     """
 
     source: np.ndarray
@@ -75,16 +78,48 @@ def enumerate_flows(alive: np.ndarray, offsets: np.ndarray) -> Flows:
     return Flows(np.concatenate(sources), np.concatenate(targets), np.concatenate(kinds))
 
 
+@numba.njit(cache=True)
+def _first_disorder(offset, source):
+    for i in range(1, len(source)):
+        if offset[i] < offset[i - 1] or (offset[i] == offset[i - 1] and source[i] <= source[i - 1]):
+            return i
+    return -1
+
+
+@numba.njit(cache=True, parallel=True)
+def _lookup(source, starts, queries, query_offsets, out):
+    for q in numba.prange(len(queries)):
+        out[q] = -1
+        k = query_offsets[q]
+        if k < 0 or k >= len(starts) - 1:
+            continue
+        lo, hi = starts[k], starts[k + 1]
+        wanted = queries[q]
+        while lo < hi:
+            middle = (lo + hi) // 2
+            if source[middle] < wanted:
+                lo = middle + 1
+            else:
+                hi = middle
+        if lo < starts[k + 1] and source[lo] == wanted:
+            out[q] = lo
+
+
 def flow_lookup(flows: Flows, sources: np.ndarray, offsets: np.ndarray) -> np.ndarray:
-    """Index of the flow ``(source, offset)`` for each query, ``-1`` where there is none."""
+    """Index of the flow ``(source, offset)`` for each query, ``-1`` where there is none.
+
+    ``flows`` must be ordered by offset, then source, as :func:`enumerate_flows` gives them:
+    each query is a binary search within its offset's run.
+    """
     if len(flows.source) == 0:
         return np.full(len(sources), -1, dtype=np.int64)
-    key = flows.offset * (1 << 40) + flows.source
-    order = np.argsort(key, kind="stable")
-    sorted_key = key[order]
-    query = offsets * (1 << 40) + sources
-    pos = np.clip(np.searchsorted(sorted_key, query), 0, len(sorted_key) - 1)
-    return np.where(sorted_key[pos] == query, order[pos], -1)
+    bad = _first_disorder(flows.offset, flows.source)
+    if bad >= 0:
+        raise ValueError(f"flows are not ordered by offset, then source (at flow {bad})")
+    starts = np.searchsorted(flows.offset, np.arange(int(flows.offset[-1]) + 2))
+    out = np.empty(len(sources), dtype=np.int64)
+    _lookup(flows.source, starts, np.asarray(sources), np.asarray(offsets), out)
+    return out
 
 
 class System(NamedTuple):
