@@ -270,6 +270,15 @@ def test_minres_reusing_an_earlier_interpolation_solves_the_smaller_system():
         earlier.interpolations, rows, earlier.coarse_matrices
     )
     assert len(coarse) == len(interpolations)
+    # consuming the earlier hierarchy (IRLS's way: lists emptied, coarse matrices compacted
+    # in place) gives the same operators
+    earlier_lists = [P.copy() for P in earlier.interpolations], [
+        matrix.copy() for matrix in earlier.coarse_matrices
+    ]
+    consumed = restrict_interpolations(earlier_lists[0], rows, earlier_lists[1], consume=True)
+    assert all(entry is None for entry in earlier_lists[0][: len(interpolations)])
+    for kept, again in zip((*interpolations, *coarse), (*consumed[0], *consumed[1]), strict=True):
+        assert abs(kept - again).max() == 0
     for P, matrix in zip(interpolations, coarse, strict=True):
         assert matrix.shape == (P.shape[1], P.shape[1])
         assert abs(matrix - matrix.T).max() <= 1e-6 * abs(matrix).max()
@@ -290,6 +299,8 @@ def test_submatrices_match_scipy_slicing():
     assert sub.shape == (150, 150) and sub.dtype == np.float32
     assert abs(sub - matrix[keep][:, keep]).max() == 0
     assert principal_submatrix(matrix, np.zeros(0, dtype=np.int64)).shape == (0, 0)
+    in_place = principal_submatrix(matrix.copy(), keep, overwrite=True)
+    assert in_place.dtype == np.float32 and abs(in_place - sub).max() == 0
     rows = np.random.default_rng(2).permutation(400)[:90]  # any order, as an IRLS step gives
     columns = used_columns(matrix, rows)
     assert set(columns) == set(matrix[rows].indices) and (np.diff(columns) > 0).all()

@@ -369,7 +369,9 @@ def restrict_interpolations(
         if consume:
             interpolations[level] = None
         if coarse_matrices is not None:
-            coarse.append(principal_submatrix(coarse_matrices[level], used))
+            coarse.append(
+                principal_submatrix(coarse_matrices[level], used, overwrite=consume)
+            )
             if consume:
                 coarse_matrices[level] = None
         rows = used
