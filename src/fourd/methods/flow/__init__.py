@@ -720,7 +720,7 @@ def run(seq: PointCloudSequence, options: Options | None = None) -> FlowResult:
     try:
         irls: IRLSResult = run_irls(
             value,
-            # not held here: the IRLS replaces it after its first solve
+            # the IRLS writes its later weights into this array
             _outward_weights(grid, slice_points, slice_normals, options.outward_cosine),
             offsets,
             region,

@@ -47,12 +47,15 @@ class IRLSResult(NamedTuple):
     history: list
 
 
-def irls_weights(x: np.ndarray, *, exponent: float, floor: float, scale: float) -> np.ndarray:
-    """Continuity weights ``[3, S, X, Y, Z]`` for the faces towards ``+axis`` from values ``x``.
+def irls_weights(
+    x: np.ndarray, *, exponent: float, floor: float, scale: float, out: np.ndarray | None = None
+) -> np.ndarray:
+    """Continuity weights ``[3, S, X, Y, Z]`` for the faces towards ``+axis`` from values ``x``
+    (written into ``out`` if given).
 
     ``w = scale * (max(|dx|, floor) / floor)^(exponent - 2)`` lies in ``(0, scale]``.
     """
-    weights = np.empty((3, *x.shape))
+    weights = np.empty((3, *x.shape)) if out is None else out
     for axis in range(3):
         dx = np.zeros(x.shape)
         a = [slice(None)] * 4
@@ -125,7 +128,8 @@ def run_irls(
     value : float64 [S, X, Y, Z]
         Initial values: ``nan`` free, 0 outside, 1 inside / data.
     weights : float64 [3, S, X, Y, Z]
-        First-iteration continuity weights (0 on outward boundary faces, 1 elsewhere).
+        First-iteration continuity weights (0 on outward boundary faces, 1 elsewhere);
+        overwritten with the later iterations' weights.
     region : bool [S, X, Y, Z]
         Cells counted for the stopping criterion (the hull: cells not carved at the start).
     solver_options : dict
@@ -219,7 +223,9 @@ def run_irls(
         flat[system.free] = free_values
         decided_now = int((~np.isnan(value) & region).sum())
         x = np.where(np.isnan(value), x, value)
-        weights = irls_weights(x, exponent=exponent, floor=floor, scale=scale)
+        # into the first iteration's array, which the caller's call still holds (squash-ball
+        # at resolution 64: 126 MB)
+        weights = irls_weights(x, exponent=exponent, floor=floor, scale=scale, out=weights)
         fraction = decided_now / total
         record = {
             "iteration": iteration,
