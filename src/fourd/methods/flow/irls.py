@@ -194,7 +194,7 @@ def run_irls(
                 )
             elif rows is not None:
                 reuse = restrict_interpolations(interpolations, rows, consume=True)
-            del interpolations, coarse
+            del interpolations, coarse, rows
         # the previous solve's vectors, flows and hierarchy are not needed in this one
         # (squash-ball at resolution 64: 0.5 GB)
         previous_flows = previous_v = previous_interpolations = previous_coarse = None
