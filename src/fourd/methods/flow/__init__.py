@@ -219,19 +219,18 @@ class Options:
         coarse matrices (half the set-up; the same MINRES residual on the captured crane
         systems, see :func:`.solver.solve_saddle`). False: a new set-up every iteration.
     reuse_coarse : bool
-        With ``reuse_interpolation``: keep the previous solve's coarse matrices too (restricted
-        to the unknowns still free), so that the later solves never form ``A + B^T B`` nor
-        its Galerkin products; only the finest level's sweeps see the new system (see
-        :func:`.solver.solve_saddle` ``reuse_coarse``). The same residual after 10 steps
-        (crane at 32: 3.3e-2 -> 3.4e-2; squash-ball 2.5e-2 both) and the same figures, the
-        later solves twice as fast (crane at 32 0.64 -> 0.57 s/frame, squash-ball 1.84 ->
-        1.61; squash-ball at 64 11.5 -> 10.1-10.5 s/frame, later solves 35 -> 17 s; those
-        with ``later_outer=10``). With the default 40 later steps (``exp``, 32): squash-ball
-        flow stage 41.4 -> 36.3 s, mass conservation error 1.19% -> 1.30%, dfaust-hopping
-        13.0 -> 11.5 s, 0.22% -> 0.24%, the same Chamfer / completeness-95. Off by
-        default because the coarse matrices stay alive while the next system is built, whose
-        assembly is the heaviest moment then: squash-ball at 64 peaked at 4.8 GiB with it
-        against 3.8 without (``exp`` harness).
+        With ``reuse_interpolation`` (the default, true): keep the previous solve's coarse
+        matrices too (restricted to the unknowns still free, compacted in place), so that the
+        later solves never form ``A + B^T B`` nor its Galerkin products; only the finest
+        level's sweeps see the new system (see :func:`.solver.solve_saddle`
+        ``reuse_coarse``). The same residual after 10 steps (crane at 32: 3.3e-2 -> 3.4e-2;
+        squash-ball 2.5e-2 both) and the same figures, the later solves' set-up down to a few
+        restrictions. Bench at 63fe479 (60k samples, single runs): squash-ball at 64 15.2 ->
+        13.6 s/frame, Chamfer / completeness-95 0.0029 / 0.0069 and mass conservation error
+        0.9% both, peak 3761 -> 3707 MiB. ``exp`` at 32: squash-ball flow stage 41.4 -> 36.3
+        s, mass conservation error 1.19% -> 1.30%, dfaust-hopping 13.0 -> 11.5 s, 0.22% ->
+        0.24%. It was off until the next system's assembly and the restriction got lighter
+        (squash-ball at 64 peaked at 4.8 GiB with it, 3.8 without, before e09226b..63fe479).
     interpolation_entries : int
         With ``inner="amg"``: keep only this many largest entries per row of the V-cycle's
         AMG interpolations (0: all, the default). One entry keeps the coarse matrices
@@ -437,7 +436,7 @@ class Options:
     max_outer: int = 40
     later_outer: int = 0
     reuse_interpolation: bool = True
-    reuse_coarse: bool = False
+    reuse_coarse: bool = True
     interpolation_entries: int = 0
     outward_cosine: float = 0.5
     fit_level: float = 0.5
