@@ -393,16 +393,21 @@ def _submatrix_lengths(indptr, indices, rows, new_column, lengths):
 
 
 @numba.njit(cache=True)
-def _submatrix_fill(indptr, indices, data, rows, new_column, out_indptr, out_indices, out_data):
+def _gather_rows(indptr, indices, data, rows, new_column, out_indptr, out_indices, out_data):
+    """Rows ``rows`` and the columns with ``new_column >= 0``, renumbered, written one after
+    the other into ``out_*`` (``out_indptr`` [len(rows) + 1] filled too). The output may be
+    ``indices`` and ``data`` themselves when ``rows`` increase: a kept entry is never written
+    past the position it is read from."""
+    at = 0
     for r in range(len(rows)):
         row = rows[r]
-        at = out_indptr[r]
         for p in range(indptr[row], indptr[row + 1]):
             column = new_column[indices[p]]
             if column >= 0:
                 out_indices[at] = column
                 out_data[at] = data[p]
                 at += 1
+        out_indptr[r + 1] = at
 
 
 def submatrix(A: sp.spmatrix, rows: np.ndarray, columns: np.ndarray) -> sp.csr_matrix:
@@ -421,27 +426,10 @@ def submatrix(A: sp.spmatrix, rows: np.ndarray, columns: np.ndarray) -> sp.csr_m
     index = np.int32 if max(indptr[-1], len(rows), len(columns)) < np.iinfo(np.int32).max else np.int64
     indices = np.empty(indptr[-1], dtype=index)
     data = np.empty(indptr[-1], dtype=A.dtype)
-    _submatrix_fill(A.indptr, A.indices, A.data, rows, new_column, indptr, indices, data)
+    _gather_rows(A.indptr, A.indices, A.data, rows, new_column, indptr, indices, data)
     return sp.csr_matrix(
         (data, indices, indptr.astype(index, copy=False)), shape=(len(rows), len(columns))
     )
-
-
-@numba.njit(cache=True)
-def _compact_rows(indptr, indices, data, keep, new_column, out_indptr):
-    """Keep rows ``keep`` (increasing) and the columns with ``new_column >= 0``, renumbered,
-    moving the entries towards the front of ``indices`` and ``data`` themselves: a kept entry
-    is never written past the position it is read from."""
-    at = 0
-    for r in range(len(keep)):
-        row = keep[r]
-        for p in range(indptr[row], indptr[row + 1]):
-            column = new_column[indices[p]]
-            if column >= 0:
-                indices[at] = column
-                data[at] = data[p]
-                at += 1
-        out_indptr[r + 1] = at
 
 
 def principal_submatrix(
@@ -462,7 +450,7 @@ def principal_submatrix(
     new_column = np.full(A.shape[0], -1, dtype=np.int64)
     new_column[keep] = np.arange(len(keep))
     indptr = np.zeros(len(keep) + 1, dtype=A.indices.dtype)
-    _compact_rows(A.indptr, A.indices, A.data, keep, new_column, indptr)
+    _gather_rows(A.indptr, A.indices, A.data, keep, new_column, indptr, A.indices, A.data)
     nnz = int(indptr[-1])
     return sp.csr_matrix(
         (A.data[:nnz], A.indices[:nnz], indptr), shape=(len(keep), len(keep)), copy=False
