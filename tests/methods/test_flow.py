@@ -44,6 +44,7 @@ from fourd.methods.flow.solver import (
 from fourd.methods.flow.sparse import (
     csr_from_entries,
     csr_product,
+    drop_weak_entries,
     galerkin_product,
     principal_submatrix,
     strong_pattern,
@@ -290,6 +291,36 @@ def test_minres_reusing_an_earlier_interpolation_solves_the_smaller_system():
     assert np.abs(frozen.u[:cells] - exact[:cells]).max() < 0.03
     # a system with an unknown the earlier one did not have cannot reuse it
     assert _previous_unknowns(first, second.free, second.flows) is None
+
+
+def test_dropping_weak_coarse_entries_lumps_them_and_keeps_the_matrix_definite():
+    """Non-Galerkin coarse matrices: each dropped entry goes to its row's diagonal, so the
+    result dominates the original (smallest eigenvalue not lower), and the V-cycle built
+    with them still preconditions MINRES to the residual of the Galerkin one."""
+    rng = np.random.default_rng(5)
+    factor = sp.random(150, 150, density=0.05, random_state=6, format="csr")
+    matrix = (factor @ factor.T + 0.1 * sp.identity(150)).tocsr()
+    dropped = drop_weak_entries(matrix, 0.1)
+    dense, diagonal = matrix.toarray(), matrix.diagonal()
+    weak = (np.abs(dense) < 0.1 * np.sqrt(np.outer(diagonal, diagonal))) & (dense != 0)
+    weak &= ~np.eye(150, dtype=bool)
+    expected = np.where(weak, 0.0, dense)
+    expected[np.diag_indices(150)] += np.abs(np.where(weak, dense, 0.0)).sum(axis=1)
+    assert weak.any() and dropped.nnz == matrix.nnz - weak.sum()
+    assert np.abs(dropped.toarray() - expected).max() < 1e-12
+    assert np.linalg.eigvalsh(expected).min() >= np.linalg.eigvalsh(dense).min() - 1e-12
+    with pytest.raises(ValueError, match="no diagonal"):
+        drop_weak_entries(sp.csr_matrix(np.array([[0.0, 1.0], [1.0, 2.0]])), 0.1)
+    value = np.full((3, 12, 12, 12), np.nan)
+    value[:, [0, -1], :, :] = value[:, :, [0, -1], :] = value[:, :, :, [0, -1]] = 0.0
+    value[:, 5:7, 5:7, 5:7] = 1.0
+    system = build_system(
+        value, 0.5 + rng.random((3, *value.shape)), neighbourhood(7), alpha=1 / 3, reg=0.0025
+    )
+    settings = dict(inner="amg", rtol=1e-3, softness=1e-3, maxiter=40)
+    galerkin = solve_saddle(system.A, system.B, system.f, system.g, **settings)
+    sparser = solve_saddle(system.A, system.B, system.f, system.g, coarse_drop=0.05, **settings)
+    assert sparser.residual <= 2 * galerkin.residual and sparser.residual < 1e-2
 
 
 def test_submatrices_match_scipy_slicing():

@@ -53,6 +53,7 @@ from scipy.sparse.linalg import LinearOperator, cg, spilu
 
 from fourd.methods.flow.sparse import (
     csr_product,
+    drop_weak_entries,
     galerkin_product,
     principal_submatrix,
     strong_pattern,
@@ -246,13 +247,17 @@ def _multilevel(levels: list, A: sp.csr_matrix) -> MultilevelSolver:
     return ml
 
 
-def _level(A: sp.csr_matrix, P: sp.csr_matrix):
+def _level(A: sp.csr_matrix, P: sp.csr_matrix, coarse_drop: float = 0.0):
     """One level of a hierarchy and the next coarser matrix, the Galerkin product ``P^T A P``
-    (on all cores, without ``A P``: :func:`.sparse.galerkin_product`)."""
+    (on all cores, without ``A P``: :func:`.sparse.galerkin_product`), its weak entries
+    lumped onto its diagonal if ``coarse_drop`` > 0 (:func:`.sparse.drop_weak_entries`)."""
     level = MultilevelSolver.Level()
     # the restriction is P's transpose as a view, not a second copy of P
     level.A, level.P, level.R = A, P, P.T
-    return level, galerkin_product(P.T.tocsr(), A, P)
+    coarse = galerkin_product(P.T.tocsr(), A, P)
+    if coarse_drop > 0:
+        coarse = drop_weak_entries(coarse, coarse_drop)
+    return level, coarse
 
 
 def _direct_interpolation(A: sp.csr_matrix, theta: float) -> sp.csr_matrix | None:
@@ -309,6 +314,7 @@ def amg_hierarchy(
     max_coarse: int = 500,
     max_levels: int = 10,
     interpolation_entries: int | None = None,
+    coarse_drop: float = 0.0,
 ):
     """The Ruge-Stueben AMG hierarchy of ``S`` [n, n] (SPD) for the V-cycle of ``inner="amg"``.
 
@@ -321,6 +327,8 @@ def amg_hierarchy(
 
     ``interpolation_entries``: keep only this many largest entries of each row of every
     interpolation (:func:`.sparse.truncate_rows`; None: all, pyamg's hierarchy).
+    ``coarse_drop``: drop the weak entries of every coarse matrix, lumped onto its diagonal
+    (:func:`.sparse.drop_weak_entries`; 0: none, Galerkin coarse matrices).
     Smoothers: :data:`_PRESMOOTHERS` / :data:`_POSTSMOOTHERS`."""
     levels = []
     A = sp.csr_matrix(S)
@@ -330,7 +338,7 @@ def amg_hierarchy(
             break
         if interpolation_entries is not None:
             P = truncate_rows(P, interpolation_entries)
-        level, A = _level(A, P)
+        level, A = _level(A, P, coarse_drop)
         levels.append(level)
     return _multilevel(levels, A)
 
@@ -396,18 +404,20 @@ def frozen_hierarchy(interpolations: tuple, coarse_matrices: tuple) -> Multileve
     return _multilevel(levels, coarse_matrices[-1])
 
 
-def restricted_hierarchy(S: sp.csr_matrix, interpolations: tuple) -> MultilevelSolver:
+def restricted_hierarchy(
+    S: sp.csr_matrix, interpolations: tuple, coarse_drop: float = 0.0
+) -> MultilevelSolver:
     """An AMG hierarchy for ``S`` [n, n] from given interpolation operators (finest first,
     the first with ``n`` rows, each next one's rows the previous one's columns: e.g.
     :func:`restrict_interpolations` of an earlier hierarchy's).
 
     The coarse matrices are the Galerkin products ``P^T A P`` with ``S`` (so the V-cycle
     stays a symmetric positive definite preconditioner). Skips the strength, splitting and
-    interpolation set-up of every level."""
+    interpolation set-up of every level. ``coarse_drop`` as in :func:`amg_hierarchy`."""
     levels = []
     A = S
     for P in interpolations:
-        level, A = _level(A, P)
+        level, A = _level(A, P, coarse_drop)
         levels.append(level)
     return _multilevel(levels, A)
 
@@ -571,6 +581,7 @@ def solve_saddle(
     reuse: tuple | None = None,
     reuse_coarse: tuple | None = None,
     interpolation_entries: int | None = None,
+    coarse_drop: float = 0.0,
     overwrite_x0: bool = False,
 ) -> SaddleSolution:
     """Solve ``[[A, B^T], [B, -softness I]] [u; lambda] = [f; g]`` by preconditioned MINRES.
@@ -609,6 +620,13 @@ def solve_saddle(
         the solve's peak 4.0 -> 3.2 GB (0.7 GB of input included); crane 18.7 -> 12.9 s,
         2.85e-2 -> 2.81e-2; dfaust-hopping 21.4 -> 14.3-15.5 s, 8.52e-3 -> 8.47e-3. But the
         flow method's squash-ball output came out worse with it (``Options``).
+    coarse_drop : float
+        With ``inner="amg"``: drop the weak entries of the coarse matrices, lumped onto their
+        diagonals (:func:`amg_hierarchy`; 0: none). Measured on the first flow systems at
+        resolution 64 (40 MINRES steps): squash-ball 0 -> 0.05: 95.8 -> 77.8 s, residual
+        1.76e-2 -> 1.82e-2, first coarse level 87M -> 16M nonzeros; crane 0 -> 0.02 / 0.05:
+        17.6 -> 16.2 / 14.6 s, 2.85e-2 -> 2.96e-2 / 2.99e-2 (0.1: 64 s, the coarsening
+        stalls).
     overwrite_x0 : bool
         Iterate in ``x0``'s memory (float64 [n + m]) instead of a copy.
 
@@ -639,10 +657,10 @@ def solve_saddle(
             if reuse is None:
                 ml = amg_hierarchy(
                     S, max_coarse=_AMG_SETUP["max_coarse"],
-                    interpolation_entries=interpolation_entries,
+                    interpolation_entries=interpolation_entries, coarse_drop=coarse_drop,
                 )
             else:
-                ml = restricted_hierarchy(S, reuse)
+                ml = restricted_hierarchy(S, reuse, coarse_drop)
             finest = None
             if len(ml.levels) > 1:
                 # the finest level sweeps A + B^T B / gamma through A and B^T (in b's double

@@ -457,6 +457,70 @@ def principal_submatrix(
     )
 
 
+@numba.njit(cache=True, inline="always")
+def _is_weak(i, j, value, diagonal, theta):
+    return j != i and abs(value) < theta * np.sqrt(abs(diagonal[i] * diagonal[j]))
+
+
+@numba.njit(cache=True)
+def _strong_counts(indptr, indices, data, diagonal, theta, lengths):
+    """Entries kept per row (``lengths[i + 1]``); returns the first row with no diagonal
+    entry, -1 if none."""
+    for i in range(len(indptr) - 1):
+        has_diagonal = False
+        count = 0
+        for p in range(indptr[i], indptr[i + 1]):
+            j = indices[p]
+            has_diagonal |= j == i
+            if not _is_weak(i, j, data[p], diagonal, theta):
+                count += 1
+        if not has_diagonal:
+            return i
+        lengths[i + 1] = count
+    return -1
+
+
+@numba.njit(cache=True)
+def _strong_fill(indptr, indices, data, diagonal, theta, out_indptr, out_indices, out_data):
+    for i in range(len(indptr) - 1):
+        at = out_indptr[i]
+        lumped = 0.0
+        own = -1
+        for p in range(indptr[i], indptr[i + 1]):
+            j = indices[p]
+            if _is_weak(i, j, data[p], diagonal, theta):
+                lumped += abs(data[p])
+                continue
+            if j == i:
+                own = at
+            out_indices[at] = j
+            out_data[at] = data[p]
+            at += 1
+        out_data[own] += lumped
+
+
+def drop_weak_entries(A: sp.spmatrix, theta: float) -> sp.csr_matrix:
+    """``A`` [n, n] (symmetric, with a positive diagonal) without its off-diagonal entries
+    ``|a_ij| < theta sqrt(a_ii a_jj)``, each dropped ``|a_ij|`` added to ``a_ii``.
+
+    The change is ``A' - A = L - E`` with ``E`` the dropped entries and ``L`` the diagonal of
+    their row sums of magnitudes, a diagonally dominant, so positive semidefinite, matrix:
+    ``A'`` is at least as positive definite as ``A``. For sparser coarse levels of the
+    V-cycle (a non-Galerkin coarse matrix; the V-cycle stays symmetric positive definite)."""
+    A = sp.csr_matrix(A)
+    diagonal = A.diagonal()
+    lengths = np.zeros(A.shape[0] + 1, dtype=np.int64)
+    bad = _strong_counts(A.indptr, A.indices, A.data, diagonal, float(theta), lengths)
+    if bad >= 0:
+        raise ValueError(f"row {bad} has no diagonal entry")
+    indptr = np.cumsum(lengths).astype(A.indptr.dtype)
+    del lengths
+    indices = np.empty(indptr[-1], dtype=A.indices.dtype)
+    data = np.empty(indptr[-1], dtype=A.dtype)
+    _strong_fill(A.indptr, A.indices, A.data, diagonal, float(theta), indptr, indices, data)
+    return sp.csr_matrix((data, indices, indptr), shape=A.shape)
+
+
 @numba.njit(cache=True)
 def _mark_columns(indptr, indices, rows, used):
     for r in range(len(rows)):
