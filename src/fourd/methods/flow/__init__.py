@@ -247,9 +247,16 @@ class Options:
         none, the default; :func:`.sparse.drop_weak_entries`). The first coarse level of
         squash-ball at 64 has 80 nonzeros per row, more work per V-cycle than the finest
         level; 0.05 keeps 16M of its 87M and the first solve took 77.8 s instead of 95.8 at
-        about the same residual (1.82e-2 against 1.76e-2, the captured system). Off by
-        default until the bench shows what it does to the output and the mass conservation
-        (one interpolation entry per row also kept the residual and lost both).
+        about the same residual (1.82e-2 against 1.76e-2, the captured system). But like
+        one interpolation entry per row, it keeps the residual and loses output quality:
+        bench at 2b70b99 (Chamfer / completeness-95 / mass conservation error / s/frame,
+        0 -> 0.05): at 64 squash-ball 0.0029 / 0.0069 / 0.9% / 13.6 -> 0.0034 / 0.0080 /
+        1.0% / 10.7 (over issue 5's Chamfer bound; peak 3699 -> 3572 MiB), dfaust-hopping
+        0.0029 / 0.0116 / 0.7% / 3.73 -> 0.0030 / 0.0123 / 0.7% / 3.05 (over its
+        completeness bound), crane 0.0021 / 0.0044 / 2.79 -> 0.0021 / 0.0045 / 2.24,
+        splitting-blob 0.0027 / 0.0054 / 2.86 -> 0.0027 / 0.0052 / 2.26; at 32 squash-ball
+        0.0026 / 0.0047 / 1.3% -> 0.0037 / 0.0101 / 1.8%, the other three the same surfaces,
+        5-10% faster. So it is off by default.
     outward_cosine : float
         A face of a data cell is an outward boundary face (first-iteration weight 0) when the
         cell's mean normal makes a cosine above this with the face direction.
