@@ -51,6 +51,35 @@ def test_the_registration_starts_from_the_carried_motion_when_that_explains_more
     assert error(V - truth) == pytest.approx(from_old_place)
 
 
+def test_each_template_component_takes_the_seed_that_explains_more_of_the_frame():
+    """Two separate spheres: the carried motion puts the big one where its points are and
+    the small one onto the big one's points (a velocity from a step in which it was lost
+    and found again); the seed carries the big one and keeps the small one predicted."""
+    blob = MovingBlob()
+    V, F = _sphere_template(blob)
+    small = 0.3 * V + np.array([2.5, 0.0, 0.0])
+    vertices, faces = np.r_[V, small], np.r_[F, F + len(V)]
+    icp = ArapIcp(K.slide_precompute(vertices, faces), faces)
+    assert icp.component_count == 2
+    big = np.arange(len(vertices)) < len(V)
+    shift = np.array([0.0, 0.0, 1.0])
+    frame = vertices + np.where(big[:, None], shift, 0.0)  # where the points are
+    points = frame[::2]
+    predicted = vertices.copy()  # the big sphere not yet moved
+    carried = frame.copy()
+    carried[~big] = 0.3 * V + shift  # the small one inside the big one's points
+    before = icp.unexplained(predicted, points)
+    seed = icp.seed(predicted, carried, points, before)
+    np.testing.assert_array_equal(seed[big], carried[big])
+    np.testing.assert_array_equal(seed[~big], predicted[~big])
+    assert icp.unexplained(seed, points) == 0.0
+    # one component: the whole carried template or the whole prediction, as before
+    one = ArapIcp(K.slide_precompute(V, F), F)
+    assert one.component_count == 1
+    np.testing.assert_array_equal(one.seed(V, V + shift, V[::2] + shift, 1.0), V + shift)
+    np.testing.assert_array_equal(one.seed(V, V + shift, V[::2], 0.0), V)
+
+
 def test_unexplained_fraction_counts_the_points_far_from_every_vertex():
     vertices = np.zeros((1, 3))
     points = np.array([[0.5, 0, 0], [0, 1.5, 0], [0, 0, -3.0], [0.9, 0, 0]])

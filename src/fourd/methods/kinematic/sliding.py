@@ -774,8 +774,7 @@ def slide_step(
             seed = start
             if registration_velocity is not None:
                 carried = vertices + dt * registration_velocity
-                if registration.unexplained(carried, surface.points) < before:
-                    seed = carried
+                seed = registration.seed(start, carried, surface.points, before)
             registered, after = registration.register_frame(
                 seed, surface.points, surface.normals
             )
