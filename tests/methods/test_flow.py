@@ -11,7 +11,7 @@ import scipy.sparse as sp
 import trimesh
 from scipy.sparse.linalg import spsolve
 
-from fourd import InputError, MeshSequence, PointCloudSequence, synth
+from fourd import AnimatedMesh, InputError, MeshSequence, PointCloudSequence, synth
 from fourd.geometry.field import Field4D
 from fourd.geometry.neighbors import point_spacing
 from fourd.methods import method_options
@@ -19,7 +19,9 @@ from fourd.methods.flow import (
     FlowField,
     Options,
     mass_conservation_error,
+    off_surface_fractions,
     reconstruct,
+    reconstruct_with_diagnostics,
     run,
     solve_saddle,
 )
@@ -853,8 +855,9 @@ def test_coherent_animation_is_closed_on_the_surface_and_returns():
     bound of 0.055 (0.045 before b1c0621)."""
     frames, radius = 8, 0.5
     seq, _ = _squash_sequence(frames, radius=radius, hole=False)
-    anim = reconstruct(seq, Options(**FAST, coherent=True))
+    anim, figures = reconstruct_with_diagnostics(seq, Options(**FAST, coherent=True))
     assert anim.vertices.shape[0] == frames and len(anim.faces)
+    assert figures["coherent_off_surface"] == 0.0
     for t in range(frames):
         a = np.exp(0.3 * np.sin(2 * np.pi * t / frames))
         radii = radius * np.array([1 / np.sqrt(a), a, 1 / np.sqrt(a)])
@@ -874,6 +877,29 @@ def test_coherent_animation_reaches_a_missing_first_frame():
     for t in range(4):
         _check_closed_manifold(anim.vertices[t], anim.faces)
     assert not np.allclose(anim.vertices[0], anim.vertices[1])
+
+
+def test_off_surface_fractions_count_vertices_far_from_the_surface_and_the_points():
+    """A sphere's signed distance: vertices on it are on; a piece 1.0 away is off, unless its
+    frame has points there."""
+    h = 0.1
+    axes = [-2.0 + h * np.arange(41)] * 3
+    grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1)
+    distance = (np.linalg.norm(grid, axis=-1) - 1.0).astype(np.float32)
+    field = FlowField(np.stack([distance, distance]), np.full(3, -2.0), h, np.array([0.0, 1.0]))
+    rng = np.random.default_rng(0)
+    on = rng.normal(size=(90, 3))
+    on /= np.linalg.norm(on, axis=1, keepdims=True)
+    piece = np.array([0.0, 0.0, 2.0]) + 0.01 * rng.normal(size=(10, 3))
+    vertices = np.concatenate([on, piece])
+    anim = AnimatedMesh(
+        faces=np.array([[0, 1, 2]]), vertices=np.stack([vertices, vertices]),
+        times=np.array([0.0, 1.0]),
+    )
+    np.testing.assert_allclose(off_surface_fractions(anim, field, 3 * h), [0.1, 0.1])
+    np.testing.assert_allclose(
+        off_surface_fractions(anim, field, 3 * h, [on, vertices]), [0.1, 0.0]
+    )
 
 
 def test_field_outside_grid_is_positive():
