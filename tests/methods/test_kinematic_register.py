@@ -80,6 +80,33 @@ def test_each_template_component_takes_the_seed_that_explains_more_of_the_frame(
     np.testing.assert_array_equal(one.seed(V, V + shift, V[::2], 0.0), V)
 
 
+def test_a_registration_that_leaves_much_of_the_frame_unexplained_is_given_up():
+    """The shape has split into two copies, each 1.2 away: the template can cover one, so
+    its registration leaves about half of the points unexplained, more than give_up, and the
+    step keeps the paper's projection instead; with give_up 1 it is kept."""
+    blob = MovingBlob()
+    V, F = _sphere_template(blob, resolution=0.15)
+    pre = K.slide_precompute(V, F)
+    rest = blob.surface(6000, 0.0, seed=1)
+    normals = blob.gradient(rest, np.zeros(len(rest)))[:, :3]
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    shift = np.array([1.2, 0.0, 0.0])
+    points = np.concatenate([rest + 2 * shift, rest - 2 * shift])
+    surface = FrameSurface(points, np.concatenate([normals, normals]), 0.05)
+    options = K.SlideOptions(rigid_guess=False)
+
+    def registered(give_up):
+        icp = ArapIcp(pre, F, RegisterOptions(give_up=give_up), 2 * pre.edge_length)
+        _, _, info = slide_step(
+            pre, blob, V, 0.0, 1.0, options=options, surface=surface, registration=icp
+        )
+        return info.registered, info.unexplained
+
+    kept, before = registered(1.0)
+    assert kept and before > 0.9
+    assert registered(RegisterOptions().give_up) == (False, before)
+
+
 def test_unexplained_fraction_counts_the_points_far_from_every_vertex():
     vertices = np.zeros((1, 3))
     points = np.array([[0.5, 0, 0], [0, 1.5, 0], [0, 0, -3.0], [0.9, 0, 0]])

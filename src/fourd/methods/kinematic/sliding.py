@@ -780,11 +780,12 @@ def slide_step(
             )
             # kept only when it explains more of the frame: where the template cannot
             # follow (a shape that splits) it would stretch the template over both parts
+            kept = after < before and after <= registration.options.give_up
             log.debug(
                 "t=%g: large-motion registration, unexplained %.3f -> %.3f%s",
-                next_time, before, after, "" if after < before else " (rejected)",
+                next_time, before, after, "" if kept else " (rejected)",
             )
-            if after < before:
+            if kept:
                 start = registered
                 registered_step = True
     guess = _project(
