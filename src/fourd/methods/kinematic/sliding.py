@@ -780,10 +780,21 @@ def slide_step(
             )
             # kept only when it explains more of the frame: where the template cannot
             # follow (a shape that splits) it would stretch the template over both parts
-            kept = after < before and after <= registration.options.give_up
+            kept = after < before
+            plain = float("nan")
+            if kept and after > registration.options.give_up:
+                # the paper's step from the prediction, as the registration's rival
+                projected = _project(
+                    target, start, options.projection_iterations, max_step=max_step,
+                    tolerance=tolerance,
+                )
+                plain = registration.unexplained(projected, surface.points)
+                kept = after < plain
             log.debug(
-                "t=%g: large-motion registration, unexplained %.3f -> %.3f%s",
-                next_time, before, after, "" if kept else " (rejected)",
+                "t=%g: large-motion registration, unexplained %.3f -> %.3f%s%s",
+                next_time, before, after,
+                "" if np.isnan(plain) else f" (projected prediction {plain:.3f})",
+                "" if kept else " (rejected)",
             )
             if kept:
                 start = registered
