@@ -1101,7 +1101,7 @@ def test_reconstruct_with_diagnostics_reports_the_mass_error(monkeypatch):
 
     scans = synth.scan(synth.scene("squash-ball", frames=2), resolution=32)
     meshes = MeshSequence(meshes=((np.eye(3), np.array([[0, 1, 2]])),) * 2)
-    fake = SimpleNamespace(meshes=meshes, animation=None, mass_error=0.017)
+    fake = SimpleNamespace(meshes=meshes, animation=None, mass_error=0.017, off_surface=None)
     monkeypatch.setattr(flow, "run", lambda seq, options=None: fake)
     result, diagnostics = reconstruct_with_diagnostics(scans, method="flow")
     assert result is meshes and diagnostics == {"mass_conservation_error": 0.017}

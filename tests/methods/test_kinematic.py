@@ -151,9 +151,9 @@ class BlobAndPlate:
 class AcceptingRegistration:
     """Stands in for the large-motion registration: runs at every step, returns its seed
     unchanged and reports that it explains more of the frame, so the step counts as
-    registered."""
+    registered (``give_up`` 1: never weighed against the projection)."""
 
-    options = RegisterOptions(threshold=0.0)
+    options = RegisterOptions(threshold=0.0, give_up=1.0)
 
     def __init__(self):
         self.calls = 0
