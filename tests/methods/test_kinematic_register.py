@@ -218,6 +218,8 @@ def test_register_options_are_validated():
         RegisterOptions(refine_iterations=-1)
     with pytest.raises(ValueError):
         RegisterOptions(refine_weight=0.0)
+    with pytest.raises(ValueError):
+        RegisterOptions(give_up=-0.1)
 
 
 def test_the_warm_started_search_finds_the_k_d_tree_pairs_as_the_targets_move():

@@ -198,6 +198,8 @@ class RegisterOptions:
             and self.end_radius > 0
         ):
             raise ValueError("weight, refine_weight, start_radius and end_radius must be positive")
+        if self.give_up < 0:
+            raise ValueError(f"give_up must not be negative, got {self.give_up}")
         if self.retry_iterations < 0 or self.retry_radius <= 0:
             raise ValueError("retry_iterations must not be negative, retry_radius positive")
         if self.refine_iterations < 0:
