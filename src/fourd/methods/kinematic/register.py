@@ -52,9 +52,9 @@ import numba
 import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
-from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
+from fourd.geometry.marching import vertex_components
 from fourd.geometry.neighbors import bucket_grid, nearest_within
 from fourd.geometry.normals import vertex_normals
 from fourd.methods.kinematic.arap import arap_rhs, arap_rotations
@@ -367,10 +367,7 @@ class ArapIcp:
         self.weight = options.weight * scale
         self.refine_weight = options.refine_weight * scale
         self._factors: dict[float, object] = {}
-        n = len(diagonal)
-        edges = self.faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
-        adjacency = sp.coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(n, n))
-        self.component_count, self.components = connected_components(adjacency, directed=False)
+        self.component_count, self.components = vertex_components(self.faces, len(diagonal))
 
     def _solve(self, rhs: np.ndarray, weight: float) -> np.ndarray:
         """``(L + weight I)^-1 rhs`` [N, 3]."""

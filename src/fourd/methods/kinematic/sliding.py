@@ -766,6 +766,7 @@ def slide_step(
             if converged:
                 break
     registered_step, before = False, float("nan")
+    guess = None  # the projection of 5.1, when a rejected registration already made it
     if registration is not None and surface is not None and len(surface.points):
         before = registration.unexplained(start, surface.points)
         if registration_due(before, previous_registration, registration.options):
@@ -784,11 +785,11 @@ def slide_step(
             plain = float("nan")
             if kept and after > registration.options.give_up:
                 # the paper's step from the prediction, as the registration's rival
-                projected = _project(
+                guess = _project(
                     target, start, options.projection_iterations, max_step=max_step,
                     tolerance=tolerance,
                 )
-                plain = registration.unexplained(projected, surface.points)
+                plain = registration.unexplained(guess, surface.points)
                 kept = after < plain
             log.debug(
                 "t=%g: large-motion registration, unexplained %.3f -> %.3f%s%s",
@@ -797,11 +798,12 @@ def slide_step(
                 "" if kept else " (rejected)",
             )
             if kept:
-                start = registered
+                start, guess = registered, None
                 registered_step = True
-    guess = _project(
-        target, start, options.projection_iterations, max_step=max_step, tolerance=tolerance
-    )
+    if guess is None:
+        guess = _project(
+            target, start, options.projection_iterations, max_step=max_step, tolerance=tolerance
+        )
     if options.linearize_at == "guess":
         # the same tangential-motion constraint, linearised at the initial guess on
         # f(., t') = 0 instead of at p^t: n' . (p' - g) + f(g, t') = 0 with n' = grad_x f(g, t')

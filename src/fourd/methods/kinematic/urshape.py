@@ -12,12 +12,10 @@ import itertools
 import logging
 
 import numpy as np
-import scipy.sparse as sp
-from scipy.sparse.csgraph import connected_components
 
 from fourd.geometry.field import Field4D
 from fourd.geometry.laplacian import laplacian_smooth
-from fourd.geometry.marching import compact, marching_cubes
+from fourd.geometry.marching import compact, marching_cubes, vertex_components
 
 log = logging.getLogger("fourd.methods.kinematic.urshape")
 
@@ -54,11 +52,7 @@ def remove_small_components(vertices, faces, min_faces: int):
     """Drop connected components with fewer than ``min_faces`` triangles."""
     if min_faces <= 1 or len(faces) == 0:
         return vertices, faces
-    n = len(vertices)
-    i = faces.ravel()
-    j = np.roll(faces, 1, axis=1).ravel()
-    graph = sp.csr_matrix((np.ones(len(i)), (i, j)), shape=(n, n))
-    _, labels = connected_components(graph, directed=False)
+    _, labels = vertex_components(faces, len(vertices))
     face_label = labels[faces[:, 0]]
     sizes = np.bincount(face_label)
     keep = sizes[face_label] >= min_faces
