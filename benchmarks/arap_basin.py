@@ -1,0 +1,136 @@
+"""Where ``kinematic``'s correspondence error on a scene comes from: does the as-rigid-as-possible
+prior prefer the tracked positions or the true ones?
+
+Run: ``.venv/bin/python benchmarks/arap_basin.py [SCENE] [--frames 11,13,19] [--iterations 40]``
+(default ``crane``, standard protocol, about a minute on 2 cores).
+
+It reconstructs the scene with ``kinematic``, then maps every template vertex to the truth:
+the closest point of the truth's frame 0 (its triangle and barycentric coordinates, plus the
+offset along the normal), carried to every frame by the same coordinates. Per listed frame it
+prints
+
+* ``error``: mean distance between tracked and true positions (fraction of the diagonal);
+* ``E tracked`` / ``E truth``: the normalised ARAP energy of the tracked and of the true
+  positions against the template (:func:`fourd.methods.kinematic.arap.arap_energy`);
+* ``relaxed from tracked`` / ``from truth``: error and energy after ``--iterations``
+  local / global ARAP steps with every vertex held to the tangent plane of the closest point of
+  the *exact* truth surface of that frame (the sliding's constraint (2), without noise), from
+  the tracked and from the true positions.
+
+If the tracked positions relax to a lower energy than the truth's while staying far from it,
+the prior itself prefers them; if they stay above the truth's energy, the tracking sits in a
+wrong local minimum.
+
+Then, per listed frame, the largest connected regions of the template whose error exceeds twice
+the frame's mean: their vertex count, centre at frame 0, mean error, and the rotation that best
+maps their true onto their tracked positions (degrees) with ``|cos|`` between its axis and the
+region's longest principal axis (near 1: a twist of a limb about itself). Needs a scene whose
+truth has faces (not ``dfaust-hopping``).
+"""
+
+from __future__ import annotations
+
+import argparse
+
+import numpy as np
+import trimesh
+
+from fourd import synth
+from fourd.evaluate.bench import HELD_OUT_SCENES, PROTOCOL, STANDARD_SCENES
+from fourd.geometry.marching import vertex_components
+from fourd.geometry.rotations import procrustes
+from fourd.methods import reconstruct
+from fourd.methods.kinematic.arap import arap_energy, arap_rhs, arap_rotations
+from fourd.methods.kinematic.sliding import ConstrainedSolver, slide_precompute
+
+
+def truth_positions(template: np.ndarray, truth_vertices: np.ndarray, truth_faces: np.ndarray):
+    """Positions [T, N, 3] of the ``template`` [N, 3] vertices carried by the truth [T, V, 3]:
+    barycentric coordinates on the closest triangle of frame 0 plus the normal offset."""
+    first = trimesh.Trimesh(truth_vertices[0], truth_faces, process=False)
+    closest, _, triangle = trimesh.proximity.closest_point(first, template)
+    corners = truth_faces[triangle]
+    bary = trimesh.triangles.points_to_barycentric(truth_vertices[0][corners], closest)
+    height = np.einsum("ij,ij->i", template - closest, first.face_normals[triangle])
+    out = np.empty((len(truth_vertices), len(template), 3))
+    for k, frame in enumerate(truth_vertices):
+        normals = trimesh.Trimesh(frame, truth_faces, process=False).face_normals[triangle]
+        out[k] = np.einsum("ij,ijk->ik", bary, frame[corners]) + height[:, None] * normals
+    return out
+
+
+def relax_on_surface(pre, start: np.ndarray, surface: trimesh.Trimesh, iterations: int):
+    """``iterations`` ARAP local / global steps from ``start`` [N, 3], every vertex held to the
+    tangent plane of its closest point on ``surface`` (re-found each step)."""
+    x = start.copy()
+    everyone = np.ones(len(x), dtype=bool)
+    for _ in range(iterations):
+        closest, _, triangle = trimesh.proximity.closest_point(surface, x)
+        normals = surface.face_normals[triangle]
+        offsets = np.einsum("ij,ij->i", normals, closest)
+        solver = ConstrainedSolver(pre, normals, offsets, everyone, 1e-4)
+        x = solver.solve(arap_rhs(pre, arap_rotations(pre, x)), x)
+    return x
+
+
+def error_regions(rest, faces, tracked, true, diagonal, largest=4, least=20):
+    """Lines describing the ``largest`` connected regions (at least ``least`` vertices) whose
+    error exceeds twice the mean; see the module docstring."""
+    error = np.linalg.norm(tracked - true, axis=1) / diagonal
+    high = error > 2.0 * error.mean()
+    count, labels = vertex_components(faces[high[faces].all(axis=1)], len(rest))
+    sizes = np.bincount(labels[high], minlength=count)
+    lines = []
+    for region in np.argsort(sizes)[::-1][:largest]:
+        members = high & (labels == region)
+        if members.sum() < least:
+            break
+        fit = procrustes(true[members], tracked[members])
+        angle = np.degrees(np.arccos(np.clip((np.trace(fit.rotation) - 1.0) / 2.0, -1.0, 1.0)))
+        r = fit.rotation
+        axis = np.array([r[2, 1] - r[1, 2], r[0, 2] - r[2, 0], r[1, 0] - r[0, 1]])
+        axis /= max(float(np.linalg.norm(axis)), 1e-12)
+        _, vectors = np.linalg.eigh(np.cov((rest[members] - rest[members].mean(axis=0)).T))
+        lines.append(
+            f"  region of {members.sum()} vertices at {np.round(rest[members].mean(axis=0), 2)}: "
+            f"error {error[members].mean():.4f}, rotation {angle:.0f} deg, "
+            f"|cos(axis, region axis)| {abs(float(axis @ vectors[:, -1])):.2f}"
+        )
+    return lines
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("scene", nargs="?", default="crane")
+    parser.add_argument("--frames", default="11,13,19", help="frame indices, comma-separated")
+    parser.add_argument("--iterations", type=int, default=40)
+    args = parser.parse_args()
+    scene = {s.key: s for s in STANDARD_SCENES + HELD_OUT_SCENES}[args.scene]
+    truth = synth.scene(scene.name, frames=scene.frames, seed=0, **scene.options)
+    scans = synth.scan(truth, resolution=scene.resolution, seed=0, **PROTOCOL)
+    result = reconstruct(scans, method="kinematic")
+    tracked, faces = np.asarray(result.vertices), np.asarray(result.faces)
+    truth_vertices, truth_faces = np.asarray(truth.vertices), np.asarray(truth.faces)
+    true = truth_positions(tracked[0], truth_vertices, truth_faces)
+    diagonal = float(np.linalg.norm(np.ptp(truth_vertices[0], axis=0)))
+    pre = slide_precompute(tracked[0], faces)
+
+    def error(x, k):
+        return float(np.linalg.norm(x - true[k], axis=1).mean()) / diagonal
+
+    print(f"{args.scene}: error / E tracked / E truth / relaxed from tracked (error, E) / "
+          f"from truth (error, E), {args.iterations} iterations")
+    for k in (int(f) for f in args.frames.split(",")):
+        surface = trimesh.Trimesh(truth_vertices[k], truth_faces, process=False)
+        from_tracked = relax_on_surface(pre, tracked[k], surface, args.iterations)
+        from_truth = relax_on_surface(pre, true[k], surface, args.iterations)
+        print(f"frame {k}: {error(tracked[k], k):.4f} / {arap_energy(pre, tracked[k]):.4f} / "
+              f"{arap_energy(pre, true[k]):.4f} / ({error(from_tracked, k):.4f}, "
+              f"{arap_energy(pre, from_tracked):.4f}) / ({error(from_truth, k):.4f}, "
+              f"{arap_energy(pre, from_truth):.4f})", flush=True)
+        for line in error_regions(tracked[0], faces, tracked[k], true[k], diagonal):
+            print(line)
+
+
+if __name__ == "__main__":
+    main()
