@@ -162,7 +162,7 @@ class AcceptingRegistration:
         self.calls += 1
         return 1.0 / self.calls
 
-    def register_frame(self, seed, points, normals):
+    def register_frame(self, seed, points, normals, previous=None):
         return seed.copy(), self.unexplained(seed, points)
 
 

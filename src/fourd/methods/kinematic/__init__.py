@@ -194,6 +194,14 @@ class Options:
         (:mod:`.register`; beyond the paper). After a kept registration, the projection of
         5.1 may move a vertex at most 1.5 median edges; one that would move farther is left
         unconstrained for that step (``SlideOptions.projection_limit``).
+    shape_memory : float
+        Weight of the previous frame's shape in the large-motion registration's
+        as-rigid-as-possible term (``RegisterOptions.previous_shape``; 0: the template's rest
+        shape alone). 0.5 suits captured people and animals, whose skin stretches and twists
+        (correspondence mean / last frame, crane 0.0073 / 0.0119 -> 0.0068 / 0.0115,
+        crane-50 0.0235 / 0.0304 -> 0.0192 / 0.0227, horse-gallop 0.0087 -> 0.0077), not
+        rigid parts, twisting tubes or shapes that split (touching-spheres last frame 0.0205
+        -> 0.0295, splitting-blob completeness-95 0.011 -> 0.22), so it is off by default.
     still_normals : float
         With the data term: where the 4D implicit moves less than this many median edges per
         step, constraint (2) takes its normal from the implicit, which is smooth over time,
@@ -242,6 +250,7 @@ class Options:
     data_term: bool = True
     data_bandwidth: float = 0.0
     large_motion: bool = True
+    shape_memory: float = 0.0
     still_normals: float = 0.2
     temporal_smoothing: int = 1
     smoothing_motion: float = 1.0
@@ -269,6 +278,8 @@ class Options:
             raise ValueError(f"fit_stride must be at least 1, got {self.fit_stride}")
         if self.window < 0 or self.window_overlap < 0:
             raise ValueError("window and window_overlap must not be negative")
+        if not 0.0 <= self.shape_memory < 1.0:
+            raise ValueError(f"shape_memory must lie in [0, 1), got {self.shape_memory}")
         if self.temporal_smoothing < 0:
             raise ValueError("temporal_smoothing must not be negative")
         object.__setattr__(self, "times", tuple(float(t) for t in self.times))
@@ -500,7 +511,10 @@ def animate(
         rigid_guess=options.rigid_guess,
         rigid_neighbours=options.rigid_neighbours,
         # both act only at input times with the data term
-        register=RegisterOptions() if options.large_motion else None,
+        register=(
+            RegisterOptions(previous_shape=options.shape_memory) if options.large_motion
+            else None
+        ),
         projection_limit=PROJECTION_LIMIT,
         still_normals=options.still_normals,
     )

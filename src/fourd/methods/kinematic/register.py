@@ -167,6 +167,23 @@ class RegisterOptions:
         from the previous step, most of it is there from the start. Always carried, a
         reversal overshoots (squash-ball correspondence 0.163 / 0.232 against 0.064 / 0.086
         when chosen).
+    previous_shape : float
+        Weight ``b`` of the previous frame's shape in the registration's ARAP term: the term
+        is ``(1 - b) E_ARAP(rest) + b E_ARAP(previous)``, two energies over the same
+        cotangent weights (so ``L + w I`` and its factorisation stay), each with its own
+        rotations. With 0 (the default) the template's rest shape alone: a stiff ARAP-ICP then
+        pulls every registered frame back towards the rest shape, against the stretch and
+        twist of real skin (the crane truth's edges are 8% longer or shorter than at frame 0
+        in the median at the kick's height, and its upper arms twist 54-64 degrees about
+        themselves; ``benchmarks/arap_basin.py``). ``exp`` runs (20k samples, correspondence
+        mean / last frame) 0 -> 0.5: crane 0.0073 / 0.0119 -> 0.0068 / 0.0115, crane-50
+        0.0235 / 0.0304 -> 0.0192 / 0.0227, crane-90 0.0096 / 0.0151 -> 0.0089 / 0.0110,
+        crane-130 0.0114 / 0.0178 -> 0.0112 / 0.0168, horse-gallop 0.0087 / 0.0043 ->
+        0.0077 / 0.0038; but bending-arm 0.0202 / 0.0338 -> 0.0219 / 0.0391,
+        touching-spheres 0.0163 / 0.0205 -> 0.0177 / 0.0295, elephant-gallop 0.0239 ->
+        0.0248, and splitting-blob completeness-95 0.0112 -> 0.22 (the remembered shape
+        keeps the template stretched over both parts). 1 (the previous shape alone) lost the
+        arms on crane (0.0109 / 0.0354).
     """
 
     threshold: float = 0.03
@@ -186,6 +203,7 @@ class RegisterOptions:
     retry_iterations: int = 10
     retry_radius: float = 10.0
     give_up: float = 0.2
+    previous_shape: float = 0.0
 
     def __post_init__(self):
         if self.iterations < 1 or self.point_stride < 1:
@@ -198,6 +216,8 @@ class RegisterOptions:
             and self.end_radius > 0
         ):
             raise ValueError("weight, refine_weight, start_radius and end_radius must be positive")
+        if not 0.0 <= self.previous_shape < 1.0:
+            raise ValueError(f"previous_shape must lie in [0, 1), got {self.previous_shape}")
         if self.give_up < 0:
             raise ValueError(f"give_up must not be negative, got {self.give_up}")
         if self.retry_iterations < 0 or self.retry_radius <= 0:
@@ -422,18 +442,19 @@ class ArapIcp:
         return seed
 
     def register_frame(
-        self, vertices: np.ndarray, points: np.ndarray, normals: np.ndarray
+        self, vertices: np.ndarray, points: np.ndarray, normals: np.ndarray,
+        previous: np.ndarray | None = None,
     ) -> tuple[np.ndarray, float]:
         """:meth:`register` and, when that leaves more than ``threshold`` of the points
         unexplained, the retry of :class:`RegisterOptions` from its result, kept when it
         explains more. Returns the positions [N, 3] and their :meth:`unexplained` fraction."""
         o = self.options
-        registered = self.register(vertices, points, normals)
+        registered = self.register(vertices, points, normals, previous=previous)
         after = self.unexplained(registered, points)
         if after > o.threshold and o.retry_iterations > 0:
             again = self.register(
                 registered, points, normals,
-                iterations=o.retry_iterations, start_radius=o.retry_radius,
+                iterations=o.retry_iterations, start_radius=o.retry_radius, previous=previous,
             )
             unexplained = self.unexplained(again, points)
             log.debug("registration retried: unexplained %.3f -> %.3f", after, unexplained)
@@ -449,10 +470,13 @@ class ArapIcp:
         *,
         iterations: int | None = None,
         start_radius: float | None = None,
+        previous: np.ndarray | None = None,
     ) -> np.ndarray:
         """Positions [N, 3] of the template registered from ``vertices`` [N, 3] to the frame's
         ``points`` [P, 3] with unit outward ``normals`` [P, 3]; ``iterations`` and
-        ``start_radius`` replace the options' stiff iterations and first radius (a retry).
+        ``start_radius`` replace the options' stiff iterations and first radius (a retry);
+        ``previous`` [N, 3] is the previous frame's shape (``previous_shape``; None: the rest
+        shape alone).
 
         The nearest-point pairs of every iteration after the first are searched warm-started
         from the previous iteration's (:func:`_nearest`): the same pairs as k-d tree queries
@@ -473,6 +497,11 @@ class ArapIcp:
         tree = cKDTree(points, **TREE_OPTIONS)
         to_point, point_lower = np.full(len(x), -1), np.zeros(len(x))
         to_vertex, vertex_lower = np.full(len(points), -1), np.zeros(len(points))
+        remembered = None
+        if previous is not None and o.previous_shape > 0:
+            previous = np.asarray(previous, dtype=np.float64)
+            edges = previous[self.pre.edge_i] - previous[self.pre.edge_j]
+            remembered = self.pre._replace(rest_edges=np.ascontiguousarray(edges))
         for it in range(iterations + o.refine_iterations):
             radius = self._radius(it, iterations, start_radius)
             # model to data: each vertex's nearest point (its tangent-plane projection is a
@@ -484,7 +513,7 @@ class ArapIcp:
                 points, x, bucket_grid(x, cell), None, to_vertex, vertex_lower, radius
             )
             before = x
-            x = self._step(it, iterations, x, points, normals, to_point, to_vertex)
+            x = self._step(it, iterations, x, points, normals, to_point, to_vertex, remembered)
             # the points stay, so no distance between a point and a vertex changes by more
             # than the farthest move of a vertex
             move = _farthest_move(before, x)
@@ -499,18 +528,22 @@ class ArapIcp:
         fraction = min(it / max(iterations - 1, 1), 1.0)
         return self.pre.edge_length * start_radius * (end / start_radius) ** fraction
 
-    def _step(self, it, iterations, x, points, normals, to_point, to_vertex):
+    def _step(self, it, iterations, x, points, normals, to_point, to_vertex, remembered=None):
         """One ARAP-ICP iteration ``it`` (stiff while below ``iterations``) from positions
         ``x`` [N, 3], given each vertex's nearest point ``to_point`` [N] and each point's
-        nearest vertex ``to_vertex`` [P] (-1: none within the radius)."""
+        nearest vertex ``to_vertex`` [P] (-1: none within the radius); ``remembered``: the
+        template's precomputation with the previous frame's edges (``previous_shape``)."""
         o = self.options
         refining = it >= iterations
         weight = self.refine_weight if refining else self.weight
         vn = vertex_normals(x, self.faces)
-        rotations = arap_rotations(self.pre, x)
+        shape = arap_rhs(self.pre, arap_rotations(self.pre, x))
+        if remembered is not None:
+            b = o.previous_shape
+            shape = (1.0 - b) * shape + b * arap_rhs(remembered, arap_rotations(remembered, x))
         targets = np.empty((len(x), 3))
         _targets(x, vn, points, normals, to_point, to_vertex, o.normal_agreement, targets)
-        rhs = arap_rhs(self.pre, rotations) + weight * targets
+        rhs = shape + weight * targets
         solved = self._solve(rhs, weight)
         # stiff steps over-relaxed: with a stiff ARAP the iterates creep along one direction
         return solved + o.relaxation * (solved - x) if 0 < it and not refining else solved

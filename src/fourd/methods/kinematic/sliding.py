@@ -777,7 +777,7 @@ def slide_step(
                 carried = vertices + dt * registration_velocity
                 seed = registration.seed(start, carried, surface.points, before)
             registered, after = registration.register_frame(
-                seed, surface.points, surface.normals
+                seed, surface.points, surface.normals, previous=vertices
             )
             # kept only when it explains more of the frame: where the template cannot
             # follow (a shape that splits) it would stretch the template over both parts
