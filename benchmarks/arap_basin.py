@@ -4,10 +4,10 @@ prior prefer the tracked positions or the true ones?
 Run: ``.venv/bin/python benchmarks/arap_basin.py [SCENE] [--frames 11,13,19] [--iterations 40]``
 (default ``crane``, standard protocol, about a minute on 2 cores).
 
-It reconstructs the scene with ``kinematic``, then maps every template vertex to the truth:
-the closest point of the truth's frame 0 (its triangle and barycentric coordinates, plus the
-offset along the normal), carried to every frame by the same coordinates. Per listed frame it
-prints
+It reconstructs the scene with ``kinematic``, then maps every template vertex to the truth as
+the correspondence metric does (triangle and barycentric coordinates of the closest point of
+the truth's frame 0), plus the offset along that triangle's normal, carried to every frame.
+Per listed frame it prints
 
 * ``error``: mean distance between tracked and true positions (fraction of the diagonal);
 * ``E tracked`` / ``E truth``: the normalised ARAP energy of the tracked and of the true
@@ -37,6 +37,7 @@ import trimesh
 
 from fourd import synth
 from fourd.evaluate.bench import HELD_OUT_SCENES, PROTOCOL, STANDARD_SCENES
+from fourd.evaluate.sampling import bind_to_surface, bound_positions, sample_surface
 from fourd.geometry.marching import vertex_components
 from fourd.geometry.rotations import procrustes
 from fourd.methods import reconstruct
@@ -46,17 +47,18 @@ from fourd.methods.kinematic.sliding import ConstrainedSolver, slide_precompute
 
 def truth_positions(template: np.ndarray, truth_vertices: np.ndarray, truth_faces: np.ndarray):
     """Positions [T, N, 3] of the ``template`` [N, 3] vertices carried by the truth [T, V, 3]:
-    barycentric coordinates on the closest triangle of frame 0 plus the normal offset."""
-    first = trimesh.Trimesh(truth_vertices[0], truth_faces, process=False)
-    closest, _, triangle = trimesh.proximity.closest_point(first, template)
-    corners = truth_faces[triangle]
-    bary = trimesh.triangles.points_to_barycentric(truth_vertices[0][corners], closest)
-    height = np.einsum("ij,ij->i", template - closest, first.face_normals[triangle])
-    out = np.empty((len(truth_vertices), len(template), 3))
-    for k, frame in enumerate(truth_vertices):
-        normals = trimesh.Trimesh(frame, truth_faces, process=False).face_normals[triangle]
-        out[k] = np.einsum("ij,ijk->ik", bary, frame[corners]) + height[:, None] * normals
-    return out
+    the correspondence metric's binding to the closest point of frame 0
+    (:func:`~fourd.evaluate.sampling.bind_to_surface`), plus the offset along that triangle's
+    normal, so that frame 0 is the template itself."""
+    samples = sample_surface(truth_vertices[0], truth_faces, 60_000, np.random.default_rng(0))
+    binding = bind_to_surface(template, truth_vertices[0], truth_faces, samples)
+    corners = truth_vertices[:, truth_faces[binding.faces]]  # [T, N, 3, 3]
+    first, second, third = corners[..., 0, :], corners[..., 1, :], corners[..., 2, :]
+    normals = np.cross(second - first, third - first)
+    normals /= np.maximum(np.linalg.norm(normals, axis=-1, keepdims=True), 1e-300)
+    on_surface = bound_positions(binding, truth_vertices, truth_faces)
+    height = np.einsum("ij,ij->i", template - on_surface[0], normals[0])
+    return on_surface + height[None, :, None] * normals
 
 
 def relax_on_surface(pre, start: np.ndarray, surface: trimesh.Trimesh, iterations: int):
