@@ -197,11 +197,9 @@ class Options:
     shape_memory : float
         Weight of the previous frame's shape in the large-motion registration's
         as-rigid-as-possible term (``RegisterOptions.previous_shape``; 0: the template's rest
-        shape alone). 0.5 suits captured people and animals, whose skin stretches and twists
-        (correspondence mean / last frame, crane 0.0073 / 0.0119 -> 0.0068 / 0.0115,
-        crane-50 0.0235 / 0.0304 -> 0.0192 / 0.0227, horse-gallop 0.0087 -> 0.0077), not
-        rigid parts, twisting tubes or shapes that split (touching-spheres last frame 0.0205
-        -> 0.0295, splitting-blob completeness-95 0.011 -> 0.22), so it is off by default.
+        shape alone). 0.5 suits captured people and animals, whose skin stretches and twists,
+        not rigid parts, twisting tubes or shapes that split, so it is off by default (the
+        figures are with ``RegisterOptions.previous_shape``).
     still_normals : float
         With the data term: where the 4D implicit moves less than this many median edges per
         step, constraint (2) takes its normal from the implicit, which is smooth over time,

@@ -431,7 +431,6 @@ class ArapIcp:
         if self.component_count < 2:
             return seed
         other = carried if seed is predicted else predicted
-        seed = seed.copy()
         for c in range(self.component_count):
             members = self.components == c
             trial = seed.copy()
