@@ -51,52 +51,46 @@ def best_rotations(covariances: np.ndarray) -> np.ndarray:
 
 
 @numba.njit(cache=True, inline="always")
-def _det3(X):
-    return (
-        X[0, 0] * (X[1, 1] * X[2, 2] - X[1, 2] * X[2, 1])
-        - X[0, 1] * (X[1, 0] * X[2, 2] - X[1, 2] * X[2, 0])
-        + X[0, 2] * (X[1, 0] * X[2, 1] - X[1, 1] * X[2, 0])
-    )
-
-
-@numba.njit(cache=True)
-def _polar_newton(X, out):
-    """Orthogonal polar factor of a 3x3 matrix with positive determinant by the scaled Newton
-    iteration ``X <- (g X + X^-T / g) / 2`` (Higham 1986); False if it did not converge."""
-    Y = X.copy()
-    cof = np.empty((3, 3))
+def _polar_newton(x00, x01, x02, x10, x11, x12, x20, x21, x22):
+    """Orthogonal polar factor of the 3x3 matrix ``X`` (given row by row) with positive
+    determinant by the scaled Newton iteration ``X <- (g X + X^-T / g) / 2`` (Higham 1986).
+    Returns ``(converged, Y00, Y01, ..., Y22)``. Scalars throughout: small arrays allocated
+    per matrix in the parallel loop cost about four times the arithmetic."""
+    change = 0.0
     for _ in range(30):
-        det = _det3(Y)
+        # cofactors: X^-T = cof / det
+        c00 = x11 * x22 - x12 * x21
+        c01 = x12 * x20 - x10 * x22
+        c02 = x10 * x21 - x11 * x20
+        det = x00 * c00 + x01 * c01 + x02 * c02
         if not (det > 1e-300):
-            return False
-        cof[0, 0] = Y[1, 1] * Y[2, 2] - Y[1, 2] * Y[2, 1]
-        cof[0, 1] = Y[1, 2] * Y[2, 0] - Y[1, 0] * Y[2, 2]
-        cof[0, 2] = Y[1, 0] * Y[2, 1] - Y[1, 1] * Y[2, 0]
-        cof[1, 0] = Y[0, 2] * Y[2, 1] - Y[0, 1] * Y[2, 2]
-        cof[1, 1] = Y[0, 0] * Y[2, 2] - Y[0, 2] * Y[2, 0]
-        cof[1, 2] = Y[0, 1] * Y[2, 0] - Y[0, 0] * Y[2, 1]
-        cof[2, 0] = Y[0, 1] * Y[1, 2] - Y[0, 2] * Y[1, 1]
-        cof[2, 1] = Y[0, 2] * Y[1, 0] - Y[0, 0] * Y[1, 2]
-        cof[2, 2] = Y[0, 0] * Y[1, 1] - Y[0, 1] * Y[1, 0]
-        # X^-T = cof / det; scaling g = (||X^-1||_F / ||X||_F)^(1/2)
-        nx = 0.0
-        ni = 0.0
-        for a in range(3):
-            for b in range(3):
-                nx += Y[a, b] * Y[a, b]
-                ni += cof[a, b] * cof[a, b]
+            return False, x00, x01, x02, x10, x11, x12, x20, x21, x22
+        c10 = x02 * x21 - x01 * x22
+        c11 = x00 * x22 - x02 * x20
+        c12 = x01 * x20 - x00 * x21
+        c20 = x01 * x12 - x02 * x11
+        c21 = x02 * x10 - x00 * x12
+        c22 = x00 * x11 - x01 * x10
+        nx = (x00 * x00 + x01 * x01 + x02 * x02 + x10 * x10 + x11 * x11 + x12 * x12
+              + x20 * x20 + x21 * x21 + x22 * x22)
+        ni = (c00 * c00 + c01 * c01 + c02 * c02 + c10 * c10 + c11 * c11 + c12 * c12
+              + c20 * c20 + c21 * c21 + c22 * c22)
+        # scaling g = (||X^-1||_F / ||X||_F)^(1/2)
         g = np.sqrt(np.sqrt(ni) / det / np.sqrt(nx))
-        change = 0.0
-        for a in range(3):
-            for b in range(3):
-                new = 0.5 * (g * Y[a, b] + cof[a, b] / (det * g))
-                change += (new - Y[a, b]) ** 2
-                Y[a, b] = new
+        a = 0.5 * g
+        b = 0.5 / (det * g)
+        n00, n01, n02 = a * x00 + b * c00, a * x01 + b * c01, a * x02 + b * c02
+        n10, n11, n12 = a * x10 + b * c10, a * x11 + b * c11, a * x12 + b * c12
+        n20, n21, n22 = a * x20 + b * c20, a * x21 + b * c21, a * x22 + b * c22
+        change = (
+            (n00 - x00) ** 2 + (n01 - x01) ** 2 + (n02 - x02) ** 2
+            + (n10 - x10) ** 2 + (n11 - x11) ** 2 + (n12 - x12) ** 2
+            + (n20 - x20) ** 2 + (n21 - x21) ** 2 + (n22 - x22) ** 2
+        )
+        x00, x01, x02, x10, x11, x12, x20, x21, x22 = n00, n01, n02, n10, n11, n12, n20, n21, n22
         if change < 1e-24:
-            out[:, :] = Y
-            return True
-    out[:, :] = Y
-    return change < 1e-12
+            return True, x00, x01, x02, x10, x11, x12, x20, x21, x22
+    return change < 1e-12, x00, x01, x02, x10, x11, x12, x20, x21, x22
 
 
 @numba.njit(cache=True)
@@ -184,9 +178,25 @@ def _rotation_by_eigenvectors(S, out):
 @numba.njit(cache=True, parallel=True)
 def _best_rotations(S, R):
     for i in numba.prange(len(S)):
-        X = S[i].T.copy()
-        if _det3(X) > 1e-12 * (np.sum(X * X) ** 1.5 + 1e-300):
-            if _polar_newton(X, R[i]):
+        s = S[i]
+        # X = S^T
+        x00, x01, x02 = s[0, 0], s[1, 0], s[2, 0]
+        x10, x11, x12 = s[0, 1], s[1, 1], s[2, 1]
+        x20, x21, x22 = s[0, 2], s[1, 2], s[2, 2]
+        det = x00 * (x11 * x22 - x12 * x21) - x01 * (x10 * x22 - x12 * x20) + x02 * (
+            x10 * x21 - x11 * x20
+        )
+        nx = (x00 * x00 + x01 * x01 + x02 * x02 + x10 * x10 + x11 * x11 + x12 * x12
+              + x20 * x20 + x21 * x21 + x22 * x22)
+        if det > 1e-12 * (nx**1.5 + 1e-300):
+            ok, y00, y01, y02, y10, y11, y12, y20, y21, y22 = _polar_newton(
+                x00, x01, x02, x10, x11, x12, x20, x21, x22
+            )
+            if ok:
+                r = R[i]
+                r[0, 0], r[0, 1], r[0, 2] = y00, y01, y02
+                r[1, 0], r[1, 1], r[1, 2] = y10, y11, y12
+                r[2, 0], r[2, 1], r[2, 2] = y20, y21, y22
                 continue
         if _rotation_by_eigenvectors(S[i], R[i]):
             continue

@@ -15,15 +15,28 @@ from fourd.geometry.rotations import best_rotations
 @numba.njit(cache=True, parallel=True)
 def _covariances(indptr, edge_j, edge_w, rest_edges, vertices, out):
     for i in numba.prange(len(indptr) - 1):
-        S = np.zeros((3, 3))
+        # scalar accumulators: a 3x3 array allocated per vertex costs more than the sums
+        s00 = s01 = s02 = s10 = s11 = s12 = s20 = s21 = s22 = 0.0
         for e in range(indptr[i], indptr[i + 1]):
             j = edge_j[e]
             w = edge_w[e]
-            for a in range(3):
-                wa = w * rest_edges[e, a]
-                for b in range(3):
-                    S[a, b] += wa * (vertices[i, b] - vertices[j, b])
-        out[i] = S
+            r0, r1, r2 = w * rest_edges[e, 0], w * rest_edges[e, 1], w * rest_edges[e, 2]
+            d0 = vertices[i, 0] - vertices[j, 0]
+            d1 = vertices[i, 1] - vertices[j, 1]
+            d2 = vertices[i, 2] - vertices[j, 2]
+            s00 += r0 * d0
+            s01 += r0 * d1
+            s02 += r0 * d2
+            s10 += r1 * d0
+            s11 += r1 * d1
+            s12 += r1 * d2
+            s20 += r2 * d0
+            s21 += r2 * d1
+            s22 += r2 * d2
+        o = out[i]
+        o[0, 0], o[0, 1], o[0, 2] = s00, s01, s02
+        o[1, 0], o[1, 1], o[1, 2] = s10, s11, s12
+        o[2, 0], o[2, 1], o[2, 2] = s20, s21, s22
 
 
 @numba.njit(cache=True, parallel=True)
