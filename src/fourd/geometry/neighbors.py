@@ -92,7 +92,6 @@ def bucket_points(points: np.ndarray, origin: np.ndarray, cell: float):
     if len(points) == 0:
         return np.zeros((0, 3)), np.zeros(0, np.int64), np.zeros(2, np.int64), np.ones(3, np.int64)
     points = np.ascontiguousarray(points, dtype=np.float64)
-    origin = np.asarray(origin, dtype=np.float64)
     index = np.floor((points - origin) / cell).astype(np.int64)
     dims = index.max(axis=0) + 1
     key = (index[:, 0] * dims[1] + index[:, 1]) * dims[2] + index[:, 2]
