@@ -402,14 +402,31 @@ def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     if len(faces) and (faces.min() < 0 or faces.max() >= frames.shape[1]):
         raise ValueError(f"faces index vertices outside 0..{frames.shape[1] - 1}")
     out = np.zeros_like(frames)
-    if len(faces):
-        for t in range(len(frames)):
+    for t in range(len(frames)):
+        if len(faces):
             _accumulate_face_normals(np.ascontiguousarray(frames[t]), faces, out[t])
-    lengths = np.linalg.norm(out, axis=-1, keepdims=True)
-    tiny = lengths[..., 0] <= 1e-300
-    out = np.divide(out, lengths, out=np.zeros_like(out), where=lengths > 1e-300)
-    out[tiny] = (0.0, 0.0, 1.0)
+        _normalize_rows(out[t])
     return out[0] if vertices.ndim == 2 else out
+
+
+@numba.njit(cache=True)
+def _normalize_rows(normals):
+    """Scale each row of ``normals`` [N, 3] to unit length in place: ``(0, 0, 1)`` where it
+    is zero, ``(0, 0, 0)`` where it is not finite."""
+    for i in range(len(normals)):
+        length = np.sqrt(normals[i, 0] * normals[i, 0] + normals[i, 1] * normals[i, 1]
+                         + normals[i, 2] * normals[i, 2])
+        if length > 1e-300:
+            for a in range(3):
+                normals[i, a] /= length
+        elif length <= 1e-300:
+            normals[i, 0] = 0.0
+            normals[i, 1] = 0.0
+            normals[i, 2] = 1.0
+        else:
+            normals[i, 0] = 0.0
+            normals[i, 1] = 0.0
+            normals[i, 2] = 0.0
 
 
 @numba.njit(cache=True)

@@ -54,6 +54,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 from scipy.spatial import cKDTree
 
+from fourd.geometry.factors import TriangularFactors, solve_ordered, unpermuted_factors
 from fourd.geometry.marching import vertex_components
 from fourd.geometry.neighbors import bucket_grid, nearest_within
 from fourd.geometry.normals import vertex_normals
@@ -404,17 +405,23 @@ class ArapIcp:
         self.component_count, self.components = vertex_components(self.faces, len(diagonal))
 
     def _solve(self, rhs: np.ndarray, weight: float) -> np.ndarray:
-        """``(L + weight I)^-1 rhs`` [N, 3]."""
+        """``(L + weight I)^-1 rhs`` [N, 3]: SuperLU's factors, back-substituted for the three
+        columns at once (:mod:`fourd.geometry.factors`; SuperLU's own solve where it
+        pivoted)."""
         if weight not in self._factors:
             n = self.pre.laplacian.shape[0]
             matrix = (self.pre.ordered_laplacian + weight * sp.identity(n)).tocsc()
-            self._factors[weight] = spla.splu(
+            lu = spla.splu(
                 matrix, permc_spec="NATURAL", diag_pivot_thresh=0.0,
                 options={"SymmetricMode": True},
             )
+            self._factors[weight] = unpermuted_factors(lu) or lu
         order = self.pre.order
+        factor = self._factors[weight]
+        if isinstance(factor, TriangularFactors):
+            return solve_ordered(factor, rhs, order)
         out = np.empty_like(rhs)
-        out[order] = self._factors[weight].solve(np.ascontiguousarray(rhs[order]))
+        out[order] = factor.solve(np.ascontiguousarray(rhs[order]))
         return out
 
     def unexplained(self, vertices: np.ndarray, points: np.ndarray) -> float:
