@@ -1,8 +1,9 @@
 """Where ``kinematic``'s correspondence error on a scene comes from: does the as-rigid-as-possible
 prior prefer the tracked positions or the true ones?
 
-Run: ``.venv/bin/python benchmarks/arap_basin.py [SCENE] [--frames 11,13,19] [--iterations 40]``
-(default ``crane``, standard protocol, about a minute on 2 cores).
+Run: ``.venv/bin/python benchmarks/arap_basin.py [SCENE] [--frames 11,13,19] [--iterations 40]
+[--twists=-60,-30,30,60]`` (default ``crane``, standard protocol, about a minute on 2 cores, plus
+about 15 s per twist and frame).
 
 It reconstructs the scene with ``kinematic``, then maps every template vertex to the truth as
 the correspondence metric does (triangle and barycentric coordinates of the closest point of
@@ -26,6 +27,12 @@ the frame's mean: their vertex count, centre at frame 0, mean error, and the rot
 maps their true onto their tracked positions (degrees) with ``|cos|`` between its axis and the
 region's longest principal axis (near 1: a twist of a limb about itself). Needs a scene whose
 truth has faces (not ``dfaust-hopping``).
+
+With ``--twists`` (degrees, comma-separated), per listed frame the largest such region of the
+tracked positions is turned rigidly by each angle about its longest principal axis through its
+centroid and relaxed as above (``--iterations``): ``twist A: error, E``. An angle whose relaxed
+energy is below the untwisted one (``twist 0``) means that a search over limb twists, scored by
+the ARAP energy alone, would find a better state than the sliding's.
 """
 
 from __future__ import annotations
@@ -34,6 +41,7 @@ import argparse
 
 import numpy as np
 import trimesh
+from scipy.spatial.transform import Rotation
 
 from fourd import synth
 from fourd.evaluate.bench import HELD_OUT_SCENES, PROTOCOL, STANDARD_SCENES
@@ -75,18 +83,40 @@ def relax_on_surface(pre, start: np.ndarray, surface: trimesh.Trimesh, iteration
     return x
 
 
-def error_regions(rest, faces, tracked, true, diagonal, largest=4, least=20):
-    """Lines describing the ``largest`` connected regions (at least ``least`` vertices) whose
-    error exceeds twice the mean; see the module docstring."""
+def error_region_masks(faces, tracked, true, diagonal, largest=4, least=20):
+    """Masks [N] of the ``largest`` connected regions (at least ``least`` vertices) whose error
+    exceeds twice the mean, largest first."""
     error = np.linalg.norm(tracked - true, axis=1) / diagonal
     high = error > 2.0 * error.mean()
-    count, labels = vertex_components(faces[high[faces].all(axis=1)], len(rest))
+    count, labels = vertex_components(faces[high[faces].all(axis=1)], len(tracked))
     sizes = np.bincount(labels[high], minlength=count)
-    lines = []
+    masks = []
     for region in np.argsort(sizes)[::-1][:largest]:
         members = high & (labels == region)
         if members.sum() < least:
             break
+        masks.append(members)
+    return masks
+
+
+def twisted(positions: np.ndarray, members: np.ndarray, degrees: float) -> np.ndarray:
+    """``positions`` [N, 3] with the ``members`` [N] turned by ``degrees`` about their longest
+    principal axis through their centroid."""
+    part = positions[members]
+    centre = part.mean(axis=0)
+    _, vectors = np.linalg.eigh(np.cov((part - centre).T))
+    rotation = Rotation.from_rotvec(np.radians(degrees) * vectors[:, -1]).as_matrix()
+    out = positions.copy()
+    out[members] = (part - centre) @ rotation.T + centre
+    return out
+
+
+def error_regions(rest, faces, tracked, true, diagonal, largest=4, least=20):
+    """Lines describing the ``largest`` connected regions (at least ``least`` vertices) whose
+    error exceeds twice the mean; see the module docstring."""
+    error = np.linalg.norm(tracked - true, axis=1) / diagonal
+    lines = []
+    for members in error_region_masks(faces, tracked, true, diagonal, largest, least):
         fit = procrustes(true[members], tracked[members])
         angle = np.degrees(np.arccos(np.clip((np.trace(fit.rotation) - 1.0) / 2.0, -1.0, 1.0)))
         r = fit.rotation
@@ -106,6 +136,7 @@ def main() -> None:
     parser.add_argument("scene", nargs="?", default="crane")
     parser.add_argument("--frames", default="11,13,19", help="frame indices, comma-separated")
     parser.add_argument("--iterations", type=int, default=40)
+    parser.add_argument("--twists", default="", help="degrees, comma-separated (see above)")
     args = parser.parse_args()
     scene = {s.key: s for s in STANDARD_SCENES + HELD_OUT_SCENES}[args.scene]
     truth = synth.scene(scene.name, frames=scene.frames, seed=0, **scene.options)
@@ -132,6 +163,14 @@ def main() -> None:
               f"{arap_energy(pre, from_truth):.4f})", flush=True)
         for line in error_regions(tracked[0], faces, tracked[k], true[k], diagonal):
             print(line)
+        masks = error_region_masks(faces, tracked[k], true[k], diagonal, largest=1)
+        if args.twists and masks:
+            for degrees in [0.0] + [float(a) for a in args.twists.split(",")]:
+                x = relax_on_surface(
+                    pre, twisted(tracked[k], masks[0], degrees), surface, args.iterations
+                )
+                print(f"  twist {degrees:+.0f}: {error(x, k):.4f}, {arap_energy(pre, x):.4f}",
+                      flush=True)
 
 
 if __name__ == "__main__":
