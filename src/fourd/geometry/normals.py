@@ -412,7 +412,7 @@ def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
 @numba.njit(cache=True)
 def _normalize_rows(normals):
     """Scale each row of ``normals`` [N, 3] to unit length in place: ``(0, 0, 1)`` where it
-    is zero, ``(0, 0, 0)`` where it is not finite."""
+    is zero, ``(0, 0, 0)`` where its length is NaN (numpy's divide-where, compiled)."""
     for i in range(len(normals)):
         length = np.sqrt(normals[i, 0] * normals[i, 0] + normals[i, 1] * normals[i, 1]
                          + normals[i, 2] * normals[i, 2])
