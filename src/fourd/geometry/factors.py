@@ -79,36 +79,30 @@ def solve_ordered(factors: TriangularFactors, rhs: np.ndarray, order: np.ndarray
     return out[:, :k]
 
 
+@numba.njit(cache=True, inline="always")
+def _minus_row(indptr, indices, data, i, y, s0, s1, s2):
+    """``(s0, s1, s2)`` less row ``i`` of the CSR factor times the three columns of ``y``."""
+    for e in range(indptr[i], indptr[i + 1]):
+        j = indices[e]
+        v = data[e]
+        s0 -= v * y[j, 0]
+        s1 -= v * y[j, 1]
+        s2 -= v * y[j, 2]
+    return s0, s1, s2
+
+
 @numba.njit(cache=True, nogil=True)
 def _solve_ordered3(lp, li, lx, up, ui, ux, inverse, rhs, order, y, out):
     """Forward substitution with the unit lower factor, then backward with the upper one, the
     three columns of ``rhs`` [n, 3] per factor entry; ``y`` [n, 3] is scratch, ``out`` [n, 3]
     the result."""
-    n = len(inverse)
-    for i in range(n):
+    for i in range(len(inverse)):
         source = order[i]
-        s0 = rhs[source, 0]
-        s1 = rhs[source, 1]
-        s2 = rhs[source, 2]
-        for e in range(lp[i], lp[i + 1]):
-            j = li[e]
-            v = lx[e]
-            s0 -= v * y[j, 0]
-            s1 -= v * y[j, 1]
-            s2 -= v * y[j, 2]
-        y[i, 0] = s0
-        y[i, 1] = s1
-        y[i, 2] = s2
-    for i in range(n - 1, -1, -1):
-        s0 = y[i, 0]
-        s1 = y[i, 1]
-        s2 = y[i, 2]
-        for e in range(up[i], up[i + 1]):
-            j = ui[e]
-            v = ux[e]
-            s0 -= v * y[j, 0]
-            s1 -= v * y[j, 1]
-            s2 -= v * y[j, 2]
+        y[i, 0], y[i, 1], y[i, 2] = _minus_row(
+            lp, li, lx, i, y, rhs[source, 0], rhs[source, 1], rhs[source, 2]
+        )
+    for i in range(len(inverse) - 1, -1, -1):
+        s0, s1, s2 = _minus_row(up, ui, ux, i, y, y[i, 0], y[i, 1], y[i, 2])
         d = inverse[i]
         y[i, 0] = s0 * d
         y[i, 1] = s1 * d
