@@ -314,6 +314,32 @@ def test_options_are_validated():
     assert K.MIN_FRAMES == 2
 
 
+def test_a_global_rigid_motion_fitted_to_a_sample_moves_every_vertex():
+    from fourd.methods.kinematic.sliding import rigid_prediction
+
+    rng = np.random.default_rng(3)
+    positions = rng.normal(size=(3000, 3))
+    axes = np.array([1.0, 0.6, 0.3])  # an ellipsoid: no motion slides it along itself
+    positions = positions / np.linalg.norm(positions, axis=1, keepdims=True) * axes
+    # point-to-plane residuals of a small rigid motion, measured against its planes
+    rotation = Rotation.from_rotvec([0.02, -0.01, 0.015]).as_matrix()
+    translation = np.array([0.01, 0.03, -0.02])
+    moved = positions @ rotation.T + translation
+    normals = (positions / axes**2) @ rotation.T
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    residuals = np.einsum("ij,ij->i", normals, positions - moved)
+    sample = np.linspace(0, len(positions) - 1, 400).astype(np.int64)
+    predicted = rigid_prediction(
+        positions, normals[sample], residuals[sample], sample=sample, regularization=0.0
+    )
+    full = rigid_prediction(positions, normals, residuals, regularization=0.0)
+    # one linearised step: second order in the motion, the same from the sample as from all
+    assert np.abs(predicted - moved).max() < 1e-3  # the motion: up to 0.046
+    assert np.abs(predicted - full).max() < 2e-4
+    with pytest.raises(ValueError):
+        rigid_prediction(positions, normals, residuals, sample=sample, neighbours=8)
+
+
 def test_reduced_solver_gives_the_solution_of_the_saddle_system_5():
     import scipy.sparse as sp
     import scipy.sparse.linalg as spla
