@@ -425,6 +425,16 @@ def test_frame_surface_is_the_signed_distance_near_its_points():
     assert np.all(coverage == 0) and np.all(value == 0) and np.all(gradient == 0)
 
 
+def test_the_frame_surface_weights_exp_matches_numpy():
+    from fourd.methods.kinematic.framesurface import _exp_into
+
+    x = np.r_[0.0, -1e-300, -np.log(2) / 2, -6.25, -np.random.default_rng(0).uniform(0, 6.25, 5000)]
+    out, bits = np.full(len(x) + 1, -1.0), np.empty(len(x) + 1, np.int64)
+    _exp_into(x, len(x), out, bits)
+    np.testing.assert_allclose(out[:-1], np.exp(x), rtol=4e-16, atol=0)
+    assert out[-1] == -1.0  # only the first count values are written
+
+
 def test_frame_surface_ignores_the_far_side_of_a_thin_part():
     rng = np.random.default_rng(4)
     uv = rng.uniform(-1, 1, size=(20000, 2))
