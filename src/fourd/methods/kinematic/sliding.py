@@ -131,16 +131,17 @@ class SlideOptions:
         At most this many Gauss-Newton steps of the rigid prediction against an input frame's
         own points when the step has a data term (see :func:`slide_step`).
     rigid_samples : int
-        Where the rigid prediction is one global motion (a step with a data term), its
-        Gauss-Newton steps fit it to this many vertices spread over the template (0: all),
-        except the last ``rigid_refine_iterations``, which fit it to every vertex. The motion
-        has six unknowns, and the target's evaluations at every vertex took about a tenth of
-        crane's time: the steps seldom meet their stopping rule on noisy data, so nearly every
-        step ran all of them. The count of steps is kept: on a deforming shape the steps do
-        not converge, and more of them moved squash-ball's template (correspondence mean /
-        last frame 0.0241 / 0.0145 -> 0.0361 / 0.0471 with two refining steps added after
-        six on the sample).
+        Where the rigid prediction is one global motion (a step with a data term, or
+        ``rigid_neighbours`` below 2), its Gauss-Newton steps fit it to this many vertices
+        spread over the template (0: all), except the last ``rigid_refine_iterations``, which
+        fit it to every vertex. The motion has six unknowns, and the target's evaluations at
+        every vertex took about a tenth of crane's time: the steps seldom meet their stopping
+        rule on noisy data, so nearly every step ran all of them. The count of steps is kept:
+        on a deforming shape the steps do not converge, and more of them moved squash-ball's
+        template (correspondence mean / last frame 0.0241 / 0.0145 -> 0.0361 / 0.0471 with
+        two refining steps added after six on the sample).
     rigid_refine_iterations : int
+        How many of those steps, the last ones, fit the global motion to every vertex.
     register : RegisterOptions or None
         Large-motion registration (:mod:`.register`): at a step with a data term whose
         prediction leaves many of the frame's points unexplained, the template is registered
