@@ -416,17 +416,17 @@ def _normalize_rows(normals):
     for i in range(len(normals)):
         length = np.sqrt(normals[i, 0] * normals[i, 0] + normals[i, 1] * normals[i, 1]
                          + normals[i, 2] * normals[i, 2])
-        if length > 1e-300:
-            for a in range(3):
-                normals[i, a] /= length
-        elif length <= 1e-300:
-            normals[i, 0] = 0.0
-            normals[i, 1] = 0.0
-            normals[i, 2] = 1.0
-        else:
+        if np.isnan(length):
             normals[i, 0] = 0.0
             normals[i, 1] = 0.0
             normals[i, 2] = 0.0
+        elif length > 1e-300:
+            for a in range(3):
+                normals[i, a] /= length
+        else:
+            normals[i, 0] = 0.0
+            normals[i, 1] = 0.0
+            normals[i, 2] = 1.0
 
 
 @numba.njit(cache=True)
