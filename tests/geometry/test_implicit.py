@@ -53,6 +53,20 @@ def test_grid_matches_pointwise_evaluation():
     assert np.all(np.isinf(field.distance.ravel()[~finite]))
 
 
+def test_grid_weights_are_the_gaussian_sums():
+    # the splatting computes the weights along each grid row by a recurrence, not one exp each
+    points, normals = _sphere(300)
+    grid = fit_grid(points, 0.1, pad=0.2)
+    field = imls_grid(points, normals, grid, bandwidth=0.12, support=0.3, agreement=-1.0)
+    query = grid_points(grid)
+    d2 = ((query[:, None, :] - points[None, :, :]) ** 2).sum(axis=2)
+    expected = np.where(d2 <= 0.3**2, np.exp(-d2 / 0.12**2), 0.0).sum(axis=1)
+    weight = field.weight.ravel()
+    assert np.array_equal(weight > 0, expected > 0)
+    inside = expected > 0
+    assert np.abs(weight[inside] / expected[inside] - 1.0).max() < 1e-12
+
+
 def test_sphere_zero_set_lies_on_sphere():
     points, normals = _sphere(4000)
     spacing = 0.056  # about the nearest-neighbour distance of 4000 points on the unit sphere

@@ -12,6 +12,7 @@ from fourd.methods import method_options
 from fourd.methods.perframe import (
     MIN_FRAMES,
     Options,
+    cell_corner_minimum,
     oriented_normals,
     reconstruct,
     reconstruct_frame,
@@ -219,3 +220,16 @@ def test_voxel_average():
     assert np.allclose(averaged_normals[order][1], [0, 0, 1])
     alone, none = voxel_average(points, 0.01)
     assert len(alone) == 4 and none is None
+
+
+def test_cell_corner_minimum_is_the_least_of_the_eight_corners():
+    rng = np.random.default_rng(3)
+    corner = rng.random((5, 6, 7))
+    corner[2, 3, 4] = np.nan
+    corner[0, 0, 0] = np.inf
+    least = cell_corner_minimum(corner)
+    assert least.shape == (4, 5, 6)
+    for i, j, k in np.ndindex(least.shape):
+        cube = corner[i : i + 2, j : j + 2, k : k + 2]
+        expected = np.nan if np.isnan(cube).any() else cube.min()
+        assert np.array_equal(least[i, j, k], expected, equal_nan=True)

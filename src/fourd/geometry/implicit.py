@@ -115,10 +115,18 @@ def _accumulate_on_grid(points, normals, origin, h, shape, bandwidth, support, o
     total = np.zeros(nx * ny * nz)
     s2 = support * support
     inv = 1.0 / (bandwidth * bandwidth)
+    # Along a row of grid points (z) the Gaussian weights follow a recurrence: with dz_c the
+    # z offset of the row's c-th point, w_{c+1} = w_c r_c, r_c = exp(-(2 dz_c h + h^2) / bw^2)
+    # and r_{c+1} = r_c exp(-2 h^2 / bw^2). Three exp per row instead of one per grid point
+    # (crane at 256 rays, 20 frames: 0.90 -> 0.65 s; the weights within a relative 4e-14).
+    step_ratio = np.exp(-2.0 * h * h * inv)
     for i in range(points.shape[0]):
         px, py, pz = points[i, 0], points[i, 1], points[i, 2]
         qx, qy, qz = normals[i, 0], normals[i, 1], normals[i, 2]
         i0, i1, j0, j1, k0, k1 = _support_box(px, py, pz, support, origin, h, nx, ny, nz)
+        dz0 = origin[2] + k0 * h - pz
+        w0 = np.exp(-dz0 * dz0 * inv)
+        r0 = np.exp(-(2.0 * dz0 * h + h * h) * inv)
         for a in range(i0, i1 + 1):
             dx = origin[0] + a * h - px
             for b in range(j0, j1 + 1):
@@ -127,9 +135,14 @@ def _accumulate_on_grid(points, normals, origin, h, shape, bandwidth, support, o
                 if dxy > s2:
                     continue
                 base = (a * ny + b) * nz
+                w = w0 * np.exp(-dxy * inv)
+                r = r0
                 for c in range(k0, k1 + 1):
                     dz = origin[2] + c * h - pz
                     d2 = dxy + dz * dz
+                    wc = w
+                    w *= r
+                    r *= step_ratio
                     if d2 > s2:
                         continue
                     v = base + c
@@ -138,9 +151,8 @@ def _accumulate_on_grid(points, normals, origin, h, shape, bandwidth, support, o
                         cosine = qx * normals[o, 0] + qy * normals[o, 1] + qz * normals[o, 2]
                         if cosine < agreement:
                             continue
-                    w = np.exp(-d2 * inv)
-                    weight[v] += w
-                    total[v] += w * (qx * dx + qy * dy + qz * dz)
+                    weight[v] += wc
+                    total[v] += wc * (qx * dx + qy * dy + qz * dz)
     return weight, total
 
 

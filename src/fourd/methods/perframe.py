@@ -252,6 +252,16 @@ def oriented_normals(
     return estimate_normals(points, k=k, sensors=sensors, mode=mode).normals
 
 
+def cell_corner_minimum(corner: np.ndarray) -> np.ndarray:
+    """The smallest of each grid cell's eight corner values: ``corner`` [X, Y, Z] -> [X - 1,
+    Y - 1, Z - 1], one axis at a time (the eight shifted views stacked into one array cost
+    27 ms of crane's 240 ms per frame; the same values, NaN where a corner is NaN)."""
+    along_x = np.minimum(corner[:-1], corner[1:])
+    along_y = np.minimum(along_x[:, :-1], along_x[:, 1:])
+    del along_x
+    return np.minimum(along_y[:, :, :-1], along_y[:, :, 1:])
+
+
 def reconstruct_frame(
     frame: Frame, options: Options | None = None
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -342,19 +352,7 @@ def reconstruct_frame(
         kept, normals, grid, bandwidth=bandwidth, support=support, agreement=options.agreement
     )
 
-    corner = field.distance
-    nearest_corner = np.minimum.reduce(
-        [
-            corner[
-                a : a + corner.shape[0] - 1,
-                b : b + corner.shape[1] - 1,
-                c : c + corner.shape[2] - 1,
-            ]
-            for a in (0, 1)
-            for b in (0, 1)
-            for c in (0, 1)
-        ]
-    )
+    nearest_corner = cell_corner_minimum(field.distance)
     cell_mask = nearest_corner <= clip
     tree = cKDTree(kept)
     values = field.values  # ours: fill in place (outside the support: outside the surface)
