@@ -854,7 +854,12 @@ def test_coherent_animation_is_closed_on_the_surface_and_returns():
     0.0115 -> 0.0089 / 0.0114, dfaust-hopping 0.0062 / 0.0098 -> 0.0060 / 0.0093); hence the
     bound of 0.055 (0.045 before b1c0621). Since the rigid prediction fits its first steps to a
     sample of the vertices (``SlideOptions.rigid_samples``) it is 0.034; with its first,
-    linearised step on the sample too it was 0.060."""
+    linearised step on the sample too it was 0.060. On the development machine of 2026-11-26
+    the same code measured 0.054, and 0.057 once the V-cycle's Gauss-Seidel sweeps ran in
+    the slice-coloured order of :mod:`fourd.methods.flow.sweeps` (another order of the same
+    sweeps: the first squash-ball system at resolution 64 reached the same MINRES residual,
+    1.767e-2 against 1.764e-2), so the bound is 0.065: a drifting template is off by far
+    more."""
     frames, radius = 8, 0.5
     seq, _ = _squash_sequence(frames, radius=radius, hole=False)
     anim, figures = reconstruct_with_diagnostics(seq, Options(**FAST, coherent=True))
@@ -867,7 +872,7 @@ def test_coherent_animation_is_closed_on_the_surface_and_returns():
         off_surface = np.abs(np.linalg.norm(anim.vertices[t] / radii, axis=1) - 1.0)
         assert off_surface.mean() < 0.025, (t, off_surface.mean())
     returned = np.linalg.norm(anim.vertices[4] - anim.vertices[0], axis=1) / radius
-    assert returned.mean() < 0.055, returned.mean()
+    assert returned.mean() < 0.065, returned.mean()
 
 
 @pytest.mark.slow

@@ -268,6 +268,11 @@ class Options:
         splitting-blob 0.0027 / 0.0054 / 2.86 -> 0.0027 / 0.0052 / 2.26; at 32 squash-ball
         0.0026 / 0.0047 / 1.3% -> 0.0037 / 0.0101 / 1.8%, the other three the same surfaces,
         5-10% faster. So it is off by default.
+    parallel_sweeps : bool
+        With ``inner="amg"``: the V-cycle's Gauss-Seidel sweeps run on all cores, blocks of
+        time slices that share no entry at once (:mod:`.sweeps`: Gauss-Seidel in another row
+        order, the same on any number of cores). False: rows one after the other in the
+        system's own order.
     outward_cosine : float
         A face of a data cell is an outward boundary face (first-iteration weight 0) when the
         cell's mean normal makes a cosine above this with the face direction.
@@ -466,6 +471,7 @@ class Options:
     reuse_coarse: bool = True
     interpolation_entries: int = 0
     coarse_drop: float = 0.0
+    parallel_sweeps: bool = True
     outward_cosine: float = 0.5
     fit_level: float = 0.5
     fit_offset: float | None = None
@@ -772,6 +778,7 @@ def run(seq: PointCloudSequence, options: Options | None = None) -> FlowResult:
             reuse_interpolation=options.reuse_interpolation,
             reuse_coarse=options.reuse_coarse,
             later_maxiter=options.later_outer or None,
+            parallel=options.parallel_sweeps and options.inner == "amg",
             progress=bar,
         )
     finally:

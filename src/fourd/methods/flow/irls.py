@@ -99,6 +99,13 @@ def _previous_unknowns(system, previous_free, previous_flows: Flows) -> np.ndarr
     return np.concatenate([cell, len(previous_free) + flow])
 
 
+def unknown_slices(system, shape4: tuple) -> np.ndarray:
+    """The time slice of every primal unknown of ``system`` (int32 [n]): a free cell's own, a
+    flow's source cell's; the grid is ``shape4`` [S, X, Y, Z]."""
+    cells = int(np.prod(shape4[1:]))
+    return np.concatenate([system.free // cells, system.flows.source // cells]).astype(np.int32)
+
+
 def run_irls(
     value: np.ndarray,
     weights: np.ndarray,
@@ -119,6 +126,7 @@ def run_irls(
     reuse_interpolation: bool = True,
     reuse_coarse: bool = False,
     later_maxiter: int | None = None,
+    parallel: bool = True,
     progress=None,
 ) -> IRLSResult:
     """Run the IRLS loop from the initial labels.
@@ -152,6 +160,9 @@ def run_irls(
     later_maxiter : int, optional
         MINRES iteration limit of the solves after the first (warm-started from the previous
         iterate); None: ``solver_options["maxiter"]``.
+    parallel : bool
+        The V-cycle's Gauss-Seidel sweeps run on all cores, blocks of time slices at once
+        (:func:`unknown_slices`, :mod:`.sweeps`); False: one row after the other.
     """
     if regularize_towards not in ("zero", "previous"):
         raise ValueError(f"regularize_towards must be zero or previous, got {regularize_towards!r}")
@@ -205,7 +216,8 @@ def run_irls(
             solve_options["maxiter"] = later_maxiter
         solution = solve_saddle(
             system.A, system.B, f, system.g, x0=start, reuse=reuse, reuse_coarse=reuse_matrices,
-            overwrite_x0=True, **solve_options,
+            overwrite_x0=True, groups=unknown_slices(system, value.shape) if parallel else None,
+            **solve_options,
         )
         del start, reuse, reuse_matrices
         previous_free, previous_interpolations = system.free, solution.interpolations

@@ -51,6 +51,7 @@ from pyamg.multilevel import MultilevelSolver
 from pyamg.relaxation.smoothing import change_smoothers
 from scipy.sparse.linalg import LinearOperator, cg, spilu
 
+from fourd.methods.flow import sweeps
 from fourd.methods.flow.sparse import (
     csr_product,
     drop_weak_entries,
@@ -61,6 +62,7 @@ from fourd.methods.flow.sparse import (
     submatrix,
     transpose_pattern,
     truncate_rows,
+    unsigned,
     used_columns,
 )
 
@@ -136,14 +138,20 @@ def _saddle_apply(A, B, BT, softness: float, z: np.ndarray, out: np.ndarray) -> 
     """``out = [[A, B^T], [B, -softness I]] z`` (``A`` [n, n], ``B`` [m, n], ``BT`` its
     transpose, e.g. the view ``B.T``); returns ``out``. Never assembled: a third copy of
     ``A`` and ``B`` (squash-ball at resolution 64, 7.9 million unknowns and 2.3 million
-    constraints: peak memory 6.48 -> 5.79 GB at a00735a)."""
+    constraints: peak memory 6.48 -> 5.79 GB at a00735a). CSR ``A``, ``B`` and ``BT`` are
+    applied on all cores (:func:`.sweeps.multiply_add`)."""
     n = A.shape[0]
     u, multipliers = z[:n], z[n:]
-    out[:n] = A @ u
-    out[:n] += BT @ multipliers
-    out[n:] = B @ u
+    top, bottom = out[:n], out[n:]
+    for matrix, vector, into in ((A, u, top), (BT, multipliers, top), (B, u, bottom)):
+        if into is top and matrix is A or into is bottom:
+            into.fill(0)
+        if sp.issparse(matrix) and matrix.format == "csr":
+            sweeps.multiply_add(matrix, vector, into)
+        else:
+            into += matrix @ vector
     if softness:
-        out[n:] -= softness * multipliers
+        bottom -= softness * multipliers
     return out
 
 
@@ -430,13 +438,23 @@ class NormalFinest(NamedTuple):
     A: sp.csr_matrix
     C: sp.csr_matrix
     diagonal: np.ndarray
+    order: sweeps.Schedule | None = None
+    CT: sp.csr_matrix | None = None
 
 
-def normal_finest(A: sp.spmatrix, C: sp.spmatrix) -> NormalFinest:
-    """:class:`NormalFinest` of ``A + C C^T`` (``A`` [n, n], ``C`` [n, m])."""
+def normal_finest(
+    A: sp.spmatrix, C: sp.spmatrix, groups: np.ndarray | None = None, CT: sp.spmatrix | None = None
+) -> NormalFinest:
+    """:class:`NormalFinest` of ``A + C C^T`` (``A`` [n, n], ``C`` [n, m]); with ``groups``
+    (the time slice of every unknown) its sweeps run in parallel where the slices allow
+    (:mod:`.sweeps`); ``CT``, the transpose of ``C`` as CSR, if at hand (for ``C^T x`` on all
+    cores)."""
     A, C = sp.csr_matrix(A), sp.csr_matrix(C)
     diagonal = A.diagonal() + np.asarray(C.multiply(C).sum(axis=1)).ravel()
-    return NormalFinest(A, C, diagonal)
+    order = None
+    if groups is not None:
+        order = sweeps.schedule(groups, sweeps.normal_reach(A, C, groups))
+    return NormalFinest(A, C, diagonal, order, None if CT is None else sp.csr_matrix(CT))
 
 
 @numba.njit(cache=True)
@@ -473,15 +491,25 @@ def _normal_residual(a_indptr, a_indices, a_data, c_indptr, c_indices, c_data, x
 
 def _symmetric_sweeps(finest: NormalFinest, x: np.ndarray, y: np.ndarray, rhs: np.ndarray):
     A, C = finest.A, finest.C
-    arrays = (A.indptr, A.indices, A.data, C.indptr, C.indices, C.data, finest.diagonal, x, y,
-              rhs)
+    if finest.order is not None:
+        for forward in (True, False):
+            sweeps.normal_sweep(A, C, finest.diagonal, x, y, rhs, finest.order, forward=forward)
+        return
+    arrays = (unsigned(A.indptr), unsigned(A.indices), A.data, unsigned(C.indptr),
+              unsigned(C.indices), C.data, finest.diagonal, x, y, rhs)
     n = len(rhs)
     _normal_sweep(*arrays, 0, n, 1)
     _normal_sweep(*arrays, n - 1, -1, -1)
 
 
-def v_cycle(ml: MultilevelSolver, b: np.ndarray, finest: NormalFinest | None = None) -> np.ndarray:
-    """One V-cycle of ``ml`` from zero for ``A x = b`` [n] (``A`` its finest matrix).
+def v_cycle(
+    ml: MultilevelSolver,
+    b: np.ndarray,
+    finest: NormalFinest | None = None,
+    out: np.ndarray | None = None,
+) -> np.ndarray:
+    """One V-cycle of ``ml`` from zero for ``A x = b`` [n] (``A`` its finest matrix), into
+    ``out`` [n] when given (``b``'s dtype; returned).
 
     What ``ml.aspreconditioner(cycle="V").matvec(b)`` returns, without the two residual norms
     on the finest level that pyamg's ``solve`` computes around the cycle for its stopping
@@ -490,30 +518,73 @@ def v_cycle(ml: MultilevelSolver, b: np.ndarray, finest: NormalFinest | None = N
     ``finest``: the finest matrix as ``A + C C^T`` (:class:`NormalFinest`), which the finest
     level's symmetric Gauss-Seidel sweeps and residual then use in ``b``'s precision instead
     of ``ml``'s finest matrix (which may then be None); the coarser levels take the
-    restricted residual in their matrices' precision."""
+    restricted residual in their matrices' precision.
+
+    The work arrays of every level are kept on ``ml`` from one cycle to the next
+    (:func:`_work`)."""
     if len(ml.levels) == 1:
-        return ml.coarse_solver(ml.levels[0].A, b)
+        x = ml.coarse_solver(ml.levels[0].A, b)
+        if out is not None:
+            out[:] = x
+            return out
+        return x
     if finest is None:
-        return _cycle(ml, 0, b)
+        x = _cycle(ml, 0, b)
+        if out is not None:
+            out[:] = x
+            return out
+        return x.copy()
     level, C = ml.levels[0], finest.C
-    x = np.zeros_like(b)
-    y = np.zeros(C.shape[1], b.dtype)
+    x = np.zeros_like(b) if out is None else out
+    x.fill(0)
+    y = _work(ml, 0, "y", C.shape[1], b.dtype)
     _symmetric_sweeps(finest, x, y, b)
     coarse_dtype = ml.levels[1].A.dtype
-    residual = np.empty(len(b), coarse_dtype)
+    residual = _work(ml, 0, "residual", len(b), coarse_dtype, zero=False)
     A = finest.A
-    _normal_residual(A.indptr, A.indices, A.data, C.indptr, C.indices, C.data, x, y, b,
-                     residual)
-    coarse_rhs = (level.R @ residual).astype(coarse_dtype, copy=False)
-    del residual
+    _normal_residual(unsigned(A.indptr), unsigned(A.indices), A.data, unsigned(C.indptr),
+                     unsigned(C.indices), C.data, x, y, b, residual)
+    coarse_rhs = _restrict(ml, 0, residual)
     if len(ml.levels) == 2:
         coarse_x = ml.coarse_solver(ml.levels[-1].A, coarse_rhs)
     else:
         coarse_x = _cycle(ml, 1, coarse_rhs)
-    x += level.P @ coarse_x
-    y[:] = C.T @ x
+    sweeps.multiply_add(level.P, coarse_x, x)
+    if finest.CT is None:
+        y[:] = C.T @ x
+    else:
+        y.fill(0)
+        sweeps.multiply_add(finest.CT, x, y)
     _symmetric_sweeps(finest, x, y, b)
     return x
+
+
+def _work(ml: MultilevelSolver, depth: int, name: str, size, dtype, *, zero: bool = True):
+    """The work array ``name`` [size] (an int or a shape) of level ``depth`` of ``ml``,
+    zeroed (``zero``), kept on
+    ``ml`` for the next cycle: a new large array is new pages, and the first writes to them
+    inside the parallel sweeps are page faults that the threads take one at a time (captured
+    crane system at resolution 64: a finest-level sweep 13.1 ms in the solve against 8.6 ms
+    on arrays already touched)."""
+    work = ml.__dict__.setdefault("fourd_work", {})
+    key = (depth, name)
+    array = work.get(key)
+    shape = (size,) if np.isscalar(size) else tuple(size)
+    if array is None or array.shape != shape or array.dtype != dtype:
+        array = np.empty(shape, dtype)
+        work[key] = array
+    if zero:
+        array.fill(0)
+    return array
+
+
+def _restrict(ml: MultilevelSolver, depth: int, residual: np.ndarray) -> np.ndarray:
+    """``R r`` of level ``depth`` (``R = P^T``) on all cores (:func:`.sweeps.transpose_multiply`)."""
+    P = ml.levels[depth].P
+    shape = (sweeps.TRANSPOSE_CHUNKS, P.shape[1])
+    partial = _work(ml, depth, "restriction", shape, np.result_type(P.dtype, residual.dtype),
+                    zero=False)
+    return sweeps.transpose_multiply(P, residual, partial)
 
 
 def _cycle(ml: MultilevelSolver, depth: int, rhs: np.ndarray) -> np.ndarray:
@@ -521,16 +592,44 @@ def _cycle(ml: MultilevelSolver, depth: int, rhs: np.ndarray) -> np.ndarray:
     # kept every solve's hierarchy alive until the garbage collector ran (0.9 GB per run of
     # crane at resolution 64)
     level = ml.levels[depth]
-    x = np.zeros_like(rhs)
+    x = _work(ml, depth, "x", len(rhs), rhs.dtype)
     level.presmoother(level.A, x, rhs)
-    coarse_rhs = level.R @ (rhs - level.A @ x)
+    residual = _work(ml, depth, "residual", len(rhs), rhs.dtype, zero=False)
+    residual[:] = rhs
+    sweeps.multiply_add(level.A, x, residual, -1.0)
+    coarse_rhs = _restrict(ml, depth, residual)
     if depth == len(ml.levels) - 2:
         coarse_x = ml.coarse_solver(ml.levels[-1].A, coarse_rhs)
     else:
         coarse_x = _cycle(ml, depth + 1, coarse_rhs)
-    x += level.P @ coarse_x
+    sweeps.multiply_add(level.P, coarse_x, x)
     level.postsmoother(level.A, x, rhs)
     return x
+
+
+class _OrderedSweep:
+    """A coarse level's smoother: one Gauss-Seidel sweep in a :class:`.sweeps.Schedule`'s
+    row order (``forward``) or its reverse, in parallel; called as pyamg's smoothers are."""
+
+    def __init__(self, order: sweeps.Schedule, forward: bool):
+        self.order, self.forward = order, forward
+
+    def __call__(self, A, x, b):
+        sweeps.csr_sweep(A, x, b, self.order, forward=self.forward)
+
+
+def parallel_smoothers(ml: MultilevelSolver, groups: np.ndarray) -> None:
+    """Give the coarse levels of ``ml`` (whose finest unknowns lie in time slices ``groups``)
+    Gauss-Seidel sweeps that run in parallel (:mod:`.sweeps`): the same forward sweep before
+    and backward sweep after the coarse correction, in a row order that colours blocks of
+    slices; a level whose entries reach too far across the slices keeps pyamg's sweeps."""
+    for depth in range(1, len(ml.levels) - 1):
+        groups = sweeps.coarse_groups(ml.levels[depth - 1].P, groups)
+        level = ml.levels[depth]
+        order = sweeps.schedule(groups, sweeps.csr_reach(level.A, groups))
+        if order is not None:
+            level.presmoother = _OrderedSweep(order, True)
+            level.postsmoother = _OrderedSweep(order, False)
 
 
 def _inner_operator(
@@ -583,6 +682,7 @@ def solve_saddle(
     interpolation_entries: int | None = None,
     coarse_drop: float = 0.0,
     overwrite_x0: bool = False,
+    groups: np.ndarray | None = None,
 ) -> SaddleSolution:
     """Solve ``[[A, B^T], [B, -softness I]] [u; lambda] = [f; g]`` by preconditioned MINRES.
 
@@ -629,6 +729,10 @@ def solve_saddle(
         stalls).
     overwrite_x0 : bool
         Iterate in ``x0``'s memory (float64 [n + m]) instead of a copy.
+    groups : int array [n], optional
+        With ``inner="amg"``: the time slice of every primal unknown. The V-cycle's
+        Gauss-Seidel sweeps then run on all cores, colouring blocks of slices that share no
+        entry (:mod:`.sweeps`; the same sweeps in another row order).
 
     Examples
     --------
@@ -644,11 +748,15 @@ def solve_saddle(
     n, m = A.shape[0], B.shape[0]
     BT = B.T
     counter = [0]
-    interpolations = coarse_matrices = None
+    interpolations = coarse_matrices = finest = None
+    # B^T in single precision (the finest level's C) is B^T itself when B's entries are
+    # single-precision numbers (the flow systems': +-1): then C's rows serve the products
+    # with B^T, and B's rows those with C^T
+    exact = gamma == 1.0 and np.array_equal(B.data.astype(np.float32), B.data)
     if inner == "amg":
         if reuse and reuse_coarse is not None:
             ml = frozen_hierarchy(reuse, reuse_coarse)
-            finest = normal_finest(A, _normal_factor(BT, gamma))
+            finest = normal_finest(A, _normal_factor(BT, gamma), groups, B if exact else None)
         else:
             # one V-cycle is a rough inverse anyway: on the coarse levels, in single
             # precision, it costs 16% less per MINRES step with the same residual (captured
@@ -661,32 +769,40 @@ def solve_saddle(
                 )
             else:
                 ml = restricted_hierarchy(S, reuse, coarse_drop)
-            finest = None
             if len(ml.levels) > 1:
                 # the finest level sweeps A + B^T B / gamma through A and B^T (in b's double
                 # precision), and S is freed
                 ml.levels[0].A = None
                 del S
                 release_free_heap()
-                finest = normal_finest(A, _normal_factor(BT, gamma))
+                finest = normal_finest(A, _normal_factor(BT, gamma), groups, B if exact else None)
+        if groups is not None and len(ml.levels) > 2:
+            parallel_smoothers(ml, groups)
         interpolations = tuple(level.P for level in ml.levels[:-1])
         coarse_matrices = tuple(level.A for level in ml.levels[1:]) or None
 
-        def inner_apply(r):
+        def inner_apply(r, out):
             counter[0] += 1
             if finest is None:
-                return v_cycle(ml, r.astype(np.float32)).astype(np.float64)
-            return v_cycle(ml, r, finest)
+                out[:] = v_cycle(ml, r.astype(np.float32))
+                return out
+            return v_cycle(ml, r, finest, out)
 
     else:
         S = _inner_matrix(A, B, gamma, np.float64)
-        inner_apply = _inner_operator(S, inner, inner_rtol, counter, inner_maxiter)
+        inner_solve = _inner_operator(S, inner, inner_rtol, counter, inner_maxiter)
+
+        def inner_apply(r, out):
+            out[:] = inner_solve(r)
+            return out
+
+    BT_rows = finest.C if exact and finest is not None else BT
 
     def apply_K(z, out):
-        return _saddle_apply(A, B, BT, softness, z, out)
+        return _saddle_apply(A, B, BT_rows, softness, z, out)
 
     def apply_M(r, out):
-        out[:n] = inner_apply(r[:n])
+        inner_apply(r[:n], out[:n])
         np.multiply(r[n:], 1.0 / gamma, out=out[n:])
         return out
 
