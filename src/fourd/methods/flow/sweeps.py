@@ -49,30 +49,45 @@ class Schedule(NamedTuple):
     colour_start: int
 
 
+@numba.njit(cache=True)
+def _block_rows(groups, low, width, count, rows, starts):
+    """Rows by (colour, block), each block's in their own order (a counting sort)."""
+    for i in range(len(groups)):
+        block = (groups[i] - low) // width
+        starts[(block % 2) * count + block + 1] += 1
+    for k in range(len(starts) - 1):
+        starts[k + 1] += starts[k]
+    at = starts[:-1].copy()
+    for i in range(len(groups)):
+        block = (groups[i] - low) // width
+        key = (block % 2) * count + block
+        rows[at[key]] = i
+        at[key] += 1
+
+
 def schedule(groups: np.ndarray, reach: int, blocks: int | None = None) -> Schedule | None:
     """The :class:`Schedule` of rows in time slices ``groups`` [n] (int) whose entries join
     rows at most ``reach`` slices apart: blocks of at least ``reach`` consecutive slices,
     about ``blocks`` of them (default :data:`BLOCKS`); None when that leaves fewer than
     :data:`MIN_BLOCKS`."""
-    groups = np.asarray(groups, dtype=np.int64)
+    groups = np.asarray(groups)
     if len(groups) == 0:
         return None
     low = int(groups.min())
     span = int(groups.max()) - low + 1
     blocks = BLOCKS if blocks is None else blocks
     width = max(int(reach), -(-span // blocks), 1)
-    block = (groups - low) // width
-    count = int(block.max()) + 1
+    count = (span - 1) // width + 1
     if count < MIN_BLOCKS:
         return None
-    # colour 0 (even blocks) first, then colour 1, each block's rows in their own order
-    key = (block % 2) * count + block
-    rows = unsigned(np.argsort(key, kind="stable").astype(np.int32 if len(groups) < 2**31 else np.int64))
-    sizes = np.bincount(key, minlength=2 * count)
-    present = sizes > 0
-    block_starts = np.concatenate([[0], np.cumsum(sizes[present])]).astype(np.int64)
-    colour_start = int(present[:count].sum())
-    return Schedule(rows, block_starts, colour_start)
+    # colour 0 (even blocks) first, then colour 1; no n-sized temporary (the IRLS's later
+    # set-ups run with the earlier hierarchy and the new system in memory)
+    rows = np.empty(len(groups), np.uint32 if len(groups) < 2**32 else np.int64)
+    starts = np.zeros(2 * count + 1, np.int64)
+    _block_rows(groups, low, width, count, rows, starts)
+    keys = np.concatenate([np.arange(0, count, 2), count + np.arange(1, count, 2)])
+    block_starts = np.concatenate([[0], np.cumsum(np.diff(starts)[keys])]).astype(np.int64)
+    return Schedule(rows, block_starts, (count + 1) // 2)
 
 
 @numba.njit(cache=True)
@@ -89,7 +104,7 @@ def _csr_reach(indptr, indices, groups):
 
 def csr_reach(A: sp.csr_matrix, groups: np.ndarray) -> int:
     """The largest slice distance ``|groups[i] - groups[j]|`` over the entries of ``A``."""
-    return int(_csr_reach(A.indptr, A.indices, np.asarray(groups, dtype=np.int64)))
+    return int(_csr_reach(unsigned(A.indptr), unsigned(A.indices), np.asarray(groups)))
 
 
 @numba.njit(cache=True)
@@ -114,7 +129,7 @@ def _column_spans(indptr, indices, groups, columns):
 def normal_reach(A: sp.csr_matrix, C: sp.csr_matrix, groups: np.ndarray) -> int:
     """The slice reach of ``A + C C^T`` (``A`` [n, n], ``C`` [n, m] CSR): the larger of
     ``A``'s and the widest column of ``C`` (two rows sharing a column are joined)."""
-    groups = np.asarray(groups, dtype=np.int64)
+    groups = np.asarray(groups)
     return max(
         csr_reach(A, groups), int(_column_spans(C.indptr, C.indices, groups, C.shape[1]))
     )
@@ -136,7 +151,7 @@ def coarse_groups(P: sp.csr_matrix, groups: np.ndarray) -> np.ndarray:
     fine row interpolated from it alone (a row whose only entry is 1: classical AMG's coarse
     points), else that of the first row that uses it (0 if none does)."""
     out = np.full(P.shape[1], -1, dtype=np.int64)
-    _coarse_groups(P.indptr, P.indices, P.data, np.asarray(groups, dtype=np.int64), out)
+    _coarse_groups(unsigned(P.indptr), unsigned(P.indices), P.data, np.asarray(groups), out)
     out[out < 0] = 0
     return out
 
