@@ -143,9 +143,9 @@ def _saddle_apply(A, B, BT, softness: float, z: np.ndarray, out: np.ndarray) -> 
     n = A.shape[0]
     u, multipliers = z[:n], z[n:]
     top, bottom = out[:n], out[n:]
+    top.fill(0)
+    bottom.fill(0)
     for matrix, vector, into in ((A, u, top), (BT, multipliers, top), (B, u, bottom)):
-        if into is top and matrix is A or into is bottom:
-            into.fill(0)
         if sp.issparse(matrix) and matrix.format == "csr":
             sweeps.multiply_add(matrix, vector, into)
         else:
@@ -464,17 +464,8 @@ def _normal_sweep(a_indptr, a_indices, a_data, c_indptr, c_indices, c_data, diag
     ``(A + C C^T) x = rhs``, with ``y = C^T x`` [m] kept up to date: row ``i`` of ``S x`` is
     ``A_i x + C_i y``, so every update is exactly Gauss-Seidel's on ``S``."""
     for i in range(first, stop, step):
-        if diagonal[i] == 0:
-            continue
-        total = 0.0
-        for p in range(a_indptr[i], a_indptr[i + 1]):
-            total += a_data[p] * x[a_indices[p]]
-        for p in range(c_indptr[i], c_indptr[i + 1]):
-            total += c_data[p] * y[c_indices[p]]
-        delta = (rhs[i] - total) / diagonal[i]
-        x[i] += delta
-        for p in range(c_indptr[i], c_indptr[i + 1]):
-            y[c_indices[p]] += c_data[p] * delta
+        sweeps.normal_row(a_indptr, a_indices, a_data, c_indptr, c_indices, c_data, diagonal,
+                          x, y, rhs, i)
 
 
 @numba.njit(cache=True, parallel=True)

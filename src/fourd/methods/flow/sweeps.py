@@ -157,8 +157,11 @@ def coarse_groups(P: sp.csr_matrix, groups: np.ndarray) -> np.ndarray:
 
 
 @numba.njit(cache=True, inline="always")
-def _normal_row(a_indptr, a_indices, a_data, c_indptr, c_indices, c_data, diagonal, x, y, rhs,
+def normal_row(a_indptr, a_indices, a_data, c_indptr, c_indices, c_data, diagonal, x, y, rhs,
                 i):
+    """Gauss-Seidel's update of row ``i`` of ``(A + C C^T) x = rhs`` with ``y = C^T x`` [m]
+    kept up to date (row ``i`` of ``S x`` is ``A_i x + C_i y``); rows with a zero diagonal
+    are left alone."""
     if diagonal[i] == 0:
         return
     total = 0.0
@@ -179,11 +182,11 @@ def _normal_sweep_blocks(a_indptr, a_indices, a_data, c_indptr, c_indices, c_dat
         lo, hi = block_starts[first_block + b], block_starts[first_block + b + 1]
         if forward:
             for q in range(lo, hi):
-                _normal_row(a_indptr, a_indices, a_data, c_indptr, c_indices, c_data,
+                normal_row(a_indptr, a_indices, a_data, c_indptr, c_indices, c_data,
                             diagonal, x, y, rhs, rows[q])
         else:
             for q in range(hi - 1, lo - 1, -1):
-                _normal_row(a_indptr, a_indices, a_data, c_indptr, c_indices, c_data,
+                normal_row(a_indptr, a_indices, a_data, c_indptr, c_indices, c_data,
                             diagonal, x, y, rhs, rows[q])
 
 
