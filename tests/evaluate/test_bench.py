@@ -93,6 +93,25 @@ def test_a_held_still_pose_is_a_named_scene():
     assert "held still" in bench._describe("crane", chosen.options)
 
 
+def test_a_clean_scan_is_a_named_scene_and_reaches_the_scanner():
+    """``crane-clean``: the standard crane stretch through 8 cameras without noise or outliers
+    (what is left of a method's error is its own); the override reaches ``synth.scan``."""
+    (chosen,) = bench._select_scenes(["crane-clean"], quick=False)
+    standard = next(s for s in bench.STANDARD_SCENES if s.key == "crane")
+    assert chosen.name == "crane" and chosen.options == standard.options
+    assert chosen.scan == {"cameras": 8, "noise": 0.0, "outliers": 0.0}
+    assert "crane-clean" not in {s.key for s in bench._select_scenes(None, quick=False)}
+    assert bench._scanner(chosen.scan) == "8 cameras, noise 0, outliers 0"
+    clean = bench.BenchScene("rigid-turn", frames=2, resolution=48, scan=chosen.scan)
+    plain = bench.BenchScene("rigid-turn", frames=2, resolution=48)
+    counts = {}
+    for scene in (clean, plain):
+        entry = bench._run_scene(scene, [], {}, samples=500, seed=0, repeats=1, timeout=None,
+                                 isolate=False, bar=bench.progress(total=0))
+        counts[scene.scan == {}] = entry["points_per_frame"]
+    assert counts[False] > counts[True]  # 8 cameras see more than 3
+
+
 def test_machine_info_names_the_machine():
     info = bench.machine_info()
     assert info["cores"] >= 1 and info["cpu"] and info["date"].endswith("UTC")
