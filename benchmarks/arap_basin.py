@@ -2,8 +2,8 @@
 prior prefer the tracked positions or the true ones?
 
 Run: ``.venv/bin/python benchmarks/arap_basin.py [SCENE] [--frames 11,13,19] [--iterations 40]
-[--twists=-60,-30,30,60]`` (default ``crane``, standard protocol, about a minute on 2 cores, plus
-about 15 s per twist and frame).
+[--twists=-60,-30,30,60]`` (default ``crane``; any bench scene, with its own scanner, e.g.
+``crane-clean``; about a minute on 2 cores, plus about 15 s per twist and frame).
 
 It reconstructs the scene with ``kinematic``, then maps every template vertex to the truth as
 the correspondence metric does (triangle and barycentric coordinates of the closest point of
@@ -140,7 +140,7 @@ def main() -> None:
     args = parser.parse_args()
     scene = {s.key: s for s in STANDARD_SCENES + HELD_OUT_SCENES}[args.scene]
     truth = synth.scene(scene.name, frames=scene.frames, seed=0, **scene.options)
-    scans = synth.scan(truth, resolution=scene.resolution, seed=0, **PROTOCOL)
+    scans = synth.scan(truth, resolution=scene.resolution, seed=0, **{**PROTOCOL, **scene.scan})
     result = reconstruct(scans, method="kinematic")
     tracked, faces = np.asarray(result.vertices), np.asarray(result.faces)
     truth_vertices, truth_faces = np.asarray(truth.vertices), np.asarray(truth.faces)
