@@ -8,8 +8,9 @@ It reconstructs the scene with ``kinematic`` three times:
 
 * ``plain``: as the method runs;
 * ``oracle seed``: every registration starts from the true positions of the template's
-  vertices at that frame (the correspondence metric's binding at frame 0, carried by the
-  truth) instead of the method's prediction;
+  vertices at that frame (:func:`arap_basin.truth_positions`: the correspondence metric's
+  binding at frame 0 with its normal offset, carried by the truth) instead of the method's
+  prediction;
 * ``oracle registration``: every registration returns those true positions unchanged.
 
 Every other step (prediction, projection, sliding, smoothing) is the method's own. It prints
@@ -28,10 +29,10 @@ from __future__ import annotations
 import argparse
 
 import numpy as np
+from arap_basin import truth_positions
 
 from fourd import evaluate, synth
 from fourd.evaluate.bench import HELD_OUT_SCENES, PROTOCOL, STANDARD_SCENES
-from fourd.evaluate.sampling import bind_to_surface, bound_positions, sample_surface
 from fourd.methods import kinematic
 from fourd.methods.kinematic import register, sliding
 
@@ -39,13 +40,15 @@ from fourd.methods.kinematic import register, sliding
 def run(scans, mode: str, true: np.ndarray | None, diagonal: float):
     """``kinematic`` on ``scans`` with the registration replaced per ``mode`` (``plain``,
     ``oracle seed``, ``oracle registration``); ``true`` [T, N, 3] are the template's true
-    positions. Returns the result and the registrations' moves away from the truth."""
+    positions at the input frames. Returns the result and the registrations' moves away from
+    the truth."""
+    times = np.asarray(scans.times, dtype=float)
     step, seed, register_frame = sliding.slide_step, register.ArapIcp.seed, register.ArapIcp.register_frame
     frame = {"index": 0}
     moves = []
 
     def tracked_step(pre, field, vertices, time, next_time, **kw):
-        frame["index"] = int(round(next_time))
+        frame["index"] = int(np.abs(times - next_time).argmin())
         return step(pre, field, vertices, time, next_time, **kw)
 
     def oracle_seed(self, predicted, carried, points, before):
@@ -81,10 +84,9 @@ def main() -> None:
     scans = synth.scan(truth, resolution=scene.resolution, seed=0, **{**PROTOCOL, **scene.scan})
     diagonal = float(np.linalg.norm(np.ptp(np.asarray(truth.vertices).reshape(-1, 3), axis=0)))
     plain, _ = run(scans, "plain", None, diagonal)
-    template = np.asarray(plain.vertices[0])
-    samples = sample_surface(truth.vertices[0], truth.faces, 20000, np.random.default_rng(0))
-    binding = bind_to_surface(template, truth.vertices[0], truth.faces, samples)
-    true = bound_positions(binding, truth.vertices, truth.faces)
+    true = truth_positions(
+        np.asarray(plain.vertices[0]), np.asarray(truth.vertices), np.asarray(truth.faces)
+    )
     for mode in ("plain", "oracle seed", "oracle registration"):
         result, moves = (plain, []) if mode == "plain" else run(scans, mode, true, diagonal)
         report = evaluate(result, truth, samples=20000)
