@@ -513,18 +513,13 @@ def v_cycle(
 
     The work arrays of every level are kept on ``ml`` from one cycle to the next
     (:func:`_work`)."""
-    if len(ml.levels) == 1:
-        x = ml.coarse_solver(ml.levels[0].A, b)
-        if out is not None:
-            out[:] = x
-            return out
-        return x
-    if finest is None:
-        x = _cycle(ml, 0, b)
-        if out is not None:
-            out[:] = x
-            return out
-        return x.copy()
+    if len(ml.levels) == 1 or finest is None:
+        # _cycle's result is a work array of ml's, reused by the next cycle
+        x = ml.coarse_solver(ml.levels[0].A, b) if len(ml.levels) == 1 else _cycle(ml, 0, b)
+        if out is None:
+            return x.copy()
+        out[:] = x
+        return out
     level, C = ml.levels[0], finest.C
     x = np.zeros_like(b) if out is None else out
     x.fill(0)
@@ -552,11 +547,11 @@ def v_cycle(
 
 def _work(ml: MultilevelSolver, depth: int, name: str, size, dtype, *, zero: bool = True):
     """The work array ``name`` [size] (an int or a shape) of level ``depth`` of ``ml``,
-    zeroed (``zero``), kept on
-    ``ml`` for the next cycle: a new large array is new pages, and the first writes to them
-    inside the parallel sweeps are page faults that the threads take one at a time (captured
-    crane system at resolution 64: a finest-level sweep 13.1 ms in the solve against 8.6 ms
-    on arrays already touched)."""
+    zeroed (``zero``), kept on ``ml`` for the next cycle instead of allocated anew in each.
+    Page faults of fresh arrays were suspected of the gap between a finest-level parallel
+    sweep in the solve (about 13 ms on the captured crane system at resolution 64) and the
+    same sweep alone (8.6 ms), but keeping the arrays did not close it: the gap is not
+    explained."""
     work = ml.__dict__.setdefault("fourd_work", {})
     key = (depth, name)
     array = work.get(key)
