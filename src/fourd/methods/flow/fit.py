@@ -12,7 +12,7 @@ on the flow grid itself (cell-centred values, trilinear interpolation between th
 
 with carved (outside) cells as Dirichlet values ``f = +1``. It is smooth, uses both the data and
 the labels, is negative inside and positive outside, and costs one sparse SPD solve (CG with a
-smoothed-aggregation AMG preconditioner). Its two uses are the paper's: improving the labels
+Jacobi preconditioner). Its two uses are the paper's: improving the labels
 (local minima well below zero -> inside, local maxima well above zero -> outside) and orienting
 the data normals (PCA directions, signs from the fit's gradient).
 
@@ -37,7 +37,6 @@ import logging
 from typing import NamedTuple
 
 import numpy as np
-import pyamg
 import scipy.sparse as sp
 from scipy import ndimage
 from scipy.sparse.linalg import cg
@@ -192,7 +191,10 @@ def fit_implicit(
     vals = np.concatenate(vals)
     matrix = sp.csr_matrix((vals, (rows, cols)), shape=(m, m))
     matrix = matrix + sp.identity(m, format="csr") * 1e-6
-    solver = pyamg.smoothed_aggregation_solver(matrix, symmetry="symmetric")
+    # CG with a Jacobi preconditioner: a smoothed-aggregation hierarchy saved steps but cost
+    # more in its set-up than all of them (squash-ball at resolution 64, 1.26M unknowns: SA
+    # set-up 5.0 s + 6 CG steps 2.9 s; Jacobi 117 steps in 1.6 s, the same values within 2e-5)
+    inverse_diagonal = 1.0 / matrix.diagonal()
     count = [0]
 
     def tick(_):
@@ -200,7 +202,7 @@ def fit_implicit(
 
     x0 = np.zeros(m)
     solution, info = cg(
-        matrix, rhs, x0=x0, rtol=rtol, maxiter=500, M=solver.aspreconditioner(), callback=tick
+        matrix, rhs, x0=x0, rtol=rtol, maxiter=5000, M=sp.diags(inverse_diagonal), callback=tick
     )
     if info != 0:
         log.warning(
