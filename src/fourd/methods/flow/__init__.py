@@ -180,7 +180,14 @@ class Options:
         Chamfer / completeness-95 at 6 and at 3 iterations: crane 0.0034 / 0.0069 both;
         dfaust-hopping 0.0040 / 0.0111 and 0.0040 / 0.0114; splitting-blob 0.0028 / 0.0050
         and 0.0027 / 0.0050, right part count in every frame), so the default is 3 (12, then
-        6 before); the flow stage costs about proportionally less.
+        6 before); the flow stage costs about proportionally less. 2 at resolution 64 (``exp``
+        runs at 87dff7d's parent, 20k samples, Chamfer / completeness-95 / s/frame, 3 -> 2):
+        squash-ball 0.0040 / 0.0077 / 7.64 -> 0.0040 / 0.0080 / 5.96, crane 0.0029 / 0.0057 /
+        1.98 -> 0.0029 / 0.0058 / 1.59, splitting-blob 0.0036 / 0.0064 / 1.97 -> 0.0036 /
+        0.0062 / 1.66, but dfaust-hopping 0.0038 / 0.0121 / 2.71 -> 0.0039 / 0.0124 / 2.10
+        (its bench completeness-95 at 3, 0.0117, is near issue 5's bound 0.012). No stopping
+        rule told the scenes apart: the fraction of free cells whose value crosses 1/2 in a
+        solve falls alike on both (squash-ball 23, 24, 11, 6%; dfaust-hopping 11, 11, 5, 3%).
     gamma : float
         Preconditioner parameter (1).
     softness : float
