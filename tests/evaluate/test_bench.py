@@ -183,3 +183,13 @@ def test_a_method_spec_is_its_own_row_with_its_options(tmp_path, monkeypatch):
     assert f"| {spec} |" in (tmp_path / "spec.md").read_text()
     sheet = rows[spec]["sheet"]
     assert sheet and sheet.endswith("squash-ball-perframe-outlier_z-6.png") and Path(sheet).exists()
+
+
+def test_peak_memory_is_the_first_runs_and_the_peak_over_all_runs_is_kept(monkeypatch):
+    # ru_maxrss only grows: read after each run, the first reading is the first run's peak
+    readings = iter([300.0, 3674.0, 3700.0, 3820.0])
+    monkeypatch.setattr(bench, "_peak_mb", lambda: next(readings))
+    monkeypatch.setattr(bench, "_reconstruct", lambda kind, name, scans, level: ("mesh", {}))
+    case = bench._timed_runs("method", "flow", None, repeats=3, log_level=0)
+    assert case["start_mb"] == 300.0 and case["peak_mb"] == 3674.0 and case["peak_all_mb"] == 3820.0
+    assert len(case["seconds"]) == 3 and case["result"] == "mesh"
