@@ -179,6 +179,15 @@ class SlideOptions:
         0.0016 / 0.0023 -> 0.0013 / 0.0017; touching-spheres 0.0174 / 0.0241 -> 0.0163 /
         0.0207; dfaust-hopping 0.0043 / 0.0058 -> 0.0043 / 0.0060; horse-gallop 0.0094 /
         0.0039 -> 0.0094 / 0.0041.
+    previous_shape : float
+        Weight ``b`` of the previous positions' shape in the ARAP term of (5): ``(1 - b)
+        E_ARAP(rest) + b E_ARAP(previous)``, each with its own rotations, over the same
+        cotangent weights (0: the template's rest shape alone, the paper). The rest shape
+        alone pulls every step towards its own proportions: with the true positions in place
+        of every large-motion registration, crane's correspondence ends at 0.0042 / 0.0060
+        with 4 iterations and 0.0027 / 0.0032 with 1 (``benchmarks/registration_oracle.py
+        --slide-iterations``). See the ``kinematic`` method's ``slide_memory`` for what 0.8
+        measured.
     """
 
     iterations: int = 4
@@ -202,8 +211,11 @@ class SlideOptions:
     projection_limit: float = 0.0
     linearize_at: Literal["previous", "guess"] = "guess"
     still_normals: float = 0.2
+    previous_shape: float = 0.0
 
     def __post_init__(self):
+        if not 0.0 <= self.previous_shape < 1.0:
+            raise ValueError(f"previous_shape must lie in [0, 1), got {self.previous_shape}")
         if self.iterations < 1:
             raise ValueError(f"iterations must be at least 1, got {self.iterations}")
         if self.substeps < 1:
@@ -863,10 +875,18 @@ def slide_step(
         guess[jumped] = start[jumped]
         constrained &= ~jumped
     solver = ConstrainedSolver(pre, normals, offsets, constrained, options.regularization)
+    remembered = None
+    if options.previous_shape > 0:
+        previous = np.asarray(vertices, dtype=np.float64)
+        edges = previous[pre.edge_i] - previous[pre.edge_j]
+        remembered = pre._replace(rest_edges=np.ascontiguousarray(edges))
     current = guess
     for iteration in range(options.iterations):
-        rotations = arap_rotations(pre, current)
-        solved = solver.solve(arap_rhs(pre, rotations), current)
+        rhs = arap_rhs(pre, arap_rotations(pre, current))
+        if remembered is not None:
+            b = options.previous_shape
+            rhs = (1.0 - b) * rhs + b * arap_rhs(remembered, arap_rotations(remembered, current))
+        solved = solver.solve(rhs, current)
         if iteration < options.iterations - 1:
             current = solved.copy()
             mask = solver.constrained
