@@ -92,6 +92,24 @@ def arap_rhs(pre, rotations: np.ndarray) -> np.ndarray:
     return out
 
 
+def with_rest_shape(pre, positions: np.ndarray):
+    """``pre`` with the edges of ``positions`` [N, 3] as its rest edges (the same cotangent
+    weights): an ARAP reference remembered from another frame."""
+    positions = np.asarray(positions, dtype=np.float64)
+    edges = positions[pre.edge_i] - positions[pre.edge_j]
+    return pre._replace(rest_edges=np.ascontiguousarray(edges))
+
+
+def blended_arap_rhs(pre, vertices: np.ndarray, remembered=None, weight: float = 0.0) -> np.ndarray:
+    """:func:`arap_rhs` at the best rotations onto ``vertices`` [N, 3] of ``(1 - weight)
+    E_ARAP(rest) + weight E_ARAP(remembered)`` (``remembered`` from :func:`with_rest_shape`;
+    None: the rest shape alone); [N, 3]."""
+    rhs = arap_rhs(pre, arap_rotations(pre, vertices))
+    if remembered is None or weight == 0:
+        return rhs
+    return (1.0 - weight) * rhs + weight * arap_rhs(remembered, arap_rotations(remembered, vertices))
+
+
 def arap_energy(pre, vertices: np.ndarray) -> float:
     """ARAP energy (1) of ``vertices`` with optimal rotations, divided by the template's
     ``sum w_ij |p0_i - p0_j|^2`` (0 for a rigid motion of the template)."""

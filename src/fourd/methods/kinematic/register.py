@@ -58,7 +58,7 @@ from fourd.geometry.factors import TriangularFactors, solve_ordered, unpermuted_
 from fourd.geometry.marching import vertex_components
 from fourd.geometry.neighbors import bucket_grid, nearest_within
 from fourd.geometry.normals import vertex_normals
-from fourd.methods.kinematic.arap import arap_rhs, arap_rotations
+from fourd.methods.kinematic.arap import blended_arap_rhs, with_rest_shape
 
 log = logging.getLogger("fourd.methods.kinematic.register")
 
@@ -534,9 +534,7 @@ class ArapIcp:
         to_vertex, vertex_lower = np.full(len(points), -1), np.zeros(len(points))
         remembered = None
         if previous is not None and o.previous_shape > 0:
-            previous = np.asarray(previous, dtype=np.float64)
-            edges = previous[self.pre.edge_i] - previous[self.pre.edge_j]
-            remembered = self.pre._replace(rest_edges=np.ascontiguousarray(edges))
+            remembered = with_rest_shape(self.pre, previous)
         stiff = True  # until stop_explained ends the stiff iterations
         for it in range(iterations + o.refine_iterations):
             if it < iterations and o.stop_explained > 0:
@@ -577,10 +575,7 @@ class ArapIcp:
         refining = it >= iterations
         weight = self.refine_weight if refining else self.weight
         vn = vertex_normals(x, self.faces)
-        shape = arap_rhs(self.pre, arap_rotations(self.pre, x))
-        if remembered is not None:
-            b = o.previous_shape
-            shape = (1.0 - b) * shape + b * arap_rhs(remembered, arap_rotations(remembered, x))
+        shape = blended_arap_rhs(self.pre, x, remembered, o.previous_shape)
         targets = np.empty((len(x), 3))
         _targets(x, vn, points, normals, to_point, to_vertex, o.normal_agreement, targets)
         rhs = shape + weight * targets

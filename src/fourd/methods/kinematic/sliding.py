@@ -67,7 +67,7 @@ from scipy.spatial import cKDTree
 from fourd.animation import AnimatedMesh
 from fourd.geometry.field import Field4D
 from fourd.geometry.laplacian import cotangent_weights, weights_laplacian
-from fourd.methods.kinematic.arap import arap_energy, arap_rhs, arap_rotations
+from fourd.methods.kinematic.arap import arap_energy, blended_arap_rhs, with_rest_shape
 from fourd.methods.kinematic.register import ArapIcp, RegisterOptions, registration_due
 from fourd.progress import progress
 
@@ -875,17 +875,10 @@ def slide_step(
         guess[jumped] = start[jumped]
         constrained &= ~jumped
     solver = ConstrainedSolver(pre, normals, offsets, constrained, options.regularization)
-    remembered = None
-    if options.previous_shape > 0:
-        previous = np.asarray(vertices, dtype=np.float64)
-        edges = previous[pre.edge_i] - previous[pre.edge_j]
-        remembered = pre._replace(rest_edges=np.ascontiguousarray(edges))
+    remembered = with_rest_shape(pre, vertices) if options.previous_shape > 0 else None
     current = guess
     for iteration in range(options.iterations):
-        rhs = arap_rhs(pre, arap_rotations(pre, current))
-        if remembered is not None:
-            b = options.previous_shape
-            rhs = (1.0 - b) * rhs + b * arap_rhs(remembered, arap_rotations(remembered, current))
+        rhs = blended_arap_rhs(pre, current, remembered, options.previous_shape)
         solved = solver.solve(rhs, current)
         if iteration < options.iterations - 1:
             current = solved.copy()
