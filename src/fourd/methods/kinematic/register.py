@@ -182,8 +182,8 @@ class RegisterOptions:
         twist of real skin (the crane truth's edges are 8% longer or shorter than at frame 0
         in the median at the kick's height, and its upper arms twist 54-64 degrees about
         themselves; ``benchmarks/arap_basin.py``). ``exp`` runs (20k samples, correspondence
-        mean / last frame) 0 -> 0.5: crane 0.0073 / 0.0119 -> 0.0068 / 0.0115, crane-50
-        0.0235 / 0.0304 -> 0.0192 / 0.0227, crane-90 0.0096 / 0.0151 -> 0.0089 / 0.0110,
+        mean / last frame) 0 -> 0.5: crane 0.0073 / 0.0119 -> 0.0068 / 0.0115 (at f8321eb
+        0.0073 / 0.0120 -> 0.0070 / 0.0125), crane-50 0.0235 / 0.0304 -> 0.0192 / 0.0227, crane-90 0.0096 / 0.0151 -> 0.0089 / 0.0110,
         crane-130 0.0114 / 0.0178 -> 0.0112 / 0.0168, horse-gallop 0.0087 / 0.0043 ->
         0.0077 / 0.0038; but bending-arm 0.0202 / 0.0338 -> 0.0219 / 0.0391,
         touching-spheres 0.0163 / 0.0205 -> 0.0177 / 0.0295, elephant-gallop 0.0239 ->
