@@ -56,7 +56,7 @@ from fourd.methods.flow.sparse import (
     truncate_rows,
     used_columns,
 )
-from fourd.methods.flow.system import build_system, neighbourhood
+from fourd.methods.flow.system import build_system, neighbourhood, still_interior
 
 # cameras below the object: the top is never seen (a persistent hole), consistently with carving
 SENSORS = np.array([[2.5, -1.2, 0.0], [-1.25, -1.2, 2.17], [-1.25, -1.2, -2.17]])
@@ -211,6 +211,53 @@ def test_system_quadratic_is_the_energy():
     assert np.allclose(differences, differences[0], rtol=0, atol=1e-9 * abs(energy(
         np.ones(system.A.shape[0]))))
     assert abs(system.A - system.A.T).max() == 0
+
+
+def _block(moving: bool) -> np.ndarray:
+    """Four slices of a 10 x 6 x 6 block fixed inside, moving one cell along +x per slice
+    (or still), with its leading and trailing layers and a one-cell shell free."""
+    value = np.zeros((4, 20, 14, 14))
+    for s in range(4):
+        x = s if moving else 0
+        value[s, 2 + x : 14 + x, 2:12, 2:12] = np.nan
+        value[s, 4 + x : 12 + x, 4:10, 4:10] = 1.0
+        value[s, [4 + x, 11 + x], 4:10, 4:10] = np.nan
+    return value
+
+
+def _solved_values(value: np.ndarray, still_depth: int):
+    system = build_system(
+        value, np.ones((3, *value.shape)), neighbourhood(7), alpha=1 / 3, reg=0.0025,
+        still_depth=still_depth,
+    )
+    solution = solve_saddle(
+        system.A, system.B, system.f, system.g, inner="cg-amg", rtol=1e-8, softness=0.0,
+        maxiter=500,
+    )
+    assert solution.converged and system.infeasible == 0
+    x = np.where(np.isnan(value), 0.0, value).ravel()
+    x[system.free] = solution.u[: len(system.free)]
+    return system, x.reshape(value.shape)
+
+
+def test_a_still_interior_keeps_only_the_stay_flows_of_deep_cells():
+    """``still_interior``: deep inside cells keep only the flow to themselves. A block at
+    rest comes out as with every flow (within 0.005: the interior's flows no longer spread
+    under the regulariser); one moving a cell per slice keeps its mass, and its free layers
+    lag by up to 0.07 (the deep cells cannot carry it along)."""
+    for moving, tolerance in ((False, 0.01), (True, 0.1)):
+        value = _block(moving)
+        every, x_every = _solved_values(value, 0)
+        fewer, x_fewer = _solved_values(value, 1)
+        assert len(fewer.flows.source) < len(every.flows.source)
+        leaving, entering = still_interior(value, 1)
+        assert leaving[:-1].sum() > 50 and entering[1:].sum() > 50
+        moves = neighbourhood(7)[fewer.flows.offset].any(axis=1)
+        assert not (leaving.ravel()[fewer.flows.source] & moves).any()
+        assert not (entering.ravel()[fewer.flows.target] & moves).any()
+        assert np.abs(x_fewer - x_every).max() < tolerance
+        masses = x_fewer.reshape(4, -1).sum(axis=1)
+        assert np.ptp(masses) < 1e-6 * masses.mean()
 
 
 def test_minres_block_preconditioner_converges():

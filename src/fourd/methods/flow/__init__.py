@@ -328,6 +328,27 @@ class Options:
         0.0123 -> 0.0033 / 0.0124, ``crane`` 0.0030 / 0.0065 -> 0.0032 / 0.0066 (3 cells:
         crane 0.0031 / 0.0065, splitting-blob 0.0031 / 0.0060). At 48 (rigid-turn, 3
         frames) the two together keep 0.985 of the ball's volume, 0.26 without.
+    still_interior : int
+        Material stays in cells fixed inside at least this many cells deep (every cell within
+        that many cells of them, in their slice, fixed inside too) and fixed inside in the
+        next slice as well: their flows to other cells are dropped, and so are flows into
+        them from other cells (:func:`.system.still_interior`; 0, the default: flows
+        everywhere, the paper). Inside a solid every cell is full whatever the flows between
+        its cells, so a thick object's interior only costs unknowns: a deviation for speed.
+        A still interior cannot carry a translating solid along, so where a thick object
+        translates its boundary layers lag (a block moving one cell per slice: free values
+        off by up to 0.07, ``tests/methods/test_flow.py``). Measured at resolution 64 (``exp``
+        runs of 998ee20 with this option, single runs one after the other on the 2-core
+        machine, 20k samples, Chamfer / completeness-95 / s/frame, 0 -> 1): squash-ball
+        0.0040 / 0.0077 / 7.71 -> 0.0039 / 0.0076 / 5.59 (38-58% of the flows dropped in its
+        three solves, volume change 0.4% -> 0.9%, mass conservation error 0.9% -> 1.6%),
+        rigid-turn 0.0063 / 0.0257 / 20.1 -> 0.0062 / 0.0235 / 12.7, dfaust-hopping 0.0038 /
+        0.0121 / 2.89 -> 0.0038 / 0.0120 / 2.69, splitting-blob 0.0036 / 0.0064 / 2.03 ->
+        0.0035 / 0.0065 / 1.82; but touching-spheres, whose balls move more than a cell per
+        slice towards each other, 0.0047 / 0.0116 -> 0.0050 / 0.0133. Keeping the flows of
+        the deep cells along their connected piece's centroid motion as well kept
+        touching-spheres at 0.0049 / 0.0126 and squash-ball, whose labelled pieces' centroids
+        wander, at 6.86 s/frame, so it was dropped.
     outlier_factor : float
         Statistical outlier filter: drop points whose 8th-neighbour distance exceeds this
         multiple of the median.
@@ -483,6 +504,7 @@ class Options:
     fit_level: float = 0.5
     fit_offset: float | None = None
     deep_inside: float | None = None
+    still_interior: int = 0
     outlier_factor: float = 3.0
     refine: int = 2
     band: float = 2.0
@@ -525,6 +547,8 @@ class Options:
             raise ValueError(f"clamp must be in [0, 0.5), got {self.clamp}")
         if self.refine < 1:
             raise ValueError(f"refine must be at least 1, got {self.refine}")
+        if self.still_interior < 0:
+            raise ValueError(f"still_interior must not be negative, got {self.still_interior}")
         if self.deep_inside is not None and self.deep_inside < 0:
             raise ValueError(f"deep_inside must not be negative, got {self.deep_inside}")
         if self.fit_offset is not None and self.fit_offset < 0:
@@ -786,6 +810,7 @@ def run(seq: PointCloudSequence, options: Options | None = None) -> FlowResult:
             reuse_coarse=options.reuse_coarse,
             later_maxiter=options.later_outer or None,
             parallel=options.parallel_sweeps and options.inner == "amg",
+            still_depth=options.still_interior,
             progress=bar,
         )
     finally:

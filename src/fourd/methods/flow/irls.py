@@ -133,6 +133,7 @@ def run_irls(
     reuse_coarse: bool = False,
     later_maxiter: int | None = None,
     parallel: bool = True,
+    still_depth: int = 0,
     progress=None,
 ) -> IRLSResult:
     """Run the IRLS loop from the initial labels.
@@ -169,6 +170,9 @@ def run_irls(
     parallel : bool
         The V-cycle's Gauss-Seidel sweeps run on all cores, blocks of time slices at once
         (:func:`unknown_slices`, :mod:`.sweeps`); False: one row after the other.
+    still_depth : int
+        Material stays in the cells fixed inside at least this many cells deep (see
+        :func:`.system.still_interior`); 0: flows everywhere.
     """
     if regularize_towards not in ("zero", "previous"):
         raise ValueError(f"regularize_towards must be zero or previous, got {regularize_towards!r}")
@@ -186,7 +190,9 @@ def run_irls(
         value[~alive] = 0.0
         x[~alive] = 0.0
         system = None  # the previous system is not needed while the next one is built
-        system = build_system(value, weights, offsets, alpha=alpha, reg=reg)
+        system = build_system(
+            value, weights, offsets, alpha=alpha, reg=reg, still_depth=still_depth
+        )
         n_x = len(system.free)
         decided_before = int((~np.isnan(value) & region).sum())
         if n_x == 0:

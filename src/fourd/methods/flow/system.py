@@ -28,6 +28,7 @@ from typing import NamedTuple
 import numba
 import numpy as np
 import scipy.sparse as sp
+from scipy import ndimage
 
 from fourd.methods.flow.sparse import csr_from_entries
 
@@ -57,8 +58,37 @@ class Flows(NamedTuple):
     offset: np.ndarray
 
 
-def enumerate_flows(alive: np.ndarray, offsets: np.ndarray) -> Flows:
-    """All flows between living cells of consecutive slices (``alive`` [S, X, Y, Z] bool)."""
+def still_interior(value: np.ndarray, depth: int) -> tuple[np.ndarray, np.ndarray]:
+    """Where material stays in its cell: ``(leaving, entering)``, bool [S, X, Y, Z].
+
+    A cell fixed inside (``value`` 1) whose neighbours within ``depth`` cells (3x3x3 steps,
+    in its slice) are all fixed inside is deep. Material leaves a deep cell that is fixed
+    inside in the next slice too only to itself (``leaving``), and enters a deep cell that was
+    fixed inside in the previous slice only from itself (``entering``). Inside a solid every
+    cell is full whatever the flows between its cells, and the stay flows kept leave every
+    constraint feasible; but a deep interior that stays cannot carry a translating solid
+    along, so its boundary layers lag (see the flow method's ``Options.still_interior``).
+    """
+    inside = value == 1
+    deep = ndimage.binary_erosion(
+        inside, structure=np.ones((1, 3, 3, 3), dtype=bool), iterations=max(depth, 1),
+        border_value=0,
+    )
+    leaving = np.zeros_like(deep)
+    leaving[:-1] = deep[:-1] & inside[1:]
+    entering = np.zeros_like(deep)
+    entering[1:] = deep[1:] & inside[:-1]
+    return leaving, entering
+
+
+def enumerate_flows(
+    alive: np.ndarray,
+    offsets: np.ndarray,
+    still: tuple[np.ndarray, np.ndarray] | None = None,
+) -> Flows:
+    """All flows between living cells of consecutive slices (``alive`` [S, X, Y, Z] bool),
+    but for the flows to another cell out of a ``leaving`` or into an ``entering`` cell of
+    ``still = (leaving, entering)`` (:func:`still_interior`; None: all flows)."""
     S, X, Y, Z = alive.shape
     strides = np.array([X * Y * Z, Y * Z, Z, 1], dtype=np.int64)
     sources, targets, kinds = [], [], []
@@ -71,6 +101,9 @@ def enumerate_flows(alive: np.ndarray, offsets: np.ndarray) -> Flows:
         zt = slice(zs.start + dz, zs.stop + dz)
         mask = np.zeros(alive.shape, dtype=bool)
         mask[:-1, xs, ys, zs] = alive[:-1, xs, ys, zs] & alive[1:, xt, yt, zt]
+        if still is not None and (dx or dy or dz):
+            mask[:-1, xs, ys, zs] &= ~still[0][:-1, xs, ys, zs]
+            mask[:-1, xs, ys, zs] &= ~still[1][1:, xt, yt, zt]
         src = np.flatnonzero(mask)
         sources.append(src)
         targets.append(src + strides[0] + dx * strides[1] + dy * strides[2] + dz * strides[3])
@@ -172,6 +205,7 @@ def build_system(
     *,
     alpha: float,
     reg: float,
+    still_depth: int = 0,
 ) -> System:
     """Assemble the system for the current cell values.
 
@@ -184,6 +218,9 @@ def build_system(
     offsets : int [K, 3]
     alpha, reg : float
         Weight of continuity against momentum, and of the regulariser ``F_r``.
+    still_depth : int
+        Material stays in the cells fixed inside at least this many cells deep
+        (:func:`still_interior`; 0: flows everywhere, the paper).
     """
     shape4 = value.shape
     S = shape4[0]
@@ -195,7 +232,9 @@ def build_system(
     n_x = len(free)
     xcol = np.full(n_cells, -1, dtype=np.int64)
     xcol[free] = np.arange(n_x)
-    flows = enumerate_flows(alive.reshape(shape4), offsets)
+    still = still_interior(value, still_depth) if still_depth > 0 else None
+    flows = enumerate_flows(alive.reshape(shape4), offsets, still)
+    del still
     n_v = len(flows.source)
     n = n_x + n_v
     fixed_value = np.where(free_mask, 0.0, flat_value)
