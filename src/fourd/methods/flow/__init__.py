@@ -70,7 +70,8 @@ log = logging.getLogger("fourd.methods.flow")
 
 MIN_FRAMES = 2
 #: From this ``resolution`` on a thick object is many cells thick: the automatic
-#: ``fit_offset`` and ``deep_inside`` switch to their fine-grid values (see :class:`Options`).
+#: ``fit_offset``, ``deep_inside`` and ``still_interior`` switch to their fine-grid values
+#: (see :class:`Options`).
 FINE_RESOLUTION = 48
 #: ``mass_levels`` tells observed from unobserved parts in cells of this resolution, or in the
 #: grid's own where it is coarser (see ``Options.observed_distance``).
@@ -328,27 +329,34 @@ class Options:
         0.0123 -> 0.0033 / 0.0124, ``crane`` 0.0030 / 0.0065 -> 0.0032 / 0.0066 (3 cells:
         crane 0.0031 / 0.0065, splitting-blob 0.0031 / 0.0060). At 48 (rigid-turn, 3
         frames) the two together keep 0.985 of the ball's volume, 0.26 without.
-    still_interior : int
+    still_interior : int or None
         Material stays in cells fixed inside at least this many cells deep (every cell within
         that many cells of them, in their slice, fixed inside too) and fixed inside in the
-        next slice as well: their flows to other cells are dropped, and so are flows into
-        them from other cells (:func:`.system.still_interior`; 0, the default: flows
-        everywhere, the paper). Inside a solid every cell is full whatever the flows between
-        its cells, so a thick object's interior only costs unknowns: a deviation for speed.
-        A still interior cannot carry a translating solid along, so where a thick object
-        translates its boundary layers lag (a block moving one cell per slice: free values
-        off by up to 0.07, ``tests/methods/test_flow.py``). Measured at resolution 64 (``exp``
-        runs of 998ee20 with this option, single runs one after the other on the 2-core
-        machine, 20k samples, Chamfer / completeness-95 / s/frame, 0 -> 1): squash-ball
-        0.0040 / 0.0077 / 7.71 -> 0.0039 / 0.0076 / 5.59 (38-58% of the flows dropped in its
-        three solves, volume change 0.4% -> 0.9%, mass conservation error 0.9% -> 1.6%),
-        rigid-turn 0.0063 / 0.0257 / 20.1 -> 0.0062 / 0.0235 / 12.7, dfaust-hopping 0.0038 /
-        0.0121 / 2.89 -> 0.0038 / 0.0120 / 2.69, splitting-blob 0.0036 / 0.0064 / 2.03 ->
-        0.0035 / 0.0065 / 1.82; but touching-spheres, whose balls move more than a cell per
-        slice towards each other, 0.0047 / 0.0116 -> 0.0050 / 0.0133. Keeping the flows of
-        the deep cells along their connected piece's centroid motion as well kept
-        touching-spheres at 0.0049 / 0.0126 and squash-ball, whose labelled pieces' centroids
-        wander, at 6.86 s/frame, so it was dropped.
+        next slice as well: their flows to other cells are dropped, so are flows into them
+        from other cells, and their flow to themselves, which must then be 1, is a constant
+        instead of an unknown with its two constraints (:func:`.system.still_interior`; 0:
+        flows everywhere, the paper; None, the default: 1 from ``resolution`` 48 on, 0
+        below, where thick interiors are a few cells). Inside a solid every cell is full
+        whatever the flows between its cells, so a thick object's interior only costs
+        unknowns: a deviation for speed. A still interior cannot carry a translating solid
+        along, so where a thick object translates its boundary layers lag (a block moving
+        one cell per slice: free values off by up to 0.07, ``tests/methods/test_flow.py``).
+        Bench at 29c40b2 (resolution 64, single runs one after the other on the 2-core
+        machine, the flows to themselves still unknowns; Chamfer / completeness-95 /
+        s/frame / peak MiB, 0 -> 1): squash-ball 0.0029 / 0.0067 / 7.59 / 3681 -> 0.0028 /
+        0.0066 / 5.66 / 2847 (38-58% of the flows dropped in its three solves; mass
+        conservation error 0.9% -> 1.6%, volume change 0.4% -> 0.9%), dfaust-hopping 0.0029
+        / 0.0117 / 2.78 -> 0.0029 / 0.0116 / 2.57, splitting-blob 0.0027 / 0.0056 / 2.04 ->
+        0.0026 / 0.0058 / 1.79, crane 0.0021 / 0.0044 / 2.00 -> 0.0021 / 0.0042 / 1.99; but
+        touching-spheres, whose balls move more than a cell per slice towards each other,
+        0.0036 / 0.0112 / 3.29 -> 0.0039 / 0.0128 / 3.03. ``exp`` runs (20k samples): rigid-turn
+        at 64 0.0063 / 0.0257 / 20.1 -> 0.0062 / 0.0235 / 12.7 s/frame; squash-ball with the
+        flows to themselves as constants 5.25 -> 4.61 s/frame in the same hour (0.0039 /
+        0.0076 / 1.6% -> 0.0039 / 0.0077 / 1.4% mass conservation error). Keeping the deep
+        cells' flows along their connected piece's centroid motion too kept touching-spheres
+        at 0.0049 / 0.0126 (``exp``, 20k samples; 0.0047 / 0.0116 with every flow) and
+        squash-ball, whose labelled pieces' centroids wander, at 6.86 s/frame, so it was
+        dropped.
     outlier_factor : float
         Statistical outlier filter: drop points whose 8th-neighbour distance exceeds this
         multiple of the median.
@@ -504,7 +512,7 @@ class Options:
     fit_level: float = 0.5
     fit_offset: float | None = None
     deep_inside: float | None = None
-    still_interior: int = 0
+    still_interior: int | None = None
     outlier_factor: float = 3.0
     refine: int = 2
     band: float = 2.0
@@ -547,7 +555,7 @@ class Options:
             raise ValueError(f"clamp must be in [0, 0.5), got {self.clamp}")
         if self.refine < 1:
             raise ValueError(f"refine must be at least 1, got {self.refine}")
-        if self.still_interior < 0:
+        if self.still_interior is not None and self.still_interior < 0:
             raise ValueError(f"still_interior must not be negative, got {self.still_interior}")
         if self.deep_inside is not None and self.deep_inside < 0:
             raise ValueError(f"deep_inside must not be negative, got {self.deep_inside}")
@@ -787,6 +795,9 @@ def run(seq: PointCloudSequence, options: Options | None = None) -> FlowResult:
         "interpolation_entries": options.interpolation_entries or None,
         "coarse_drop": options.coarse_drop,
     }
+    still_depth = options.still_interior
+    if still_depth is None:
+        still_depth = 1 if options.resolution >= FINE_RESOLUTION else 0
     bar = progress(total=options.max_iterations, desc="flow: IRLS", unit="iteration")
     try:
         irls: IRLSResult = run_irls(
@@ -810,7 +821,7 @@ def run(seq: PointCloudSequence, options: Options | None = None) -> FlowResult:
             reuse_coarse=options.reuse_coarse,
             later_maxiter=options.later_outer or None,
             parallel=options.parallel_sweeps and options.inner == "amg",
-            still_depth=options.still_interior,
+            still_depth=still_depth,
             progress=bar,
         )
     finally:

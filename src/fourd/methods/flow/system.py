@@ -234,9 +234,17 @@ def build_system(
     xcol[free] = np.arange(n_x)
     still = still_interior(value, still_depth) if still_depth > 0 else None
     flows = enumerate_flows(alive.reshape(shape4), offsets, still)
+    # a deep cell's flow to itself is its only way out (or in) and its value is 1, so that
+    # flow is 1: a constant, not an unknown
+    pinned = np.zeros(len(flows.source), dtype=bool)
+    if still is not None:
+        stay = ~offsets[flows.offset].any(axis=1)
+        pinned = stay & (still[0].ravel()[flows.source] | still[1].ravel()[flows.target])
     del still
-    n_v = len(flows.source)
+    n_v = int((~pinned).sum())
     n = n_x + n_v
+    column = np.full(len(flows.source), -1, dtype=np.int64)
+    column[~pinned] = n_x + np.arange(n_v)
     fixed_value = np.where(free_mask, 0.0, flat_value)
 
     f = np.zeros(n)
@@ -277,17 +285,23 @@ def build_system(
         t_src = flows.source // strides[0]
         successor = flow_lookup(flows, flows.target, flows.offset)
         has_next_slice = t_src < S - 2
-        pair = has_next_slice & (successor >= 0)
-        first.append(n_x + np.flatnonzero(pair))
-        second.append(n_x + successor[pair])
-        lonely_out = has_next_slice & (successor < 0)
+        pair = np.flatnonzero(has_next_slice & (successor >= 0))
+        a, b = column[pair], column[successor[pair]]
+        # a pinned partner (a flow of 1) puts (v - 1)^2: the missing partner's v^2 and f += w
+        f += np.bincount(np.maximum(a, b)[(a < 0) ^ (b < 0)], minlength=n) * mom
+        both = (a >= 0) & (b >= 0)
+        one = (a >= 0) ^ (b >= 0)
+        first.append(np.concatenate([a[both], np.maximum(a, b)[one]]))
+        second.append(np.concatenate([b[both], np.full(int(one.sum()), -1, dtype=np.int64)]))
+        lonely_out = has_next_slice & (successor < 0) & ~pinned
         predecessor = flow_lookup(flows, flows.source - shift, flows.offset)
-        lonely_in = (t_src >= 1) & (predecessor < 0)
-        single = n_x + np.concatenate([np.flatnonzero(lonely_out), np.flatnonzero(lonely_in)])
+        lonely_in = (t_src >= 1) & (predecessor < 0) & ~pinned
+        single = column[np.concatenate([np.flatnonzero(lonely_out), np.flatnonzero(lonely_in)])]
         first.append(single)
         second.append(np.full(len(single), -1, dtype=np.int64))
         term_weight.append(np.full(len(first[-2]) + len(single), mom))
-        del d, shift, t_src, successor, predecessor, pair, lonely_out, lonely_in, single
+        del d, shift, t_src, successor, predecessor, pair, a, b, both, one
+        del lonely_out, lonely_in, single
 
     first, second, term_weight = (np.concatenate(t) for t in (first, second, term_weight))
     A = _gram(first, second, term_weight, n, reg)
@@ -309,11 +323,15 @@ def build_system(
     cells = np.concatenate([out_cells, in_cells])
     is_free = free_mask[cells]
     g_all = np.where(is_free, 0.0, fixed_value[cells])
+    if pinned.any():
+        g_all -= np.bincount(row_of_out[flows.source[pinned]], minlength=m_all)
+        g_all -= np.bincount(row_of_in[flows.target[pinned]], minlength=m_all)
+        flows = Flows(flows.source[~pinned], flows.target[~pinned], flows.offset[~pinned])
     flow_out, flow_in = row_of_out[flows.source], row_of_in[flows.target]
     has_flow = np.zeros(m_all, dtype=bool)
     has_flow[flow_out] = True
     has_flow[flow_in] = True
-    infeasible = int((~has_flow & ~is_free).sum())
+    infeasible = int((~has_flow & ~is_free & (g_all != 0)).sum())
     keep = has_flow | is_free
     g = g_all[keep]
     index = np.int32 if max(n, m_all) < np.iinfo(np.int32).max else np.int64
