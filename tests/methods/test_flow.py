@@ -56,7 +56,12 @@ from fourd.methods.flow.sparse import (
     truncate_rows,
     used_columns,
 )
-from fourd.methods.flow.system import build_system, neighbourhood, still_interior
+from fourd.methods.flow.system import (
+    build_system,
+    enumerate_flows,
+    neighbourhood,
+    still_interior,
+)
 
 # cameras below the object: the top is never seen (a persistent hole), consistently with carving
 SENSORS = np.array([[2.5, -1.2, 0.0], [-1.25, -1.2, 2.17], [-1.25, -1.2, -2.17]])
@@ -154,21 +159,37 @@ def test_options_validated_through_registry():
         method_options("flow", {"interpolation_entries": "-1"})
 
 
-def test_system_quadratic_is_the_energy():
+@pytest.mark.parametrize("still_depth", [0, 1])
+def test_system_quadratic_is_the_energy(still_depth):
     """``u^T A u - 2 f^T u`` differs from the energy F of the system's docstring (continuity
     with the fixed cells substituted, momentum with missing partners as zero flows, the
-    regulariser) by a constant, computed here term by term with Python loops."""
+    regulariser) by a constant, computed here term by term with Python loops; with a still
+    interior, over every flow that is left, the deep cells' flows to themselves held at 1."""
     rng = np.random.default_rng(3)
-    value = np.full((4, 6, 5, 5), np.nan)
+    if still_depth:
+        value = np.full((4, 9, 8, 8), np.nan)
+        value[:, 2:7, 2:7, 2:7] = 1.0
+        value[1:, 2, 2:7, 2:7] = np.nan  # the block's side moves: flows to a free layer
+    else:
+        value = np.full((4, 6, 5, 5), np.nan)
+        value[:, 2:4, 2:3, 2:4] = 1.0
     value[:, [0, -1], :, :] = value[:, :, [0, -1], :] = value[:, :, :, [0, -1]] = 0.0
-    value[:, 2:4, 2:3, 2:4] = 1.0
-    value[rng.random(value.shape) < 0.1] = 0.0
+    dead = rng.random(value.shape) < 0.1
+    value[dead & (np.isnan(value) if still_depth else True)] = 0.0
     weights = rng.random((3, *value.shape))
     alpha, reg = 1 / 3, 0.0025
     offsets = neighbourhood(7)
-    system = build_system(value, weights, offsets, alpha=alpha, reg=reg)
+    system = build_system(value, weights, offsets, alpha=alpha, reg=reg, still_depth=still_depth)
     n_x = len(system.free)
-    flows = system.flows
+    still = still_interior(value, still_depth) if still_depth else None
+    flows = enumerate_flows(value != 0, offsets, still)
+    pinned = np.zeros(len(flows.source), dtype=bool)
+    if still is not None:
+        pinned = ~offsets[flows.offset].any(axis=1) & (
+            still[0].ravel()[flows.source] | still[1].ravel()[flows.target]
+        )
+        assert pinned.sum() >= 27
+    assert np.array_equal(flows.source[~pinned], system.flows.source)
     index = {(int(a), int(k)): i for i, (a, k) in enumerate(zip(flows.source, flows.offset, strict=True))}
     S, shape = value.shape[0], value.shape
     strides = np.array([np.prod(shape[a + 1 :]) for a in range(4)])
@@ -176,7 +197,8 @@ def test_system_quadratic_is_the_energy():
     def energy(u):
         x = np.where(np.isnan(value), 0.0, value).ravel().copy()
         x[system.free] = u[:n_x]
-        v = u[n_x:]
+        v = np.ones(len(flows.source))
+        v[~pinned] = u[n_x:]
         total = reg * (u**2).sum()
         cells = x.reshape(shape)
         for axis in range(3):
