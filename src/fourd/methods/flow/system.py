@@ -3,7 +3,9 @@
 Unknowns are the cell values ``x`` that are not yet decided and the flow variables ``v`` from
 every living cell of slice ``t`` to the living cells of slice ``t + 1`` in its neighbourhood
 (7 or 27 cells, Figure 2). Decided cells (data, labels, clamped values) are back-substituted;
-flows into or out of a zero cell do not exist.
+flows into or out of a zero cell do not exist; with ``still_depth`` a deep interior's flows
+to other cells do not exist either and its flows to themselves are constants 1
+(:func:`still_interior`).
 
 Energy (weights ``alpha``, ``1 - alpha`` and ``reg``)::
 
