@@ -31,6 +31,13 @@ crane-50 0.0235 / 0.0308, 0.0142 / 0.0164, 0.0078 / 0.0094, and with ``--slide-i
 0.0231 / 0.0314, 0.0150 / 0.0179, 0.0049 / 0.0055 (the sliding's own iterations, too, pull
 a right state towards the rest shape's ARAP minimum).
 
+``--energies`` then reruns the plain tracking with every registration also started from the
+truth, and prints per registered frame the ARAP energy against the template and the mean
+distance from the truth of the method's registration, of the one from the truth, and of the
+truth itself. crane: both registrations end at the same energy (0.0013-0.0091, within 0.0005
+of each other), the truth's own being 0.0089-0.0524: the prior's minimum is not the truth,
+and its energy cannot choose between seeds.
+
 This reaches into the method's internals (it replaces ``ArapIcp.seed``,
 ``ArapIcp.register_frame`` and ``sliding.slide_step`` for the run), so it is a diagnostic
 script, not part of the package.
@@ -47,16 +54,19 @@ from arap_basin import truth_positions
 from fourd import evaluate, synth
 from fourd.evaluate.bench import HELD_OUT_SCENES, PROTOCOL, STANDARD_SCENES
 from fourd.methods import kinematic
-from fourd.methods.kinematic import register, sliding
+from fourd.methods.kinematic import arap, register, sliding
 
 
 def run(scans, mode: str, true: np.ndarray | None, diagonal: float,
         options: kinematic.Options | None = None, stop_explained: float = 0.0):
     """``kinematic`` with ``options`` (None: its defaults) on ``scans``, with the registration
-    replaced per ``mode`` (``plain``, ``oracle seed``, ``oracle registration``) and its
+    replaced per ``mode`` (``plain``, ``oracle seed``, ``oracle registration``, or
+    ``energies``: as ``plain``, each registration also run from the truth) and its
     ``RegisterOptions.stop_explained`` set to ``stop_explained``; ``true`` [T, N, 3] are the
     template's true positions at the input frames. Returns the result and the registrations'
-    moves away from the truth."""
+    moves away from the truth (with ``energies``: per registration the frame and, for the
+    method's registration, the one from the truth and the truth itself, the ARAP energy
+    against the template and the mean distance from the truth)."""
     times = np.asarray(scans.times, dtype=float)
     step, seed, register_frame = sliding.slide_step, register.ArapIcp.seed, register.ArapIcp.register_frame
     frame = {"index": 0}
@@ -70,6 +80,15 @@ def run(scans, mode: str, true: np.ndarray | None, diagonal: float,
         return true[frame["index"]].copy()
 
     def oracle_register(self, vertices, points, normals, previous=None):
+        if mode == "energies":
+            own = register_frame(self, vertices, points, normals, previous=previous)
+            now = true[frame["index"]]
+            from_truth = register_frame(self, now.copy(), points, normals, previous=previous)
+            moves.append((frame["index"], *(
+                (arap.arap_energy(self.pre, x), np.linalg.norm(x - now, axis=1).mean() / diagonal)
+                for x in (own[0], from_truth[0], now)
+            )))
+            return own
         if mode == "oracle registration":
             return true[frame["index"]].copy(), 0.0
         out = register_frame(self, vertices, points, normals, previous=previous)
@@ -87,8 +106,9 @@ def run(scans, mode: str, true: np.ndarray | None, diagonal: float,
         register.ArapIcp.__init__ = stopping_init
         if mode != "plain":
             sliding.slide_step = tracked_step
-            register.ArapIcp.seed = oracle_seed
             register.ArapIcp.register_frame = oracle_register
+        if mode not in ("plain", "energies"):
+            register.ArapIcp.seed = oracle_seed
         result = kinematic.reconstruct(scans, options or kinematic.Options())
     finally:
         register.ArapIcp.__init__ = init
@@ -111,6 +131,11 @@ def main() -> None:
         help="the sliding's ARAP iterations per step (kinematic's iterations; default its own)",
     )
     parser.add_argument("--per-frame", action="store_true", help="print each frame's error too")
+    parser.add_argument(
+        "--energies", action="store_true",
+        help="then, per registration of the plain run, the ARAP energy and distance from the "
+        "truth of its result, of the registration started from the truth, and of the truth",
+    )
     args = parser.parse_args()
     options = kinematic.Options()
     if args.slide_iterations is not None:
@@ -137,6 +162,12 @@ def main() -> None:
         if moves:
             print("  registrations from the truth, mean distance from it after: "
                   + ", ".join(f"frame {k} {m:.4f}" for k, m in moves))
+    if args.energies:
+        _, rows = run(scans, "energies", true, diagonal, **settings)
+        print(f"{args.scene} registrations, ARAP energy against the template / mean distance "
+              "from the truth: the method's, started from the truth, the truth")
+        for k, *cells in rows:
+            print(f"  frame {k}: " + ", ".join(f"{e:.4f} / {d:.4f}" for e, d in cells))
 
 
 if __name__ == "__main__":
