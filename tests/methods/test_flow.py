@@ -34,10 +34,17 @@ from fourd.methods.flow.grid import (
     unsigned_distance,
 )
 from fourd.methods.flow.irls import _previous_unknowns
-from fourd.methods.flow.post import drop_cavities, implicit_function
+from fourd.methods.flow.post import (
+    _linear_weights,
+    _stencil_csr,
+    _upsample,
+    drop_cavities,
+    implicit_function,
+)
 from fourd.methods.flow.solver import (
     _saddle_apply,
     amg_hierarchy,
+    jacobi_cg,
     minres_inplace,
     normal_finest,
     restrict_interpolations,
@@ -431,6 +438,67 @@ def test_csr_from_entries_matches_scipy_coo():
         csr_from_entries(np.array([0, 1]), np.array([0, 200]), np.ones(2), (300, 200))
     with pytest.raises(ValueError, match="row index"):
         csr_from_entries(np.array([300]), np.array([0]), np.ones(1), (300, 200))
+
+
+def test_jacobi_cg_follows_scipys_cg():
+    """The compiled Jacobi-preconditioned CG of the postprocessing: scipy's solution, residual
+    within ``rtol``, as many steps as scipy's (give or take one), 0 steps from the answer, and
+    ``info`` set when ``maxiter`` is too small."""
+    from scipy.sparse.linalg import cg
+
+    rng = np.random.default_rng(4)
+    n = 30
+    path = sp.diags([-np.ones(n - 1), 2 * np.ones(n), -np.ones(n - 1)], [-1, 0, 1])
+    A = (sp.kron(path, sp.identity(n)) + sp.kron(sp.identity(n), path)).tocsr()
+    A = (A + sp.diags(rng.uniform(0.01, 1.0, n * n))).tocsr()
+    A.indices = A.indices.astype(np.int32)
+    b = rng.normal(size=n * n)
+    x0 = rng.normal(size=n * n)
+    steps = []
+    expected, info = cg(A, b, x0=x0, rtol=1e-8, maxiter=2000,
+                        M=sp.diags(1.0 / A.diagonal()), callback=lambda _: steps.append(1))
+    x, status, taken = jacobi_cg(A, b, x0, rtol=1e-8, maxiter=2000)
+    assert info == 0 and status == 0
+    assert np.linalg.norm(b - A @ x) <= 1e-8 * np.linalg.norm(b)
+    assert abs(x - expected).max() < 1e-6 * abs(expected).max()
+    assert abs(taken - len(steps)) <= 1
+    exact = sp.linalg.spsolve(A.tocsc(), b)
+    assert jacobi_cg(A, A @ exact, exact, rtol=1e-8, maxiter=10)[2] == 0
+    assert jacobi_cg(A, b, x0, rtol=1e-8, maxiter=3)[1:] == (3, 3)
+
+
+@pytest.mark.parametrize("refine", [2, 3])
+def test_upsample_is_scipys_linear_interpolation(refine):
+    """The postprocessing's refinement of the coarse signed distance: ``map_coordinates`` with
+    ``order=1, mode="nearest"`` at the fine nodes' coarse coordinates."""
+    from scipy import ndimage
+
+    coarse = np.random.default_rng(5).normal(size=(5, 6, 7))
+    fine = np.empty(tuple(refine * n for n in coarse.shape), dtype=np.float32)
+    axes = [_linear_weights(n, refine) for n in coarse.shape]
+    _upsample(coarse, *axes[0], *axes[1], *axes[2], fine)
+    coords = np.meshgrid(*[(np.arange(n) + 0.5) / refine - 0.5 for n in fine.shape], indexing="ij")
+    expected = ndimage.map_coordinates(coarse, coords, order=1, mode="nearest")
+    assert abs(fine - expected).max() < 1e-6
+
+
+def test_stencil_rows_take_their_weights_from_the_slots():
+    """The postprocessing's Laplace matrix from its slot table: the diagonal in slot 4, the
+    temporal edges weighted by the slice's time weights, spatial ones by ``-smoothness``, empty
+    slots skipped, entries in slot order."""
+    columns = -np.ones((3, 9), dtype=np.int32)
+    columns[:, 4] = [0, 1, 2]
+    columns[0, 8] = 1  # row 0 (slice 0) -> next slice
+    columns[1, 0] = 0  # row 1 (slice 1) -> previous slice
+    columns[1, 6] = 2  # row 1: a spatial neighbour
+    columns[2, 2] = 1  # row 2: a spatial neighbour
+    nodes = np.array([3, 10 + 3, 10 + 5])  # 10 nodes per slice
+    data, indices, indptr = _stencil_csr(
+        columns, np.array([5.0, 6.0, 7.0]), nodes, 10, 0.5, np.array([0.2])
+    )
+    matrix = sp.csr_matrix((data, indices, indptr), shape=(3, 3)).toarray()
+    assert np.array_equal(matrix, [[5.0, -0.1, 0.0], [-0.1, 6.0, -0.5], [0.0, -0.5, 7.0]])
+    assert list(indices) == [0, 1, 0, 1, 2, 1, 2]
 
 
 def test_csr_product_matches_scipy():

@@ -326,24 +326,6 @@ def transpose_pattern(
     return out_indptr[:-1].copy(), out_indices
 
 
-def csr_from_rows(columns: np.ndarray, values: np.ndarray, n_cols: int) -> sp.csr_matrix:
-    """The CSR matrix [r, n_cols] whose row ``i`` holds ``values[i, j]`` at ``columns[i, j]``
-    for every slot ``j`` with ``columns[i, j] >= 0`` (a row table ``[r, w]``, at most ``w``
-    entries per row, ``-1`` for an empty slot; slots in the order they should be stored).
-
-    Examples
-    --------
-    >>> import numpy as np
-    >>> csr_from_rows(np.array([[0, 2], [-1, 1]]), np.array([[1.0, 2.0], [9.0, 3.0]]), 3).toarray()
-    array([[1., 0., 2.],
-           [0., 3., 0.]])
-    """
-    present = columns >= 0
-    indptr = np.zeros(len(columns) + 1, dtype=np.int64)
-    np.cumsum(present.sum(axis=1), out=indptr[1:])
-    return sp.csr_matrix((values[present], columns[present], indptr), shape=(len(columns), n_cols))
-
-
 @numba.njit(cache=True)
 def _scatter_entries(rows, columns, values, n_cols, cursor, out_indices, out_data):
     """Scatter the entries into their rows; returns the first entry whose column is out of
