@@ -271,9 +271,10 @@ def _solved_values(value: np.ndarray, still_depth: int):
 
 def test_a_still_interior_keeps_only_the_stay_flows_of_deep_cells():
     """``still_interior``: deep inside cells keep only the flow to themselves. A block at
-    rest comes out as with every flow (within 0.005: the interior's flows no longer spread
-    under the regulariser); one moving a cell per slice keeps its mass, and its free layers
-    lag by up to 0.07 (the deep cells cannot carry it along)."""
+    rest comes out as with every flow (measured within 0.005, asserted within 0.01: the
+    interior's flows no longer spread under the regulariser); one moving a cell per slice
+    keeps its mass, and its free layers lag by up to 0.07 (the deep cells cannot carry it
+    along)."""
     for moving, tolerance in ((False, 0.01), (True, 0.1)):
         value = _block(moving)
         every, x_every = _solved_values(value, 0)

@@ -289,10 +289,10 @@ def build_system(
         has_next_slice = t_src < S - 2
         pair = np.flatnonzero(has_next_slice & (successor >= 0))
         a, b = column[pair], column[successor[pair]]
-        # a pinned partner (a flow of 1) puts (v - 1)^2: the missing partner's v^2 and f += w
-        f += np.bincount(np.maximum(a, b)[(a < 0) ^ (b < 0)], minlength=n) * mom
         both = (a >= 0) & (b >= 0)
         one = (a >= 0) ^ (b >= 0)
+        # a pinned partner (a flow of 1) puts (v - 1)^2: the missing partner's v^2 and f += w
+        f += np.bincount(np.maximum(a, b)[one], minlength=n) * mom
         first.append(np.concatenate([a[both], np.maximum(a, b)[one]]))
         second.append(np.concatenate([b[both], np.full(int(one.sum()), -1, dtype=np.int64)]))
         lonely_out = has_next_slice & (successor < 0) & ~pinned
