@@ -193,3 +193,14 @@ def test_peak_memory_is_the_first_runs_and_the_peak_over_all_runs_is_kept(monkey
     case = bench._timed_runs("method", "flow", None, repeats=3, log_level=0)
     assert case["start_mb"] == 300.0 and case["peak_mb"] == 3674.0 and case["peak_all_mb"] == 3820.0
     assert len(case["seconds"]) == 3 and case["result"] == "mesh"
+
+
+def test_the_run_history_follows_the_tables():
+    machine = {"date": "2026-01-01 00:00 UTC", "commit": "abc1234", "cpu": "cpu", "cores": 2,
+               "memory_gb": 8.0, "python": "3.11", "load_average": [0.0, 0.0, 0.0]}
+    settings = {"quick": False, "protocol": {"cameras": 3, "noise": 0.002, "outliers": 0.02},
+                "seed": 0, "samples": 1000, "repeats": 1}
+    report = {"machine": machine, "settings": settings, "scenes": {}, "notes": ["rerun at abc1234"]}
+    text = bench.format_markdown(report)
+    assert text.index("## Summary") < text.index("## Run history") < text.index("- rerun at abc1234")
+    assert "## Run history" not in bench.format_markdown({**report, "notes": []})

@@ -533,7 +533,8 @@ def format_markdown(report: dict, plots: dict[str, Path] | None = None, base: Pa
         "memory of the process that ran it, at the end of its first run.",
         f"- Total wall time of this run: {report.get('wall_seconds', 0):.0f} s.",
     ]
-    lines += [f"- {note}" for note in report.get("notes", [])]
+    if report.get("notes"):
+        lines.append("- How each row was made (commit, repeats, what changed): the run history at the end.")
     lines += ["", "## Summary", "", "| scene | method | Chamfer | floor | compl. 95% | corr mean | corr last | s/frame |",
               "|---|---|---|---|---|---|---|---|"]
     for name, entry in report["scenes"].items():
@@ -577,6 +578,8 @@ def format_markdown(report: dict, plots: dict[str, Path] | None = None, base: Pa
                 relative = os.path.relpath(row["sheet"], base) if base else row["sheet"]
                 lines += ["", f"{label}, checker painted on the first frame (drift swims, filled-in regions blue):",
                           "", f"![{name} / {label}]({relative})"]
+    if report.get("notes"):
+        lines += ["", "## Run history", ""] + [f"- {note}" for note in report["notes"]]
     return "\n".join(lines) + "\n"
 
 
