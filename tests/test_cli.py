@@ -1,5 +1,6 @@
 """The command line: exit status 2 and one line naming the file for every kind of bad input."""
 
+import dataclasses
 import os
 from pathlib import Path
 
@@ -185,3 +186,13 @@ def test_an_interrupted_run_resumes_from_its_cache(tmp_path, monkeypatch):
     monkeypatch.setattr(perframe, "reconstruct_frame", lambda frame, options: (calls.append(frame.time), original(frame, options))[1])
     assert main(argv) == 0
     assert calls == [2.0] and out.exists()
+
+
+def test_options_lists_every_option_of_a_method(capsys):
+    assert main(["options", "flow"]) == 0
+    out = capsys.readouterr().out
+    fields = [f.name for f in dataclasses.fields(method_module("flow").Options)]
+    assert all(f"\n  {name} = " in out for name in fields)
+    assert "resolution = 32  (int)" in out
+    assert main(["options", "nosuch"]) == 2
+    assert "unknown method 'nosuch'" in capsys.readouterr().err

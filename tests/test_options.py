@@ -4,7 +4,8 @@ from typing import Literal
 import pytest
 
 from fourd.errors import InputError
-from fourd.options import make_options, parse_assignments
+from fourd.methods import METHODS, method_module
+from fourd.options import make_options, option_docs, parse_assignments
 
 
 @dataclass(frozen=True)
@@ -40,3 +41,46 @@ def test_parse_assignments():
     assert parse_assignments(["a=1", " b = two "]) == {"a": "1", "b": "two"}
     with pytest.raises(InputError, match="key=value"):
         parse_assignments(["novalue"])
+
+
+@dataclass(frozen=True)
+class Documented:
+    """Options of a test.
+
+    Attributes
+    ----------
+    radius : float
+        Search radius (``e.g.`` 2 spacings). A second sentence.
+    lo, hi : float, int
+        Bounds (``lo`` the lower; one entry for two fields).
+    window : int
+        Frames per fit (0: all; windows of this many frames are fitted one by one, each with
+        its own tree, which keeps the memory linear in the frame count and the time too).
+
+    Notes
+    -----
+    radius : not an option
+    """
+
+    radius: float = 1.0
+    lo: float = 0.0
+    hi: int = 4
+    window: int = 0
+    hidden: bool = False
+
+
+def test_option_docs_read_the_attributes_section():
+    docs = {d.name: d for d in option_docs(Documented)}
+    assert list(docs) == ["radius", "lo", "hi", "window", "hidden"]
+    assert (docs["lo"].type, docs["hi"].type, docs["hi"].default) == ("float", "int", 4)
+    assert docs["lo"].description == docs["hi"].description
+    assert docs["radius"].summary == "Search radius (e.g. 2 spacings)."
+    assert docs["radius"].description.endswith("A second sentence.")  # not the Notes section
+    assert docs["window"].summary == "Frames per fit (0: ...)."
+    assert docs["hidden"].description == ""
+
+
+@pytest.mark.parametrize("method", list(METHODS))
+def test_every_option_of_every_method_is_documented(method):
+    missing = [d.name for d in option_docs(method_module(method).Options) if not d.description]
+    assert not missing, f"{method}.Options does not describe {missing} in its Attributes section"

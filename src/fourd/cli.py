@@ -181,6 +181,24 @@ def cmd_view(args) -> int:
     return 0
 
 
+def cmd_options(args) -> int:
+    import textwrap
+
+    from fourd.methods import DEFAULT_METHOD, method_module
+    from fourd.options import option_docs
+
+    name = args.method or DEFAULT_METHOD
+    docs = option_docs(method_module(name).Options)
+    print(f"options of method {name} (fourd reconstruct --method {name} --set KEY=VALUE; "
+          f"fourd options {name} --long for the whole text):")
+    for doc in docs:
+        text = doc.text if args.long else doc.summary
+        print(f"\n  {doc.name} = {doc.default!r}  ({doc.type})")
+        print(textwrap.fill(text or "(undocumented)", width=96, initial_indent="      ",
+                            subsequent_indent="      "))
+    return 0
+
+
 def cmd_info(args) -> int:
     from fourd.info import describe
 
@@ -260,6 +278,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--input", help="the scans (folder) to show as points")
     p.add_argument("-o", "--output", help="folder for the page (default: RESULT-view/)")
     p.add_argument("--open", action="store_true", help="open the page in a browser")
+
+    p = add("options", "list a method's options with their defaults and what they do", cmd_options)
+    p.add_argument("method", nargs="?", help="method name (default: the project's default)")
+    p.add_argument("--long", action="store_true", help="the whole description, not its first sentence")
 
     p = add("info", "describe an input folder or a result", cmd_info)
     p.add_argument("path")

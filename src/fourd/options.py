@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import dataclasses
+import inspect
+import re
 import types
 import typing
 from collections.abc import Mapping
@@ -85,4 +87,85 @@ def parse_assignments(assignments: list[str]) -> dict[str, str]:
         if not sep or not key.strip():
             raise InputError(f"--set expects key=value, got {item!r}")
         result[key.strip()] = value.strip()
+    return result
+
+
+@dataclasses.dataclass(frozen=True)
+class OptionDoc:
+    """One documented option of a method: its name, type as written in the docstring, default
+    value and description (the docstring's text, whitespace collapsed)."""
+
+    name: str
+    type: str
+    default: Any
+    description: str
+
+    @property
+    def text(self) -> str:
+        """The description without reStructuredText markup (``x`` -> x, :func:`~.a.b` -> b)."""
+        text = re.sub(r":\w+:`~?\.?(?:[\w.]*\.)?([\w]+)`", r"\1", self.description)
+        return text.replace("``", "")
+
+    @property
+    def summary(self) -> str:
+        """The first sentence of :attr:`text`; a long parenthesis in it is cut at its first
+        ``;`` (the measurements that follow are in the whole text)."""
+        text = self.text
+        match = re.search(r"(?<![ .][a-z])\.(\s|$)", text)
+        return _shorten_parentheses(text if match is None else text[: match.start() + 1])
+
+
+def _shorten_parentheses(text: str, longest: int = 100) -> str:
+    """Cut each top-level parenthesis of ``text`` longer than ``longest`` characters after its
+    first clause (``(64 in the paper; 32 here: ...)`` -> ``(64 in the paper; ...)``)."""
+    out, depth, start = [], 0, 0
+    for i, char in enumerate(text):
+        if char == "(":
+            if depth == 0:
+                out.append(text[start:i])
+                start = i
+            depth += 1
+        elif char == ")" and depth:
+            depth -= 1
+            if depth == 0:
+                inner = text[start + 1:i]
+                cut = re.search(r"[;:] ", inner)
+                if len(inner) > longest and cut:
+                    inner = inner[: cut.start() + 1] + " ..."
+                out.append(f"({inner})")
+                start = i + 1
+    out.append(text[start:])
+    return "".join(out)
+
+
+def option_docs(options_class) -> list[OptionDoc]:
+    """The options of ``options_class`` in field order, described by the ``Attributes`` section
+    of its numpy-style docstring (an entry may name several fields: ``a, b : float``). A field
+    the docstring does not describe gets an empty description."""
+    doc = inspect.cleandoc(options_class.__doc__ or "")
+    lines = doc.splitlines()
+    start = next((i + 2 for i, line in enumerate(lines[:-1])
+                  if line.strip() == "Attributes" and set(lines[i + 1].strip()) == {"-"}), len(lines))
+    entries: dict[str, tuple[str, list[str]]] = {}
+    current: list[str] | None = None
+    for i in range(start, len(lines)):
+        line = lines[i]
+        if i + 1 < len(lines) and line.strip() and set(lines[i + 1].strip()) == {"-"}:
+            break  # the next section
+        header = re.match(r"^([A-Za-z_][\w, ]*?) : (.*)$", line)
+        if header:
+            current = []
+            names = [name.strip() for name in header.group(1).split(",")]
+            types_ = [t.strip() for t in header.group(2).split(",")]
+            if len(types_) != len(names):  # `a, b : float`: one type for all
+                types_ = [header.group(2).strip()] * len(names)
+            for name, type_text in zip(names, types_, strict=True):
+                entries[name] = (type_text, current)
+        elif current is not None and line.strip():
+            current.append(line.strip())
+    result = []
+    for field in dataclasses.fields(options_class):
+        type_text, text = entries.get(field.name, (str(field.type), []))
+        default = field.default if field.default is not dataclasses.MISSING else None
+        result.append(OptionDoc(field.name, type_text, default, " ".join(text)))
     return result

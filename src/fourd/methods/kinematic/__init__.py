@@ -162,6 +162,8 @@ class Options:
         Frames per 4D fit (0: one fit over the whole sequence); longer sequences are fitted
         window by window with ``window_overlap`` extra frames on each side.
     window_overlap : int
+        Extra frames on both sides of each window that its 4D fit takes in (with ``window``),
+        so that ``f`` is continuous enough across the windows' boundaries.
     outlier_factor : float
         Per-frame outlier removal: drop points whose mean distance to their 8 nearest
         neighbours exceeds this multiple of the median of that distance (0: keep all).
