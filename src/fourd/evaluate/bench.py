@@ -404,7 +404,8 @@ def run_bench(
     for bench_scene in chosen_scenes:
         entry = _run_scene(bench_scene, chosen_methods, peers, samples=samples, seed=seed,
                            repeats=repeats, timeout=timeout, isolate=isolate, bar=bar,
-                           sheets=_plots_dir(output))
+                           sheets=_plots_dir(output),
+                           made={"commit": machine["commit"], "date": machine["date"], "repeats": repeats})
         report["scenes"][bench_scene.key] = entry
     bar.close()
     report["wall_seconds"] = time.perf_counter() - started
@@ -413,7 +414,9 @@ def run_bench(
 
 
 def _run_scene(bench_scene: BenchScene, methods, peers, *, samples, seed, repeats, timeout, isolate, bar,
-               sheets: Path | None = None) -> dict:
+               sheets: Path | None = None, made: dict | None = None) -> dict:
+    """Scan one scene and run every method and peer on it. ``made`` (commit, date, repeats) is
+    kept with each row, so a row merged into another report still says where it came from."""
     from fourd import synth
 
     entry = {"settings": asdict(bench_scene), "rows": {}}
@@ -437,7 +440,7 @@ def _run_scene(bench_scene: BenchScene, methods, peers, *, samples, seed, repeat
         case = run_case(kind, name, scans, repeats=repeats, timeout=timeout, isolate=isolate)
         if "error" in case:
             log.warning("bench: %s failed on %s: %s", label, bench_scene.key, case["error"])
-            entry["rows"][label] = {"error": case["error"]}
+            entry["rows"][label] = {"error": case["error"], "made": made}
         else:
             per_frame = statistics.median(case["seconds"]) / len(scans)
             timing = {"seconds_per_frame": per_frame, "seconds": case["seconds"],
@@ -446,9 +449,10 @@ def _run_scene(bench_scene: BenchScene, methods, peers, *, samples, seed, repeat
             try:
                 metrics = evaluate(case["result"], truth, samples=samples, seed=seed, timing=timing)
                 metrics.update(case.get("diagnostics") or {})
-                entry["rows"][label] = {"metrics": metrics}
+                entry["rows"][label] = {"metrics": metrics, "made": made}
             except Exception as error:  # noqa: BLE001
-                entry["rows"][label] = {"error": f"evaluation failed: {type(error).__name__}: {error}"}
+                entry["rows"][label] = {"error": f"evaluation failed: {type(error).__name__}: {error}",
+                                        "made": made}
             if sheets is not None:
                 entry["rows"][label]["sheet"] = _contact_sheet(case["result"], truth, sheets, bench_scene.key, label)
         bar.update(1)
@@ -493,14 +497,23 @@ def _cell(value, kind: str) -> str:
     return f"{value:.4f}"
 
 
-def _row(label: str, metrics: dict) -> str:
+def _row(label: str, metrics: dict, made: dict | None = None) -> str:
     cells = [_cell(metrics.get(key), kind) for _, key, kind in COLUMNS]
     timing = metrics.get("timing") or {}
     seconds = timing.get("seconds_per_frame")
     peak = timing.get("peak_memory_mb")
     cells.append("—" if seconds is None else f"{seconds:.2f}")
     cells.append("—" if peak is None else f"{peak:.0f}")
+    cells.append(_made(made))
     return f"| {label} | " + " | ".join(cells) + " |"
+
+
+def _made(made: dict | None) -> str:
+    """``"abc1234, 3 runs"``: the commit and repeats a row was measured with; ``"—"`` for rows
+    from before rows kept it (the run history names their commits)."""
+    if not made:
+        return "—"
+    return f"{made['commit']}, {made['repeats']} run{'s' if made['repeats'] != 1 else ''}"
 
 
 def _plots_dir(output: Path) -> Path:
@@ -549,8 +562,8 @@ def format_markdown(report: dict, plots: dict[str, Path] | None = None, base: Pa
                 f"{_cell(m['completeness_95'], 'd')} | {_cell(m['correspondence_mean'], 'd')} | "
                 f"{_cell(m['correspondence_last'], 'd')} | {'—' if seconds is None else f'{seconds:.2f}'} |"
             )
-    header = "| method | " + " | ".join(c[0] for c in COLUMNS) + " | s/frame | peak MB |"
-    rule = "|" + "---|" * (len(COLUMNS) + 3)
+    header = "| method | " + " | ".join(c[0] for c in COLUMNS) + " | s/frame | peak MB | measured at |"
+    rule = "|" + "---|" * (len(COLUMNS) + 4)
     for name, entry in report["scenes"].items():
         lines += ["", f"## {name}", ""]
         if "error" in entry:
@@ -567,9 +580,10 @@ def format_markdown(report: dict, plots: dict[str, Path] | None = None, base: Pa
         for label, row in entry["rows"].items():
             if "error" in row:
                 message = row["error"].replace("|", "/").replace("\n", " ")[:200]
-                lines.append(f"| {label} | failed: {message} |" + " |" * (len(COLUMNS) + 1))
+                lines.append(f"| {label} | failed: {message} |" + " |" * (len(COLUMNS) + 1)
+                             + f" {_made(row.get('made'))} |")
             else:
-                lines.append(_row(label, row["metrics"]))
+                lines.append(_row(label, row["metrics"], row.get("made")))
         if plots and name in plots:
             relative = os.path.relpath(plots[name], base) if base else plots[name]
             lines += ["", f"![{name}: accuracy, completeness and correspondence error per frame]({relative})"]
