@@ -68,6 +68,7 @@ def make_options(options_class, values: Mapping[str, Any] | None = None, *, meth
         raise InputError(
             f"unknown option{'s' if len(unknown) > 1 else ''} {', '.join(unknown)}{where}; "
             f"valid keys: {', '.join(sorted(fields))}"
+            + (f" (fourd options {method} says what each does)" if method else "")
         )
     hints = typing.get_type_hints(options_class)
     converted = {}
