@@ -356,7 +356,10 @@ class Options:
         cells' flows along their connected piece's centroid motion too kept touching-spheres
         at 0.0049 / 0.0126 (``exp``, 20k samples; 0.0047 / 0.0116 with every flow) and
         squash-ball, whose labelled pieces' centroids wander, at 6.86 s/frame, so it was
-        dropped.
+        dropped. At the default resolution 32 (bench at b6746ef, single runs, 0 -> 1): 10-15%
+        faster, surfaces mixed (rigid-turn 0.0066 / 0.0316 / 3.59 -> 0.0069 / 0.0291 / 3.11,
+        squash-ball 0.0025 / 0.0046 / 1.76 -> 0.0026 / 0.0048 / 1.61, touching-spheres 0.0025
+        / 0.0069 / 1.06 -> 0.0024 / 0.0061 / 1.01), so below 48 it stays off.
     outlier_factor : float
         Statistical outlier filter: drop points whose 8th-neighbour distance exceeds this
         multiple of the median.
