@@ -225,3 +225,6 @@ def test_each_row_says_at_which_commit_and_with_how_many_runs_it_was_measured():
     assert row["new"].endswith("| def5678, 3 runs |") and row["old"].endswith("| — |")
     assert row["broken"].endswith("| def5678, 1 run |")
     assert {line.count("|") for line in table} == {table[0].count("|")}
+    summary = text[text.index("## Summary"):text.index("\n## squash-ball")].strip().splitlines()[2:]
+    assert summary[0].endswith("| measured at |") and summary[2].endswith("| def5678, 3 runs |")
+    assert {line.count("|") for line in summary} == {summary[0].count("|")}

@@ -548,19 +548,21 @@ def format_markdown(report: dict, plots: dict[str, Path] | None = None, base: Pa
     ]
     if report.get("notes"):
         lines.append("- How each row was made (commit, repeats, what changed): the run history at the end.")
-    lines += ["", "## Summary", "", "| scene | method | Chamfer | floor | compl. 95% | corr mean | corr last | s/frame |",
-              "|---|---|---|---|---|---|---|---|"]
+    lines += ["", "## Summary", "",
+              "| scene | method | Chamfer | floor | compl. 95% | corr mean | corr last | s/frame | measured at |",
+              "|---|---|---|---|---|---|---|---|---|"]
     for name, entry in report["scenes"].items():
         for label, row in entry.get("rows", {}).items():
             if "error" in row:
-                lines.append(f"| {name} | {label} | failed | | | | | |")
+                lines.append(f"| {name} | {label} | failed | | | | | | {_made(row.get('made'))} |")
                 continue
             m = row["metrics"]
             seconds = (m.get("timing") or {}).get("seconds_per_frame")
             lines.append(
                 f"| {name} | {label} | {_cell(m['chamfer'], 'd')} | {_cell(entry['floor']['chamfer'], 'd')} | "
                 f"{_cell(m['completeness_95'], 'd')} | {_cell(m['correspondence_mean'], 'd')} | "
-                f"{_cell(m['correspondence_last'], 'd')} | {'—' if seconds is None else f'{seconds:.2f}'} |"
+                f"{_cell(m['correspondence_last'], 'd')} | {'—' if seconds is None else f'{seconds:.2f}'} | "
+                f"{_made(row.get('made'))} |"
             )
     header = "| method | " + " | ".join(c[0] for c in COLUMNS) + " | s/frame | peak MB | measured at |"
     rule = "|" + "---|" * (len(COLUMNS) + 4)
