@@ -16,18 +16,21 @@ import re
 import sys
 from pathlib import Path
 
+from fourd.evaluate.bench import _cell
+
 ROOT = Path(__file__).resolve().parents[1]
 ROW = re.compile(r"^\| ([\w-]+) \| `([^`]+)` \|.*\|$")
 
 
 def cells(metrics: dict) -> list[str]:
-    """Chamfer, completeness-95, correspondence mean / last, closed frames, s/frame."""
+    """Chamfer, completeness-95, correspondence mean / last, closed frames, s/frame, formatted
+    as the bench's own tables format them."""
     if metrics.get("correspondence_mean") is None:
         correspondence = "—"
     else:
-        correspondence = f"{metrics['correspondence_mean']:.4f} / {metrics['correspondence_last']:.4f}"
-    return [f"{metrics['chamfer']:.4f}", f"{metrics['completeness_95']:.4f}", correspondence,
-            f"{metrics['closed_manifold']:.0%}", f"{metrics['timing']['seconds_per_frame']:.2f}"]
+        correspondence = f"{_cell(metrics['correspondence_mean'], 'd')} / {_cell(metrics['correspondence_last'], 'd')}"
+    return [_cell(metrics["chamfer"], "d"), _cell(metrics["completeness_95"], "d"), correspondence,
+            _cell(metrics["closed_manifold"], "%"), _cell(metrics["timing"]["seconds_per_frame"], "r")]
 
 
 def rewrite(readme: str, report: dict) -> str:
