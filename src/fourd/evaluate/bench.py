@@ -143,9 +143,11 @@ def _reconstruct(kind: str, name: str, scans, log_level: int):
     logging.getLogger("fourd").setLevel(log_level)
     if kind == "method":
         from fourd.methods import reconstruct_with_diagnostics
+        from fourd.methods.base import diagnostic_figures
 
         method, values = parse_method_spec(name)
-        return reconstruct_with_diagnostics(scans, method=method, **values)
+        result, diagnostics = reconstruct_with_diagnostics(scans, method=method, **values)
+        return result, diagnostic_figures(diagnostics)
     from fourd.evaluate import baselines
 
     return getattr(baselines, name)(scans), {}

@@ -1,11 +1,10 @@
 """The registry of reconstruction methods.
 
-Each method module exposes ``Options`` (a frozen dataclass with documented defaults),
-``reconstruct(seq, options) -> AnimatedMesh | MeshSequence`` and a module-level constant
-``MIN_FRAMES`` (1 for per-frame methods, 2 for sequence methods); a method with figures of
-its own (flow's mass conservation error) also has ``reconstruct_with_diagnostics(seq,
-options) -> (result, dict)``, which ``fourd bench`` reports. Modules are imported only
-when used, so a broken or slow-to-import method never affects the others.
+Each method module keeps the contract of :mod:`fourd.methods.base` (``Options``,
+``reconstruct``, ``MIN_FRAMES``, ``RESULT``, optional typed diagnostics). Modules are
+imported only when used, so a broken or slow-to-import method never affects the others.
+Method packages never import each other; a combination of methods (``watertight``,
+``auto``) is a module of its own here that calls their public functions.
 """
 
 from __future__ import annotations
@@ -16,6 +15,7 @@ from types import ModuleType
 
 from fourd.animation import AnimatedMesh, MeshSequence
 from fourd.errors import InputError
+from fourd.methods.base import Reconstruction
 from fourd.options import make_options
 from fourd.sequence import PointCloudSequence
 
@@ -25,11 +25,18 @@ log = logging.getLogger("fourd.methods")
 METHODS: dict[str, str] = {
     "kinematic": "fourd.methods.kinematic",
     "flow": "fourd.methods.flow",
+    "watertight": "fourd.methods.watertight",
     "perframe": "fourd.methods.perframe",
 }
 
 #: The method ``fourd reconstruct`` and ``fourd demo`` use when none is named.
 DEFAULT_METHOD = "perframe"
+
+#: Old spellings still accepted: (method, option, value) -> the method that replaced them
+#: (the option is dropped, the other options carry over).
+ALIASES: dict[tuple[str, str, str], str] = {
+    ("flow", "coherent", "true"): "watertight",
+}
 
 
 def available_methods() -> list[str]:
@@ -58,7 +65,22 @@ def method_module(name: str) -> ModuleType:
 
 def method_options(name: str, values: dict | None = None):
     """The method's ``Options`` built from ``values`` (strings are converted by field type)."""
+    name, values = resolve_alias(name, values)
     return make_options(method_module(name).Options, values, method=name)
+
+
+def resolve_alias(name: str, values: dict | None) -> tuple[str, dict]:
+    """``(method, values)`` with an old spelling (:data:`ALIASES`) replaced by its method:
+    ``("flow", {"coherent": "true", "resolution": 64})`` -> ``("watertight", {"resolution":
+    64})``; a false value of the old option is dropped."""
+    values = dict(values or {})
+    for (old, option, value), new in ALIASES.items():
+        if name == old and option in values:
+            given = str(values.pop(option)).strip().lower()
+            if given in (value, "1", "yes", "on"):
+                log.warning("%s:%s=%s is now the method %r", old, option, value, new)
+                return new, values
+    return name, values
 
 
 def reconstruct(
@@ -74,20 +96,21 @@ def reconstruct(
 
 def reconstruct_with_diagnostics(
     seq: PointCloudSequence, method: str | None = None, options=None, **values
-) -> tuple[AnimatedMesh | MeshSequence, dict]:
-    """:func:`reconstruct`, plus the method's own figures as a dict of floats (e.g. ``flow``:
-    ``mass_conservation_error``). A method module that has such figures defines
-    ``reconstruct_with_diagnostics(seq, options) -> (result, dict)``; the others give ``{}``.
-    """
+) -> Reconstruction:
+    """:func:`reconstruct`, plus the method's own figures: a :class:`~.base.Reconstruction`
+    whose ``diagnostics`` is the method's typed figures (``flow``:
+    :class:`~fourd.methods.flow.FlowDiagnostics`), or None for a method without any."""
     module, options = _method_and_options(seq, method, options, values)
     hook = getattr(module, "reconstruct_with_diagnostics", None)
     if hook is None:
-        return module.reconstruct(seq, options), {}
+        return Reconstruction(module.reconstruct(seq, options), None)
     return hook(seq, options)
 
 
 def _method_and_options(seq, method, options, values):
     name = method or DEFAULT_METHOD
+    if options is None:
+        name, values = resolve_alias(name, values)
     module = method_module(name)
     if options is None:
         options = method_options(name, values)

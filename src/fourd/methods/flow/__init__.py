@@ -34,12 +34,13 @@ from typing import Literal, NamedTuple
 import numpy as np
 from scipy.spatial import cKDTree
 
-from fourd.animation import AnimatedMesh, MeshSequence
+from fourd.animation import MeshSequence
 from fourd.errors import InputError
 from fourd.geometry.laplacian import laplacian_smooth
 from fourd.geometry.neighbors import point_spacing
 from fourd.geometry.normals import estimate_normals, pca_normals, vertex_normals
 from fourd.geometry.outliers import distance_ratio_inliers
+from fourd.methods.base import Reconstruction
 from fourd.methods.flow.fit import deep_inside, fit_gradient, fit_implicit, fit_labels
 from fourd.methods.flow.grid import (
     SpaceTimeGrid,
@@ -69,6 +70,7 @@ from fourd.sequence import PointCloudSequence
 log = logging.getLogger("fourd.methods.flow")
 
 MIN_FRAMES = 2
+RESULT = MeshSequence
 #: From this ``resolution`` on a thick object is many cells thick: the automatic
 #: ``fit_offset``, ``deep_inside`` and ``still_interior`` switch to their fine-grid values
 #: (see :class:`Options`).
@@ -76,20 +78,10 @@ FINE_RESOLUTION = 48
 #: ``mass_levels`` tells observed from unobserved parts in cells of this resolution, or in the
 #: grid's own where it is coarser (see ``Options.observed_distance``).
 OBSERVED_RESOLUTION = 32
-#: ``coherent``: a template vertex farther than this many cells of the sliding field's grid
-#: (:func:`~.post.redistanced`) from both the flow's surface and its frame's points is off
-#: the surface, and a frame with more than :data:`OFF_SURFACE_WARNING` of its vertices off
-#: it is reported (a warning, and the diagnostic ``coherent_off_surface``, the largest
-#: fraction over the frames). Both, because the sliding's data term follows each frame's own
-#: points, and the flow lags fast thin parts by several cells (horse-gallop's legs: 10% of
-#: the template farther than 2 cells from the flow's surface in its worst frame, in a sound
-#: run). Measured on horse-gallop (resolution 32), a sound run and one whose hoof (1.5% of
-#: the template) flew off from frame 15: at most 0.3% and 1.5% of the vertices off.
-OFF_SURFACE_CELLS = 8.0
-OFF_SURFACE_WARNING = 0.005
 
 __all__ = [
     "MIN_FRAMES",
+    "FlowDiagnostics",
     "FlowField",
     "FlowResult",
     "Options",
@@ -97,8 +89,10 @@ __all__ = [
     "mass_conservation_error",
     "reconstruct",
     "reconstruct_with_diagnostics",
+    "RESULT",
     "run",
     "solve_saddle",
+    "surface_distance",
 ]
 
 
@@ -478,10 +472,6 @@ class Options:
         ``touching-spheres`` 0.0038 / 0.0083 -> 0.0039 / 0.0085 lose a little; smoothing
         only from half a cell on gave ``rigid-turn`` 0.0296 but ``squash-ball`` 0.0039 /
         0.0071 and ``touching-spheres`` 0.0040 / 0.0089).
-    coherent : bool
-        Return an :class:`~fourd.AnimatedMesh`: a closed template of the first frame slid
-        along the signed distance to the flow's meshes with the kinematic method's
-        :func:`~fourd.methods.kinematic.animate` (see :func:`coherent_animation`).
     """
 
     resolution: int = 32
@@ -528,7 +518,6 @@ class Options:
     observed_distance: float = 0.5
     level_limit: float = 4.0
     unobserved_smoothing: int = 100
-    coherent: bool = False
 
     def __post_init__(self):
         if self.resolution < 4:
@@ -587,7 +576,6 @@ class FlowResult(NamedTuple):
     """Everything :func:`run` computes.
 
     meshes : MeshSequence, one closed mesh per input frame.
-    animation : AnimatedMesh or None (``coherent=True``).
     field : FlowField, the 4D implicit function (a ``Field4D``).
     grid : SpaceTimeGrid of the flow solution.
     x : float64 [S, X, Y, Z], the flow solution (characteristic function).
@@ -595,13 +583,13 @@ class FlowResult(NamedTuple):
     mass_error : float, :func:`mass_conservation_error` of ``mass``.
     history : list of dict, one per IRLS iteration.
     seconds : dict, wall time per stage.
-    off_surface : float64 [T] or None (``coherent=True``): per frame, the fraction of the
-        animation's vertices far from both the flow's surface and the frame's points
-        (:data:`OFF_SURFACE_CELLS`, :func:`off_surface_fractions`).
+    frame_points : list of T arrays [P, 3] or None, each input frame's points after the
+        outlier filter (None: a missing frame).
+    frame_normals : list of T arrays [P, 3] or None, their oriented unit normals (None: a
+        frame with fewer than 4 points).
     """
 
     meshes: MeshSequence
-    animation: AnimatedMesh | None
     field: FlowField
     grid: SpaceTimeGrid
     x: np.ndarray
@@ -609,7 +597,21 @@ class FlowResult(NamedTuple):
     mass_error: float
     history: list
     seconds: dict
-    off_surface: np.ndarray | None = None
+    frame_points: list
+    frame_normals: list
+
+
+@dataclass(frozen=True)
+class FlowDiagnostics:
+    """The flow's own figures.
+
+    Attributes
+    ----------
+    mass_conservation_error : float
+        The paper's figure, a fraction (:func:`mass_conservation_error`).
+    """
+
+    mass_conservation_error: float
 
 
 def mass_conservation_error(mass) -> float:
@@ -884,55 +886,21 @@ def run(seq: PointCloudSequence, options: Options | None = None) -> FlowResult:
         irls.iterations,
         ", ".join(f"{k} {v:.1f}s" for k, v in seconds.items()),
     )
-    animation = None
-    if options.coherent:
-        clock = time.perf_counter()
-        frame_normals = [
-            None if p is None or len(p) < 4 else slice_normals[grid.frame_slice[i]]
-            for i, p in enumerate(frame_points)
-        ]
-        sliding_field = redistanced(field, grid.frame_slice, meshes)
-        animation = coherent_animation(sliding_field, seq, frame_points, frame_normals)
-        seconds["coherent"] = time.perf_counter() - clock
-        off_surface = off_surface_fractions(
-            animation, sliding_field, OFF_SURFACE_CELLS * sliding_field.spacing, frame_points
-        )
-        lost = np.flatnonzero(off_surface > OFF_SURFACE_WARNING)
-        if len(lost):
-            log.warning(
-                "coherent: in %d of %d frames (first %d) more than %.1f%% of the template lies "
-                "far from both the flow's surface and the frame's points (at most %.1f%%, "
-                "frame %d): the sliding lost part of it; the plain flow meshes "
-                "(coherent=false) are sound",
-                len(lost), len(off_surface), lost[0], 100 * OFF_SURFACE_WARNING,
-                100 * off_surface.max(), int(off_surface.argmax()),
-            )
-    else:
-        off_surface = None
+    frame_normals = [
+        None if p is None or len(p) < 4 else slice_normals[grid.frame_slice[i]]
+        for i, p in enumerate(frame_points)
+    ]
     return FlowResult(
-        result_meshes, animation, field, grid, irls.x, mass, error, irls.history, seconds,
-        off_surface,
+        result_meshes, field, grid, irls.x, mass, error, irls.history, seconds, frame_points,
+        frame_normals,
     )
 
 
-def off_surface_fractions(
-    animation: AnimatedMesh, field, distance: float, points: list | None = None
-) -> np.ndarray:
-    """Per frame of ``animation``, the fraction of its vertices where ``|field|`` (a signed
-    distance at the animation's times, :func:`~.post.redistanced`) exceeds ``distance``
-    (input units) and, where ``points`` gives the frame points ([P, 3] or None, one per
-    frame), no point lies within ``distance``; [T]."""
-    vertices = np.asarray(animation.vertices)
-    times = np.asarray(animation.times, dtype=float)
-    fractions = np.empty(len(vertices))
-    for k, (v, t) in enumerate(zip(vertices, times, strict=True)):
-        off = np.abs(field.value(v, t)) > distance
-        frame = None if points is None else points[k]
-        if frame is not None and len(frame) and off.any():
-            near, _ = cKDTree(frame).query(v[off], distance_upper_bound=distance, workers=-1)
-            off[np.flatnonzero(off)[np.isfinite(near)]] = False
-        fractions[k] = off.mean()
-    return fractions
+def surface_distance(result: FlowResult) -> FlowField:
+    """A signed distance to ``result``'s closed meshes at the input times, on the flow's grid
+    (:func:`~.post.redistanced`): a :class:`~fourd.geometry.field.Field4D` to slide a
+    template along."""
+    return redistanced(result.field, result.grid.frame_slice, result.meshes.meshes)
 
 
 def _mesh_volume(vertices: np.ndarray, faces: np.ndarray) -> float:
@@ -1071,72 +1039,19 @@ def _smoothing_strength(
     return float(min(abs(deficit) / slope / h, 1.0))
 
 
-def coherent_animation(
-    field: FlowField,
-    seq: PointCloudSequence,
-    frame_points: list,
-    frame_normals: list,
-) -> AnimatedMesh:
-    """Slide a closed template of the first frame with data along ``field``, the signed
-    distance to the flow's meshes (:func:`~fourd.methods.flow.post.redistanced`).
-
-    The kinematic method's :func:`~fourd.methods.kinematic.animate` with the urshape
-    polygonised everywhere in the grid (so closed), its data term (each frame's own points,
-    with the large-motion registration) and the smoothed frames projected back where the
-    filter cut the corners of fast curved trajectories. ``field`` fills what the frames do
-    not see. The data term was off until the kinematic method's registration came: it made
-    correspondence worse then (crane, mean / last frame 0.032 / 0.057 with it, 0.024 / 0.049
-    without); now it makes it better (20k samples, Chamfer / completeness-95 / correspondence
-    mean / last without and with it: crane 0.0048 / 0.0275 / 0.0223 / 0.0429 and
-    0.0032 / 0.0062 / 0.0101 / 0.0165; horse-gallop 0.0148 / 0.146 / 0.039 / 0.049 and
-    0.0061 / 0.048 / 0.014 / 0.011; dfaust-hopping 0.0039 / 0.0138 / 0.0060 / 0.0095 and
-    0.0036 / 0.0116 / 0.0058 / 0.0089). Frames before the first with data are reached by
-    sliding backwards.
-    """
-    try:
-        from fourd.methods import kinematic
-    except ImportError as error:
-        raise InputError(f"coherent=true needs the kinematic method ({error})") from None
-    first = next(i for i, n in enumerate(frame_normals) if n is not None)
-    empty = np.zeros((0, 3))
-    points = [empty if n is None else p for p, n in zip(frame_points, frame_normals, strict=True)]
-    normals = [empty if n is None else n for n in frame_normals]
-    times = np.asarray(seq.times, dtype=float)
-    return kinematic.animate(
-        field,
-        points[first:],
-        normals[first:],
-        times[first:],
-        spacing=point_spacing(points[first]),
-        options=kinematic.Options(times=tuple(times) if first else ()),
-        closed=True,
-        bounds=field.bounds(),
-        project_smoothed=True,
-    )
-
-
-def reconstruct(
-    seq: PointCloudSequence, options: Options | None = None
-) -> MeshSequence | AnimatedMesh:
-    """Closed, manifold meshes per frame (an :class:`~fourd.AnimatedMesh` with ``coherent``).
+def reconstruct(seq: PointCloudSequence, options: Options | None = None) -> MeshSequence:
+    """Closed, manifold meshes per frame.
 
     The mass conservation error is logged at info level; :func:`run` returns it with every
     other intermediate result.
     """
-    return reconstruct_with_diagnostics(seq, options)[0]
+    return run(seq, options).meshes
 
 
 def reconstruct_with_diagnostics(
     seq: PointCloudSequence, options: Options | None = None
-) -> tuple[MeshSequence | AnimatedMesh, dict]:
-    """:func:`reconstruct` and ``{"mass_conservation_error": ...}`` (the paper's figure, a
-    fraction; see :func:`mass_conservation_error`), with ``coherent``: also
-    ``"coherent_off_surface"``, the largest fraction over the frames of the template's
-    vertices far from both the flow's surface and the frame's points
-    (:func:`off_surface_fractions`)."""
+) -> Reconstruction:
+    """:func:`reconstruct` and :class:`FlowDiagnostics` (the paper's mass conservation
+    error)."""
     result = run(seq, options)
-    meshes = result.animation if result.animation is not None else result.meshes
-    figures = {"mass_conservation_error": float(result.mass_error)}
-    if result.off_surface is not None:
-        figures["coherent_off_surface"] = float(result.off_surface.max())
-    return meshes, figures
+    return Reconstruction(result.meshes, FlowDiagnostics(float(result.mass_error)))

@@ -1,0 +1,104 @@
+"""The method contract: what a module in :data:`fourd.methods.METHODS` provides.
+
+A method module (or package) exposes
+
+- ``Options``: a frozen dataclass, every field with a default and documented in the numpy
+  ``Attributes`` section of its docstring (read by ``fourd options``);
+- ``MIN_FRAMES``: the fewest input frames it accepts (1 for per-frame methods, 2 for
+  sequence methods);
+- ``RESULT``: the kind of result, :class:`~fourd.AnimatedMesh` (one connectivity) or
+  :class:`~fourd.MeshSequence` (a mesh per frame);
+- ``reconstruct(seq, options) -> RESULT``;
+- optionally ``reconstruct_with_diagnostics(seq, options) -> Reconstruction``, when the
+  method has figures of its own (``flow``'s mass conservation error): the result and a frozen
+  dataclass of floats, the same type whatever the options.
+
+:func:`check_method_module` checks a module against this contract; a test runs it on every
+registry entry.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from types import ModuleType
+from typing import Any, NamedTuple, Protocol, runtime_checkable
+
+from fourd.animation import AnimatedMesh, MeshSequence
+from fourd.sequence import PointCloudSequence
+
+__all__ = [
+    "MethodModule",
+    "Reconstruction",
+    "check_method_module",
+    "diagnostic_figures",
+]
+
+
+class Reconstruction(NamedTuple):
+    """A method's result with its own figures.
+
+    result : AnimatedMesh or MeshSequence, the method's ``RESULT``.
+    diagnostics : a frozen dataclass of floats (the method's figures), or None for a method
+        without figures of its own.
+    """
+
+    result: AnimatedMesh | MeshSequence
+    diagnostics: Any = None
+
+
+@runtime_checkable
+class MethodModule(Protocol):
+    """What a method module provides (see the module docstring)."""
+
+    Options: type
+    MIN_FRAMES: int
+    RESULT: type
+
+    def reconstruct(self, seq: PointCloudSequence, options: Any = None) -> Any: ...
+
+
+def diagnostic_figures(diagnostics) -> dict[str, float]:
+    """A method's typed diagnostics as ``{name: float}`` (the bench's "mass err." and such);
+    ``{}`` for None.
+
+    Examples
+    --------
+    >>> @dataclasses.dataclass(frozen=True)
+    ... class Figures:
+    ...     mass_conservation_error: float
+    >>> diagnostic_figures(Figures(0.012))
+    {'mass_conservation_error': 0.012}
+    >>> diagnostic_figures(None)
+    {}
+    """
+    if diagnostics is None:
+        return {}
+    if not dataclasses.is_dataclass(diagnostics):
+        raise TypeError(f"diagnostics must be a dataclass, got {type(diagnostics).__name__}")
+    return {k: float(v) for k, v in dataclasses.asdict(diagnostics).items() if v is not None}
+
+
+def check_method_module(module: ModuleType) -> list[str]:
+    """The ways ``module`` breaks the method contract (an empty list when it keeps it)."""
+    problems = []
+    options = getattr(module, "Options", None)
+    if options is None or not dataclasses.is_dataclass(options):
+        problems.append("Options is missing or not a dataclass")
+    else:
+        if not options.__dataclass_params__.frozen:
+            problems.append("Options is not frozen")
+        try:
+            options()
+        except TypeError as error:
+            problems.append(f"Options() needs arguments: {error}")
+    minimum = getattr(module, "MIN_FRAMES", None)
+    if not isinstance(minimum, int) or minimum < 1:
+        problems.append(f"MIN_FRAMES must be a positive int, got {minimum!r}")
+    if getattr(module, "RESULT", None) not in (AnimatedMesh, MeshSequence):
+        problems.append("RESULT must be AnimatedMesh or MeshSequence")
+    if not callable(getattr(module, "reconstruct", None)):
+        problems.append("reconstruct is missing")
+    hook = getattr(module, "reconstruct_with_diagnostics", None)
+    if hook is not None and not callable(hook):
+        problems.append("reconstruct_with_diagnostics is not callable")
+    return problems
