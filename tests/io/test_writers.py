@@ -260,10 +260,17 @@ def test_pc2_bytes_and_topology(tmp_path):
     assert np.abs(read_pc2(tmp_path / "walk.pc2").vertices - anim.vertices).max() <= 1e-5
 
 
-def test_pc2_refuses_a_mesh_sequence(tmp_path):
-    with pytest.raises(InputError, match="walk.pc2"):
-        save(_sequence(), tmp_path / "walk.pc2")
-    assert not (tmp_path / "walk.pc2").exists()
+def test_pc2_of_a_mesh_sequence_shows_each_frame_its_own_mesh(tmp_path):
+    """Changing connectivity (a shape that splits) is baked into one: frame t's own mesh is
+    in place, every other frame's mesh collapsed to a point, so only frame t's area shows."""
+    meshes = _sequence()
+    save(meshes, tmp_path / "walk.pc2")
+    cache = read_pc2(tmp_path / "walk.pc2").vertices
+    faces = trimesh.load(tmp_path / "walk.obj", process=False).faces
+    assert cache.shape == (3, sum(len(v) for v, _ in meshes.meshes), 3)
+    for t, (vertices, own) in enumerate(meshes.meshes):
+        mesh = trimesh.Trimesh(cache[t], faces, process=False)
+        assert mesh.area == pytest.approx(trimesh.Trimesh(vertices, own).area, rel=1e-5)
 
 
 # ---------------------------------------------------------------------------- per frame

@@ -15,7 +15,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from fourd.animation import AnimatedMesh
+from fourd.animation import AnimatedMesh, MeshSequence
 from fourd.errors import InputError
 from fourd.io.atomic import atomic_path
 from fourd.io.meshfiles import write_obj
@@ -43,16 +43,51 @@ class PointCache(NamedTuple):
     rate: float
 
 
+def one_connectivity(meshes: MeshSequence) -> AnimatedMesh:
+    """Per-frame meshes as one connectivity, for formats that cannot change it: the disjoint
+    union of every frame's mesh, where frame ``t`` shows its own mesh and collapses each
+    other frame's mesh onto one point (that mesh's own centroid), so its triangles vanish
+    (the usual way to bake changing topology into a fixed-topology cache). ``observed``
+    marks each frame's own vertices. ``N`` is the sum of the frames' vertex counts.
+
+    Examples
+    --------
+    >>> tri = (np.eye(3), np.array([[0, 1, 2]]))
+    >>> anim = one_connectivity(MeshSequence((tri, (2 * np.eye(3), np.array([[0, 1, 2]])))))
+    >>> anim.vertices.shape, anim.faces.tolist()
+    ((2, 6, 3), [[0, 1, 2], [3, 4, 5]])
+    >>> bool(np.ptp(anim.vertices[0, 3:], axis=0).max() == 0)  # frame 1's mesh hidden in frame 0
+    True
+    """
+    counts = [len(v) for v, _ in meshes.meshes]
+    starts = np.concatenate([[0], np.cumsum(counts)])
+    faces = np.concatenate([f + starts[k] for k, (_, f) in enumerate(meshes.meshes)])
+    centroids = np.stack([v.mean(axis=0) for v, _ in meshes.meshes])
+    vertices = np.repeat(centroids, counts, axis=0)[None].repeat(len(meshes), axis=0)
+    observed = np.zeros((len(meshes), starts[-1]), dtype=bool)
+    for k, (v, _) in enumerate(meshes.meshes):
+        vertices[k, starts[k]:starts[k + 1]] = v
+        observed[k, starts[k]:starts[k + 1]] = True
+    return AnimatedMesh(faces=faces, vertices=vertices, times=meshes.times, observed=observed)
+
+
 def write_pc2(path: str | os.PathLike, anim: AnimatedMesh) -> Path:
     """Write ``anim`` as ``path`` (``.pc2``) plus the topology ``path.with_suffix(".obj")``.
 
     ``times`` are read as frame numbers: the start frame is ``times[0]`` and the sample rate
-    the mean time step (uneven steps are logged). Returns the path of the ``.obj``.
+    the mean time step (uneven steps are logged). A :class:`MeshSequence` (meshes whose
+    connectivity changes, e.g. a shape that splits) is written through
+    :func:`one_connectivity`. Returns the path of the ``.obj``.
     """
+    if isinstance(anim, MeshSequence):
+        log.info(
+            "%s: the meshes change connectivity; the point cache holds all %d of them, each "
+            "shown in its own frame and collapsed to a point in the others", path, len(anim),
+        )
+        anim = one_connectivity(anim)
     if not isinstance(anim, AnimatedMesh):
         raise InputError(
-            f"a .pc2 point cache needs one connectivity for all frames; this is a {type(anim).__name__} "
-            "(write a folder of meshes or .npz instead)",
+            f"a .pc2 point cache needs an AnimatedMesh or a MeshSequence, got {type(anim).__name__}",
             path,
         )
     path = Path(path)
