@@ -254,7 +254,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--methods",
         nargs="+",
         help="method names; NAME:key=value,... adds a row for a method with options "
-        "(e.g. flow:coherent=true)",
+        "(e.g. flow:resolution=64)",
     )
     p.add_argument("--scenes", nargs="+")
     p.add_argument("-o", "--output", default="benchmarks/BENCHMARKS.md")

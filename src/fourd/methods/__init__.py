@@ -23,6 +23,7 @@ log = logging.getLogger("fourd.methods")
 
 #: name -> module path, in order of preference for the default method.
 METHODS: dict[str, str] = {
+    "auto": "fourd.methods.auto",
     "kinematic": "fourd.methods.kinematic",
     "flow": "fourd.methods.flow",
     "watertight": "fourd.methods.watertight",
@@ -30,7 +31,7 @@ METHODS: dict[str, str] = {
 }
 
 #: The method ``fourd reconstruct`` and ``fourd demo`` use when none is named.
-DEFAULT_METHOD = "perframe"
+DEFAULT_METHOD = "auto"
 
 #: Old spellings still accepted: (method, option, value) -> the method that replaced them
 #: (the option is dropped, the other options carry over).

@@ -7,7 +7,8 @@ A method module (or package) exposes
 - ``MIN_FRAMES``: the fewest input frames it accepts (1 for per-frame methods, 2 for
   sequence methods);
 - ``RESULT``: the kind of result, :class:`~fourd.AnimatedMesh` (one connectivity) or
-  :class:`~fourd.MeshSequence` (a mesh per frame);
+  :class:`~fourd.MeshSequence` (a mesh per frame), or a tuple of both for a method whose
+  result depends on the data (``auto``: a MeshSequence where the shape splits);
 - ``reconstruct(seq, options) -> RESULT``;
 - optionally ``reconstruct_with_diagnostics(seq, options) -> Reconstruction``, when the
   method has figures of its own (``flow``'s mass conservation error): the result and a frozen
@@ -94,8 +95,10 @@ def check_method_module(module: ModuleType) -> list[str]:
     minimum = getattr(module, "MIN_FRAMES", None)
     if not isinstance(minimum, int) or minimum < 1:
         problems.append(f"MIN_FRAMES must be a positive int, got {minimum!r}")
-    if getattr(module, "RESULT", None) not in (AnimatedMesh, MeshSequence):
-        problems.append("RESULT must be AnimatedMesh or MeshSequence")
+    kinds = getattr(module, "RESULT", None)
+    kinds = kinds if isinstance(kinds, tuple) else (kinds,)
+    if not kinds or any(kind not in (AnimatedMesh, MeshSequence) for kind in kinds):
+        problems.append("RESULT must be AnimatedMesh, MeshSequence or a tuple of them")
     if not callable(getattr(module, "reconstruct", None)):
         problems.append("reconstruct is missing")
     hook = getattr(module, "reconstruct_with_diagnostics", None)

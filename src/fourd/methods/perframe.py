@@ -45,6 +45,7 @@ log = logging.getLogger("fourd.methods.perframe")
 
 #: A per-frame method needs a single frame.
 MIN_FRAMES = 1
+RESULT = MeshSequence
 
 
 @dataclass(frozen=True)

@@ -19,10 +19,13 @@ import logging
 import time
 
 import numpy as np
+import scipy.sparse as sp
+import trimesh
+from scipy.sparse.linalg import splu
 from scipy.spatial import cKDTree
 
 from fourd.animation import AnimatedMesh
-from fourd.errors import InputError
+from fourd.geometry.laplacian import uniform_laplacian
 from fourd.geometry.neighbors import point_spacing
 from fourd.methods import flow, kinematic
 from fourd.methods.base import Reconstruction
@@ -55,19 +58,26 @@ __all__ = [
     "off_surface_fractions",
     "reconstruct",
     "reconstruct_with_diagnostics",
-    "slide_closed_template",
+    "close_animation",
+    "close_on_flow",
+    "fit_to_frames",
 ]
 
 
 @dataclasses.dataclass(frozen=True)
 class Options(flow.Options):
-    pass
+    fit_frames: bool = False
 
 
 Options.__doc__ = (
-    "Options of the watertight method: those of the ``flow`` method, whose field the closed\n"
-    "    template slides along (the sliding takes the ``kinematic`` method's defaults).\n"
-    + flow.Options.__doc__.split("\n", 1)[1]
+    "Options of the watertight method: those of the ``flow`` method, whose surfaces close\n"
+    "    the kinematic result (run with its defaults), and ``fit_frames``.\n"
+    + flow.Options.__doc__.split("\n", 1)[1].rstrip().removesuffix('"""').rstrip()
+    + """
+    fit_frames : bool
+        Move the observed vertices of every frame onto the frame's own points' surface
+        (:func:`fit_to_frames`): closer to the data, with each frame's own noise (False).
+"""
 )
 
 
@@ -95,41 +105,88 @@ def flow_options(options: Options) -> flow.Options:
     )
 
 
-def slide_closed_template(
-    field, seq: PointCloudSequence, frame_points: list, frame_normals: list
+def close_animation(
+    opened: AnimatedMesh,
+    field,
+    *,
+    cell_size: float,
+    target_vertices: int = 10000,
+    reach: float = 1.5,
 ) -> AnimatedMesh:
-    """Slide a closed template of the first frame with data along ``field``, a signed
-    distance in space-time (:func:`fourd.methods.flow.surface_distance`).
+    """An open animated mesh closed by a signed distance in space-time: a closed template of
+    ``field`` at ``opened.times[0]`` whose vertices on the open mesh follow it exactly and
+    whose other vertices (the parts no frame showed at the first time) follow by harmonic
+    extension of the displacements, then lie on ``field`` at each time.
 
-    The kinematic method's :func:`~fourd.methods.kinematic.animate` with the urshape
-    polygonised everywhere in the grid (so closed), its data term (each frame's own points,
-    with the large-motion registration) and the smoothed frames projected back where the
-    filter cut the corners of fast curved trajectories. ``field`` fills what the frames do
-    not see. Frames before the first with data are reached by sliding backwards.
+    Measured cause of the closed sliding's drift (``experiments/watertight_drift.py``,
+    crane-130, correspondence mean / last frame): the closed template slid along the flow's
+    surfaces 0.0209 / 0.0271; the open template slid along the same surfaces 0.0119 / 0.0195;
+    the kinematic method 0.0116 / 0.0186. Neither the field, nor the frames' points, nor the
+    projection of the smoothed frames (0.0208 / 0.0271 without it) is the cause: the closed
+    template's filled parts (between the legs, under the arms) hold limbs together as
+    rigidly as the skin. Here they are carried along instead.
 
     Parameters
     ----------
-    field : Field4D, negative inside, at the times of ``seq``.
-    frame_points, frame_normals : lists of T arrays [P, 3] or None (a frame without data).
+    opened : AnimatedMesh
+        The open animation (one frame per time of ``field``); its frame 0 is the surface the
+        template's vertices are bound to.
+    field : Field4D
+        Signed distance, negative inside, at ``opened.times`` (closed surfaces).
+    cell_size : float
+        Marching-cubes cell of the closed template (input units).
+    target_vertices : int
+        About this many template vertices (:func:`~fourd.methods.kinematic.extract_template`).
+    reach : float
+        A template vertex within this many of the open mesh's median edges of it (and facing
+        the same way) is bound to it.
+
+    Returns
+    -------
+    AnimatedMesh with the closed template as ``rest``; ``observed`` is the open mesh's, by
+    the nearest bound corner, and False for the vertices carried along.
     """
-    if all(n is None for n in frame_normals):
-        raise InputError("watertight: no frame has data to build a template from")
-    first = next(i for i, n in enumerate(frame_normals) if n is not None)
-    empty = np.zeros((0, 3))
-    points = [empty if n is None else p for p, n in zip(frame_points, frame_normals, strict=True)]
-    normals = [empty if n is None else n for n in frame_normals]
-    times = np.asarray(seq.times, dtype=float)
-    return kinematic.animate(
-        field,
-        points[first:],
-        normals[first:],
-        times[first:],
-        spacing=point_spacing(points[first]),
-        options=kinematic.Options(times=tuple(times) if first else ()),
-        closed=True,
-        bounds=field.bounds(),
-        project_smoothed=True,
+    times = np.asarray(opened.times, dtype=float)
+    start = np.asarray(opened.vertices[0], dtype=float)
+    faces_o = opened.faces
+    vertices, faces = kinematic.extract_template(
+        field, float(times[0]), bounds=field.bounds(), cell_size=cell_size,
+        min_component_faces=20, target_vertices=target_vertices,
     )
+    mesh = trimesh.Trimesh(start, faces_o, process=False)
+    closest, distance, triangle = trimesh.proximity.closest_point(mesh, vertices)
+    corners = faces_o[triangle]
+    weights = trimesh.triangles.points_to_barycentric(start[corners], closest)
+    edges = np.linalg.norm(start[faces_o[:, [1, 2, 0]]] - start[faces_o], axis=2)
+    normals = trimesh.Trimesh(vertices, faces, process=False).vertex_normals
+    facing = np.einsum("ij,ij->i", normals, mesh.face_normals[triangle]) > 0.3
+    bound = (distance < reach * float(np.median(edges))) & facing
+    free = np.flatnonzero(~bound)
+    log.info(
+        "watertight: closed template of %d vertices, %d (%.0f%%) carried along the open mesh's "
+        "holes", len(vertices), len(free), 100 * len(free) / len(vertices),
+    )
+    laplacian = uniform_laplacian(len(vertices), faces).tocsr()
+    solve = None
+    if len(free):
+        inner = laplacian[free][:, free] + sp.identity(len(free)) * 1e-9
+        solve = splu(inner.tocsc()).solve
+        coupling = laplacian[free][:, np.flatnonzero(bound)]
+    out = np.empty((len(times), len(vertices), 3))
+    observed = np.zeros((len(times), len(vertices)), dtype=bool)
+    rest = vertices.copy()
+    rest[bound] = closest[bound]
+    for k, t in enumerate(times):
+        frame = np.einsum("ij,ijk->ik", weights[bound], opened.vertices[k][corners[bound]])
+        out[k, bound] = frame
+        observed[k, bound] = opened.observed[k][corners[bound]].any(axis=1)
+        if solve is None:
+            continue
+        moved = solve(-(coupling @ (frame - rest[bound])))
+        out[k, free] = kinematic.project_to_surface(
+            field, rest[free] + moved, float(t), iterations=4, max_step=2.0 * cell_size
+        )
+    return AnimatedMesh(faces=faces, vertices=out, times=times, observed=observed, rest=rest)
 
 
 def off_surface_fractions(
@@ -152,30 +209,98 @@ def off_surface_fractions(
     return fractions
 
 
-def reconstruct_with_diagnostics(
-    seq: PointCloudSequence, options: Options | None = None
-) -> Reconstruction:
-    """:func:`reconstruct` and :class:`WatertightDiagnostics`."""
-    options = Options() if options is None else options
-    flowed = flow.run(seq, flow_options(options))
+def close_on_flow(
+    seq: PointCloudSequence,
+    opened: AnimatedMesh,
+    flowed: flow.FlowResult,
+    *,
+    fit_frames: bool = False,
+) -> tuple[AnimatedMesh, float]:
+    """``opened`` (the kinematic result on ``seq``) closed by the surfaces of a ``flow`` run
+    on ``seq`` (:func:`close_animation`), optionally fitted to each frame's points
+    (:func:`fit_to_frames`); and the largest fraction over the frames of its vertices off the
+    surface (:func:`off_surface_fractions`, warned above :data:`OFF_SURFACE_WARNING`)."""
     clock = time.perf_counter()
     field = flow.surface_distance(flowed)
-    animation = slide_closed_template(field, seq, flowed.frame_points, flowed.frame_normals)
+    first = next(i for i, p in enumerate(flowed.frame_points) if p is not None and len(p) >= 4)
+    points = flowed.frame_points[first]
+    spacing = point_spacing(points)
+    cell = kinematic.template_cell_size(points, spacing, kinematic.Options().template_vertices)
+    animation = close_animation(opened, field, cell_size=cell)
+    if fit_frames:
+        animation = fit_to_frames(
+            animation, flowed.frame_points, flowed.frame_normals, bandwidth=2.0 * spacing,
+            max_step=cell,
+        )
     off_surface = off_surface_fractions(
         animation, field, OFF_SURFACE_CELLS * field.spacing, flowed.frame_points
     )
     lost = np.flatnonzero(off_surface > OFF_SURFACE_WARNING)
     if len(lost):
         log.warning(
-            "watertight: in %d of %d frames (first %d) more than %.1f%% of the template lies "
-            "far from both the flow's surface and the frame's points (at most %.1f%%, frame "
-            "%d): the sliding lost part of it; the plain flow meshes (method flow) are sound",
-            len(lost), len(off_surface), lost[0], 100 * OFF_SURFACE_WARNING,
+            "watertight: in %d of %d frames (first %d) more than %.1f%% of the closed mesh "
+            "lies far from both the flow's surface and the frame's points (at most %.1f%%, "
+            "frame %d): the tracking lost part of it; the plain flow meshes (method flow) are "
+            "sound", len(lost), len(off_surface), lost[0], 100 * OFF_SURFACE_WARNING,
             100 * off_surface.max(), int(off_surface.argmax()),
         )
-    log.info("watertight: sliding %.1f s", time.perf_counter() - clock)
-    diagnostics = WatertightDiagnostics(float(flowed.mass_error), float(off_surface.max()))
-    return Reconstruction(animation, diagnostics)
+    log.info("watertight: closing %.1f s", time.perf_counter() - clock)
+    return animation, float(off_surface.max())
+
+
+def fit_to_frames(
+    animation: AnimatedMesh,
+    points: list,
+    normals: list,
+    *,
+    bandwidth: float,
+    max_step: float,
+) -> AnimatedMesh:
+    """``animation`` with its observed vertices moved onto each frame's own surface (the IMLS
+    surface of the frame's points, :class:`~fourd.methods.kinematic.FrameSurface`; at most
+    ``max_step`` input units, 3 Newton steps along its gradient, where the points alone
+    define it): what the tracking's rigidity and temporal smoothing keep off the data comes
+    back, and so does each frame's own noise.
+
+    Parameters
+    ----------
+    points, normals : lists of T arrays [P, 3] or None (a frame without data stays).
+    bandwidth : float
+        The IMLS Gaussian width (input units).
+    """
+    vertices = np.array(animation.vertices, dtype=float)
+    for k, (p, n) in enumerate(zip(points, normals, strict=True)):
+        if p is None or n is None or len(p) < 4:
+            continue
+        surface = kinematic.FrameSurface(p, n, bandwidth)
+        which = np.flatnonzero(animation.observed[k])
+        x = vertices[k, which]
+        for _ in range(3):
+            distance, gradient, coverage = surface.evaluate(x)
+            norm2 = np.maximum(np.einsum("ij,ij->i", gradient, gradient), 1e-12)
+            step = (distance / norm2)[:, None] * gradient
+            length = np.linalg.norm(step, axis=1)
+            step *= (np.minimum(1.0, max_step / np.maximum(length, 1e-30)) * (coverage >= 0.99))[:, None]
+            x = x - step
+        moved = np.linalg.norm(x - vertices[k, which], axis=1) <= max_step
+        vertices[k, which[moved]] = x[moved]
+    return AnimatedMesh(
+        faces=animation.faces, vertices=vertices, times=animation.times,
+        observed=animation.observed, rest=animation.rest,
+    )
+
+
+def reconstruct_with_diagnostics(
+    seq: PointCloudSequence, options: Options | None = None
+) -> Reconstruction:
+    """:func:`reconstruct` and :class:`WatertightDiagnostics`."""
+    options = Options() if options is None else options
+    opened = kinematic.reconstruct(seq, kinematic.Options())
+    flowed = flow.run(seq, flow_options(options))
+    animation, off_surface = close_on_flow(seq, opened, flowed, fit_frames=options.fit_frames)
+    return Reconstruction(
+        animation, WatertightDiagnostics(float(flowed.mass_error), off_surface)
+    )
 
 
 def reconstruct(seq: PointCloudSequence, options: Options | None = None) -> AnimatedMesh:

@@ -1,0 +1,207 @@
+"""Method ``auto``, the default: one animated mesh, with the method chosen from the data.
+
+The rule, in order:
+
+1. The ``kinematic`` method (Süßmuth et al. 2008, ``000_00387fefe94cc850.txt``) runs first:
+   its urshape is the first frame's surface where the frame has points, so its holes are
+   the parts of the surface the first frame did not see.
+2. **Open surface** (a sheet, a face, a one-sided scan): a closed surface has no vector area
+   (``sum of n_f A_f`` over its faces is zero, by the divergence theorem), and holes add only
+   their own projected area, while an open sheet's vector area is nearly its whole area. When
+   the urshape's vector area exceeds ``open_area`` of its area, the data does not enclose a
+   volume and the kinematic result is returned: closing it would invent a back side.
+3. **Closed object**: the ``flow`` method (Sharf et al. 2008, ``002_382acf333feb7a6e.txt``)
+   reconstructs closed, manifold frames. When the number of parts of those frames changes
+   over the sequence (the shape **splits or merges**), one connectivity cannot follow it: a
+   warning says so and the flow's per-frame meshes are returned (a
+   :class:`~fourd.MeshSequence`, no correspondences). Otherwise the kinematic result is
+   closed by the flow's surfaces (:func:`fourd.methods.watertight.close_on_flow`): one
+   closed animated mesh whose observed vertices are the kinematic result's.
+
+``surface`` forces step 2's answer. The decision and its figures are logged at info level and
+returned by :func:`reconstruct_with_diagnostics`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+from typing import Literal
+
+import numpy as np
+
+from fourd.animation import AnimatedMesh, MeshSequence
+from fourd.geometry.marching import vertex_components
+from fourd.methods import flow, kinematic, watertight
+from fourd.methods.base import Reconstruction
+from fourd.sequence import PointCloudSequence
+
+log = logging.getLogger("fourd.methods.auto")
+
+MIN_FRAMES = 2
+#: An AnimatedMesh, or the flow's MeshSequence where the shape splits or merges (warned).
+RESULT = (AnimatedMesh, MeshSequence)
+
+__all__ = [
+    "MIN_FRAMES",
+    "AutoDiagnostics",
+    "Options",
+    "RESULT",
+    "part_counts",
+    "reconstruct",
+    "reconstruct_with_diagnostics",
+    "vector_area_fraction",
+]
+
+
+@dataclasses.dataclass(frozen=True)
+class Options:
+    """Options of the default method.
+
+    Attributes
+    ----------
+    surface : str
+        ``auto`` (default): decide from the data whether it is an open surface or a closed
+        object (see the module docstring); ``open``: always the kinematic result; ``closed``:
+        always the closed composition.
+    open_area : float
+        The data is an open surface when the vector area of the first frame's urshape
+        (:func:`vector_area_fraction`) exceeds this fraction of its area (0.5; a closed
+        surface has 0 and its holes add their projected area: 0.10-0.18 on the bench's
+        closed objects, 0.94 on waving-sheet).
+    resolution : int
+        The flow grid for closed objects: cells along the longest side of the data's box
+        (32).
+    split_part : float
+        A part of a flow frame counts towards the split test when it holds at least this
+        fraction of the frame's faces (0.05).
+    fit_frames : bool
+        For a closed object, move the observed vertices of every frame onto the frame's own
+        points' surface (:func:`fourd.methods.watertight.fit_to_frames`): closer to the
+        data, with each frame's own noise (False).
+    seed : int
+        Seed of the kinematic method's sampling (0).
+    """
+
+    surface: Literal["auto", "open", "closed"] = "auto"
+    open_area: float = 0.5
+    resolution: int = 32
+    split_part: float = 0.05
+    fit_frames: bool = False
+    seed: int = 0
+
+    def __post_init__(self):
+        if self.surface not in ("auto", "open", "closed"):
+            raise ValueError(f"surface must be auto, open or closed, got {self.surface!r}")
+        if not 0 < self.open_area <= 1:
+            raise ValueError(f"open_area must be in (0, 1], got {self.open_area}")
+        if not 0 < self.split_part < 1:
+            raise ValueError(f"split_part must be between 0 and 1, got {self.split_part}")
+
+
+@dataclasses.dataclass(frozen=True)
+class AutoDiagnostics:
+    """What the default method decided, and on which figures.
+
+    Attributes
+    ----------
+    open_surface : float
+        1 when the kinematic (open) result was returned, else 0.
+    vector_area : float
+        :func:`vector_area_fraction` of the first frame's urshape.
+    split : float
+        1 when the flow's frames change their number of parts (the flow's meshes returned).
+    mass_conservation_error : float or None
+        The flow's, where it ran.
+    off_surface : float or None
+        The closed composition's :class:`~fourd.methods.watertight.WatertightDiagnostics`
+        figure, where it ran.
+    """
+
+    open_surface: float
+    vector_area: float
+    split: float
+    mass_conservation_error: float | None = None
+    off_surface: float | None = None
+
+
+def vector_area_fraction(vertices: np.ndarray, faces: np.ndarray) -> float:
+    """``|sum_f n_f A_f| / sum_f A_f`` of a triangle mesh, in [0, 1]: 0 for a closed surface
+    (divergence theorem), the sum of its holes' projected areas over its area for a surface
+    with holes, 1 for a flat open sheet.
+
+    Examples
+    --------
+    >>> square = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], float)
+    >>> vector_area_fraction(square, np.array([[0, 1, 2], [0, 2, 3]]))
+    1.0
+    >>> tetrahedron = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], float)
+    >>> round(vector_area_fraction(tetrahedron, np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])), 12)
+    0.0
+    """
+    a, b, c = (np.asarray(vertices, float)[faces[:, k]] for k in range(3))
+    cross = 0.5 * np.cross(b - a, c - a)
+    area = np.linalg.norm(cross, axis=1).sum()
+    return float(np.linalg.norm(cross.sum(axis=0)) / area) if area > 0 else 0.0
+
+
+def part_counts(meshes: MeshSequence, smallest: float) -> np.ndarray:
+    """Per frame, the connected parts holding at least ``smallest`` of its faces; [T]."""
+    counts = []
+    for vertices, faces in meshes.meshes:
+        if len(faces) == 0:
+            counts.append(0)
+            continue
+        _, labels = vertex_components(faces, len(vertices))
+        sizes = np.bincount(labels[faces[:, 0]])
+        counts.append(int((sizes >= smallest * len(faces)).sum()))
+    return np.array(counts)
+
+
+def reconstruct_with_diagnostics(
+    seq: PointCloudSequence, options: Options | None = None
+) -> Reconstruction:
+    """:func:`reconstruct` and :class:`AutoDiagnostics`."""
+    options = Options() if options is None else options
+    opened = kinematic.reconstruct(seq, kinematic.Options(seed=options.seed))
+    openness = vector_area_fraction(opened.rest, opened.faces)
+    is_open = options.surface == "open" or (
+        options.surface == "auto" and openness > options.open_area
+    )
+    if is_open:
+        log.info(
+            "auto: an open surface (the first frame's vector area is %.2f of its area, over "
+            "%.2f): the kinematic result", openness, options.open_area,
+        )
+        return Reconstruction(opened, AutoDiagnostics(1.0, openness, 0.0))
+    flowed = flow.run(seq, flow.Options(resolution=options.resolution))
+    parts = part_counts(flowed.meshes, options.split_part)
+    present = parts[parts > 0]
+    if len(present) and present.min() != present.max():
+        changes = np.flatnonzero(np.diff(parts) != 0) + 1
+        log.warning(
+            "auto: the shape splits or merges (parts per frame %s, first change at frame %d): "
+            "one connectivity cannot follow it, so the result is the flow's closed meshes, one "
+            "per frame, without correspondences",
+            " ".join(map(str, parts)), int(changes[0]),
+        )
+        return Reconstruction(
+            flowed.meshes, AutoDiagnostics(0.0, openness, 1.0, float(flowed.mass_error))
+        )
+    animation, off = watertight.close_on_flow(
+        seq, opened, flowed, fit_frames=options.fit_frames
+    )
+    log.info(
+        "auto: a closed object (vector area %.2f of the area): closed template slid along "
+        "the flow's surfaces", openness,
+    )
+    return Reconstruction(
+        animation, AutoDiagnostics(0.0, openness, 0.0, float(flowed.mass_error), off)
+    )
+
+
+def reconstruct(
+    seq: PointCloudSequence, options: Options | None = None
+) -> AnimatedMesh | MeshSequence:
+    """One animated mesh from ``seq`` by the rule of the module docstring."""
+    return reconstruct_with_diagnostics(seq, options).result

@@ -1,0 +1,91 @@
+"""The method contract (fourd.methods.base) on every registry entry, and the rule that method
+packages never import each other."""
+
+from __future__ import annotations
+
+import ast
+import dataclasses
+from pathlib import Path
+
+import pytest
+
+import fourd.methods
+from fourd.methods import DEFAULT_METHOD, METHODS, method_module
+from fourd.methods.base import check_method_module, diagnostic_figures
+
+#: Registry entries that combine methods: they may import the methods they combine.
+COMPOSITIONS = {"auto", "watertight"}
+SOURCE = Path(fourd.methods.__file__).parent
+
+
+@pytest.mark.parametrize("name", list(METHODS))
+def test_every_registry_entry_keeps_the_method_contract(name):
+    assert check_method_module(method_module(name)) == []
+
+
+def test_the_contract_check_names_what_is_missing():
+    class Module:
+        @dataclasses.dataclass
+        class Options:
+            x: int = 1
+
+        MIN_FRAMES = 0
+
+    problems = check_method_module(Module)
+    assert "Options is not frozen" in problems
+    assert any("MIN_FRAMES" in p for p in problems)
+    assert any("RESULT" in p for p in problems)
+    assert "reconstruct is missing" in problems
+
+
+def test_the_default_method_gives_one_connectivity():
+    from fourd import AnimatedMesh
+
+    result = method_module(DEFAULT_METHOD).RESULT
+    assert result is AnimatedMesh or AnimatedMesh in result
+
+
+def test_diagnostics_are_typed_figures():
+    @dataclasses.dataclass(frozen=True)
+    class Figures:
+        error: float
+        optional: float | None = None
+
+    assert diagnostic_figures(Figures(0.5)) == {"error": 0.5}
+    with pytest.raises(TypeError):
+        diagnostic_figures({"error": 0.5})
+
+
+def _imported_modules(path: Path) -> set[str]:
+    names = set()
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.Import):
+            names.update(alias.name for alias in node.names)
+        elif isinstance(node, ast.ImportFrom) and node.module:
+            names.add(node.module)
+            names.update(f"{node.module}.{alias.name}" for alias in node.names)
+    return names
+
+
+def _package_of(module: str) -> str | None:
+    parts = module.split(".")
+    if parts[:2] != ["fourd", "methods"] or len(parts) < 3:
+        return None
+    return parts[2] if parts[2] in METHODS else None
+
+
+@pytest.mark.parametrize("name", sorted(set(METHODS) - COMPOSITIONS))
+def test_no_method_imports_another(name):
+    path = SOURCE / name
+    files = sorted(path.rglob("*.py")) if path.is_dir() else [SOURCE / f"{name}.py"]
+    assert files
+    for file in files:
+        others = {_package_of(m) for m in _imported_modules(file)} - {None, name}
+        assert not others, f"{file.relative_to(SOURCE)} imports the method(s) {sorted(others)}"
+
+
+def test_the_import_walk_sees_a_cross_import(tmp_path):
+    file = tmp_path / "x.py"
+    file.write_text("from fourd.methods import kinematic\nimport fourd.methods.flow.post\n")
+    packages = {_package_of(m) for m in _imported_modules(file)} - {None}
+    assert packages == {"kinematic", "flow"}
