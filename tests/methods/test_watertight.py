@@ -11,6 +11,7 @@ from fourd.methods import method_options, resolve_alias
 from fourd.methods.flow import FlowField
 from fourd.methods.watertight import (
     Options,
+    close_animation,
     off_surface_fractions,
     reconstruct,
     reconstruct_with_diagnostics,
@@ -71,42 +72,87 @@ def test_flow_coherent_is_an_alias_of_watertight():
     assert isinstance(options, Options) and options.resolution == 20
 
 
-@pytest.mark.slow
-def test_coherent_animation_is_closed_on_the_surface_and_returns():
-    """One closed, manifold connectivity for every frame, vertices on the
-    ellipsoid of their frame, and when the ellipsoid is back to its first shape (frame 4 of
-    8) the vertices are back where they started (no drift).
+class _MovingSphere:
+    """The signed distance of a unit sphere rotated by ``rotations[k]`` about the origin and
+    moved by ``shifts[k]`` at time k (a Field4D; the sphere's distance is rotation-free)."""
 
-    8 frames per squash cycle, not 4: with the data term (each frame's own points) a quarter
-    cycle per frame left the vertices 0.049 radii from their start at the return (0.030
-    without it); at 8 frames 0.037 (0.016 without it). The same code measures 0.040 with the
-    dependencies that resolved on 2026-11-23 (numpy 2.4.6, scipy 1.17.1, scikit-image 0.26.0,
-    trimesh 5.2.0, numba 0.68.1). On this 16-cell grid the figure moves by +-0.01 with the
-    details of the postprocessing's field: since b1c0621 (no temporal Laplace edges between
-    frames with data, ``time_smoothness=0``) it is 0.049, with ``time_smoothness`` 1 0.040 and
-    with 0.1 0.059, while the benchmark's correspondence improved a little (crane 0.0090 /
-    0.0115 -> 0.0089 / 0.0114, dfaust-hopping 0.0062 / 0.0098 -> 0.0060 / 0.0093); hence the
-    bound of 0.055 (0.045 before b1c0621). Since the rigid prediction fits its first steps to a
-    sample of the vertices (``SlideOptions.rigid_samples``) it is 0.034; with its first,
-    linearised step on the sample too it was 0.060. On the development machine of 2026-11-26
-    the same code measured 0.054, and 0.057 once the V-cycle's Gauss-Seidel sweeps ran in
-    the slice-coloured order of :mod:`fourd.methods.flow.sweeps` (another order of the same
-    sweeps: the first squash-ball system at resolution 64 reached the same MINRES residual,
-    1.767e-2 against 1.764e-2), so the bound is 0.065: a drifting template is off by far
-    more."""
-    frames, radius = 8, 0.5
+    def __init__(self, shifts):
+        self.shifts = np.asarray(shifts, float)
+
+    def _centre(self, times, count):
+        k = np.clip(np.rint(np.broadcast_to(times, (count,))).astype(int), 0, len(self.shifts) - 1)
+        return self.shifts[k]
+
+    def value(self, points, times):
+        return np.linalg.norm(points - self._centre(times, len(points)), axis=1) - 1.0
+
+    def gradient(self, points, times):
+        d = points - self._centre(times, len(points))
+        g = d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-12)
+        return np.hstack([g, np.zeros((len(points), 1))])
+
+
+def _rotation(angle):
+    c, s = np.cos(angle), np.sin(angle)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def test_close_animation_carries_the_hole_along_a_known_rigid_motion():
+    """A unit sphere open at its top (the first frame never saw it) turns and moves rigidly:
+    closed by the sphere's own signed distance, every frame is closed and manifold, the
+    vertices bound to the open mesh follow it exactly, and the cap's vertices (carried
+    along) follow the known rigid motion within a fraction of an edge."""
+    sphere = trimesh.creation.icosphere(subdivisions=4)
+    keep = sphere.vertices[sphere.faces].mean(axis=1)[:, 2] < 0.6
+    open_mesh = trimesh.Trimesh(sphere.vertices, sphere.faces[keep], process=False)
+    open_mesh.remove_unreferenced_vertices()
+    frames = 4
+    rotations = [_rotation(0.3 * k) for k in range(frames)]
+    shifts = np.array([[0.2 * k, 0.1 * k, 0.0] for k in range(frames)])
+    opened = AnimatedMesh(
+        faces=open_mesh.faces,
+        vertices=np.stack([open_mesh.vertices @ r.T + t for r, t in zip(rotations, shifts, strict=True)]),
+        times=np.arange(frames, dtype=float),
+    )
+    bounds = np.array([[-1.2] * 3, [1.2] * 3])
+    closed = close_animation(opened, _MovingSphere(shifts), bounds=bounds, cell_size=0.1)
+    bound = closed.observed[0]
+    assert 0.02 < (~bound).mean() < 0.3  # the cap is carried along, the rest is bound
+    edge = 0.1 * 0.6
+    for k in range(frames):
+        _check_closed_manifold(closed.vertices[k], closed.faces)
+        expected = closed.rest @ rotations[k].T + shifts[k]
+        error = np.linalg.norm(closed.vertices[k] - expected, axis=1)
+        assert error[bound].max() < 1e-9
+        assert error[~bound].mean() < 0.25 * edge and error[~bound].max() < edge, k
+        radius = np.linalg.norm(closed.vertices[k] - shifts[k], axis=1)
+        assert np.abs(radius - 1.0).max() < 0.02
+
+
+@pytest.mark.slow
+def test_watertight_is_closed_and_its_observed_part_is_the_kinematic_result():
+    """On a squashing ellipsoid: one closed, manifold connectivity for every frame, every
+    vertex near its frame's ellipsoid, and the vertices bound to the kinematic result lie on
+    that result's surface in every frame (closing adds no drift of its own)."""
+    from fourd.methods import kinematic
+
+    frames, radius = 4, 0.5
     seq, _ = _squash_sequence(frames, radius=radius, hole=False)
     anim, figures = reconstruct_with_diagnostics(seq, Options(**FAST))
+    opened = kinematic.reconstruct(seq)
     assert anim.vertices.shape[0] == frames and len(anim.faces)
     assert figures.off_surface == 0.0
+    bound = anim.observed[0]
+    assert bound.mean() > 0.8
     for t in range(frames):
         a = np.exp(0.3 * np.sin(2 * np.pi * t / frames))
         radii = radius * np.array([1 / np.sqrt(a), a, 1 / np.sqrt(a)])
         _check_closed_manifold(anim.vertices[t], anim.faces)
         off_surface = np.abs(np.linalg.norm(anim.vertices[t] / radii, axis=1) - 1.0)
         assert off_surface.mean() < 0.025, (t, off_surface.mean())
-    returned = np.linalg.norm(anim.vertices[4] - anim.vertices[0], axis=1) / radius
-    assert returned.mean() < 0.065, returned.mean()
+        surface = trimesh.Trimesh(opened.vertices[t], opened.faces, process=False)
+        _, distance, _ = trimesh.proximity.closest_point(surface, anim.vertices[t][bound])
+        assert distance.max() < 1e-6 * radius
 
 
 @pytest.mark.slow

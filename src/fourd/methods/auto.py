@@ -75,10 +75,6 @@ class Options:
     split_part : float
         A part of a flow frame counts towards the split test when it holds at least this
         fraction of the frame's faces (0.05).
-    fit_frames : bool
-        For a closed object, move the observed vertices of every frame onto the frame's own
-        points' surface (:func:`fourd.methods.watertight.fit_to_frames`): closer to the
-        data, with each frame's own noise (False).
     seed : int
         Seed of the kinematic method's sampling (0).
     """
@@ -87,7 +83,6 @@ class Options:
     open_area: float = 0.5
     resolution: int = 32
     split_part: float = 0.05
-    fit_frames: bool = False
     seed: int = 0
 
     def __post_init__(self):
@@ -188,9 +183,7 @@ def reconstruct_with_diagnostics(
         return Reconstruction(
             flowed.meshes, AutoDiagnostics(0.0, openness, 1.0, float(flowed.mass_error))
         )
-    animation, off = watertight.close_on_flow(
-        seq, opened, flowed, fit_frames=options.fit_frames
-    )
+    animation, off = watertight.close_on_flow(seq, opened, flowed)
     log.info(
         "auto: a closed object (vector area %.2f of the area): closed template slid along "
         "the flow's surfaces", openness,

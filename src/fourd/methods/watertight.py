@@ -19,13 +19,10 @@ import logging
 import time
 
 import numpy as np
-import scipy.sparse as sp
 import trimesh
-from scipy.sparse.linalg import splu
 from scipy.spatial import cKDTree
 
 from fourd.animation import AnimatedMesh
-from fourd.geometry.laplacian import uniform_laplacian
 from fourd.geometry.neighbors import point_spacing
 from fourd.methods import flow, kinematic
 from fourd.methods.base import Reconstruction
@@ -47,6 +44,9 @@ RESULT = AnimatedMesh
 #: 0.3% and 1.5% of the vertices off.
 OFF_SURFACE_CELLS = 8.0
 OFF_SURFACE_WARNING = 0.005
+#: :func:`close_animation`: a vertex carried along moves by the rigid motion of this many
+#: nearest bound vertices (:func:`rigid_blend`).
+RIGID_ANCHORS = 32
 
 __all__ = [
     "MIN_FRAMES",
@@ -60,24 +60,19 @@ __all__ = [
     "reconstruct_with_diagnostics",
     "close_animation",
     "close_on_flow",
-    "fit_to_frames",
+    "rigid_blend",
 ]
 
 
 @dataclasses.dataclass(frozen=True)
 class Options(flow.Options):
-    fit_frames: bool = False
+    pass
 
 
 Options.__doc__ = (
     "Options of the watertight method: those of the ``flow`` method, whose surfaces close\n"
-    "    the kinematic result (run with its defaults), and ``fit_frames``.\n"
-    + flow.Options.__doc__.split("\n", 1)[1].rstrip().removesuffix('"""').rstrip()
-    + """
-    fit_frames : bool
-        Move the observed vertices of every frame onto the frame's own points' surface
-        (:func:`fit_to_frames`): closer to the data, with each frame's own noise (False).
-"""
+    "    the kinematic result (run with its defaults).\n"
+    + flow.Options.__doc__.split("\n", 1)[1]
 )
 
 
@@ -109,14 +104,16 @@ def close_animation(
     opened: AnimatedMesh,
     field,
     *,
+    bounds: np.ndarray,
     cell_size: float,
     target_vertices: int = 10000,
     reach: float = 1.5,
 ) -> AnimatedMesh:
     """An open animated mesh closed by a signed distance in space-time: a closed template of
     ``field`` at ``opened.times[0]`` whose vertices on the open mesh follow it exactly and
-    whose other vertices (the parts no frame showed at the first time) follow by harmonic
-    extension of the displacements, then lie on ``field`` at each time.
+    whose other vertices (the parts no frame showed at the first time) follow the rigid
+    motion of their nearest bound vertices (:func:`rigid_blend`), then lie on ``field`` at
+    each time.
 
     Measured cause of the closed sliding's drift (``experiments/watertight_drift.py``,
     crane-130, correspondence mean / last frame): the closed template slid along the flow's
@@ -133,6 +130,8 @@ def close_animation(
         template's vertices are bound to.
     field : Field4D
         Signed distance, negative inside, at ``opened.times`` (closed surfaces).
+    bounds : ndarray [2, 3]
+        Box holding the closed surface at the first time.
     cell_size : float
         Marching-cubes cell of the closed template (input units).
     target_vertices : int
@@ -150,13 +149,13 @@ def close_animation(
     start = np.asarray(opened.vertices[0], dtype=float)
     faces_o = opened.faces
     vertices, faces = kinematic.extract_template(
-        field, float(times[0]), bounds=field.bounds(), cell_size=cell_size,
+        field, float(times[0]), bounds=np.asarray(bounds, float), cell_size=cell_size,
         min_component_faces=20, target_vertices=target_vertices,
     )
     mesh = trimesh.Trimesh(start, faces_o, process=False)
     closest, distance, triangle = trimesh.proximity.closest_point(mesh, vertices)
     corners = faces_o[triangle]
-    weights = trimesh.triangles.points_to_barycentric(start[corners], closest)
+    weights_b = trimesh.triangles.points_to_barycentric(start[corners], closest)
     edges = np.linalg.norm(start[faces_o[:, [1, 2, 0]]] - start[faces_o], axis=2)
     normals = trimesh.Trimesh(vertices, faces, process=False).vertex_normals
     facing = np.einsum("ij,ij->i", normals, mesh.face_normals[triangle]) > 0.3
@@ -166,27 +165,58 @@ def close_animation(
         "watertight: closed template of %d vertices, %d (%.0f%%) carried along the open mesh's "
         "holes", len(vertices), len(free), 100 * len(free) / len(vertices),
     )
-    laplacian = uniform_laplacian(len(vertices), faces).tocsr()
-    solve = None
-    if len(free):
-        inner = laplacian[free][:, free] + sp.identity(len(free)) * 1e-9
-        solve = splu(inner.tocsc()).solve
-        coupling = laplacian[free][:, np.flatnonzero(bound)]
-    out = np.empty((len(times), len(vertices), 3))
-    observed = np.zeros((len(times), len(vertices)), dtype=bool)
     rest = vertices.copy()
     rest[bound] = closest[bound]
+    out = np.empty((len(times), len(vertices), 3))
+    observed = np.zeros((len(times), len(vertices)), dtype=bool)
+    anchors = np.flatnonzero(bound)
+    if len(free) and len(anchors) >= 3:
+        distance, near = cKDTree(rest[anchors]).query(rest[free], k=min(RIGID_ANCHORS, len(anchors)))
+        weights = 1.0 / (distance**2 + (1e-3 * cell_size) ** 2)
     for k, t in enumerate(times):
-        frame = np.einsum("ij,ijk->ik", weights[bound], opened.vertices[k][corners[bound]])
+        frame = np.einsum("ij,ijk->ik", weights_b[bound], opened.vertices[k][corners[bound]])
         out[k, bound] = frame
         observed[k, bound] = opened.observed[k][corners[bound]].any(axis=1)
-        if solve is None:
+        if len(free) == 0:
             continue
-        moved = solve(-(coupling @ (frame - rest[bound])))
+        if len(anchors) < 3:
+            out[k, free] = rest[free]
+        else:
+            out[k, free] = rigid_blend(rest[anchors][near], frame[near], weights, rest[free])
         out[k, free] = kinematic.project_to_surface(
-            field, rest[free] + moved, float(t), iterations=4, max_step=2.0 * cell_size
+            field, out[k, free], float(t), iterations=4, max_step=2.0 * cell_size
         )
     return AnimatedMesh(faces=faces, vertices=out, times=times, observed=observed, rest=rest)
+
+
+def rigid_blend(
+    source: np.ndarray, target: np.ndarray, weights: np.ndarray, points: np.ndarray
+) -> np.ndarray:
+    """Moving least squares rigid deformation (Schaefer, McPhail, Warren 2006): each point
+    [M, 3] moves by the rigid motion that best maps its anchors ``source`` [M, K, 3] onto
+    ``target`` [M, K, 3] with ``weights`` [M, K] (weighted Kabsch, reflections excluded).
+    A rigid motion of all anchors moves every point by exactly that motion.
+
+    Examples
+    --------
+    >>> rng = np.random.default_rng(0)
+    >>> source = rng.normal(size=(1, 6, 3))
+    >>> turn = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
+    >>> moved = rigid_blend(source, source @ turn.T + 1.0, np.ones((1, 6)), np.zeros((1, 3)))
+    >>> np.allclose(moved, [[1.0, 1.0, 1.0]])
+    True
+    """
+    w = weights / weights.sum(axis=1, keepdims=True)
+    source_centre = np.einsum("mk,mki->mi", w, source)
+    target_centre = np.einsum("mk,mki->mi", w, target)
+    covariance = np.einsum(
+        "mk,mki,mkj->mij", w, source - source_centre[:, None], target - target_centre[:, None]
+    )
+    u, _, vt = np.linalg.svd(covariance)
+    flip = np.sign(np.linalg.det(np.einsum("mji,mkj->mik", vt, u)))
+    vt[:, 2, :] *= flip[:, None]
+    rotation = np.einsum("mji,mkj->mik", vt, u)
+    return np.einsum("mij,mj->mi", rotation, points - source_centre) + target_centre
 
 
 def off_surface_fractions(
@@ -213,25 +243,18 @@ def close_on_flow(
     seq: PointCloudSequence,
     opened: AnimatedMesh,
     flowed: flow.FlowResult,
-    *,
-    fit_frames: bool = False,
 ) -> tuple[AnimatedMesh, float]:
     """``opened`` (the kinematic result on ``seq``) closed by the surfaces of a ``flow`` run
-    on ``seq`` (:func:`close_animation`), optionally fitted to each frame's points
-    (:func:`fit_to_frames`); and the largest fraction over the frames of its vertices off the
-    surface (:func:`off_surface_fractions`, warned above :data:`OFF_SURFACE_WARNING`)."""
+    on ``seq`` (:func:`close_animation`), and the largest fraction over the frames of its
+    vertices off the surface (:func:`off_surface_fractions`, warned above
+    :data:`OFF_SURFACE_WARNING`)."""
     clock = time.perf_counter()
     field = flow.surface_distance(flowed)
     first = next(i for i, p in enumerate(flowed.frame_points) if p is not None and len(p) >= 4)
     points = flowed.frame_points[first]
     spacing = point_spacing(points)
     cell = kinematic.template_cell_size(points, spacing, kinematic.Options().template_vertices)
-    animation = close_animation(opened, field, cell_size=cell)
-    if fit_frames:
-        animation = fit_to_frames(
-            animation, flowed.frame_points, flowed.frame_normals, bandwidth=2.0 * spacing,
-            max_step=cell,
-        )
+    animation = close_animation(opened, field, bounds=field.bounds(), cell_size=cell)
     off_surface = off_surface_fractions(
         animation, field, OFF_SURFACE_CELLS * field.spacing, flowed.frame_points
     )
@@ -248,48 +271,6 @@ def close_on_flow(
     return animation, float(off_surface.max())
 
 
-def fit_to_frames(
-    animation: AnimatedMesh,
-    points: list,
-    normals: list,
-    *,
-    bandwidth: float,
-    max_step: float,
-) -> AnimatedMesh:
-    """``animation`` with its observed vertices moved onto each frame's own surface (the IMLS
-    surface of the frame's points, :class:`~fourd.methods.kinematic.FrameSurface`; at most
-    ``max_step`` input units, 3 Newton steps along its gradient, where the points alone
-    define it): what the tracking's rigidity and temporal smoothing keep off the data comes
-    back, and so does each frame's own noise.
-
-    Parameters
-    ----------
-    points, normals : lists of T arrays [P, 3] or None (a frame without data stays).
-    bandwidth : float
-        The IMLS Gaussian width (input units).
-    """
-    vertices = np.array(animation.vertices, dtype=float)
-    for k, (p, n) in enumerate(zip(points, normals, strict=True)):
-        if p is None or n is None or len(p) < 4:
-            continue
-        surface = kinematic.FrameSurface(p, n, bandwidth)
-        which = np.flatnonzero(animation.observed[k])
-        x = vertices[k, which]
-        for _ in range(3):
-            distance, gradient, coverage = surface.evaluate(x)
-            norm2 = np.maximum(np.einsum("ij,ij->i", gradient, gradient), 1e-12)
-            step = (distance / norm2)[:, None] * gradient
-            length = np.linalg.norm(step, axis=1)
-            step *= (np.minimum(1.0, max_step / np.maximum(length, 1e-30)) * (coverage >= 0.99))[:, None]
-            x = x - step
-        moved = np.linalg.norm(x - vertices[k, which], axis=1) <= max_step
-        vertices[k, which[moved]] = x[moved]
-    return AnimatedMesh(
-        faces=animation.faces, vertices=vertices, times=animation.times,
-        observed=animation.observed, rest=animation.rest,
-    )
-
-
 def reconstruct_with_diagnostics(
     seq: PointCloudSequence, options: Options | None = None
 ) -> Reconstruction:
@@ -297,7 +278,7 @@ def reconstruct_with_diagnostics(
     options = Options() if options is None else options
     opened = kinematic.reconstruct(seq, kinematic.Options())
     flowed = flow.run(seq, flow_options(options))
-    animation, off_surface = close_on_flow(seq, opened, flowed, fit_frames=options.fit_frames)
+    animation, off_surface = close_on_flow(seq, opened, flowed)
     return Reconstruction(
         animation, WatertightDiagnostics(float(flowed.mass_error), off_surface)
     )
