@@ -47,7 +47,7 @@ from scipy.cluster.vq import kmeans2
 from scipy.spatial import cKDTree
 
 from fourd import evaluate, synth
-from fourd.evaluate.bench import HELD_OUT_SCENES, PROTOCOL, STANDARD_SCENES
+from fourd.bench import HELD_OUT_SCENES, PROTOCOL, STANDARD_SCENES
 from fourd.geometry.neighbors import bucket_grid
 from fourd.geometry.normals import vertex_normals
 from fourd.methods import kinematic

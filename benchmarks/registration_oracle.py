@@ -52,7 +52,7 @@ import numpy as np
 from arap_basin import truth_positions
 
 from fourd import evaluate, synth
-from fourd.evaluate.bench import HELD_OUT_SCENES, PROTOCOL, STANDARD_SCENES
+from fourd.bench import HELD_OUT_SCENES, PROTOCOL, STANDARD_SCENES
 from fourd.methods import kinematic
 from fourd.methods.kinematic import arap, register, sliding
 

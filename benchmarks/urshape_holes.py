@@ -53,7 +53,7 @@ import numpy as np
 from scipy import ndimage
 
 from fourd import evaluate, reconstruct, synth
-from fourd.evaluate.bench import HELD_OUT_SCENES, PROTOCOL, STANDARD_SCENES
+from fourd.bench import HELD_OUT_SCENES, PROTOCOL, STANDARD_SCENES
 from fourd.methods.kinematic import urshape
 
 

@@ -10,9 +10,6 @@
 
 from __future__ import annotations
 
-# The subpackage fourd.evaluate is imported first so that the function fourd.evaluate
-# defined below is not replaced by the subpackage when it is first imported later.
-import fourd.evaluate.metrics as _metrics
 from fourd import synth
 from fourd.animation import AnimatedMesh, MeshSequence
 from fourd.errors import InputError
@@ -47,8 +44,10 @@ def load_result(path):
 
 def evaluate(result, truth, **options) -> dict:
     """Metrics of ``result`` against the ground-truth :class:`AnimatedMesh` ``truth``
-    (see :func:`fourd.evaluate.metrics.evaluate`)."""
-    return _metrics.evaluate(result, truth, **options)
+    (see :func:`fourd.metrics.evaluate`)."""
+    from fourd.metrics import evaluate as _evaluate
+
+    return _evaluate(result, truth, **options)
 
 
 __all__ = [

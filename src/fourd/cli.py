@@ -136,7 +136,7 @@ def cmd_synth(args) -> int:
 
 
 def cmd_evaluate(args) -> int:
-    from fourd.evaluate.metrics import evaluate_files, format_report
+    from fourd.metrics import evaluate_files, format_report
 
     report = evaluate_files(args.result, args.truth)
     if args.json:
@@ -147,7 +147,7 @@ def cmd_evaluate(args) -> int:
 
 
 def cmd_bench(args) -> int:
-    from fourd.evaluate.bench import merge_reports, run_bench
+    from fourd.bench import merge_reports, run_bench
 
     if args.merge:
         merge_reports(args.merge, args.output, notes=args.note or [])
