@@ -21,7 +21,7 @@ __version__ = "0.1.0"
 
 def load_sequence(path) -> PointCloudSequence:
     """Read a folder of frame files (or one ``.npz`` with ``points [T, P, 3]``); see the README."""
-    from fourd.io.readers import load_sequence as _load
+    from fourd.io.frames import load_sequence as _load
 
     return _load(path)
 
@@ -29,15 +29,15 @@ def load_sequence(path) -> PointCloudSequence:
 def save(result, path, **options):
     """Write an :class:`AnimatedMesh` or :class:`MeshSequence`; the format follows the extension
     (``.npz``, ``.glb``, ``.usd/.usda/.usdc``, ``.pc2``, or a folder). Options go to
-    :func:`fourd.io.writers.save` (``mesh_format``, ``fps``, ``interpolation``)."""
-    from fourd.io.writers import save as _save
+    :func:`fourd.io.results.save` (``mesh_format``, ``fps``, ``interpolation``)."""
+    from fourd.io.results import save as _save
 
     return _save(result, path, **options)
 
 
 def load_result(path):
     """Read a result written by :func:`save` (``.npz``, or a folder of per-frame meshes)."""
-    from fourd.io.writers import load_result as _load
+    from fourd.io.results import load_result as _load
 
     return _load(path)
 

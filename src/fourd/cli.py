@@ -81,8 +81,8 @@ def _configure_logging(quiet: bool, verbose: bool = False) -> None:
 
 
 def cmd_reconstruct(args) -> int:
-    from fourd.io.readers import load_sequence
-    from fourd.io.writers import check_output, save
+    from fourd.io.frames import load_sequence
+    from fourd.io.results import check_output, save
     from fourd.methods import DEFAULT_METHOD, method_options, reconstruct
     from fourd.options import parse_assignments
 

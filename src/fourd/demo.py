@@ -14,7 +14,7 @@ from pathlib import Path
 
 from fourd import synth
 from fourd.animation import AnimatedMesh
-from fourd.io.writers import save
+from fourd.io.results import save
 from fourd.jsonable import jsonable
 from fourd.methods import DEFAULT_METHOD, reconstruct
 

@@ -49,7 +49,7 @@ def load_truth(path: str | os.PathLike):
 
 
 def _load_result(path: Path):
-    from fourd.io.writers import load_result
+    from fourd.io.results import load_result
 
     return load_result(path)
 

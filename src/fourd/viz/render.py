@@ -35,7 +35,7 @@ from fourd.animation import AnimatedMesh
 from fourd.errors import InputError
 from fourd.geometry.normals import vertex_normals
 from fourd.io.atomic import atomic_path
-from fourd.io.writers import as_result
+from fourd.io.results import as_result
 from fourd.viz import texture as tex
 
 log = logging.getLogger("fourd.viz.render")
