@@ -214,14 +214,14 @@ def test_bench_sheet_turntable_and_gif(tmp_path):
     grid = R.turntable(anim, tmp_path / "turn.png", views=4, tile=64)
     with Image.open(grid) as im:
         assert im.size[0] == 4 * 64
-    gif = R.animation(anim, tmp_path / "anim.gif", size=64)
+    gif = R.render_animation(anim, tmp_path / "anim.gif", size=64)
     with Image.open(gif) as im:
         assert im.n_frames == 4
     turn = R.turntable(anim, tmp_path / "turn.gif", views=5, tile=48)
     with Image.open(turn) as im:
         assert im.n_frames == 5
     with pytest.raises(InputError, match=r"\.gif or \.mp4"):
-        R.animation(anim, tmp_path / "anim.avi")
+        R.render_animation(anim, tmp_path / "anim.avi")
 
 
 def test_mp4_needs_imageio_ffmpeg(tmp_path):
@@ -230,9 +230,9 @@ def test_mp4_needs_imageio_ffmpeg(tmp_path):
         import imageio_ffmpeg  # noqa: F401
     except ImportError:
         with pytest.raises(InputError, match="imageio-ffmpeg"):
-            R.animation(anim, tmp_path / "a.mp4", size=64)
+            R.render_animation(anim, tmp_path / "a.mp4", size=64)
     else:
-        path = R.animation(anim, tmp_path / "a.mp4", size=64)
+        path = R.render_animation(anim, tmp_path / "a.mp4", size=64)
         assert path.stat().st_size > 0
 
 

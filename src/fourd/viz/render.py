@@ -8,7 +8,7 @@ Points are splatted as small discs into the same depth buffer.
 
 On top of it: :func:`contact_sheet` (frames in a grid, texture carried from the first frame
 by the correspondences, optional error and ``observed`` colouring), :func:`turntable`,
-:func:`animation` (GIF via Pillow; MP4 when ``imageio-ffmpeg`` is installed) and
+:func:`render_animation` (GIF via Pillow; MP4 when ``imageio-ffmpeg`` is installed) and
 :func:`bench_sheet` for the benchmark.
 
 Examples
@@ -840,7 +840,7 @@ def _write_gif(images, path: Path, fps: float) -> Path:
     return _readable(path)
 
 
-def animation(
+def render_animation(
     result,
     path,
     *,
