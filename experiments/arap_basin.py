@@ -1,7 +1,7 @@
 """Where ``kinematic``'s correspondence error on a scene comes from: does the as-rigid-as-possible
 prior prefer the tracked positions or the true ones?
 
-Run: ``.venv/bin/python benchmarks/arap_basin.py [SCENE] [--frames 11,13,19] [--iterations 40]
+Run: ``.venv/bin/python experiments/arap_basin.py [SCENE] [--frames 11,13,19] [--iterations 40]
 [--twists=-60,-30,30,60]`` (default ``crane``; any bench scene, with its own scanner, e.g.
 ``crane-clean``; about a minute on 2 cores, plus about 15 s per twist and frame).
 
