@@ -253,8 +253,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--methods",
         nargs="+",
-        help="method names; NAME:key=value,... adds a row for a method with options "
-        "(e.g. flow:coherent=true)",
+        help="method names; NAME:key=value,... adds a row for a method with options as --set "
+        "takes them (e.g. flow:coherent=true, flow:missing_frames=1,2,resolution=64)",
     )
     p.add_argument("--scenes", nargs="+")
     p.add_argument("-o", "--output", default="benchmarks/BENCHMARKS.md")

@@ -41,3 +41,29 @@ def test_method_specs_carry_options():
         suite.select_methods(["perframe:no_such_option=1"], quick=False)
     with pytest.raises(InputError, match="unknown method"):
         suite.select_methods(["nope:x=1"], quick=False)
+
+
+def test_a_method_spec_takes_list_values_as_set_does():
+    """``flow:missing_frames=1,2`` (issue 49): a comma not followed by ``key=`` continues the
+    value before it, so a spec takes every value ``--set`` takes."""
+    from fourd.options import parse_assignments
+
+    name, values = suite.parse_method_spec("flow:missing_frames=1,2,resolution=64")
+    assert (name, values) == ("flow", {"missing_frames": "1,2", "resolution": "64"})
+    assert values == parse_assignments(["missing_frames=1,2", "resolution=64"])
+    assert suite.parse_method_spec("flow:resolution=64, missing_frames=1, 2 ,3") == (
+        "flow",
+        {"resolution": "64", "missing_frames": "1, 2 ,3"},
+    )
+    assert suite.parse_method_spec("flow:missing_frames=1,2,")[1] == {"missing_frames": "1,2"}
+    with pytest.raises(InputError, match="expected key=value, got '1'"):
+        suite.parse_method_spec("flow:1,missing_frames=2")
+
+
+def test_a_method_spec_with_a_list_value_is_a_valid_bench_row():
+    from fourd.methods import method_options
+
+    spec = "flow:missing_frames=1,2,resolution=64"
+    assert suite.select_methods([spec], quick=False) == [spec]
+    options = method_options("flow", suite.parse_method_spec(spec)[1])
+    assert options.missing_frames == (1, 2) and options.resolution == 64

@@ -7,9 +7,11 @@ takes them (:func:`parse_method_spec`).
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass, field
 
 from fourd.errors import InputError
+from fourd.options import parse_assignments
 
 
 @dataclass(frozen=True)
@@ -110,17 +112,36 @@ def select_scenes(scenes, quick: bool) -> list[BenchScene]:
     return chosen
 
 
+#: A comma followed by this starts the next option of a method spec; any other comma belongs to
+#: the value before it (``missing_frames=1,2``).
+_NEXT_OPTION = re.compile(r"\s*[A-Za-z_]\w*\s*=")
+
+
 def parse_method_spec(spec: str) -> tuple[str, dict[str, str]]:
     """``"flow:coherent=true,resolution=40"`` -> ``("flow", {"coherent": "true", ...})``: a
-    bench row for a method with options (the spec is the row's label)."""
+    bench row for a method with options (the spec is the row's label).
+
+    The options are what ``--set KEY=VALUE`` takes, separated by commas; a comma that is not
+    followed by ``key=`` continues the value before it, so list values need no quoting.
+
+    >>> parse_method_spec("flow:missing_frames=1,2,resolution=64")
+    ('flow', {'missing_frames': '1,2', 'resolution': '64'})
+    >>> parse_method_spec("perframe")
+    ('perframe', {})
+    """
     name, _, rest = spec.partition(":")
-    values = {}
-    for item in filter(None, (part.strip() for part in rest.split(","))):
-        key, sep, value = item.partition("=")
+    assignments: list[str] = []
+    for part in rest.split(","):
+        if not part.strip():
+            continue
+        if assignments and not _NEXT_OPTION.match(part):
+            assignments[-1] += "," + part
+            continue
+        key, sep, _ = part.partition("=")
         if not sep or not key.strip():
-            raise InputError(f"method spec {spec!r}: expected key=value, got {item!r}")
-        values[key.strip()] = value.strip()
-    return name.strip(), values
+            raise InputError(f"method spec {spec!r}: expected key=value, got {part.strip()!r}")
+        assignments.append(part)
+    return name.strip(), parse_assignments(assignments)
 
 
 def select_methods(methods, quick: bool) -> list[str]:
