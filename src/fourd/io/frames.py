@@ -384,9 +384,13 @@ def load_sequence(path: str | os.PathLike) -> PointCloudSequence:
 
     Examples
     --------
-    >>> seq = load_sequence("scans/")            # doctest: +SKIP
-    >>> len(seq), seq.times[:3]                  # doctest: +SKIP
-    (40, array([0., 1., 2.]))
+    >>> import tempfile
+    >>> frames = tuple(Frame(np.random.default_rng(t).random((50, 3)), time=t) for t in range(3))
+    >>> with tempfile.TemporaryDirectory() as folder:
+    ...     write_frames(PointCloudSequence(frames), folder)
+    ...     seq = load_sequence(folder)
+    >>> len(seq), seq.times, seq.names[0]
+    (3, array([0., 1., 2.]), 'frame_0000.ply')
     """
     path = Path(path)
     if not path.exists():

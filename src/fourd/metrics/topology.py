@@ -7,7 +7,7 @@ Examples
 >>> topology(sphere.faces).closed_manifold
 True
 >>> round(enclosed_volume(sphere.vertices, sphere.faces), 2)
-3.54
+3.66
 """
 
 from __future__ import annotations
