@@ -25,7 +25,7 @@ bench-quick: $(STAMP)
 	$(VENV)/bin/fourd bench --quick -o benchmarks/out/BENCHMARKS-quick.md
 
 lint: $(STAMP)
-	$(VENV)/bin/ruff check src tests
+	$(VENV)/bin/ruff check src tests benchmarks experiments
 
 clean:
 	rm -rf demo-out benchmarks/out .pytest_cache

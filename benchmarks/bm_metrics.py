@@ -1,4 +1,4 @@
-"""Time :func:`fourd.evaluate.metrics.evaluate` on the crane truth (20 frames, 60,000 samples).
+"""Time :func:`fourd.metrics.evaluate` on the crane truth (20 frames, 60,000 samples).
 
 Run: ``.venv/bin/python benchmarks/bm_metrics.py``. Prints the wall time of the floor (the truth
 against itself: near queries) and of a frame-0 copy held still (far queries: the slow case).
@@ -11,7 +11,7 @@ import time
 import numpy as np
 
 from fourd import AnimatedMesh, synth
-from fourd.evaluate.metrics import evaluate, metric_floor
+from fourd.metrics import evaluate, metric_floor
 
 
 def main() -> None:

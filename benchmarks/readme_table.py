@@ -16,7 +16,7 @@ import re
 import sys
 from pathlib import Path
 
-from fourd.evaluate.bench import _cell
+from fourd.bench import format_cell
 
 ROOT = Path(__file__).resolve().parents[1]
 ROW = re.compile(r"^\| ([\w-]+) \| `([^`]+)` \|.*\|$")
@@ -28,9 +28,9 @@ def cells(metrics: dict) -> list[str]:
     if metrics.get("correspondence_mean") is None:
         correspondence = "—"
     else:
-        correspondence = f"{_cell(metrics['correspondence_mean'], 'd')} / {_cell(metrics['correspondence_last'], 'd')}"
-    return [_cell(metrics["chamfer"], "d"), _cell(metrics["completeness_95"], "d"), correspondence,
-            _cell(metrics["closed_manifold"], "%"), _cell(metrics["timing"]["seconds_per_frame"], "r")]
+        correspondence = f"{format_cell(metrics['correspondence_mean'], 'd')} / {format_cell(metrics['correspondence_last'], 'd')}"
+    return [format_cell(metrics["chamfer"], "d"), format_cell(metrics["completeness_95"], "d"), correspondence,
+            format_cell(metrics["closed_manifold"], "%"), format_cell(metrics["timing"]["seconds_per_frame"], "r")]
 
 
 def rewrite(readme: str, report: dict) -> str:

@@ -18,7 +18,7 @@ import threading
 import time
 from pathlib import Path
 
-from fourd.evaluate.bench import STANDARD_SCENES
+from fourd.bench import STANDARD_SCENES
 
 #: Rough relative cost of one frame, to deal out the longest cases first.
 METHOD_COST = {"perframe": 1.0, "kinematic": 4.0, "flow": 8.0}

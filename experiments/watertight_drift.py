@@ -16,8 +16,8 @@ import sys
 import numpy as np
 
 from fourd import synth
-from fourd.evaluate.bench import HELD_OUT_SCENES, PROTOCOL, STANDARD_SCENES
-from fourd.evaluate.metrics import evaluate
+from fourd.bench.suite import HELD_OUT_SCENES, PROTOCOL, STANDARD_SCENES
+from fourd.metrics import evaluate
 from fourd.geometry.neighbors import point_spacing
 from fourd.methods import flow, kinematic
 

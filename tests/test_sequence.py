@@ -79,11 +79,11 @@ def test_mesh_sequence_validation():
         MeshSequence(((v, f), (v, np.array([[0, 1, 3]]))))
 
 
-def test_fourd_evaluate_stays_a_function_after_the_metrics_module_is_imported():
+def test_fourd_evaluate_stays_a_function_after_the_metrics_and_bench_packages_are_imported():
     import importlib
 
     import fourd
 
-    importlib.import_module("fourd.evaluate.metrics")
-    importlib.import_module("fourd.evaluate.bench")
+    importlib.import_module("fourd.metrics")
+    importlib.import_module("fourd.bench")
     assert callable(fourd.evaluate) and fourd.evaluate.__module__ == "fourd"

@@ -1,18 +1,22 @@
 """fourd: animated meshes from time-varying point clouds.
 
->>> import fourd
->>> truth = fourd.synth.scene("bending-arm", frames=6)          # doctest: +SKIP
->>> scans = fourd.synth.scan(truth, cameras=3, noise=0.002)      # doctest: +SKIP
->>> anim = fourd.reconstruct(scans, method="kinematic")          # doctest: +SKIP
->>> report = fourd.evaluate(anim, truth)                         # doctest: +SKIP
->>> fourd.save(anim, "bend.glb")                                 # doctest: +SKIP
+A small real run (``method="kinematic"`` or ``"flow"`` give correspondences; the README has the
+figures of each):
+
+>>> import fourd, pathlib, tempfile
+>>> truth = fourd.synth.scene("squash-ball", frames=3)
+>>> scans = fourd.synth.scan(truth, cameras=3, noise=0.002, resolution=48)
+>>> anim = fourd.reconstruct(scans, method="perframe")
+>>> report = fourd.evaluate(anim, truth, samples=2000)
+>>> report["chamfer"] < 0.05
+True
+>>> with tempfile.TemporaryDirectory() as folder:
+...     fourd.save(anim, pathlib.Path(folder) / "ball.glb").name
+'ball.glb'
 """
 
 from __future__ import annotations
 
-# The subpackage fourd.evaluate is imported first so that the function fourd.evaluate
-# defined below is not replaced by the subpackage when it is first imported later.
-import fourd.evaluate.metrics as _metrics
 from fourd import synth
 from fourd.animation import AnimatedMesh, MeshSequence
 from fourd.errors import InputError
@@ -24,7 +28,7 @@ __version__ = "0.1.0"
 
 def load_sequence(path) -> PointCloudSequence:
     """Read a folder of frame files (or one ``.npz`` with ``points [T, P, 3]``); see the README."""
-    from fourd.io.readers import load_sequence as _load
+    from fourd.io.frames import load_sequence as _load
 
     return _load(path)
 
@@ -32,23 +36,25 @@ def load_sequence(path) -> PointCloudSequence:
 def save(result, path, **options):
     """Write an :class:`AnimatedMesh` or :class:`MeshSequence`; the format follows the extension
     (``.npz``, ``.glb``, ``.usd/.usda/.usdc``, ``.pc2``, or a folder). Options go to
-    :func:`fourd.io.writers.save` (``mesh_format``, ``fps``, ``interpolation``)."""
-    from fourd.io.writers import save as _save
+    :func:`fourd.io.results.save` (``mesh_format``, ``fps``, ``interpolation``)."""
+    from fourd.io.results import save as _save
 
     return _save(result, path, **options)
 
 
 def load_result(path):
     """Read a result written by :func:`save` (``.npz``, or a folder of per-frame meshes)."""
-    from fourd.io.writers import load_result as _load
+    from fourd.io.results import load_result as _load
 
     return _load(path)
 
 
 def evaluate(result, truth, **options) -> dict:
     """Metrics of ``result`` against the ground-truth :class:`AnimatedMesh` ``truth``
-    (see :func:`fourd.evaluate.metrics.evaluate`)."""
-    return _metrics.evaluate(result, truth, **options)
+    (see :func:`fourd.metrics.evaluate`)."""
+    from fourd.metrics import evaluate as _evaluate
+
+    return _evaluate(result, truth, **options)
 
 
 __all__ = [

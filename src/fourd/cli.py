@@ -81,8 +81,8 @@ def _configure_logging(quiet: bool, verbose: bool = False) -> None:
 
 
 def cmd_reconstruct(args) -> int:
-    from fourd.io.readers import load_sequence
-    from fourd.io.writers import check_output, save
+    from fourd.io.frames import load_sequence
+    from fourd.io.results import check_output, save
     from fourd.methods import DEFAULT_METHOD, method_options, reconstruct
     from fourd.options import parse_assignments
 
@@ -136,7 +136,7 @@ def cmd_synth(args) -> int:
 
 
 def cmd_evaluate(args) -> int:
-    from fourd.evaluate.metrics import evaluate_files, format_report
+    from fourd.metrics import evaluate_files, format_report
 
     report = evaluate_files(args.result, args.truth)
     if args.json:
@@ -147,7 +147,7 @@ def cmd_evaluate(args) -> int:
 
 
 def cmd_bench(args) -> int:
-    from fourd.evaluate.bench import merge_reports, run_bench
+    from fourd.bench import merge_reports, run_bench
 
     if args.merge:
         merge_reports(args.merge, args.output, notes=args.note or [])
@@ -253,8 +253,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--methods",
         nargs="+",
-        help="method names; NAME:key=value,... adds a row for a method with options "
-        "(e.g. flow:resolution=64)",
+        help="method names; NAME:key=value,... adds a row for a method with options as --set "
+        "takes them (e.g. watertight, flow:missing_frames=1,2,resolution=64)",
     )
     p.add_argument("--scenes", nargs="+")
     p.add_argument("-o", "--output", default="benchmarks/BENCHMARKS.md")

@@ -14,7 +14,7 @@ from pathlib import Path
 
 from fourd import synth
 from fourd.animation import AnimatedMesh
-from fourd.io.writers import save
+from fourd.io.results import save
 from fourd.jsonable import jsonable
 from fourd.methods import DEFAULT_METHOD, reconstruct
 
@@ -34,7 +34,7 @@ def run_demo(
     seed: int = 0,
 ) -> dict[str, Path]:
     """Run the demo; returns the paths written, by label."""
-    from fourd.evaluate.metrics import evaluate
+    from fourd.metrics import evaluate
     from fourd.synth.write import write_synth
     from fourd.viz.render import contact_sheet
     from fourd.viz.viewer import write_viewer

@@ -57,9 +57,9 @@ def describe(path) -> str:
     if not path.exists():
         raise InputError("does not exist", path)
     if _is_result(path):
-        from fourd.io.writers import load_result
+        from fourd.io.results import load_result
 
         return f"{path}\n" + describe_result(load_result(path))
-    from fourd.io.readers import load_sequence
+    from fourd.io.frames import load_sequence
 
     return f"{path}\n" + describe_sequence(load_sequence(path))

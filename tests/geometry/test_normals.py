@@ -1,7 +1,8 @@
 import numpy as np
+import trimesh
 
 from fourd.geometry.neighbors import knn, point_spacing
-from fourd.geometry.normals import estimate_normals, pca_normals
+from fourd.geometry.normals import estimate_normals, pca_normals, vertex_normals
 
 
 def _sphere(count, seed=0, noise=0.0):
@@ -118,3 +119,18 @@ def test_vertex_normals_of_one_frame_and_of_frames_agree_and_point_outwards():
     np.testing.assert_array_equal(one[-1], [0.0, 0.0, 1.0])
     radial = vertices[:-1] / np.linalg.norm(vertices[:-1], axis=1, keepdims=True)
     assert np.einsum("ij,ij->i", one[:-1], radial).min() > 0.8
+
+
+def test_vertex_normals_area_weighted():
+    sphere = trimesh.creation.icosphere(subdivisions=3)
+    normals = vertex_normals(sphere.vertices, sphere.faces)
+    assert (
+        np.min(np.sum(normals * sphere.vertices, axis=1)) >= 0.999
+    )  # outward radial on a unit sphere
+    # one big and one tiny triangle sharing vertex 0: the big one dominates
+    vertices = np.array([[0, 0, 0], [10, 0, 0], [0, 10, 0], [0, 0, 0.1], [0.1, 0, 0.0]], float)
+    faces = np.array([[0, 1, 2], [0, 3, 4]])
+    n = vertex_normals(vertices, faces)
+    assert n[0, 2] > 0.99
+    stacked = vertex_normals(np.stack([sphere.vertices, 2 * sphere.vertices]), sphere.faces)
+    assert np.allclose(stacked[0], normals) and np.allclose(stacked[1], normals)

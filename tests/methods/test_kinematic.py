@@ -535,8 +535,8 @@ def _kinematic_on_crane(*, frames: int, step: int, start: int = 0, **options) ->
     """``kinematic`` (with ``options``) on a stretch of the crane capture scanned with the
     standard protocol, evaluated with 10,000 samples; skips without ../shared/data."""
     from fourd import synth
-    from fourd.evaluate.bench import PROTOCOL
-    from fourd.evaluate.metrics import evaluate
+    from fourd.bench import PROTOCOL
+    from fourd.metrics import evaluate
     from fourd.synth.data import shared_data_dir
 
     if shared_data_dir() is None or not (shared_data_dir() / "crane.npz").exists():

@@ -89,7 +89,7 @@ def test_write_viewer_animated_mesh(tmp_path):
 
 
 def test_write_viewer_embeds_the_glb_when_the_writer_exists(tmp_path):
-    pytest.importorskip("fourd.io.writers")
+    pytest.importorskip("fourd.io.results")
     anim = deforming_sphere(frames=3)
     viewer.write_viewer(anim, tmp_path / "v")
     data = page_data(tmp_path / "v")
@@ -130,9 +130,9 @@ def test_write_viewer_bad_input(tmp_path):
 
 
 def test_write_viewer_from_saved_result_and_metrics_file(tmp_path):
-    writers = pytest.importorskip("fourd.io.writers")
+    results = pytest.importorskip("fourd.io.results")
     anim = deforming_sphere(frames=3)
-    writers.save(anim, tmp_path / "result.npz")
+    results.save(anim, tmp_path / "result.npz")
     (tmp_path / "metrics.json").write_text(json.dumps({"hausdorff": 0.5}))
     viewer.write_viewer(tmp_path / "result.npz", tmp_path / "v", metrics=tmp_path / "metrics.json")
     data = page_data(tmp_path / "v")

@@ -178,7 +178,7 @@ def test_viewer_plays_animated_mesh_and_its_glb_in_chromium(tmp_path, serve):
     # the exported .glb plays its morph animation in three.js (AnimationMixer)
     if not has_glb:
         pytest.skip(
-            "fourd.io.writers could not write result.glb: the glb half of this test did not run"
+            "fourd.io.results could not write result.glb: the glb half of this test did not run"
         )
     assert info["glb"]["keyCount"] == anim.frame_count and info["glb"]["meshes"] == 1
     diagonal = anim.diagonal()
@@ -211,7 +211,7 @@ def test_viewer_plays_mesh_sequence_in_chromium(tmp_path, serve):
 
 def test_viewer_fetches_a_large_glb_over_http(tmp_path, serve, monkeypatch):
     chromium, node = _require_tooling()
-    pytest.importorskip("fourd.io.writers")
+    pytest.importorskip("fourd.io.results")
     from fourd.viz import viewer
 
     monkeypatch.setattr(viewer, "EMBED_GLB_LIMIT", 0)  # every .glb counts as large

@@ -3,7 +3,7 @@
 Layout of ``OUTDIR`` (what ``fourd synth SCENE OUTDIR`` produces)::
 
     OUTDIR/
-      frame_0000.ply ...   binary PLY scans, one per kept frame (fourd.io.readers.write_frames)
+      frame_0000.ply ...   binary PLY scans, one per kept frame (fourd.io.frames.write_frames)
       times.txt            one time per frame
       sensors.json         the fixed camera positions {"sensors": [[x, y, z], ...]}
       truth.npz            the ground truth (AnimatedMesh: vertices, faces, times, observed[, rest];
@@ -36,7 +36,7 @@ INFO_FILE = "truth.json"
 
 def save_truth(truth, path: str | os.PathLike) -> None:
     """Write a ground truth as ``.npz`` (the layout of :func:`fourd.save`)."""
-    from fourd.io.writers import save
+    from fourd.io.results import save
 
     save(truth, path)
 
@@ -61,7 +61,7 @@ def write_synth(
     pathlib.Path
         ``outdir``.
     """
-    from fourd.io.readers import write_frames
+    from fourd.io.frames import write_frames
 
     if not isinstance(scans, PointCloudSequence):
         raise InputError(f"scans must be a PointCloudSequence, got {type(scans).__name__}")

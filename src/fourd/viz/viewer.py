@@ -28,7 +28,7 @@ import numpy as np
 from fourd.animation import AnimatedMesh
 from fourd.errors import InputError
 from fourd.io.atomic import atomic_path
-from fourd.io.writers import as_result
+from fourd.io.results import as_result
 from fourd.jsonable import jsonable
 from fourd.viz import texture as tex
 
@@ -79,14 +79,14 @@ def _subsample(points: np.ndarray, limit: int, seed: int) -> np.ndarray:
 
 
 def _write_glb(result, outdir: Path) -> Path | None:
-    """``outdir/result.glb`` through :func:`fourd.io.writers.save`, or None when that writer
+    """``outdir/result.glb`` through :func:`fourd.io.results.save`, or None when that writer
     is not available (the page then plays from the inlined frames only)."""
     if not isinstance(result, AnimatedMesh) or len(result.faces) == 0:
         return None
     try:
-        from fourd.io.writers import save
+        from fourd.io.results import save
     except ImportError:
-        log.info("fourd.io.writers is not available: no .glb in the viewer")
+        log.info("fourd.io.results is not available: no .glb in the viewer")
         return None
     path = outdir / "result.glb"
     try:

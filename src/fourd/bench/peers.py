@@ -30,7 +30,7 @@ from fourd.animation import AnimatedMesh, MeshSequence
 from fourd.progress import progress
 from fourd.sequence import Frame, PointCloudSequence
 
-log = logging.getLogger("fourd.evaluate.baselines")
+log = logging.getLogger("fourd.bench.peers")
 
 #: BASELINES.md settings.
 OUTLIER_NEIGHBOURS, OUTLIER_STD = 20, 2.0

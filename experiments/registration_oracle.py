@@ -1,7 +1,7 @@
 """Which step of ``kinematic``'s tracking loses the correspondence: the large-motion registration
 or the sliding after it? An oracle experiment on a scene with an animated-mesh truth.
 
-Run: ``.venv/bin/python benchmarks/registration_oracle.py [SCENE]`` (default ``crane``; any
+Run: ``.venv/bin/python experiments/registration_oracle.py [SCENE]`` (default ``crane``; any
 bench scene with its own scanner, e.g. ``crane-clean``; about two minutes on 2 cores).
 
 It reconstructs the scene with ``kinematic`` three times:
@@ -52,7 +52,7 @@ import numpy as np
 from arap_basin import truth_positions
 
 from fourd import evaluate, synth
-from fourd.evaluate.bench import HELD_OUT_SCENES, PROTOCOL, STANDARD_SCENES
+from fourd.bench import HELD_OUT_SCENES, PROTOCOL, STANDARD_SCENES
 from fourd.methods import kinematic
 from fourd.methods.kinematic import arap, register, sliding
 

@@ -9,7 +9,7 @@ import pytest
 import trimesh
 
 from fourd import AnimatedMesh, InputError, MeshSequence
-from fourd.evaluate.metrics import (
+from fourd.metrics import (
     enclosed_volume,
     evaluate,
     evaluate_files,

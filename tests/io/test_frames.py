@@ -11,10 +11,10 @@ import pytest
 import trimesh
 
 from fourd.errors import InputError
-from fourd.io import readers
+from fourd.io import frames as frame_files
+from fourd.io.frames import load_sequence, natural_key, read_frame, write_frames
 from fourd.io.meshfiles import write_obj, write_xyz
 from fourd.io.ply import write_ply
-from fourd.io.readers import load_sequence, natural_key, read_frame, write_frames
 from fourd.sequence import Frame, PointCloudSequence
 
 
@@ -64,7 +64,7 @@ def test_zero_length_normals_are_dropped_with_a_warning(tmp_path, caplog):
     points, normals = _cloud()
     normals[5] = 0.0
     write_ply(tmp_path / "z.ply", points, normals=normals)
-    with caplog.at_level(logging.WARNING, logger="fourd.io.readers"):
+    with caplog.at_level(logging.WARNING, logger="fourd.io.frames"):
         frame = read_frame(tmp_path / "z.ply")
     assert frame.normals is None
     assert "z.ply" in caplog.text and "zero length" in caplog.text
@@ -309,14 +309,14 @@ def test_unreadable_file(tmp_path, monkeypatch):
     folder = _three_frames(tmp_path / "s")
     write_ply(folder / "frame_1.ply", np.eye(4, 3))
     (folder / "frame_1.npy").unlink()
-    original = readers.read_ply
+    original = frame_files.read_ply
 
     def denied(path, **kwargs):
         if path.name == "frame_1.ply":
             raise PermissionError(13, "Permission denied", str(path))
         return original(path, **kwargs)
 
-    monkeypatch.setattr(readers, "read_ply", denied)
+    monkeypatch.setattr(frame_files, "read_ply", denied)
     _raises(folder, match_name="frame_1.ply", words="Permission denied")
 
 

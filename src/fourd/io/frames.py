@@ -1,4 +1,5 @@
-"""Reading frames and sequences of frames; writing scan folders.
+"""Input frames on disk: frame files and folders read into a
+:class:`~fourd.sequence.PointCloudSequence`, and scan folders written back (:func:`write_frames`).
 
 An input sequence is a folder of frame files, one per time step, ordered by the natural sort
 of their names (``frame_2.ply`` before ``frame_10.ply``), with optional ``sensors.json`` and
@@ -35,9 +36,10 @@ from fourd.errors import InputError
 from fourd.io.atomic import atomic_dir
 from fourd.io.meshfiles import read_obj, read_xyz, write_xyz
 from fourd.io.ply import PlyMesh, read_ply, write_ply
+from fourd.io.sidecars import read_sensors, read_times, sensor_table
 from fourd.sequence import Frame, PointCloudSequence
 
-log = logging.getLogger("fourd.io.readers")
+log = logging.getLogger("fourd.io.frames")
 
 #: Extensions of frame files, lower case.
 FRAME_SUFFIXES: tuple[str, ...] = (".ply", ".obj", ".xyz", ".pts", ".npy", ".npz")
@@ -283,85 +285,6 @@ def _frame_files(folder: Path) -> list[Path]:
     return files
 
 
-def read_times(path: str | os.PathLike, count: int | None = None) -> np.ndarray:
-    """Read ``times.txt``: one number per frame (whitespace separated; ``#`` starts a comment).
-
-    Raises InputError when a value is not a finite number, when the count differs from
-    ``count``, or when the times do not increase strictly.
-    """
-    path = Path(path)
-    from fourd.io.meshfiles import read_text
-
-    values = []
-    for line in read_text(path).splitlines():
-        values.extend(line.split("#", 1)[0].split())
-    try:
-        times = np.array(values, dtype=np.float64)
-    except ValueError:
-        bad = next(v for v in values if not _is_number(v))
-        raise InputError(f"{bad!r} is not a number", path) from None
-    if not np.isfinite(times).all():
-        raise InputError("times must be finite numbers", path)
-    if count is not None and len(times) != count:
-        raise InputError(f"has {len(times)} times but there are {count} frames", path)
-    steps = np.diff(times)
-    if np.any(steps <= 0):
-        i = int(np.argmax(steps <= 0))
-        raise InputError(
-            f"times must increase strictly: time {i + 2} ({times[i + 1]}) follows {times[i]}", path
-        )
-    return times
-
-
-def _is_number(text: str) -> bool:
-    try:
-        float(text)
-    except ValueError:
-        return False
-    return True
-
-
-def _sensor_table(value, path: Path, where: str) -> np.ndarray | None:
-    try:
-        table = np.array(value, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise InputError(f"{where} must be a list of [x, y, z] positions", path) from None
-    if table.size == 0:
-        return None
-    if table.ndim != 2 or table.shape[1] != 3:
-        raise InputError(
-            f"{where} must be a list of [x, y, z] positions, got shape {list(table.shape)}", path
-        )
-    if not np.isfinite(table).all():
-        raise InputError(f"{where} holds NaN or infinite positions", path)
-    return table
-
-
-def read_sensors(path: str | os.PathLike, count: int) -> list[np.ndarray | None]:
-    """Read ``sensors.json``: ``{"sensors": [[x,y,z], ...]}`` (the same scanners for every
-    frame) or ``{"frames": [[[x,y,z], ...], ...]}`` (one list per frame; an empty list means
-    unknown for that frame). Returns one ``[K, 3]`` array (or None) per frame."""
-    path = Path(path)
-    from fourd.io.meshfiles import read_text
-
-    try:
-        data = json.loads(read_text(path))
-    except json.JSONDecodeError as error:
-        raise InputError(f"is not valid JSON ({error.msg} at line {error.lineno})", path) from None
-    if not isinstance(data, dict) or not ({"sensors", "frames"} & set(data)):
-        raise InputError(
-            'expected {"sensors": [[x, y, z], ...]} or {"frames": [[[x, y, z], ...], ...]}', path
-        )
-    if "frames" in data:
-        frames = data["frames"]
-        if not isinstance(frames, list) or len(frames) != count:
-            have = len(frames) if isinstance(frames, list) else "no list of"
-            raise InputError(f'"frames" has {have} entries but there are {count} frames', path)
-        return [_sensor_table(item, path, f'"frames"[{i}]') for i, item in enumerate(frames)]
-    table = _sensor_table(data["sensors"], path, '"sensors"')
-    return [table] * count
-
-
 def _npz_sequence(path: Path) -> PointCloudSequence:
     data = _load_npz(path)
     if "points" not in data:
@@ -409,9 +332,9 @@ def _npz_sequence(path: Path) -> PointCloudSequence:
     if "sensors" in data:
         value = np.asarray(data["sensors"], dtype=np.float64)
         if value.ndim == 2:
-            sensors = [_sensor_table(value, path, "sensors")] * count
+            sensors = [sensor_table(value, path, "sensors")] * count
         elif value.ndim == 3 and len(value) == count:
-            sensors = [_sensor_table(v, path, f"sensors[{i}]") for i, v in enumerate(value)]
+            sensors = [sensor_table(v, path, f"sensors[{i}]") for i, v in enumerate(value)]
         else:
             raise InputError(
                 f"sensors must have shape [K, 3] or [{count}, K, 3], got {list(value.shape)}", path
@@ -461,9 +384,13 @@ def load_sequence(path: str | os.PathLike) -> PointCloudSequence:
 
     Examples
     --------
-    >>> seq = load_sequence("scans/")            # doctest: +SKIP
-    >>> len(seq), seq.times[:3]                  # doctest: +SKIP
-    (40, array([0., 1., 2.]))
+    >>> import tempfile
+    >>> frames = tuple(Frame(np.random.default_rng(t).random((50, 3)), time=t) for t in range(3))
+    >>> with tempfile.TemporaryDirectory() as folder:
+    ...     write_frames(PointCloudSequence(frames), folder)
+    ...     seq = load_sequence(folder)
+    >>> len(seq), seq.times, seq.names[0]
+    (3, array([0., 1., 2.]), 'frame_0000.ply')
     """
     path = Path(path)
     if not path.exists():
@@ -501,8 +428,6 @@ def load_sequence(path: str | os.PathLike) -> PointCloudSequence:
         log.warning("%s: %d of %d frames have normals", path, with_normals, len(frames))
     return PointCloudSequence(tuple(frames), tuple(f.name for f in files))
 
-
-# ------------------------------------------------------------------------------- writing
 
 
 def write_frames(

@@ -1,7 +1,7 @@
 """Would a reduced, patch-wise rigid deformation model register ``kinematic``'s large motions
 better than its as-rigid-as-possible ICP? An experiment, not part of the package.
 
-Run: ``.venv/bin/python benchmarks/patch_registration.py [SCENE ...] [--patches 20]
+Run: ``.venv/bin/python experiments/patch_registration.py [SCENE ...] [--patches 20]
 [--stiffness 0.1] [--no-refine]`` (default ``crane``; any bench scene; about a minute per scene
 on 2 cores).
 
@@ -47,7 +47,7 @@ from scipy.cluster.vq import kmeans2
 from scipy.spatial import cKDTree
 
 from fourd import evaluate, synth
-from fourd.evaluate.bench import HELD_OUT_SCENES, PROTOCOL, STANDARD_SCENES
+from fourd.bench import HELD_OUT_SCENES, PROTOCOL, STANDARD_SCENES
 from fourd.geometry.neighbors import bucket_grid
 from fourd.geometry.normals import vertex_normals
 from fourd.methods import kinematic

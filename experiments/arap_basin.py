@@ -1,7 +1,7 @@
 """Where ``kinematic``'s correspondence error on a scene comes from: does the as-rigid-as-possible
 prior prefer the tracked positions or the true ones?
 
-Run: ``.venv/bin/python benchmarks/arap_basin.py [SCENE] [--frames 11,13,19] [--iterations 40]
+Run: ``.venv/bin/python experiments/arap_basin.py [SCENE] [--frames 11,13,19] [--iterations 40]
 [--twists=-60,-30,30,60]`` (default ``crane``; any bench scene, with its own scanner, e.g.
 ``crane-clean``; about a minute on 2 cores, plus about 15 s per twist and frame).
 
@@ -44,19 +44,19 @@ import trimesh
 from scipy.spatial.transform import Rotation
 
 from fourd import synth
-from fourd.evaluate.bench import HELD_OUT_SCENES, PROTOCOL, STANDARD_SCENES
-from fourd.evaluate.sampling import bind_to_surface, bound_positions, sample_surface
+from fourd.bench import HELD_OUT_SCENES, PROTOCOL, STANDARD_SCENES
 from fourd.geometry.marching import vertex_components
 from fourd.geometry.rotations import procrustes
 from fourd.methods import reconstruct
 from fourd.methods.kinematic.arap import arap_energy, arap_rhs, arap_rotations
 from fourd.methods.kinematic.sliding import ConstrainedSolver, slide_precompute
+from fourd.metrics.sampling import bind_to_surface, bound_positions, sample_surface
 
 
 def truth_positions(template: np.ndarray, truth_vertices: np.ndarray, truth_faces: np.ndarray):
     """Positions [T, N, 3] of the ``template`` [N, 3] vertices carried by the truth [T, V, 3]:
     the correspondence metric's binding to the closest point of frame 0
-    (:func:`~fourd.evaluate.sampling.bind_to_surface`), plus the offset along that triangle's
+    (:func:`~fourd.metrics.sampling.bind_to_surface`), plus the offset along that triangle's
     normal, so that frame 0 is the template itself."""
     samples = sample_surface(truth_vertices[0], truth_faces, 60_000, np.random.default_rng(0))
     binding = bind_to_surface(template, truth_vertices[0], truth_faces, samples)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import trimesh
 
-from fourd.evaluate.sampling import (
+from fourd.metrics.sampling import (
     bind_to_surface,
     bound_positions,
     closest_on_triangles,

@@ -1,6 +1,6 @@
 """Dense surface samples and exact closest points on triangle meshes, vectorised.
 
-The metrics in :mod:`fourd.evaluate.metrics` compare surfaces through seeded, area-weighted
+The metrics in :mod:`fourd.metrics.scores` compare surfaces through seeded, area-weighted
 samples (fast, with a small floor reported beside every figure) and bind vertices to the true
 surface through exact closest points on candidate triangles found from those samples.
 """

@@ -52,79 +52,20 @@ True
 from __future__ import annotations
 
 import logging
-import os
-from pathlib import Path
-from typing import NamedTuple
 
 import numpy as np
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from fourd.animation import AnimatedMesh, MeshSequence
 from fourd.errors import InputError
-from fourd.evaluate.sampling import bind_to_surface, bound_positions, sample_surface
 from fourd.jsonable import jsonable
+from fourd.metrics.sampling import bind_to_surface, bound_positions, sample_surface
+from fourd.metrics.topology import Topology, enclosed_volume, topology
 
-log = logging.getLogger("fourd.evaluate.metrics")
+log = logging.getLogger("fourd.metrics.scores")
 
 #: Roles in the sampling seed, so result and truth samples are independent even for the same mesh.
 _RESULT, _TRUTH = 0, 1
-
-
-class Topology(NamedTuple):
-    """Combinatorial topology of one triangle mesh (only vertices used by faces count)."""
-
-    components: int
-    boundary_loops: int
-    euler: int
-    nonmanifold_edges: int
-    boundary_edges: int
-    oriented: bool
-    closed_manifold: bool
-
-
-def topology(faces: np.ndarray, vertex_count: int | None = None) -> Topology:
-    """Components, boundary loops, Euler characteristic and manifoldness of ``faces [F, 3]``.
-
-    Faces with a repeated corner are ignored. Components are connected through shared vertices;
-    boundary loops are the connected pieces of the edges used by one face only.
-    """
-    faces = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
-    faces = faces[(faces[:, 0] != faces[:, 1]) & (faces[:, 1] != faces[:, 2]) & (faces[:, 0] != faces[:, 2])]
-    if len(faces) == 0:
-        return Topology(0, 0, 0, 0, 0, True, False)
-    n = int(faces.max()) + 1 if vertex_count is None else int(vertex_count)
-    directed = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
-    undirected = np.sort(directed, axis=1)
-    keys = undirected[:, 0] * n + undirected[:, 1]
-    unique_keys, counts = np.unique(keys, return_counts=True)
-    boundary = unique_keys[counts == 1]
-    nonmanifold = int(np.count_nonzero(counts > 2))
-    oriented = len(np.unique(directed[:, 0] * n + directed[:, 1])) == len(directed)
-    used = np.unique(faces)
-    euler = len(used) - len(unique_keys) + len(faces)
-
-    def pieces(a: np.ndarray, b: np.ndarray, nodes: np.ndarray) -> int:
-        graph = coo_matrix((np.ones(len(a)), (a, b)), shape=(n, n)).tocsr()
-        _, labels = connected_components(graph, directed=False)
-        return len(np.unique(labels[nodes]))
-
-    components = pieces(undirected[:, 0], undirected[:, 1], used)
-    if len(boundary):
-        ba, bb = boundary // n, boundary % n
-        loops = pieces(ba, bb, np.unique(np.concatenate([ba, bb])))
-    else:
-        loops = 0
-    closed = len(boundary) == 0 and nonmanifold == 0
-    return Topology(components, loops, int(euler), nonmanifold, int(len(boundary)), bool(oriented), closed)
-
-
-def enclosed_volume(vertices: np.ndarray, faces: np.ndarray) -> float:
-    """Volume enclosed by a closed, consistently oriented mesh (absolute value; input units^3)."""
-    corners = np.asarray(vertices, dtype=np.float64)[np.asarray(faces, dtype=np.int64)]
-    signed = np.einsum("fi,fi->f", corners[:, 0], np.cross(corners[:, 1], corners[:, 2])).sum() / 6.0
-    return float(abs(signed))
 
 
 def _frame_count(value, name: str) -> int:
@@ -363,143 +304,3 @@ def metric_floor(truth, *, samples: int = 60000, seed: int = 0) -> dict:
     the bias of sample-to-sample distances at this density. Correspondence binds exactly (0).
     """
     return evaluate(truth, truth, samples=samples, seed=seed)
-
-
-# --------------------------------------------------------------------------------------------
-# Files and reports
-
-
-def load_truth(path: str | os.PathLike):
-    """Read a ground truth: a result-style ``.npz`` (``vertices``, ``faces``), a point sequence
-    ``.npz`` (``points [T, P, 3]``, as in ``../shared/data``; ``loc`` and ``scale`` applied
-    when present), a folder written by ``fourd synth`` (its ``truth.npz``), or anything
-    :func:`fourd.load_result` reads."""
-    path = Path(path)
-    if not path.exists():
-        raise InputError("no such file or folder", path)
-    if path.is_dir():
-        for name in ("truth.npz", "truth"):
-            if (path / name).exists():
-                return load_truth(path / name)
-    if path.suffix == ".npz":
-        try:
-            with np.load(path, allow_pickle=False) as data:
-                keys = set(data.files)
-                if "vertices" in keys and "faces" in keys:
-                    vertices = data["vertices"].astype(np.float64)
-                    faces = data["faces"]
-                    times = data["times"] if "times" in keys else None
-                    if vertices.ndim == 3:
-                        return AnimatedMesh(faces, vertices, times)
-                if "points" in keys and "faces" not in keys:
-                    points = data["points"].astype(np.float64)
-                    if points.ndim == 3:
-                        if "scale" in keys and "loc" in keys:
-                            points = points * data["scale"].astype(np.float64) + data["loc"].astype(np.float64)
-                        times = data["times"] if "times" in keys else None
-                        return AnimatedMesh(np.zeros((0, 3), dtype=np.int64), points, times)
-        except (OSError, ValueError) as error:
-            raise InputError(f"cannot read ({error})", path) from None
-        except InputError as error:
-            raise InputError(error.problem, path) from None
-    return _load_result(path)
-
-
-def _load_result(path: Path):
-    try:
-        from fourd.io.writers import load_result
-    except ImportError:  # the writers are not there yet: read the documented npz layout
-        load_result = None
-    if load_result is not None:
-        return load_result(path)
-    if path.suffix != ".npz":
-        raise InputError("cannot read this result format (only .npz without fourd.io.writers)", path)
-    with np.load(path, allow_pickle=False) as data:
-        try:
-            return AnimatedMesh(
-                data["faces"],
-                data["vertices"].astype(np.float64),
-                data["times"] if "times" in data.files else None,
-                data["observed"] if "observed" in data.files else None,
-                data["rest"] if "rest" in data.files else None,
-            )
-        except KeyError as error:
-            raise InputError(f"missing array {error}", path) from None
-        except InputError as error:
-            raise InputError(error.problem, path) from None
-
-
-def evaluate_files(
-    result_path: str | os.PathLike,
-    truth_path: str | os.PathLike,
-    *,
-    samples: int = 60000,
-    seed: int = 0,
-    floor: bool = True,
-) -> dict:
-    """:func:`evaluate` a saved result against a saved truth (see :func:`load_truth`); with
-    ``floor`` the truth's :func:`metric_floor` is added under ``"floor"``."""
-    result = _load_result(Path(result_path)) if Path(result_path).exists() else None
-    if result is None:
-        raise InputError("no such file or folder", result_path)
-    truth = load_truth(truth_path)
-    report = evaluate(result, truth, samples=samples, seed=seed)
-    report["result_path"] = os.fspath(result_path)
-    report["truth_path"] = os.fspath(truth_path)
-    if floor:
-        report["floor"] = metric_floor(truth, samples=samples, seed=seed)
-    return report
-
-
-#: (key, label) of the scalars :func:`format_report` shows, in order.
-REPORT_ROWS = (
-    ("accuracy", "accuracy (result -> truth), mean"),
-    ("accuracy_95", "accuracy, 95th percentile"),
-    ("completeness", "completeness (truth -> result), mean"),
-    ("completeness_95", "completeness, 95th percentile"),
-    ("chamfer", "Chamfer (mean of the two means)"),
-    ("completeness_observed", "completeness near observed output"),
-    ("completeness_filled", "completeness near filled-in output"),
-    ("filled_fraction", "truth covered by filled-in output"),
-    ("correspondence_mean", "correspondence error, mean"),
-    ("correspondence_first", "correspondence error, first frame"),
-    ("correspondence_last", "correspondence error, last frame"),
-    ("jitter", "jitter (output / truth, 1 = as smooth)"),
-    ("volume_change", "relative volume change"),
-    ("truth_volume_change", "truth's relative volume change"),
-    ("closed_manifold", "frames closed and manifold"),
-    ("components_max", "connected components (max)"),
-    ("boundary_loops_max", "boundary loops (max)"),
-    ("nonmanifold_edges_max", "non-manifold edges (max)"),
-)
-
-
-def _fmt(value) -> str:
-    if value is None:
-        return "-"
-    if isinstance(value, bool):
-        return "yes" if value else "no"
-    if isinstance(value, int):
-        return str(value)
-    return f"{value:.4f}" if abs(value) < 1000 else f"{value:.4g}"
-
-
-def format_report(metrics: dict) -> str:
-    """A short human-readable table of :func:`evaluate`'s scalars (and the floor, if present)."""
-    floor = metrics.get("floor")
-    lines = [
-        f"{metrics.get('frames')} frames, {metrics.get('result_kind')}; distances as fractions of "
-        f"the truth's diagonal ({_fmt(metrics.get('diagonal'))} units)"
-    ]
-    width = max(len(label) for _, label in REPORT_ROWS)
-    header = f"{'metric':<{width}}  {'value':>10}" + (f"  {'floor':>10}" if floor else "")
-    lines += [header, "-" * len(header)]
-    for key, label in REPORT_ROWS:
-        row = f"{label:<{width}}  {_fmt(metrics.get(key)):>10}"
-        if floor:
-            row += f"  {_fmt(floor.get(key)):>10}"
-        lines.append(row)
-    timing = metrics.get("timing") or {}
-    for key, value in timing.items():
-        lines.append(f"{key:<{width}}  {_fmt(value):>10}")
-    return "\n".join(lines)

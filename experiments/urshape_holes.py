@@ -1,6 +1,6 @@
 """Would a less holey urshape help ``kinematic``? An experiment, not part of the package.
 
-Run: ``.venv/bin/python benchmarks/urshape_holes.py SCENE [SCENE ...] [--closing N]
+Run: ``.venv/bin/python experiments/urshape_holes.py SCENE [SCENE ...] [--closing N]
 [--dilation N] [--fill-loops K]`` (any bench scene; 10-40 s per scene on 2 cores).
 
 Why: the paper polygonises the urshape only in cells with an input point inside their
@@ -53,7 +53,7 @@ import numpy as np
 from scipy import ndimage
 
 from fourd import evaluate, reconstruct, synth
-from fourd.evaluate.bench import HELD_OUT_SCENES, PROTOCOL, STANDARD_SCENES
+from fourd.bench import HELD_OUT_SCENES, PROTOCOL, STANDARD_SCENES
 from fourd.methods.kinematic import urshape
 
 

@@ -10,11 +10,10 @@ import trimesh
 
 from fourd.animation import AnimatedMesh, MeshSequence
 from fourd.errors import InputError
-from fourd.geometry.normals import vertex_normals
-from fourd.io import writers
+from fourd.io import meshfolder
 from fourd.io.atomic import atomic_path
 from fourd.io.pc2 import read_pc2
-from fourd.io.writers import load_result, output_kind, save
+from fourd.io.results import load_result, output_kind, save
 
 
 def _animation(frames=5, subdivisions=2, seed=0) -> AnimatedMesh:
@@ -183,21 +182,6 @@ def test_glb_point_animation_without_faces(tmp_path):
     assert len(primitive.targets) == 2
 
 
-def test_vertex_normals_area_weighted():
-    sphere = trimesh.creation.icosphere(subdivisions=3)
-    normals = vertex_normals(sphere.vertices, sphere.faces)
-    assert (
-        np.min(np.sum(normals * sphere.vertices, axis=1)) >= 0.999
-    )  # outward radial on a unit sphere
-    # one big and one tiny triangle sharing vertex 0: the big one dominates
-    vertices = np.array([[0, 0, 0], [10, 0, 0], [0, 10, 0], [0, 0, 0.1], [0.1, 0, 0.0]], float)
-    faces = np.array([[0, 1, 2], [0, 3, 4]])
-    n = vertex_normals(vertices, faces)
-    assert n[0, 2] > 0.99
-    stacked = vertex_normals(np.stack([sphere.vertices, 2 * sphere.vertices]), sphere.faces)
-    assert np.allclose(stacked[0], normals) and np.allclose(stacked[1], normals)
-
-
 # ------------------------------------------------------------------------------------ usd
 
 
@@ -354,7 +338,7 @@ def test_interrupted_write_leaves_nothing(tmp_path, monkeypatch, name):
     def explode(*args, **kwargs):
         raise KeyboardInterrupt("interrupted")
 
-    monkeypatch.setattr(writers, "write_obj", explode)  # folder of meshes
+    monkeypatch.setattr(meshfolder, "write_obj", explode)  # folder of meshes
     monkeypatch.setattr(np, "savez", explode)
     monkeypatch.setattr("pygltflib.GLTF2.save_binary", explode)
     monkeypatch.setattr("fourd.io.pc2.open", explode, raising=False)  # the point cache body
@@ -401,7 +385,7 @@ def test_load_result_problems(tmp_path):
 
 
 def test_check_output_before_computing(tmp_path):
-    from fourd.io.writers import check_output
+    from fourd.io.results import check_output
 
     assert check_output(tmp_path / "walk.glb") == "glb"
     assert check_output(str(tmp_path / "frames") + "/") == "folder"

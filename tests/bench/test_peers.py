@@ -5,11 +5,11 @@ from __future__ import annotations
 import pytest
 
 from fourd import AnimatedMesh, MeshSequence, synth
-from fourd.evaluate.metrics import evaluate
+from fourd.metrics import evaluate
 
 pytest.importorskip("open3d", reason="the peers need the optional extra 'baselines' (open3d)")
 
-from fourd.evaluate.baselines import poisson_per_frame, template_nicp  # noqa: E402
+from fourd.bench.peers import poisson_per_frame, template_nicp  # noqa: E402
 
 
 @pytest.mark.slow

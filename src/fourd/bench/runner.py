@@ -1,0 +1,202 @@
+"""``fourd bench``: methods x scenes on the standard scan protocol, written up with the machine.
+
+For every scene the ground truth is built with the standard settings (:data:`STANDARD_SCENES`),
+scanned with the benchmark protocol (3 cameras, noise 0.2% of the diagonal, 2% outliers, fixed
+seed; :mod:`fourd.synth.scanner`), reconstructed by every method and scored by
+:func:`fourd.metrics.evaluate`; the truth scored against itself (the floor) is the
+first row of every table. Each reconstruction runs in a fresh child process (``spawn``) so that
+its peak resident memory is its own and a crash or a hang (``timeout``) costs one row, not the
+run; the wall time per frame is the median over ``repeats`` runs of the reconstruction call.
+
+Outputs: ``BENCHMARKS.md`` (one table per scene, the machine, the commit), ``BENCHMARKS.json``
+beside it (every metric and per-frame curve), and one PNG per scene (accuracy and
+completeness and correspondence error per frame) in ``plots/`` beside it.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import logging
+import os
+import statistics
+import time
+from dataclasses import asdict
+from pathlib import Path
+
+import numpy as np
+
+from fourd.bench.case import run_case
+from fourd.bench.machine import machine_info
+from fourd.bench.report import plots_dir, portable_name, write_report
+from fourd.bench.suite import (
+    PEERS,
+    PROTOCOL,
+    QUICK_SAMPLES,
+    SAMPLES,
+    BenchScene,
+    select_methods,
+    select_scenes,
+)
+from fourd.errors import InputError
+from fourd.metrics import evaluate, metric_floor
+from fourd.progress import progress
+
+log = logging.getLogger("fourd.bench")
+
+
+#: Frames shown in each bench contact sheet (evenly spaced, first and last included).
+SHEET_FRAMES = 4
+
+
+def run_bench(
+    *,
+    methods=None,
+    scenes=None,
+    quick: bool = False,
+    repeats: int = 1,
+    output: str | os.PathLike = "benchmarks/BENCHMARKS.md",
+    baselines: bool = False,
+    seed: int = 0,
+    timeout: float | None = None,
+    isolate: bool = True,
+) -> dict:
+    """Run methods x scenes, score them against the truth, write the report.
+
+    Parameters
+    ----------
+    methods : list of str, optional
+        Method names (default: every available method; ``quick``: ``perframe``).
+    scenes : list of str, optional
+        Scene names (default: :data:`STANDARD_SCENES`, or :data:`QUICK_SCENES` with ``quick``).
+    quick : bool
+        A CI-sized run: 4 frames, coarse cameras, fewer metric samples.
+    repeats : int
+        Reconstructions per case; the wall time is their median.
+    output : path
+        The Markdown report; ``.json`` beside it and PNG plots in ``plots/`` beside it
+        (``<stem>-plots/`` when the file is not named ``BENCHMARKS.md``).
+    baselines : bool
+        Add the peers of BASELINES.md (:mod:`fourd.bench.peers`; needs ``open3d``).
+    seed : int
+        Seed of the scans and the metric sampling.
+    timeout : float, optional
+        Seconds one reconstruction case may take (isolated runs only).
+    isolate : bool
+        Run each reconstruction in a fresh child process (own peak memory, crash-safe).
+
+    Returns
+    -------
+    dict
+        What ``BENCHMARKS.json`` holds: ``machine``, ``settings``, ``scenes`` (per scene:
+        ``frames``, ``floor``, ``rows`` with per method ``metrics`` or ``error``), ``notes``,
+        ``wall_seconds``, and ``paths`` (the files written).
+    """
+    repeats = int(repeats)
+    if repeats < 1:
+        raise InputError(f"repeats must be at least 1, got {repeats}")
+    chosen_scenes = select_scenes(scenes, quick)
+    chosen_methods = select_methods(methods, quick)
+    output = Path(output)
+    output.parent.mkdir(parents=True, exist_ok=True)
+    samples = QUICK_SAMPLES if quick else SAMPLES
+    notes = []
+    peers = {}
+    if baselines:
+        if importlib.util.find_spec("open3d") is None:
+            notes.append("open3d is not installed (pip install 'fourd[baselines]'): the peer rows are skipped.")
+            log.warning(notes[-1])
+        else:
+            peers = dict(PEERS)
+    started = time.perf_counter()
+    machine = machine_info()
+    report = {
+        "machine": machine,
+        "settings": {
+            "methods": chosen_methods,
+            "peers": list(peers),
+            "quick": quick,
+            "repeats": repeats,
+            "seed": seed,
+            "samples": samples,
+            "protocol": PROTOCOL,
+            "scenes": [asdict(s) for s in chosen_scenes],
+        },
+        "scenes": {},
+        "notes": notes,
+    }
+    cases = [(s, kind, name, label) for s in chosen_scenes
+             for kind, name, label in [("method", m, m) for m in chosen_methods]
+             + [("baseline", fn, label) for label, fn in peers.items()]]
+    bar = progress(total=len(cases), desc="bench", unit="case")
+    for bench_scene in chosen_scenes:
+        entry = _run_scene(bench_scene, chosen_methods, peers, samples=samples, seed=seed,
+                           repeats=repeats, timeout=timeout, isolate=isolate, bar=bar,
+                           sheets=plots_dir(output),
+                           made={"commit": machine["commit"], "date": machine["date"], "repeats": repeats})
+        report["scenes"][bench_scene.key] = entry
+    bar.close()
+    report["wall_seconds"] = time.perf_counter() - started
+    report["paths"] = write_report(report, output)
+    return report
+
+
+def _run_scene(bench_scene: BenchScene, methods, peers, *, samples, seed, repeats, timeout, isolate, bar,
+               sheets: Path | None = None, made: dict | None = None) -> dict:
+    """Scan one scene and run every method and peer on it. ``made`` (commit, date, repeats) is
+    kept with each row, so a row merged into another report still says where it came from."""
+    from fourd import synth
+
+    entry = {"settings": asdict(bench_scene), "rows": {}}
+    try:
+        truth = synth.scene(bench_scene.name, frames=bench_scene.frames, seed=seed, **bench_scene.options)
+        scans = synth.scan(
+            truth, resolution=bench_scene.resolution, seed=seed, **{**PROTOCOL, **bench_scene.scan}
+        )
+    except Exception as error:  # noqa: BLE001 - a missing data file costs one scene
+        entry["error"] = f"{type(error).__name__}: {error}"
+        log.warning("scene %s: %s", bench_scene.key, entry["error"])
+        bar.update(len(methods) + len(peers))
+        return entry
+    entry["frames"] = truth.frame_count
+    entry["truth_kind"] = type(truth).__name__
+    entry["points_per_frame"] = round(sum(len(f) for f in scans.frames) / len(scans), 1)
+    entry["floor"] = metric_floor(truth, samples=samples, seed=seed)
+    for kind, name, label in [("method", m, m) for m in methods] + [("baseline", fn, lb) for lb, fn in peers.items()]:
+        bar.set_postfix_str(f"{bench_scene.key} / {label}")
+        log.info("bench: %s on %s (%d frames)", label, bench_scene.key, len(scans))
+        case = run_case(kind, name, scans, repeats=repeats, timeout=timeout, isolate=isolate)
+        if "error" in case:
+            log.warning("bench: %s failed on %s: %s", label, bench_scene.key, case["error"])
+            entry["rows"][label] = {"error": case["error"], "made": made}
+        else:
+            per_frame = statistics.median(case["seconds"]) / len(scans)
+            timing = {"seconds_per_frame": per_frame, "seconds": case["seconds"],
+                      "peak_memory_mb": case["peak_mb"], "start_memory_mb": case["start_mb"],
+                      "peak_memory_all_runs_mb": case.get("peak_all_mb", case["peak_mb"])}
+            try:
+                metrics = evaluate(case["result"], truth, samples=samples, seed=seed, timing=timing)
+                metrics.update(case.get("diagnostics") or {})
+                entry["rows"][label] = {"metrics": metrics, "made": made}
+            except Exception as error:  # noqa: BLE001
+                entry["rows"][label] = {"error": f"evaluation failed: {type(error).__name__}: {error}",
+                                        "made": made}
+            if sheets is not None:
+                entry["rows"][label]["sheet"] = _contact_sheet(case["result"], truth, sheets, bench_scene.key, label)
+        bar.update(1)
+    return entry
+
+
+def _contact_sheet(result, truth, folder: Path, scene: str, label: str) -> str | None:
+    """The (scene, method) contact sheet with the first-frame checker; its path, or None."""
+    from fourd.viz.render import bench_sheet
+
+    folder.mkdir(parents=True, exist_ok=True)
+    path = folder / portable_name(f"{scene}-{label}.png")
+    try:
+        count = len(result.meshes) if hasattr(result, "meshes") else result.frame_count
+        frames = sorted({int(round(i)) for i in np.linspace(0, count - 1, SHEET_FRAMES)})
+        bench_sheet(result, truth, path, title=f"{scene} / {label}", frames=frames)
+    except Exception as error:  # noqa: BLE001 - a picture must not cost the numbers
+        log.warning("bench: no contact sheet for %s on %s: %s", label, scene, error)
+        return None
+    return str(path)

@@ -1,0 +1,77 @@
+"""fourd's own result file (``.npz``): what :func:`fourd.save` writes for ``*.npz``.
+
+An :class:`~fourd.animation.AnimatedMesh`: ``kind="animated"``, ``vertices`` float32
+``[T, N, 3]``, ``faces`` int32 ``[F, 3]``, ``times`` ``[T]``, ``observed`` bool ``[T, N]``,
+optional ``rest`` float32 ``[N, 3]``. A :class:`~fourd.animation.MeshSequence`:
+``kind="meshes"``, ``vertices_<t>``, ``faces_<t>``, ``times``.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from fourd.animation import AnimatedMesh, MeshSequence
+from fourd.errors import InputError
+from fourd.io.atomic import atomic_path
+
+
+def write_npz(path: Path, result: AnimatedMesh | MeshSequence) -> None:
+    """Write ``result`` as a fourd ``.npz`` (see the module docstring), atomically."""
+    if isinstance(result, AnimatedMesh):
+        arrays = {
+            "kind": np.array("animated"),
+            "vertices": result.vertices.astype(np.float32),
+            "faces": result.faces.astype(np.int32),
+            "times": result.times,
+            "observed": result.observed,
+        }
+        if result.rest is not None:
+            arrays["rest"] = result.rest.astype(np.float32)
+    else:
+        arrays = {"kind": np.array("meshes"), "times": result.times}
+        for t, (vertices, faces) in enumerate(result.meshes):
+            arrays[f"vertices_{t}"] = vertices.astype(np.float32)
+            arrays[f"faces_{t}"] = faces.astype(np.int32)
+    with atomic_path(path) as tmp, open(tmp, "wb") as stream:
+        np.savez(stream, **arrays)
+
+
+def _rewrap(error: InputError, path) -> InputError:
+    return InputError(error.problem, error.path or path)
+
+
+def read_npz(path: Path) -> AnimatedMesh | MeshSequence:
+    """Read a fourd ``.npz`` result written by :func:`write_npz`."""
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            arrays = {key: data[key] for key in data.files}
+    except FileNotFoundError:
+        raise InputError("does not exist", path) from None
+    except Exception as error:  # zip, pickle, header errors: one clear line
+        raise InputError(
+            f"is not a readable .npz result ({type(error).__name__}: {error})", path
+        ) from None
+    kind = str(arrays.get("kind", "animated"))
+    try:
+        if kind == "meshes":
+            count = sum(1 for key in arrays if key.startswith("vertices_"))
+            meshes = []
+            for t in range(count):
+                if f"vertices_{t}" not in arrays or f"faces_{t}" not in arrays:
+                    raise InputError(f"frame {t} lacks vertices_{t} or faces_{t}", path)
+                meshes.append((arrays[f"vertices_{t}"], arrays[f"faces_{t}"]))
+            return MeshSequence(tuple(meshes), arrays.get("times"))
+        missing = [key for key in ("vertices", "faces") if key not in arrays]
+        if missing:
+            raise InputError(f"is not a fourd result: no {' or '.join(missing)} array", path)
+        return AnimatedMesh(
+            faces=arrays["faces"],
+            vertices=arrays["vertices"],
+            times=arrays.get("times"),
+            observed=arrays.get("observed"),
+            rest=arrays.get("rest"),
+        )
+    except InputError as error:
+        raise _rewrap(error, path) from None
