@@ -17,9 +17,9 @@ import numpy as np
 
 from fourd import synth
 from fourd.bench.suite import HELD_OUT_SCENES, PROTOCOL, STANDARD_SCENES
-from fourd.metrics import evaluate
 from fourd.geometry.neighbors import point_spacing
 from fourd.methods import flow, kinematic
+from fourd.metrics import evaluate
 
 
 def scans_of(label: str):

@@ -112,8 +112,9 @@ def close_animation(
     """An open animated mesh closed by a signed distance in space-time: a closed template of
     ``field`` at ``opened.times[0]`` whose vertices on the open mesh follow it exactly and
     whose other vertices (the parts no frame showed at the first time) follow the rigid
-    motion of their nearest bound vertices (:func:`rigid_blend`), then lie on ``field`` at
-    each time.
+    motion of their nearest bound vertices (:func:`rigid_blend`), then move onto ``field``
+    at each time by at most two template cells (where the field lags a fast thin part by
+    more, the rigid motion is the better guess).
 
     Measured cause of the closed sliding's drift (``experiments/watertight_drift.py``,
     crane-130, correspondence mean / last frame): the closed template slid along the flow's
@@ -184,7 +185,7 @@ def close_animation(
         else:
             out[k, free] = rigid_blend(rest[anchors][near], frame[near], weights, rest[free])
         out[k, free] = kinematic.project_to_surface(
-            field, out[k, free], float(t), iterations=4, max_step=2.0 * cell_size
+            field, out[k, free], float(t), iterations=4, max_step=0.5 * cell_size
         )
     return AnimatedMesh(faces=faces, vertices=out, times=times, observed=observed, rest=rest)
 
