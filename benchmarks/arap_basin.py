@@ -50,7 +50,7 @@ from fourd.geometry.marching import vertex_components
 from fourd.geometry.rotations import procrustes
 from fourd.methods import reconstruct
 from fourd.methods.kinematic.arap import arap_energy, arap_rhs, arap_rotations
-from fourd.methods.kinematic.sliding import ConstrainedSolver, slide_precompute
+from fourd.methods.kinematic.arap_solve import ConstrainedSolver, slide_precompute
 
 
 def truth_positions(template: np.ndarray, truth_vertices: np.ndarray, truth_faces: np.ndarray):

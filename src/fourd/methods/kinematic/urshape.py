@@ -148,7 +148,7 @@ def extract_template(
     vertices : ndarray [N, 3]
     faces : ndarray int64 [F, 3] (outward wound; empty when ``f`` has no zero crossing)
     """
-    from fourd.methods.kinematic.sliding import project_to_surface
+    from fourd.methods.kinematic.projection import project_to_surface
 
     bounds = np.asarray(bounds, dtype=np.float64)
     if bounds.shape != (2, 3) or np.any(bounds[1] < bounds[0]):
@@ -169,3 +169,16 @@ def extract_template(
         )
     log.debug("urshape: %d vertices, %d faces", len(vertices), len(faces))
     return vertices, faces
+
+
+def template_cell_size(points: np.ndarray, spacing: float, vertices: int) -> float:
+    """Marching-cubes cell size giving about ``vertices`` urshape vertices.
+
+    The surface area is estimated from the voxels of size ``2 * spacing`` that hold points
+    (a surface crosses about 1.5 / c^2 voxels of size c per unit area, averaged over
+    orientations), and marching cubes makes about 1.5 vertices per ``cell^2`` of area.
+    """
+    voxel = 2.0 * spacing
+    keys = np.unique(np.floor(points / voxel).astype(np.int64), axis=0)
+    area = len(keys) * voxel**2 / 1.5
+    return float(np.sqrt(1.5 * area / vertices))
