@@ -46,7 +46,7 @@ from scipy.spatial.transform import Rotation
 from fourd import synth
 from fourd.evaluate.bench import HELD_OUT_SCENES, PROTOCOL, STANDARD_SCENES
 from fourd.evaluate.sampling import bind_to_surface, bound_positions, sample_surface
-from fourd.geometry.marching import vertex_components
+from fourd.geometry.meshes import vertex_components
 from fourd.geometry.rotations import procrustes
 from fourd.methods import reconstruct
 from fourd.methods.kinematic.arap import arap_energy, arap_rhs, arap_rotations

@@ -1008,7 +1008,7 @@ def test_a_flat_piece_touching_the_solid_is_dropped():
     points) or on one edge (a doubled flat triangle; marching cubes once left a doubled quad on
     two edges at resolution 64): each is a component of its own, below ``min_component``, and
     the mesh that is left is closed and manifold."""
-    from fourd.methods.flow.post import _drop_small_components, component_volumes
+    from fourd.geometry.meshes import component_volumes, remove_small_components
 
     sphere = trimesh.creation.icosphere(subdivisions=2)
     tip = int(np.argmax(sphere.vertices[:, 0]))  # (1, 0, 0) lies on the sphere
@@ -1020,7 +1020,7 @@ def test_a_flat_piece_touching_the_solid_is_dropped():
     faces = np.vstack([sphere.faces, piece])
     labels, volumes = component_volumes(vertices, faces)
     assert len(volumes) == 2 and abs(volumes).min() < 1e-12
-    kept, kept_faces = _drop_small_components(vertices, faces, 0.02)
+    kept, kept_faces = remove_small_components(vertices, faces, min_fraction=0.02, measure="volume")
     assert len(kept_faces) == len(sphere.faces)
     _check_closed_manifold(kept, kept_faces)
     # a doubled flat triangle on one of the sphere's edges (that edge then has four faces)
@@ -1029,7 +1029,7 @@ def test_a_flat_piece_touching_the_solid_is_dropped():
     faces = np.vstack([sphere.faces, [[a, b, n], [b, a, n]]])
     labels, volumes = component_volumes(vertices, faces)
     assert len(volumes) == 2 and abs(volumes).min() < 1e-12
-    kept, kept_faces = _drop_small_components(vertices, faces, 0.02)
+    kept, kept_faces = remove_small_components(vertices, faces, min_fraction=0.02, measure="volume")
     assert len(kept_faces) == len(sphere.faces)
     _check_closed_manifold(kept, kept_faces)
 

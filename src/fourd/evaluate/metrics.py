@@ -64,6 +64,7 @@ from scipy.spatial import cKDTree
 from fourd.animation import AnimatedMesh, MeshSequence
 from fourd.errors import InputError
 from fourd.evaluate.sampling import bind_to_surface, bound_positions, sample_surface
+from fourd.geometry.meshes import enclosed_volume
 from fourd.jsonable import jsonable
 
 log = logging.getLogger("fourd.evaluate.metrics")
@@ -118,13 +119,6 @@ def topology(faces: np.ndarray, vertex_count: int | None = None) -> Topology:
         loops = 0
     closed = len(boundary) == 0 and nonmanifold == 0
     return Topology(components, loops, int(euler), nonmanifold, int(len(boundary)), bool(oriented), closed)
-
-
-def enclosed_volume(vertices: np.ndarray, faces: np.ndarray) -> float:
-    """Volume enclosed by a closed, consistently oriented mesh (absolute value; input units^3)."""
-    corners = np.asarray(vertices, dtype=np.float64)[np.asarray(faces, dtype=np.int64)]
-    signed = np.einsum("fi,fi->f", corners[:, 0], np.cross(corners[:, 1], corners[:, 2])).sum() / 6.0
-    return float(abs(signed))
 
 
 def _frame_count(value, name: str) -> int:

@@ -37,6 +37,7 @@ from scipy.spatial import cKDTree
 from fourd.animation import MeshSequence
 from fourd.errors import InputError
 from fourd.geometry.laplacian import laplacian_smooth
+from fourd.geometry.meshes import face_volumes
 from fourd.geometry.neighbors import point_spacing
 from fourd.geometry.normals import estimate_normals, pca_normals, vertex_normals
 from fourd.geometry.outliers import distance_ratio_inliers
@@ -58,7 +59,6 @@ from fourd.methods.flow.post import (
     FlowField,
     drop_cavities,
     extract_mesh,
-    face_volumes,
     implicit_function,
     redistanced,
 )
@@ -904,7 +904,7 @@ def surface_distance(result: FlowResult) -> FlowField:
 
 
 def _mesh_volume(vertices: np.ndarray, faces: np.ndarray) -> float:
-    """Signed volume enclosed by a closed mesh (:func:`.post.face_volumes` summed)."""
+    """Signed volume enclosed by a closed mesh (:func:`fourd.geometry.meshes.face_volumes` summed)."""
     return float(face_volumes(vertices, faces).sum())
 
 

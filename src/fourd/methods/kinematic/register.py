@@ -55,7 +55,7 @@ import scipy.sparse.linalg as spla
 from scipy.spatial import cKDTree
 
 from fourd.geometry.factors import TriangularFactors, solve_ordered, unpermuted_factors
-from fourd.geometry.marching import vertex_components
+from fourd.geometry.meshes import vertex_components
 from fourd.geometry.neighbors import bucket_grid, nearest_within
 from fourd.geometry.normals import vertex_normals
 from fourd.methods.kinematic.arap import blended_arap_rhs, with_rest_shape
