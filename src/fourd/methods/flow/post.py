@@ -36,7 +36,7 @@ from fourd.geometry.marching import compact, marching_cubes
 from fourd.geometry.meshes import component_volumes, remove_small_components
 from fourd.geometry.normals import vertex_normals
 from fourd.methods.flow.grid import SpaceTimeGrid
-from fourd.methods.flow.solver import jacobi_cg
+from fourd.methods.flow.krylov import jacobi_cg
 
 log = logging.getLogger("fourd.methods.flow.post")
 
