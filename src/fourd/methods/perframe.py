@@ -66,8 +66,9 @@ class Options:
         Linking distance of the isolated-cluster test (spacings).
     min_cluster_fraction : float
         Point clusters smaller than this fraction of the largest are removed.
-    normal_k : int
-        Neighbours for PCA normals.
+    normals_k : int
+        Neighbours for PCA normals (``normal_k`` is still accepted by ``fourd`` and
+        ``make_options``, with a warning).
     orientation : {"auto", "sensors", "propagation"}
         How PCA normals get their sign. ``"propagation"``: consistent propagation over the
         neighbour graph with an outward check; ``"sensors"``: each normal faces its nearest
@@ -108,7 +109,7 @@ class Options:
     outlier_z: float = 5.0
     cluster_radius: float = 3.0
     min_cluster_fraction: float = 0.01
-    normal_k: int = 16
+    normals_k: int = 16
     orientation: Literal["auto", "sensors", "propagation"] = "auto"
     use_input_normals: bool = True
     grid_scale: float = 1.0
@@ -124,7 +125,7 @@ class Options:
     cache_dir: str | None = None
 
     def __post_init__(self):
-        for name in ("outlier_k", "normal_k"):
+        for name in ("outlier_k", "normals_k"):
             if getattr(self, name) < 3:
                 raise ValueError(f"{name} must be at least 3, got {getattr(self, name)}")
         for name in (
@@ -267,7 +268,7 @@ def reconstruct_frame(
     """
     options = Options() if options is None else options
     points = frame.points
-    minimum = max(options.outlier_k, options.normal_k) + 2
+    minimum = max(options.outlier_k, options.normals_k) + 2
     if len(points) < minimum:
         log.warning(
             "frame at time %g has %d points (fewer than %d): empty mesh",
@@ -320,7 +321,7 @@ def reconstruct_frame(
         normals = input_normals
     else:
         normals = oriented_normals(
-            kept, k=options.normal_k, sensors=frame.sensors, mode=options.orientation
+            kept, k=options.normals_k, sensors=frame.sensors, mode=options.orientation
         )
 
     # Every corner of a kept cell must lie within the support.
