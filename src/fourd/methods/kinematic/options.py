@@ -36,12 +36,10 @@ class Options:
     min_points : int
         N_min of the MPU fit (points per leaf support at least).
     time_scale : float
-        Multiplies ``delta`` (the 4D distance between consecutive frames, ``s``). The paper's
-        choice is 1; the default 2 spreads the frames further apart in 4D so that a leaf's
-        support spans fewer frames and ``f(., t)`` lags less behind fast motion (measured with
-        the standard scans: correspondence on dfaust-hopping 0.0046 -> 0.0042, rigid-turn
-        0.079 -> 0.030, crane Chamfer 0.0101 -> 0.0077; 4 helps rigid-turn and crane further
-        but doubles the jitter on dfaust-hopping).
+        Multiplies ``delta`` (the 4D distance between consecutive frames, ``s``); the
+        paper's choice is 1. The default 2 spreads the frames further apart in 4D so that a
+        leaf's support spans fewer frames and ``f(., t)`` lags less behind fast motion
+        (measurements: benchmarks/METHODS.md).
     cell_size : float
         Urshape marching-cubes cell size; 0: chosen from the first frame's surface area so
         that the urshape has about ``template_vertices`` vertices.
@@ -73,22 +71,15 @@ class Options:
     normals_k : int
         Neighbours for PCA normals when the input has none.
     fit_stride : int
-        Every ``fit_stride``-th cleaned point of each frame enters the 4D fit (1: all). The
-        data term, the spacing and the observed flags still use every point. Measured with
-        ``exp`` runs of the standard scans (20k samples; Chamfer / completeness-95 /
-        correspondence mean), all points against every second one: dfaust-hopping
-        0.0036 / 0.0176 / 0.0045 and 0.0036 / 0.0176 / 0.0044, rigid-turn 0.0062 / 0.0515 /
-        0.0017 and 0.0062 / 0.0514 / 0.0016, crane 0.0087 / 0.068 / 0.028 and 0.0069 /
-        0.045 / 0.025; the fit takes about half the time. Every third or fourth point was
-        no faster overall and noisier on crane.
+        Every ``fit_stride``-th cleaned point of each frame enters the 4D fit (1: all; the
+        default 2 takes about half the fit's time). The data term, the spacing and the
+        observed flags still use every point.
     data_term : bool
         At output times that are input times, register, project and constrain the observed
-        vertices against that frame's own points (an IMLS surface,
-        :mod:`.framesurface`) instead of the 4D implicit, whose zero set lags a little behind
-        or ahead of each frame; the 4D implicit still fills holes, links the frames and gives
-        the urshape (beyond the paper; ``fourd bench`` with the standard scans, correspondence
-        mean / last frame: rigid-turn 0.029 / 0.058 -> 0.0015 / 0.0024, crane 0.031 / 0.059
-        -> 0.030 / 0.053, dfaust-hopping 0.0041 / 0.0057 -> 0.0043 / 0.0055).
+        vertices against that frame's own points (an IMLS surface, :mod:`.framesurface`)
+        instead of the 4D implicit, whose zero set lags a little behind or ahead of each
+        frame; the 4D implicit still fills holes, links the frames and gives the urshape
+        (beyond the paper; on by default).
     data_bandwidth : float
         Gaussian width of that surface; 0: ``2 * s``.
     large_motion : bool
@@ -100,50 +91,29 @@ class Options:
         5.1 may move a vertex at most 1.5 median edges; one that would move farther is left
         unconstrained for that step (``SlideOptions.projection_limit``).
     shape_memory : float
-        Weight of the previous frame's shape in the large-motion registration's
-        as-rigid-as-possible term (``RegisterOptions.previous_shape``; 0: the template's rest
-        shape alone). 0.5 suits captured people and animals, whose skin stretches and twists,
-        not rigid parts, twisting tubes or shapes that split, so it is off by default (the
-        figures are with ``RegisterOptions.previous_shape``).
+        Weight in [0, 1) of the previous frame's shape in the large-motion registration's
+        as-rigid-as-possible term (``RegisterOptions.previous_shape``; 0, the default: the
+        template's rest shape alone). 0.5 suits captured people and animals, whose skin
+        stretches and twists.
     slide_memory : float
-        Weight of the previous frame's shape in the sliding's as-rigid-as-possible term
-        (``SlideOptions.previous_shape``; 0: the urshape alone, the paper). Off by default:
-        it helps the held-out crane stretches and the shapes that stretch, not crane itself.
-        ``exp`` runs at 0.8 (20k samples, correspondence mean / last frame, 0 -> 0.8): crane
-        0.0073 / 0.0120 -> 0.0074 / 0.0134, crane-50 0.0235 / 0.0308 -> 0.0207 / 0.0299,
-        crane-90 0.0095 / 0.0150 -> 0.0090 / 0.0130, crane-130 0.0114 / 0.0177 -> 0.0108 /
-        0.0172, crane-still 0.0016 / 0.0027 -> 0.0013 / 0.0016, bending-arm 0.0202 / 0.0338
-        -> 0.0203 / 0.0271, touching-spheres 0.0158 / 0.0243 -> 0.0128 / 0.0205 (jitter 3.10
-        -> 1.35), waving-sheet 0.0313 / 0.0425 -> 0.0286 / 0.0328, splitting-blob Chamfer /
-        completeness-95 0.0164 / 0.0152 -> 0.0099 / 0.0085; but rigid-turn 0.0012 / 0.0017 ->
-        0.0014 / 0.0023, dfaust-hopping 0.0043 / 0.0061 -> 0.0044 / 0.0066, squash-ball
-        0.0226 / 0.0066 -> 0.0229 / 0.0106, horse-gallop 0.0087 / 0.0043 -> 0.0093 / 0.0055.
-        With ``shape_memory`` 0.5 as well (for captured people): crane 0.0070 / 0.0117,
-        crane-50 0.0144 / 0.0195, crane-90 0.0090 / 0.0113, crane-130 0.0113 / 0.0173, but
-        bending-arm 0.0243 / 0.0431, squash-ball 0.0277 / 0.0312, elephant-gallop 0.0277 /
-        0.0356.
+        Weight in [0, 1) of the previous frame's shape in the sliding's as-rigid-as-possible
+        term (``SlideOptions.previous_shape``; 0, the default: the urshape alone, the
+        paper). It helps shapes that stretch, not crane itself (measurements:
+        benchmarks/METHODS.md).
     still_normals : float
         With the data term: where the 4D implicit moves less than this many median edges per
         step, constraint (2) takes its normal from the implicit, which is smooth over time,
         instead of from the frame's noisy surface, so a still part does not creep along
-        itself (``SlideOptions.still_normals``; 0: never). A still crane, 20 frames: last-frame
-        correspondence 0.0095 -> 0.0026.
+        itself (``SlideOptions.still_normals``; 0: never).
     temporal_smoothing : int
-        Passes of a ``[1/4, 1/2, 1/4]`` filter over the vertex trajectories (time-weighted for
-        uneven output times; the first and last frames stay): the data term gives every frame
-        its own scan noise (jitter on dfaust-hopping 2.2 without, 0.82 with one pass).
+        Passes of a ``[1/4, 1/2, 1/4]`` filter over the vertex trajectories (time-weighted
+        for uneven output times; the first and last frames stay), which takes out the scan
+        noise the data term gives every frame (0: none).
     smoothing_motion : float
         The filter keeps out of the shape's accelerations: its step shrinks where a vertex's
         neighbourhood deviates from the neighbouring frames together, and keeps doing so in
         the next frames, by more than this multiple of the median deviation
-        (:func:`smooth_trajectories`; 0: the plain filter everywhere). The plain filter cut
-        crane's kicking leg off the surface (per-frame accuracy 0.0022 unsmoothed against
-        0.0029 smoothed at the kick's peak). ``fourd bench``, Chamfer / jitter, plain and with
-        this at 1: crane 0.0027 / 0.79 and 0.0024 / 0.96, dfaust-hopping 0.0025 / 0.75 and
-        0.0025 / 0.78, crane-90 and crane-130 0.0028 -> 0.0025, the others within 0.0002.
-        Without the condition in time (only the shared deviation, at 3), a one-frame jump of a
-        whole region counted as motion: touching-spheres jitter 2.96 -> 8.1, squash-ball's
-        bounce 0.95 -> 1.60.
+        (:func:`smooth_trajectories`; 0: the plain filter everywhere).
     times : tuple of float
         Output times (default: the input times). They may lie between or beyond input times.
     seed : int
