@@ -3,16 +3,19 @@ at the first time, and the urshape slid along the space-time surface as rigidly 
 
 Pipeline (000_00387fefe94cc850.txt):
 
-1. space-time point cloud (section 2): per-frame outlier removal (beyond the paper: points
+1. space-time point cloud (section 2, :mod:`.frames`): per-frame outlier removal (beyond the paper: points
    whose mean distance to their neighbours is far above the typical one), per-frame normals
    (given, or PCA oriented by the sensors or by propagation), 4D points ``(x, y, z, w)`` with
    ``w = delta * (t - t0) / dt`` (``dt`` the median frame step) and 4D normals ``(n, 0)``;
    ``delta`` is the median nearest-neighbour spacing of the first frame (the paper takes the
    median edge length of a triangulation of the first frame, which estimates the same
    sampling distance), times ``time_scale`` (default 2; the paper uses 1, see Options);
-2. 4D MPU (section 3, :mod:`.mpu4d`), over all frames or over sliding windows of frames;
+2. 4D MPU (section 3, :mod:`.mpu4d`; its kernels in :mod:`.mpu_fit`, :mod:`.mpu_tree`,
+   :mod:`.mpu_eval`), over all frames or over sliding windows of frames (:mod:`.field`);
 3. urshape (section 4, :mod:`.urshape`);
-4. sliding (section 5, :mod:`.sliding`), optionally with sub-steps in time;
+4. sliding (section 5, :mod:`.sliding`, with :mod:`.rigid`, :mod:`.projection` and
+   :mod:`.arap_solve`), optionally with sub-steps in time (:mod:`.animate`,
+   :mod:`.trajectories`);
 5. output at the input times or at any requested ``times``.
 
 Beyond the paper (all documented options): robust MPU error / normal-spread quantile,

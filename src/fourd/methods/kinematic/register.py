@@ -398,7 +398,7 @@ def unexplained_fraction(vertices: np.ndarray, points: np.ndarray, distance: flo
 
 
 class ArapIcp:
-    """The registration for one template (:func:`fourd.methods.kinematic.sliding.slide_precompute`
+    """The registration for one template (:func:`fourd.methods.kinematic.arap_solve.slide_precompute`
     output ``pre`` and its ``faces``); ``L + w I`` is factorised on first use, once per data
     weight (the stiff and the refining one). ``epsilon``: the data radius of the sliding (0: 2
     median edge lengths)."""
