@@ -4,8 +4,12 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from fourd.animation import AnimatedMesh
+
 #: A space-time fit needs at least two frames.
 MIN_FRAMES = 2
+#: One connectivity: the urshape slid through every frame.
+RESULT = AnimatedMesh
 #: Neighbours of the per-frame outlier test (mean distance to them).
 OUTLIER_NEIGHBOURS = 8
 #: After a kept large-motion registration, the projection of 5.1 may move a vertex at most
