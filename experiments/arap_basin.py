@@ -45,11 +45,11 @@ from scipy.spatial.transform import Rotation
 
 from fourd import synth
 from fourd.bench import HELD_OUT_SCENES, PROTOCOL, STANDARD_SCENES
-from fourd.geometry.marching import vertex_components
+from fourd.geometry.meshes import vertex_components
 from fourd.geometry.rotations import procrustes
 from fourd.methods import reconstruct
 from fourd.methods.kinematic.arap import arap_energy, arap_rhs, arap_rotations
-from fourd.methods.kinematic.sliding import ConstrainedSolver, slide_precompute
+from fourd.methods.kinematic.arap_solve import ConstrainedSolver, slide_precompute
 from fourd.metrics.sampling import bind_to_surface, bound_positions, sample_surface
 
 

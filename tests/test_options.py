@@ -84,3 +84,21 @@ def test_option_docs_read_the_attributes_section():
 def test_every_option_of_every_method_is_documented(method):
     missing = [d.name for d in option_docs(method_module(method).Options) if not d.description]
     assert not missing, f"{method}.Options does not describe {missing} in its Attributes section"
+
+
+def test_a_renamed_option_is_still_accepted_under_its_old_name(caplog):
+    from fourd.methods import method_options
+
+    with caplog.at_level("WARNING", logger="fourd.options"):
+        options = method_options("perframe", {"normal_k": "8"})
+    assert options.normals_k == 8
+    assert "normals_k" in caplog.text
+    assert method_options("kinematic", {"normal_k": 12}).normals_k == 12
+    with pytest.raises(InputError, match="only normals_k"):
+        method_options("perframe", {"normal_k": "8", "normals_k": "9"})
+
+
+def test_methods_agree_on_the_name_of_the_normals_neighbourhood():
+    for method in ("perframe", "kinematic"):
+        names = {f for f in method_module(method).Options.__dataclass_fields__}
+        assert "normals_k" in names and "normal_k" not in names

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import inspect
+import logging
 import re
 import types
 import typing
@@ -11,6 +12,11 @@ from collections.abc import Mapping
 from typing import Any
 
 from fourd.errors import InputError
+
+log = logging.getLogger("fourd.options")
+
+#: Old option names still accepted (with a warning) by :func:`make_options`: old -> new.
+RENAMED = {"normal_k": "normals_k"}
 
 _TRUE = {"1", "true", "yes", "on"}
 _FALSE = {"0", "false", "no", "off"}
@@ -58,10 +64,17 @@ def _convert(text: str, annotation, key: str):
 def make_options(options_class, values: Mapping[str, Any] | None = None, *, method: str = ""):
     """Instantiate ``options_class`` from ``values``; string values are converted by field type.
 
-    Raises :class:`InputError` for an unknown key, listing the valid ones.
+    Raises :class:`InputError` for an unknown key, listing the valid ones. An old name of
+    :data:`RENAMED` is taken as its new one, with a warning.
     """
     values = dict(values or {})
     fields = {f.name: f for f in dataclasses.fields(options_class)}
+    for old, new in RENAMED.items():
+        if old in values and old not in fields and new in fields:
+            if new in values:
+                raise InputError(f"option {old} is the old name of {new}: give only {new}")
+            log.warning("option %s is now called %s", old, new)
+            values[new] = values.pop(old)
     unknown = sorted(set(values) - set(fields))
     if unknown:
         where = f" for method {method}" if method else ""

@@ -158,7 +158,7 @@ def test_options_are_frozen_and_validated():
     with pytest.raises(dataclasses.FrozenInstanceError):
         options.grid_scale = 2.0  # type: ignore[misc]
     for bad in (
-        {"normal_k": 1},
+        {"normals_k": 1},
         {"bandwidth": 0.0},
         {"min_component_fraction": 2.0},
         {"max_grid": 12},

@@ -3,8 +3,6 @@
 from __future__ import annotations
 
 import numpy as np
-import scipy.sparse as sp
-from scipy.sparse.csgraph import connected_components
 from skimage.measure import marching_cubes as _skimage_marching_cubes
 
 
@@ -14,16 +12,6 @@ def compact(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.nda
     used[faces.ravel()] = True
     remap = np.cumsum(used) - 1
     return vertices[used], remap[faces]
-
-
-def vertex_components(faces: np.ndarray, vertex_count: int) -> tuple[int, np.ndarray]:
-    """Connected components of a mesh's vertices joined by the edges of ``faces`` [F, 3]:
-    ``(count, labels [vertex_count])``; a vertex of no face is a component of its own."""
-    faces = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
-    i = faces.ravel()
-    j = np.roll(faces, 1, axis=1).ravel()
-    graph = sp.csr_matrix((np.ones(len(i)), (i, j)), shape=(vertex_count, vertex_count))
-    return connected_components(graph, directed=False)
 
 
 def marching_cubes(

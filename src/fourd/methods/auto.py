@@ -31,7 +31,7 @@ from typing import Literal
 import numpy as np
 
 from fourd.animation import AnimatedMesh, MeshSequence
-from fourd.geometry.marching import vertex_components
+from fourd.geometry.meshes import vertex_components
 from fourd.methods import flow, kinematic, watertight
 from fourd.methods.base import Reconstruction
 from fourd.sequence import PointCloudSequence

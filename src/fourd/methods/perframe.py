@@ -27,7 +27,6 @@ from typing import Literal
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from fourd.animation import MeshSequence
@@ -35,6 +34,7 @@ from fourd.cache import StageCache, stage_key
 from fourd.geometry.grid import fit_grid
 from fourd.geometry.implicit import imls_grid
 from fourd.geometry.marching import compact, marching_cubes
+from fourd.geometry.meshes import remove_small_components, vertex_adjacency
 from fourd.geometry.neighbors import point_spacing
 from fourd.geometry.normals import estimate_normals
 from fourd.geometry.outliers import remove_outliers
@@ -66,8 +66,9 @@ class Options:
         Linking distance of the isolated-cluster test (spacings).
     min_cluster_fraction : float
         Point clusters smaller than this fraction of the largest are removed.
-    normal_k : int
-        Neighbours for PCA normals.
+    normals_k : int
+        Neighbours for PCA normals (``normal_k`` is still accepted by ``fourd`` and
+        ``make_options``, with a warning).
     orientation : {"auto", "sensors", "propagation"}
         How PCA normals get their sign. ``"propagation"``: consistent propagation over the
         neighbour graph with an outward check; ``"sensors"``: each normal faces its nearest
@@ -108,7 +109,7 @@ class Options:
     outlier_z: float = 5.0
     cluster_radius: float = 3.0
     min_cluster_fraction: float = 0.01
-    normal_k: int = 16
+    normals_k: int = 16
     orientation: Literal["auto", "sensors", "propagation"] = "auto"
     use_input_normals: bool = True
     grid_scale: float = 1.0
@@ -124,7 +125,7 @@ class Options:
     cache_dir: str | None = None
 
     def __post_init__(self):
-        for name in ("outlier_k", "normal_k"):
+        for name in ("outlier_k", "normals_k"):
             if getattr(self, name) < 3:
                 raise ValueError(f"{name} must be at least 3, got {getattr(self, name)}")
         for name in (
@@ -163,30 +164,6 @@ def _empty() -> tuple[np.ndarray, np.ndarray]:
     return np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64)
 
 
-def _vertex_adjacency(faces: np.ndarray, count: int) -> sp.csr_matrix:
-    rows = faces[:, [0, 1, 2, 1, 2, 0]].ravel()
-    cols = faces[:, [1, 2, 0, 0, 1, 2]].ravel()
-    graph = sp.csr_matrix((np.ones(len(rows)), (rows, cols)), shape=(count, count))
-    graph.data[:] = 1.0
-    return graph
-
-
-def remove_small_components(
-    vertices: np.ndarray, faces: np.ndarray, *, min_fraction: float
-) -> tuple[np.ndarray, np.ndarray]:
-    """Drop connected components with fewer faces than ``min_fraction`` of the largest."""
-    if len(faces) == 0 or min_fraction <= 0:
-        return vertices, faces
-    parts, labels = connected_components(_vertex_adjacency(faces, len(vertices)), directed=False)
-    if parts == 1:
-        return vertices, faces
-    face_labels = labels[faces[:, 0]]
-    sizes = np.bincount(face_labels, minlength=parts)
-    keep = sizes[face_labels] >= min_fraction * sizes.max()
-    log.debug("components: %d, %d kept", parts, int((sizes >= min_fraction * sizes.max()).sum()))
-    return compact(vertices, faces[keep])
-
-
 def taubin_smooth(
     vertices: np.ndarray,
     faces: np.ndarray,
@@ -201,7 +178,7 @@ def taubin_smooth(
     """
     if iterations <= 0 or len(faces) == 0:
         return vertices
-    adjacency = _vertex_adjacency(faces, len(vertices))
+    adjacency = vertex_adjacency(faces, len(vertices))
     degree = np.asarray(adjacency.sum(axis=1)).ravel()
     average = sp.diags(1.0 / np.maximum(degree, 1.0)) @ adjacency
     result = vertices.copy()
@@ -291,7 +268,7 @@ def reconstruct_frame(
     """
     options = Options() if options is None else options
     points = frame.points
-    minimum = max(options.outlier_k, options.normal_k) + 2
+    minimum = max(options.outlier_k, options.normals_k) + 2
     if len(points) < minimum:
         log.warning(
             "frame at time %g has %d points (fewer than %d): empty mesh",
@@ -344,7 +321,7 @@ def reconstruct_frame(
         normals = input_normals
     else:
         normals = oriented_normals(
-            kept, k=options.normal_k, sensors=frame.sensors, mode=options.orientation
+            kept, k=options.normals_k, sensors=frame.sensors, mode=options.orientation
         )
 
     # Every corner of a kept cell must lie within the support.

@@ -18,6 +18,10 @@ import numpy as np
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
+from fourd.geometry.meshes import enclosed_volume
+
+__all__ = ["Topology", "enclosed_volume", "topology"]
+
 
 class Topology(NamedTuple):
     """Combinatorial topology of one triangle mesh (only vertices used by faces count)."""
@@ -65,10 +69,3 @@ def topology(faces: np.ndarray, vertex_count: int | None = None) -> Topology:
         loops = 0
     closed = len(boundary) == 0 and nonmanifold == 0
     return Topology(components, loops, int(euler), nonmanifold, int(len(boundary)), bool(oriented), closed)
-
-
-def enclosed_volume(vertices: np.ndarray, faces: np.ndarray) -> float:
-    """Volume enclosed by a closed, consistently oriented mesh (absolute value; input units^3)."""
-    corners = np.asarray(vertices, dtype=np.float64)[np.asarray(faces, dtype=np.int64)]
-    signed = np.einsum("fi,fi->f", corners[:, 0], np.cross(corners[:, 1], corners[:, 2])).sum() / 6.0
-    return float(abs(signed))

@@ -26,12 +26,12 @@ import inspect
 import logging
 
 import numpy as np
-import scipy.sparse as sp
 import trimesh
 
 from fourd.animation import AnimatedMesh, MeshSequence
 from fourd.errors import InputError
 from fourd.geometry.marching import marching_cubes
+from fourd.geometry.meshes import vertex_adjacency
 
 logger = logging.getLogger("fourd.synth.scenes")
 
@@ -119,16 +119,6 @@ def _project(field, points: np.ndarray, eps: float, iterations: int = 4, gradien
     return points
 
 
-def _vertex_adjacency(faces: np.ndarray, count: int) -> sp.csr_matrix:
-    edges = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
-    edges = np.concatenate([edges, edges[:, ::-1]])
-    adjacency = sp.coo_matrix(
-        (np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(count, count)
-    ).tocsr()
-    adjacency.data[:] = 1.0
-    return adjacency
-
-
 def _implicit_mesh(
     field,
     lower: np.ndarray,
@@ -157,7 +147,7 @@ def _implicit_mesh(
     mesh.remove_unreferenced_vertices()
     vertices, faces = np.asarray(mesh.vertices, dtype=float), np.asarray(mesh.faces, dtype=np.int64)
     eps = 1e-4 * spacing
-    adjacency = _vertex_adjacency(faces, len(vertices))
+    adjacency = vertex_adjacency(faces, len(vertices))
     degree = np.asarray(adjacency.sum(axis=1)).ravel()
     for _ in range(relax):
         delta = adjacency @ vertices / degree[:, None] - vertices

@@ -41,7 +41,7 @@ import scipy.sparse as sp
 from scipy import ndimage
 
 from fourd.methods.flow.grid import SpaceTimeGrid
-from fourd.methods.flow.solver import jacobi_cg
+from fourd.methods.flow.krylov import jacobi_cg
 
 log = logging.getLogger("fourd.methods.flow.fit")
 

@@ -1,7 +1,7 @@
 """Iteratively reweighted least squares with bootstrapping and clamping (paper 002, section 4(b)).
 
 Every iteration assembles the constrained quadratic of :mod:`.system` for the cells still
-free, solves it with :func:`.solver.solve_saddle`, then
+free, solves it with :func:`.saddle.solve_saddle`, then
 
 * clamps: free cells whose value came out within ``clamp`` of 0 or 1 become hard constraints
   (back-substituted from then on);
@@ -23,8 +23,9 @@ from typing import NamedTuple
 
 import numpy as np
 
+from fourd.methods.flow.amg import restrict_interpolations
 from fourd.methods.flow.grid import speed_prune
-from fourd.methods.flow.solver import release_free_heap, restrict_interpolations, solve_saddle
+from fourd.methods.flow.saddle import release_free_heap, solve_saddle
 from fourd.methods.flow.system import Flows, build_system, flow_lookup
 
 log = logging.getLogger("fourd.methods.flow.irls")
@@ -148,7 +149,7 @@ def run_irls(
     region : bool [S, X, Y, Z]
         Cells counted for the stopping criterion (the hull: cells not carved at the start).
     solver_options : dict
-        Keyword arguments for :func:`.solver.solve_saddle`.
+        Keyword arguments for :func:`.saddle.solve_saddle`.
     guess : float64 [S, X, Y, Z], optional
         Starting values of the free cells for the first solve (e.g. the implicit fit's
         inside indicator); flows start as "material stays in its cell".
@@ -159,10 +160,10 @@ def run_irls(
     reuse_interpolation : bool
         From the second iteration on, the inner V-cycle keeps the previous solve's AMG
         interpolation, restricted to the unknowns still free (see
-        :func:`.solver.restricted_hierarchy`); a new set-up only if an unknown is new.
+        :func:`.amg.restricted_hierarchy`); a new set-up only if an unknown is new.
     reuse_coarse : bool
         With ``reuse_interpolation``: keep the previous solve's coarse matrices too
-        (restricted, :func:`.solver.frozen_hierarchy`) instead of forming ``A + B^T B`` and
+        (restricted, :func:`.amg.frozen_hierarchy`) instead of forming ``A + B^T B`` and
         its Galerkin products again.
     later_maxiter : int, optional
         MINRES iteration limit of the solves after the first (warm-started from the previous

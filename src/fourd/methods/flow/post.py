@@ -33,9 +33,10 @@ from scipy import ndimage
 from scipy.spatial import cKDTree
 
 from fourd.geometry.marching import compact, marching_cubes
+from fourd.geometry.meshes import component_volumes, remove_small_components
 from fourd.geometry.normals import vertex_normals
 from fourd.methods.flow.grid import SpaceTimeGrid
-from fourd.methods.flow.solver import jacobi_cg
+from fourd.methods.flow.krylov import jacobi_cg
 
 log = logging.getLogger("fourd.methods.flow.post")
 
@@ -339,52 +340,6 @@ def implicit_function(
     return FlowField(values.reshape(shape4), origin, hf, grid.times)
 
 
-def face_volumes(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    """Each face's signed volume ``a . (b x c) / 6`` against the origin [F]: their sum over a
-    closed mesh is the volume it encloses (positive for outward-oriented faces)."""
-    tri = vertices[faces]
-    return np.einsum("ij,ij->i", tri[:, 0], np.cross(tri[:, 1], tri[:, 2])) / 6.0
-
-
-def component_volumes(vertices, faces) -> tuple[np.ndarray, np.ndarray]:
-    """The closed components of a mesh: the component of every face [F] and the signed volume
-    each encloses [C] (positive for outward-oriented faces, negative for a cavity's inner
-    surface). Faces belong together when they share an edge that no other face has, so a
-    piece that touches the rest only at vertices or along edges of three or more faces is a
-    component of its own and can be dropped by its volume (marching cubes once left a flat
-    doubled quad, four faces enclosing nothing, on two edges of a resolution-64 surface)."""
-    n_faces = len(faces)
-    edges = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1)
-    _, edge, count = np.unique(
-        edges[:, 0] * np.int64(len(vertices)) + edges[:, 1],
-        return_inverse=True,
-        return_counts=True,
-    )
-    nodes = n_faces + len(count)
-    face = np.tile(np.arange(n_faces), 3)
-    joins = count[edge] == 2
-    graph = sp.coo_matrix(
-        (np.ones(int(joins.sum())), (face[joins], n_faces + edge[joins])), shape=(nodes, nodes)
-    )
-    _, labels = sp.csgraph.connected_components(graph, directed=False)
-    _, face_label = np.unique(labels[:n_faces], return_inverse=True)
-    signed = face_volumes(vertices, faces)
-    return face_label, np.bincount(face_label, weights=signed)
-
-
-def _drop_small_components(vertices, faces, fraction):
-    """Drop the closed components whose enclosed volume (absolute, so a cavity's inner
-    surface counts by its size) is below ``fraction`` of the largest."""
-    if len(faces) == 0 or fraction <= 0:
-        return vertices, faces
-    face_label, volume = component_volumes(vertices, faces)
-    if len(volume) <= 1:
-        return vertices, faces
-    volume = np.abs(volume)
-    faces = faces[(volume >= fraction * volume.max())[face_label]]
-    return compact(vertices, faces)
-
-
 def drop_cavities(vertices, faces) -> tuple[np.ndarray, np.ndarray, int]:
     """The mesh without the inner surfaces of cavities, and how many there were.
 
@@ -418,7 +373,7 @@ def extract_mesh(
     vertices, faces = marching_cubes(
         values, origin=field.origin - field.spacing, spacing=field.spacing
     )
-    return _drop_small_components(vertices, faces, min_component)
+    return remove_small_components(vertices, faces, min_fraction=min_component, measure="volume")
 
 
 def redistanced(

@@ -1,7 +1,7 @@
 """The as-rigid-as-possible local step and energy over a template (Sorkine & Alexa, SGP 2007):
 per-vertex best rotations of the cotangent-weighted edge covariances, the right side of the
 global step, and the normalised energy. ``pre`` is a
-:class:`fourd.methods.kinematic.sliding.SlidePrecompute` of the template; the sliding (5.2,
+:class:`fourd.methods.kinematic.arap_solve.SlidePrecompute` of the template; the sliding (5.2,
 5.3) and the large-motion registration share these."""
 
 from __future__ import annotations

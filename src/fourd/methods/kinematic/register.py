@@ -55,7 +55,7 @@ import scipy.sparse.linalg as spla
 from scipy.spatial import cKDTree
 
 from fourd.geometry.factors import TriangularFactors, solve_ordered, unpermuted_factors
-from fourd.geometry.marching import vertex_components
+from fourd.geometry.meshes import vertex_components
 from fourd.geometry.neighbors import bucket_grid, nearest_within
 from fourd.geometry.normals import vertex_normals
 from fourd.methods.kinematic.arap import blended_arap_rhs, with_rest_shape
@@ -398,7 +398,7 @@ def unexplained_fraction(vertices: np.ndarray, points: np.ndarray, distance: flo
 
 
 class ArapIcp:
-    """The registration for one template (:func:`fourd.methods.kinematic.sliding.slide_precompute`
+    """The registration for one template (:func:`fourd.methods.kinematic.arap_solve.slide_precompute`
     output ``pre`` and its ``faces``); ``L + w I`` is factorised on first use, once per data
     weight (the stiff and the refining one). ``epsilon``: the data radius of the sliding (0: 2
     median edge lengths)."""

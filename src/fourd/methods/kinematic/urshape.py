@@ -15,7 +15,8 @@ import numpy as np
 
 from fourd.geometry.field import Field4D
 from fourd.geometry.laplacian import laplacian_smooth
-from fourd.geometry.marching import compact, marching_cubes, vertex_components
+from fourd.geometry.marching import compact, marching_cubes
+from fourd.geometry.meshes import remove_small_components
 
 log = logging.getLogger("fourd.methods.kinematic.urshape")
 
@@ -46,19 +47,6 @@ def data_cell_mask(points: np.ndarray, origin: np.ndarray, cell_size: float, sha
         c = cell[ok]
         mask[c[:, 0], c[:, 1], c[:, 2]] = True
     return mask
-
-
-def remove_small_components(vertices, faces, min_faces: int):
-    """Drop connected components with fewer than ``min_faces`` triangles."""
-    if min_faces <= 1 or len(faces) == 0:
-        return vertices, faces
-    _, labels = vertex_components(faces, len(vertices))
-    face_label = labels[faces[:, 0]]
-    sizes = np.bincount(face_label)
-    keep = sizes[face_label] >= min_faces
-    if keep.all():
-        return vertices, faces
-    return compact(vertices, faces[keep])
 
 
 def _polygonise(field, time, bounds, cell_size, data_points, min_component_faces):
@@ -101,7 +89,7 @@ def _polygonise(field, time, bounds, cell_size, data_points, min_component_faces
         (faces[:, 0] != faces[:, 1]) & (faces[:, 1] != faces[:, 2]) & (faces[:, 0] != faces[:, 2])
     )
     vertices, faces = compact(vertices, faces[good])
-    vertices, faces = remove_small_components(vertices, faces, min_component_faces)
+    vertices, faces = remove_small_components(vertices, faces, min_faces=min_component_faces)
     return vertices, faces
 
 
@@ -148,7 +136,7 @@ def extract_template(
     vertices : ndarray [N, 3]
     faces : ndarray int64 [F, 3] (outward wound; empty when ``f`` has no zero crossing)
     """
-    from fourd.methods.kinematic.sliding import project_to_surface
+    from fourd.methods.kinematic.projection import project_to_surface
 
     bounds = np.asarray(bounds, dtype=np.float64)
     if bounds.shape != (2, 3) or np.any(bounds[1] < bounds[0]):
@@ -169,3 +157,16 @@ def extract_template(
         )
     log.debug("urshape: %d vertices, %d faces", len(vertices), len(faces))
     return vertices, faces
+
+
+def template_cell_size(points: np.ndarray, spacing: float, vertices: int) -> float:
+    """Marching-cubes cell size giving about ``vertices`` urshape vertices.
+
+    The surface area is estimated from the voxels of size ``2 * spacing`` that hold points
+    (a surface crosses about 1.5 / c^2 voxels of size c per unit area, averaged over
+    orientations), and marching cubes makes about 1.5 vertices per ``cell^2`` of area.
+    """
+    voxel = 2.0 * spacing
+    keys = np.unique(np.floor(points / voxel).astype(np.int64), axis=0)
+    area = len(keys) * voxel**2 / 1.5
+    return float(np.sqrt(1.5 * area / vertices))

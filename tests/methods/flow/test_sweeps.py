@@ -8,14 +8,14 @@ import pytest
 import scipy.sparse as sp
 
 from fourd.methods.flow import sweeps
-from fourd.methods.flow.irls import unknown_slices
-from fourd.methods.flow.solver import (
+from fourd.methods.flow.amg import (
     amg_hierarchy,
     normal_finest,
     parallel_smoothers,
-    solve_saddle,
     v_cycle,
 )
+from fourd.methods.flow.irls import unknown_slices
+from fourd.methods.flow.saddle import solve_saddle
 from fourd.methods.flow.system import build_system, neighbourhood
 
 

@@ -2,9 +2,9 @@
 
 import numpy as np
 import pytest
+from kinematic_shapes import MovingBlob, _sphere_template
 from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
-from test_kinematic import MovingBlob, _sphere_template
 
 from fourd import synth
 from fourd.geometry.neighbors import bucket_grid

@@ -1,0 +1,83 @@
+"""The ``kinematic`` pipeline: prepared frames, the 4D fit, then :func:`.animate`
+(urshape and sliding); see the package docstring for the paper and what is beyond it.
+"""
+
+from __future__ import annotations
+
+import logging
+import time as _time
+
+import numpy as np
+
+from fourd.animation import AnimatedMesh
+from fourd.errors import InputError
+from fourd.geometry.neighbors import point_spacing
+from fourd.methods.kinematic.animate import animate
+from fourd.methods.kinematic.field import fit_windows, space_time_points
+from fourd.methods.kinematic.frames import prepare_frames
+from fourd.methods.kinematic.mpu4d import MPUOptions
+from fourd.methods.kinematic.options import MIN_FRAMES, Options
+from fourd.sequence import PointCloudSequence
+
+log = logging.getLogger("fourd.methods.kinematic")
+
+
+def reconstruct(seq: PointCloudSequence, options: Options | None = None) -> AnimatedMesh:
+    """Animated mesh from a point-cloud sequence by 4D MPU + urshape + ARAP sliding.
+
+    Returns an :class:`AnimatedMesh` with ``rest`` the urshape; one frame per output time
+    (default: per input frame). Raises :class:`InputError` when the sequence is too short or
+    the implicit has no surface at the first time.
+
+    References
+    ----------
+    Süßmuth, Winter, Greiner: Reconstructing animated meshes from time-varying point clouds,
+    SGP 2008 (000_00387fefe94cc850.txt).
+    """
+    options = options or Options()
+    if len(seq) < MIN_FRAMES:
+        raise InputError(f"kinematic needs at least {MIN_FRAMES} frames, got {len(seq)}")
+    started = _time.perf_counter()
+    times = seq.times
+    points, normals = prepare_frames(seq, options)
+    spacing = point_spacing(points[0], seed=options.seed)
+    steps = np.diff(times)
+    time_unit = float(np.median(steps))
+    delta = spacing * options.time_scale
+    time_scale = delta / time_unit
+    stride = options.fit_stride
+    stp = space_time_points(
+        [p[::stride] for p in points],
+        [n[::stride] for n in normals],
+        times,
+        delta=delta,
+        time_origin=times[0],
+        time_unit=time_unit,
+    )
+    mpu_options = MPUOptions(
+        error=options.mpu_error or 2.0 * spacing,
+        min_points=options.min_points,
+        error_quantile=options.error_quantile,
+    )
+    field = fit_windows(
+        stp,
+        times,
+        mpu_options=mpu_options,
+        window=options.window,
+        overlap=options.window_overlap,
+        time_origin=times[0],
+        time_scale=time_scale,
+    )
+    fitted = _time.perf_counter()
+    log.info("4D fit: %.2f s", fitted - started)
+
+    result = animate(field, points, normals, times, spacing=spacing, options=options)
+    finished = _time.perf_counter()
+    log.info(
+        "kinematic: %d frames in %.2f s (fit %.2f, urshape and sliding %.2f)",
+        len(result.times),
+        finished - started,
+        fitted - started,
+        finished - fitted,
+    )
+    return result
