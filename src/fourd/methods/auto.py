@@ -17,6 +17,9 @@ The rule, in order:
    :class:`~fourd.MeshSequence`, no correspondences). Otherwise the kinematic result is
    closed by the flow's surfaces (:func:`fourd.methods.watertight.close_on_flow`): one
    closed animated mesh whose observed vertices are the kinematic result's.
+4. **A flow that lacks parts**: where the flow's surface misses more than ``lost_limit`` of
+   the tracked first frame (it lags thin, fast parts), the closed result would miss them too,
+   so the kinematic (open) result is returned.
 
 ``surface`` forces step 2's answer. The decision and its figures are logged at info level and
 returned by :func:`reconstruct_with_diagnostics`.
@@ -72,6 +75,10 @@ class Options:
     resolution : int
         The flow grid for closed objects: cells along the longest side of the data's box
         (32).
+    lost_limit : float
+        For a closed object, the kinematic (open) result is returned instead of the closed
+        one when the flow's surface lacks more than this fraction of the tracked first frame
+        (0.02; a thin, fast limb the flow lags: horse-gallop's legs).
     split_part : float
         A part of a flow frame counts towards the split test when it holds at least this
         fraction of the frame's faces (0.05).
@@ -82,6 +89,7 @@ class Options:
     surface: Literal["auto", "open", "closed"] = "auto"
     open_area: float = 0.5
     resolution: int = 32
+    lost_limit: float = 0.02
     split_part: float = 0.05
     seed: int = 0
 
@@ -101,16 +109,17 @@ class AutoDiagnostics:
     Attributes
     ----------
     open_surface : float
-        1 when the kinematic (open) result was returned, else 0.
+        1 when the kinematic (open) result was returned (an open surface, or a flow that
+        lacks tracked parts), else 0.
     vector_area : float
         :func:`vector_area_fraction` of the first frame's urshape.
     split : float
         1 when the flow's frames change their number of parts (the flow's meshes returned).
     mass_conservation_error : float or None
         The flow's, where it ran.
-    off_surface : float or None
-        The closed composition's :class:`~fourd.methods.watertight.WatertightDiagnostics`
-        figure, where it ran.
+    off_surface, lost : float or None
+        The closed composition's :class:`~fourd.methods.watertight.Closing` figures, where
+        it ran.
     """
 
     open_surface: float
@@ -118,6 +127,7 @@ class AutoDiagnostics:
     split: float
     mass_conservation_error: float | None = None
     off_surface: float | None = None
+    lost: float | None = None
 
 
 def vector_area_fraction(vertices: np.ndarray, faces: np.ndarray) -> float:
@@ -183,13 +193,26 @@ def reconstruct_with_diagnostics(
         return Reconstruction(
             flowed.meshes, AutoDiagnostics(0.0, openness, 1.0, float(flowed.mass_error))
         )
-    animation, off = watertight.close_on_flow(seq, opened, flowed)
+    closing = watertight.close_on_flow(seq, opened, flowed)
+    if closing.lost > options.lost_limit:
+        log.info(
+            "auto: the flow's surface lacks %.1f%% of the tracked first frame (over %.1f%%): "
+            "the kinematic result, open where no frame saw", 100 * closing.lost,
+            100 * options.lost_limit,
+        )
+        return Reconstruction(
+            opened,
+            AutoDiagnostics(1.0, openness, 0.0, float(flowed.mass_error), None, closing.lost),
+        )
     log.info(
         "auto: a closed object (vector area %.2f of the area): closed template slid along "
         "the flow's surfaces", openness,
     )
     return Reconstruction(
-        animation, AutoDiagnostics(0.0, openness, 0.0, float(flowed.mass_error), off)
+        closing.animation,
+        AutoDiagnostics(
+            0.0, openness, 0.0, float(flowed.mass_error), closing.off_surface, closing.lost
+        ),
     )
 
 

@@ -17,6 +17,7 @@ from __future__ import annotations
 import dataclasses
 import logging
 import time
+from typing import NamedTuple
 
 import numpy as np
 import trimesh
@@ -47,6 +48,9 @@ OFF_SURFACE_WARNING = 0.005
 #: :func:`close_animation`: a vertex carried along moves by the rigid motion of this many
 #: nearest bound vertices (:func:`rigid_blend`).
 RIGID_ANCHORS = 32
+#: :func:`close_on_flow` warns when the closed result lacks more than this fraction of the
+#: tracked first frame (:class:`Closing` ``lost``).
+LOST_WARNING = 0.02
 
 __all__ = [
     "MIN_FRAMES",
@@ -59,6 +63,8 @@ __all__ = [
     "reconstruct",
     "reconstruct_with_diagnostics",
     "close_animation",
+    "Closing",
+    "LOST_WARNING",
     "close_on_flow",
     "rigid_blend",
 ]
@@ -87,10 +93,13 @@ class WatertightDiagnostics:
     off_surface : float
         The largest fraction over the frames of the template's vertices far from both the
         flow's surface and the frame's points (:func:`off_surface_fractions`).
+    lost : float
+        The fraction of the tracked first frame the closed result lacks (:class:`Closing`).
     """
 
     mass_conservation_error: float
     off_surface: float
+    lost: float
 
 
 def flow_options(options: Options) -> flow.Options:
@@ -240,15 +249,30 @@ def off_surface_fractions(
     return fractions
 
 
+class Closing(NamedTuple):
+    """What :func:`close_on_flow` made.
+
+    animation : AnimatedMesh, the closed result.
+    off_surface : float, the largest fraction over the frames of its vertices far from both
+        the flow's surface and the frame's points (:func:`off_surface_fractions`).
+    lost : float, the fraction of the open result's first-frame vertices farther than two of
+        its median edges from the closed template: parts the flow does not have (a thin,
+        fast limb it lags), which the closed result lacks.
+    """
+
+    animation: AnimatedMesh
+    off_surface: float
+    lost: float
+
+
 def close_on_flow(
     seq: PointCloudSequence,
     opened: AnimatedMesh,
     flowed: flow.FlowResult,
-) -> tuple[AnimatedMesh, float]:
+) -> Closing:
     """``opened`` (the kinematic result on ``seq``) closed by the surfaces of a ``flow`` run
-    on ``seq`` (:func:`close_animation`), and the largest fraction over the frames of its
-    vertices off the surface (:func:`off_surface_fractions`, warned above
-    :data:`OFF_SURFACE_WARNING`)."""
+    on ``seq`` (:func:`close_animation`), with the figures that say whether it is sound
+    (:class:`Closing`; warned above :data:`OFF_SURFACE_WARNING` and :data:`LOST_WARNING`)."""
     clock = time.perf_counter()
     field = flow.surface_distance(flowed)
     first = next(i for i, p in enumerate(flowed.frame_points) if p is not None and len(p) >= 4)
@@ -268,8 +292,18 @@ def close_on_flow(
             "sound", len(lost), len(off_surface), lost[0], 100 * OFF_SURFACE_WARNING,
             100 * off_surface.max(), int(off_surface.argmax()),
         )
+    start = np.asarray(opened.vertices[0])
+    edge = np.median(np.linalg.norm(start[opened.faces[:, [1, 2, 0]]] - start[opened.faces], axis=2))
+    distance, _ = cKDTree(animation.rest).query(start, distance_upper_bound=2.0 * edge, workers=-1)
+    lost = float(np.mean(~np.isfinite(distance)))
+    if lost > LOST_WARNING:
+        log.warning(
+            "watertight: the flow's surface lacks %.1f%% of the tracked first frame (a thin "
+            "or fast part it lags), and so does the closed result; the kinematic method keeps "
+            "it", 100 * lost,
+        )
     log.info("watertight: closing %.1f s", time.perf_counter() - clock)
-    return animation, float(off_surface.max())
+    return Closing(animation, float(off_surface.max()), lost)
 
 
 def reconstruct_with_diagnostics(
@@ -279,9 +313,10 @@ def reconstruct_with_diagnostics(
     options = Options() if options is None else options
     opened = kinematic.reconstruct(seq, kinematic.Options())
     flowed = flow.run(seq, flow_options(options))
-    animation, off_surface = close_on_flow(seq, opened, flowed)
+    closing = close_on_flow(seq, opened, flowed)
     return Reconstruction(
-        animation, WatertightDiagnostics(float(flowed.mass_error), off_surface)
+        closing.animation,
+        WatertightDiagnostics(float(flowed.mass_error), closing.off_surface, closing.lost),
     )
 
 
