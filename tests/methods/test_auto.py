@@ -1,0 +1,88 @@
+"""The default method: its decision rule on known shapes, and its result on small scenes."""
+
+from __future__ import annotations
+
+import logging
+
+import numpy as np
+import pytest
+import trimesh
+
+from fourd import AnimatedMesh, MeshSequence, synth
+from fourd.methods import DEFAULT_METHOD, reconstruct_with_diagnostics
+from fourd.methods.auto import Options, part_counts, splits, vector_area_fraction
+from fourd.metrics import evaluate
+
+
+def test_vector_area_is_zero_when_closed_half_for_a_hemisphere_and_one_for_a_sheet():
+    sphere = trimesh.creation.icosphere(subdivisions=3)
+    assert vector_area_fraction(sphere.vertices, sphere.faces) < 1e-12
+    upper = sphere.vertices[sphere.faces].mean(axis=1)[:, 2] > 0
+    # projected area pi r^2 over the surface 2 pi r^2
+    assert vector_area_fraction(sphere.vertices, sphere.faces[upper]) == pytest.approx(0.5, abs=0.02)
+    sheet = trimesh.creation.box(extents=(1, 1, 0.001))
+    top = sheet.face_normals[:, 2] > 0.9
+    assert vector_area_fraction(sheet.vertices, sheet.faces[top]) == pytest.approx(1.0)
+
+
+def test_part_counts_ignore_small_pieces_and_splits_need_a_lasting_change():
+    a = trimesh.creation.icosphere(subdivisions=2)
+    b = a.copy()
+    b.apply_translation([3, 0, 0])
+    crumb = trimesh.creation.box(extents=(0.1, 0.1, 0.1))  # 12 of 332 faces
+    crumb.apply_translation([0, 3, 0])
+    one = (a.vertices, a.faces)
+    two = trimesh.util.concatenate([a, b])
+    with_crumb = trimesh.util.concatenate([a, crumb])
+    meshes = MeshSequence((one, (two.vertices, two.faces), (with_crumb.vertices, with_crumb.faces)))
+    assert part_counts(meshes, 0.05).tolist() == [1, 2, 1]
+    assert splits(np.array([1, 1, 1, 1, 2, 2, 2, 2]))
+    assert splits(np.array([2, 2, 2, 1, 1, 1]))  # a merge
+    assert not splits(np.array([1, 1, 2, 1, 1, 1, 2, 1]))  # flicker
+
+
+def test_options_are_checked():
+    with pytest.raises(ValueError, match="surface"):
+        Options(surface="half")
+    with pytest.raises(ValueError, match="open_area"):
+        Options(open_area=0.0)
+
+
+def test_the_default_method_is_auto():
+    assert DEFAULT_METHOD == "auto"
+
+
+@pytest.mark.slow
+def test_a_sheet_is_an_open_surface_and_gives_the_kinematic_animation():
+    truth = synth.scene("waving-sheet", frames=4)
+    scans = synth.scan(truth, resolution=96, seed=0)
+    result, diagnostics = reconstruct_with_diagnostics(scans)
+    assert isinstance(result, AnimatedMesh) and diagnostics.open_surface == 1.0
+    assert diagnostics.vector_area > 0.5
+    metrics = evaluate(result, truth, samples=10000)
+    assert metrics["closed_manifold"] == 0.0
+    assert metrics["chamfer"] < 0.005 and metrics["correspondence_last"] < 0.05
+
+
+@pytest.mark.slow
+def test_a_closed_object_gives_one_closed_animated_mesh():
+    truth = synth.scene("squash-ball", frames=4)
+    scans = synth.scan(truth, resolution=96, seed=0)
+    result, diagnostics = reconstruct_with_diagnostics(scans, options=Options(resolution=20))
+    assert isinstance(result, AnimatedMesh)
+    assert (diagnostics.open_surface, diagnostics.split) == (0.0, 0.0)
+    metrics = evaluate(result, truth, samples=10000)
+    assert metrics["closed_manifold"] == 1.0
+    assert metrics["chamfer"] < 0.01
+
+
+@pytest.mark.slow
+def test_a_shape_that_splits_gives_the_flow_meshes_and_a_warning(caplog):
+    truth = synth.scene("splitting-blob", frames=8)
+    scans = synth.scan(truth, resolution=96, seed=0)
+    with caplog.at_level(logging.WARNING, logger="fourd.methods.auto"):
+        result, diagnostics = reconstruct_with_diagnostics(scans, options=Options(resolution=24))
+    assert isinstance(result, MeshSequence) and diagnostics.split == 1.0
+    assert "splits or merges" in caplog.text
+    counts = part_counts(result, 0.05)
+    assert counts[0] == 1 and counts[-1] == 2
