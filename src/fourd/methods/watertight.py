@@ -51,6 +51,9 @@ RIGID_ANCHORS = 32
 #: :func:`close_on_flow` warns when the closed result lacks more than this fraction of the
 #: tracked first frame (:class:`Closing` ``lost``).
 LOST_WARNING = 0.02
+#: :func:`close_animation` binds a template vertex to the open mesh within this many of its
+#: median edges (or ``reach``, when farther).
+BIND_EDGES = 1.5
 
 __all__ = [
     "MIN_FRAMES",
@@ -116,7 +119,7 @@ def close_animation(
     bounds: np.ndarray,
     cell_size: float,
     target_vertices: int = 10000,
-    reach: float = 1.5,
+    reach: float = 0.0,
 ) -> AnimatedMesh:
     """An open animated mesh closed by a signed distance in space-time: a closed template of
     ``field`` at ``opened.times[0]`` whose vertices on the open mesh follow it exactly and
@@ -147,8 +150,10 @@ def close_animation(
     target_vertices : int
         About this many template vertices (:func:`~fourd.methods.kinematic.extract_template`).
     reach : float
-        A template vertex within this many of the open mesh's median edges of it (and facing
-        the same way) is bound to it.
+        A template vertex within this distance of the open mesh (input units; at least
+        :data:`BIND_EDGES` of its median edges), facing the same way, is bound to it:
+        :func:`close_on_flow` takes half a flow cell, the offset of a coarse flow's surface
+        from the data.
 
     Returns
     -------
@@ -169,7 +174,7 @@ def close_animation(
     edges = np.linalg.norm(start[faces_o[:, [1, 2, 0]]] - start[faces_o], axis=2)
     normals = trimesh.Trimesh(vertices, faces, process=False).vertex_normals
     facing = np.einsum("ij,ij->i", normals, mesh.face_normals[triangle]) > 0.3
-    bound = (distance < reach * float(np.median(edges))) & facing
+    bound = (distance < max(reach, BIND_EDGES * float(np.median(edges)))) & facing
     free = np.flatnonzero(~bound)
     log.info(
         "watertight: closed template of %d vertices, %d (%.0f%%) carried along the open mesh's "
@@ -279,7 +284,9 @@ def close_on_flow(
     points = flowed.frame_points[first]
     spacing = point_spacing(points)
     cell = kinematic.template_cell_size(points, spacing, kinematic.Options().template_vertices)
-    animation = close_animation(opened, field, bounds=field.bounds(), cell_size=cell)
+    animation = close_animation(
+        opened, field, bounds=field.bounds(), cell_size=cell, reach=0.5 * flowed.grid.h
+    )
     off_surface = off_surface_fractions(
         animation, field, OFF_SURFACE_CELLS * field.spacing, flowed.frame_points
     )
