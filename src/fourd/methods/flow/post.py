@@ -380,7 +380,7 @@ def redistanced(
     field: FlowField, slice_index, meshes, *, near: float = 2.0, workers: int = -1
 ) -> FlowField:
     """A signed distance to the frames' meshes on ``field``'s grid: the field to slide a
-    template along (``coherent``).
+    template along (:func:`~fourd.methods.flow.surface_distance`).
 
     The postprocessing's function is distance-like only near its data: elsewhere in the band
     its spatial gradient falls to a tenth of one, and Newton projections onto it overshoot

@@ -39,7 +39,7 @@ def animate(
 ) -> AnimatedMesh:
     """Urshape at ``times[0]`` and its sliding along ``field`` (sections 4 and 5 with this
     method's data term): everything of :func:`reconstruct` after the 4D fit, for any
-    :class:`~fourd.Field4D` (the ``flow`` method's ``coherent`` option composes with it).
+    :class:`~fourd.Field4D`.
 
     Parameters
     ----------

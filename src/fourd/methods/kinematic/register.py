@@ -181,7 +181,7 @@ class RegisterOptions:
         pulls every registered frame back towards the rest shape, against the stretch and
         twist of real skin (the crane truth's edges are 8% longer or shorter than at frame 0
         in the median at the kick's height, and its upper arms twist 54-64 degrees about
-        themselves; ``benchmarks/arap_basin.py``). ``exp`` runs (20k samples, correspondence
+        themselves; ``experiments/arap_basin.py``). ``exp`` runs (20k samples, correspondence
         mean / last frame) 0 -> 0.5: crane 0.0073 / 0.0119 -> 0.0068 / 0.0115 (at f8321eb
         0.0073 / 0.0120 -> 0.0070 / 0.0125), crane-50 0.0235 / 0.0304 -> 0.0192 / 0.0227, crane-90 0.0096 / 0.0151 -> 0.0089 / 0.0110,
         crane-130 0.0114 / 0.0178 -> 0.0112 / 0.0168, horse-gallop 0.0087 / 0.0043 ->
@@ -194,7 +194,7 @@ class RegisterOptions:
         End the stiff iterations as soon as no more than this fraction of the frame's points
         is unexplained (:meth:`ArapIcp.unexplained`, checked before each), then refine (0:
         all ``iterations``, the default). A diagnostic of where the registration's error
-        comes from (``benchmarks/registration_oracle.py --stop-explained``; crane,
+        comes from (``experiments/registration_oracle.py --stop-explained``; crane,
         correspondence mean / last frame): from the true positions 0.0058 / 0.0080 with all
         iterations and 0.0043 / 0.0058 with 0.005, as good as replacing each registration by
         the truth (0.0042 / 0.0060), so the stiff iterations themselves leave a right state,

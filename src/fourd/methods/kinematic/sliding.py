@@ -178,7 +178,7 @@ class SlideOptions:
         cotangent weights (0: the template's rest shape alone, the paper). The rest shape
         alone pulls every step towards its own proportions: with the true positions in place
         of every large-motion registration, crane's correspondence ends at 0.0042 / 0.0060
-        with 4 iterations and 0.0027 / 0.0032 with 1 (``benchmarks/registration_oracle.py
+        with 4 iterations and 0.0027 / 0.0032 with 1 (``experiments/registration_oracle.py
         --slide-iterations``). See the ``kinematic`` method's ``slide_memory`` for what 0.8
         measured.
     """
