@@ -185,6 +185,7 @@ def close_animation(
     out = np.empty((len(times), len(vertices), 3))
     observed = np.zeros((len(times), len(vertices)), dtype=bool)
     anchors = np.flatnonzero(bound)
+    offsets = np.zeros((len(times), len(free), 3))
     if len(free) and len(anchors) >= 3:
         distance, near = cKDTree(rest[anchors]).query(rest[free], k=min(RIGID_ANCHORS, len(anchors)))
         weights = 1.0 / (distance**2 + (1e-3 * cell_size) ** 2)
@@ -198,9 +199,15 @@ def close_animation(
             out[k, free] = rest[free]
         else:
             out[k, free] = rigid_blend(rest[anchors][near], frame[near], weights, rest[free])
-        out[k, free] = kinematic.project_to_surface(
+        offsets[k] = kinematic.project_to_surface(
             field, out[k, free], float(t), iterations=4, max_step=0.5 * cell_size
-        )
+        ) - out[k, free]
+    if len(free) and len(times) > 2:
+        # the flow's surface moves by a fraction of a cell from frame to frame in the filled
+        # parts; one [1, 2, 1] pass over time keeps that from showing as flicker
+        offsets[1:-1] = 0.25 * offsets[:-2] + 0.5 * offsets[1:-1] + 0.25 * offsets[2:]
+    if len(free):
+        out[:, free] += offsets
     return AnimatedMesh(faces=faces, vertices=out, times=times, observed=observed, rest=rest)
 
 
