@@ -167,8 +167,8 @@ def part_counts(meshes: MeshSequence, smallest: float) -> np.ndarray:
 def splits(parts: np.ndarray) -> bool:
     """Whether per-frame part counts [T] (:func:`part_counts`) say the shape splits or
     merges: the most frequent count of the first quarter of the frames (at least three)
-    differs from that of the last quarter. A part the flow pinches off for a frame or three (a thin, fast
-    leg: horse-gallop's counts flicker between 1 and 2) is no split.
+    differs from that of the last quarter. A part the flow pinches off for a frame or three
+    (a thin, fast leg: horse-gallop's counts flicker between 1 and 2) is no split.
 
     Examples
     --------
@@ -213,9 +213,10 @@ def reconstruct_with_diagnostics(
         )
     closing = watertight.close_on_flow(seq, opened, flowed)
     if closing.lost > options.lost_limit:
-        log.info(
-            "auto: the flow's surface lacks %.1f%% of the tracked first frame (over %.1f%%): "
-            "the kinematic result, open where no frame saw", 100 * closing.lost,
+        log.warning(
+            "auto: the flow's surface lacks %.1f%% of the tracked first frame (over %.1f%%; a "
+            "thin, fast part it lags), so the result is the kinematic one, open where no frame "
+            "saw (method watertight closes it anyway)", 100 * closing.lost,
             100 * options.lost_limit,
         )
         return Reconstruction(
