@@ -6,29 +6,13 @@ import time
 import numpy as np
 import pytest
 import trimesh
+from viz_shapes import ink, rotating_sphere
 
-from fourd.animation import AnimatedMesh, MeshSequence
+from fourd.animation import MeshSequence
 from fourd.errors import InputError
 from fourd.viz import raster as R
 from fourd.viz import texture as tex
 from fourd.viz.camera import Camera, fit_camera
-
-WHITE = np.array(R.BACKGROUND)
-
-
-def ink(image):
-    """Mask of pixels that are not background."""
-    return np.any(image != WHITE, axis=-1)
-
-
-def rotating_sphere(frames=3, degrees=40.0, subdivisions=3):
-    s = trimesh.creation.icosphere(subdivisions)
-    out = []
-    for t in range(frames):
-        a = math.radians(degrees * t)
-        rot = np.array([[math.cos(a), 0, math.sin(a)], [0, 1, 0], [-math.sin(a), 0, math.cos(a)]])
-        out.append(s.vertices @ rot.T)
-    return AnimatedMesh(s.faces, np.stack(out))
 
 
 def test_sphere_covers_its_projected_disc():

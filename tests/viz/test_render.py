@@ -1,32 +1,14 @@
-import math
 
 import numpy as np
 import pytest
 import trimesh
 from PIL import Image
+from viz_shapes import ink, rotating_sphere
 
 from fourd.animation import AnimatedMesh, MeshSequence
 from fourd.errors import InputError
 from fourd.sequence import PointCloudSequence
 from fourd.viz import render as R
-from fourd.viz.raster import BACKGROUND
-
-WHITE = np.array(BACKGROUND)
-
-
-def ink(image):
-    """Mask of pixels that are not background."""
-    return np.any(image != WHITE, axis=-1)
-
-
-def rotating_sphere(frames=3, degrees=40.0, subdivisions=3):
-    s = trimesh.creation.icosphere(subdivisions)
-    out = []
-    for t in range(frames):
-        a = math.radians(degrees * t)
-        rot = np.array([[math.cos(a), 0, math.sin(a)], [0, 1, 0], [-math.sin(a), 0, math.cos(a)]])
-        out.append(s.vertices @ rot.T)
-    return AnimatedMesh(s.faces, np.stack(out))
 
 
 def test_pick_frames():

@@ -131,3 +131,10 @@ def remove_small_components(
     if keep.all():
         return vertices, faces
     return compact(vertices, faces[keep])
+
+
+def median_edge_length(vertices: np.ndarray, faces: np.ndarray) -> float:
+    """Median length of the edges of ``faces`` [F, 3] over ``vertices`` [N, 3]."""
+    faces = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
+    lengths = np.linalg.norm(vertices[faces[:, [1, 2, 0]]] - vertices[faces], axis=2)
+    return float(np.median(lengths))

@@ -24,6 +24,7 @@ import trimesh
 from scipy.spatial import cKDTree
 
 from fourd.animation import AnimatedMesh
+from fourd.geometry.meshes import median_edge_length
 from fourd.geometry.neighbors import point_spacing
 from fourd.methods import flow, kinematic
 from fourd.methods.base import Reconstruction
@@ -171,10 +172,9 @@ def close_animation(
     closest, distance, triangle = trimesh.proximity.closest_point(mesh, vertices)
     corners = faces_o[triangle]
     weights_b = trimesh.triangles.points_to_barycentric(start[corners], closest)
-    edges = np.linalg.norm(start[faces_o[:, [1, 2, 0]]] - start[faces_o], axis=2)
     normals = trimesh.Trimesh(vertices, faces, process=False).vertex_normals
     facing = np.einsum("ij,ij->i", normals, mesh.face_normals[triangle]) > 0.3
-    bound = (distance < max(reach, BIND_EDGES * float(np.median(edges)))) & facing
+    bound = (distance < max(reach, BIND_EDGES * median_edge_length(start, faces_o))) & facing
     free = np.flatnonzero(~bound)
     log.info(
         "watertight: closed template of %d vertices, %d (%.0f%%) carried along the open mesh's "
@@ -307,7 +307,7 @@ def close_on_flow(
             100 * off_surface.max(), int(off_surface.argmax()),
         )
     start = np.asarray(opened.vertices[0])
-    edge = np.median(np.linalg.norm(start[opened.faces[:, [1, 2, 0]]] - start[opened.faces], axis=2))
+    edge = median_edge_length(start, opened.faces)
     distance, _ = cKDTree(animation.rest).query(start, distance_upper_bound=2.0 * edge, workers=-1)
     lost = float(np.mean(~np.isfinite(distance)))
     if lost > LOST_WARNING:

@@ -13,7 +13,7 @@ import numpy as np
 
 from fourd.animation import AnimatedMesh
 from fourd.errors import InputError
-from fourd.methods.kinematic.arap_solve import median_edge_length
+from fourd.geometry.meshes import median_edge_length
 from fourd.methods.kinematic.framesurface import FrameSurface
 from fourd.methods.kinematic.options import PROJECTION_LIMIT, SMOOTHED_PROJECTION_MIN, Options
 from fourd.methods.kinematic.projection import project_to_surface

@@ -15,6 +15,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from fourd.geometry.laplacian import cotangent_weights, weights_laplacian
+from fourd.geometry.meshes import median_edge_length
 
 
 class SlidePrecompute(NamedTuple):
@@ -32,13 +33,6 @@ class SlidePrecompute(NamedTuple):
     indptr: np.ndarray
     order: np.ndarray
     ordered_laplacian: sp.csr_matrix
-
-
-def median_edge_length(vertices: np.ndarray, faces: np.ndarray) -> float:
-    """Median length of the edges of ``faces`` [F, 3] over ``vertices`` [N, 3]."""
-    faces = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
-    lengths = np.linalg.norm(vertices[faces[:, [1, 2, 0]]] - vertices[faces], axis=2)
-    return float(np.median(lengths))
 
 
 def slide_precompute(rest_vertices: np.ndarray, faces: np.ndarray) -> SlidePrecompute:
