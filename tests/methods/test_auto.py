@@ -10,7 +10,9 @@ import trimesh
 
 from fourd import AnimatedMesh, MeshSequence, synth
 from fourd.methods import DEFAULT_METHOD, reconstruct_with_diagnostics
-from fourd.methods.auto import Options, part_counts, splits, vector_area_fraction
+from fourd.geometry.neighbors import point_spacing
+from fourd.geometry.normals import vertex_normals
+from fourd.methods.auto import Options, fit_to_frames, part_counts, splits, vector_area_fraction
 from fourd.metrics import evaluate
 
 
@@ -61,9 +63,12 @@ def test_a_sheet_is_an_open_surface_and_gives_the_kinematic_animation():
     result, diagnostics = reconstruct_with_diagnostics(scans)
     assert isinstance(result, AnimatedMesh) and diagnostics.open_surface == 1.0
     assert diagnostics.vector_area > 0.5
-    expected = kinematic.reconstruct(scans)
+    opened = kinematic.reconstruct(scans)
+    expected = fit_to_frames(scans, opened, Options())
     assert np.array_equal(result.vertices, expected.vertices)
-    assert np.array_equal(result.faces, expected.faces)
+    assert np.array_equal(result.faces, opened.faces)
+    unfitted = reconstruct_with_diagnostics(scans, options=Options(fit_frames=False)).result
+    assert np.array_equal(unfitted.vertices, opened.vertices)
 
 
 @pytest.mark.slow
@@ -74,7 +79,9 @@ def test_a_closed_object_gives_one_closed_animated_mesh_on_the_kinematic_result(
 
     truth = synth.scene("squash-ball", frames=4)
     scans = synth.scan(truth, resolution=96, seed=0)
-    result, diagnostics = reconstruct_with_diagnostics(scans, options=Options(resolution=20))
+    result, diagnostics = reconstruct_with_diagnostics(
+        scans, options=Options(resolution=20, fit_frames=False)
+    )
     assert isinstance(result, AnimatedMesh)
     assert (diagnostics.open_surface, diagnostics.split) == (0.0, 0.0)
     metrics = evaluate(result, truth, samples=10000)
@@ -88,6 +95,27 @@ def test_a_closed_object_gives_one_closed_animated_mesh_on_the_kinematic_result(
         surface = trimesh.Trimesh(opened.vertices[t], opened.faces, process=False)
         _, distance, _ = trimesh.proximity.closest_point(surface, result.vertices[t][bound])
         assert distance.max() < 1e-4  # on it, up to the round-off of sliver triangles
+
+
+@pytest.mark.slow
+def test_fitting_to_the_frames_moves_vertices_towards_the_truth_along_their_normals():
+    truth = synth.scene("squash-ball", frames=4)
+    scans = synth.scan(truth, resolution=96, seed=0)
+    unfitted = reconstruct_with_diagnostics(
+        scans, options=Options(resolution=20, fit_frames=False)
+    ).result
+    fitted = fit_to_frames(scans, unfitted, Options())
+    before = evaluate(unfitted, truth, samples=10000)
+    after = evaluate(fitted, truth, samples=10000)
+    assert after["accuracy"] < before["accuracy"]
+    assert after["correspondence_mean"] <= before["correspondence_mean"] * 1.01
+    spacing = point_spacing(scans.frames[0].points)
+    moved = np.linalg.norm(fitted.vertices - unfitted.vertices, axis=2)
+    assert moved.max() <= 4 * spacing * 1.001  # fit_reach caps it
+    normals = np.stack([vertex_normals(v, unfitted.faces) for v in unfitted.vertices])
+    along = np.abs(np.einsum("tni,tni->tn", fitted.vertices - unfitted.vertices, normals))
+    # the first iteration's step is along these normals, the second along slightly turned ones
+    assert np.median(along / np.maximum(moved, 1e-12)) > 0.99
 
 
 @pytest.mark.slow

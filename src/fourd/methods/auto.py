@@ -21,6 +21,13 @@ The rule, in order:
    the tracked first frame (it lags thin, fast parts), the closed result would miss them too,
    so the kinematic (open) result is returned.
 
+5. **Fit to the frames**: the animated mesh's vertices are moved along their normals onto each
+   frame's points (:func:`fourd.geometry.surface_fit.fit_along_normals`, a local quadric fit
+   of the frame's points, smoothed over the mesh and in time): the tracking trades the data
+   against rigidity and the filled-in parts come from the coarser flow, and moving along the
+   normal removes that error without moving a vertex along the surface, so the
+   correspondences stay. ``fit_frames`` turns it off.
+
 ``surface`` forces step 2's answer. The decision and its figures are logged at info level and
 returned by :func:`reconstruct_with_diagnostics`.
 """
@@ -35,6 +42,9 @@ import numpy as np
 
 from fourd.animation import AnimatedMesh, MeshSequence
 from fourd.geometry.meshes import vertex_components
+from fourd.geometry.neighbors import point_spacing
+from fourd.geometry.outliers import distance_ratio_inliers
+from fourd.geometry.surface_fit import fit_along_normals
 from fourd.methods import flow, kinematic, watertight
 from fourd.methods.base import Reconstruction
 from fourd.sequence import PointCloudSequence
@@ -49,6 +59,7 @@ __all__ = [
     "MIN_FRAMES",
     "AutoDiagnostics",
     "Options",
+    "fit_to_frames",
     "RESULT",
     "part_counts",
     "reconstruct",
@@ -83,6 +94,15 @@ class Options:
     split_part : float
         A part of a flow frame counts towards the split test when it holds at least this
         fraction of the frame's faces (0.05).
+    fit_frames : bool
+        Move the result's vertices along their normals onto each frame's points (step 5 of
+        the module docstring; True).
+    fit_radius : float
+        Width of that fit's Gaussian weights along the surface, in point spacings of the
+        first frame (2).
+    fit_reach : float
+        The fit ignores points farther than this from a vertex's tangent plane and moves no
+        vertex farther, in point spacings (4).
     seed : int
         Seed of the kinematic method's sampling (0).
     """
@@ -92,6 +112,9 @@ class Options:
     resolution: int = 32
     lost_limit: float = 0.02
     split_part: float = 0.05
+    fit_frames: bool = True
+    fit_radius: float = 2.0
+    fit_reach: float = 4.0
     seed: int = 0
 
     def __post_init__(self):
@@ -101,6 +124,10 @@ class Options:
             raise ValueError(f"open_area must be in (0, 1], got {self.open_area}")
         if not 0 < self.split_part < 1:
             raise ValueError(f"split_part must be between 0 and 1, got {self.split_part}")
+        if self.fit_radius <= 0 or self.fit_reach <= 0:
+            raise ValueError(
+                f"fit_radius and fit_reach must be positive, got {self.fit_radius}, {self.fit_reach}"
+            )
 
 
 @dataclasses.dataclass(frozen=True)
@@ -184,6 +211,30 @@ def splits(parts: np.ndarray) -> bool:
     return bool(first != last)
 
 
+def fit_to_frames(seq: PointCloudSequence, animation: AnimatedMesh, options: Options) -> AnimatedMesh:
+    """Step 5 of the module docstring: ``animation`` with every frame's vertices moved along
+    their normals onto that frame's points (outliers removed as ``kinematic`` removes them).
+    Needs one mesh frame per input frame; otherwise (other output ``times``) it is returned
+    as it is."""
+    if not options.fit_frames or len(animation.vertices) != len(seq.frames):
+        return animation
+    frames = [
+        frame.points[distance_ratio_inliers(frame.points, k=8, factor=3.0)]
+        if len(frame.points) > 9 else frame.points
+        for frame in seq.frames
+    ]
+    spacing = point_spacing(frames[0])
+    fit = fit_along_normals(
+        animation.vertices, animation.faces, frames,
+        radius=options.fit_radius * spacing, reach=options.fit_reach * spacing,
+    )
+    log.info(
+        "auto: fitted to the frames along the normals (median |offset| %.2g, %.0f%% of the "
+        "vertices near points)", float(np.median(np.abs(fit.offsets))), 100 * fit.supported.mean(),
+    )
+    return dataclasses.replace(animation, vertices=fit.vertices)
+
+
 def reconstruct_with_diagnostics(
     seq: PointCloudSequence, options: Options | None = None
 ) -> Reconstruction:
@@ -199,7 +250,7 @@ def reconstruct_with_diagnostics(
             "auto: an open surface (the first frame's vector area is %.2f of its area, over "
             "%.2f): the kinematic result", openness, options.open_area,
         )
-        return Reconstruction(opened, AutoDiagnostics(1.0, openness, 0.0))
+        return Reconstruction(fit_to_frames(seq, opened, options), AutoDiagnostics(1.0, openness, 0.0))
     flowed = flow.run(seq, flow.Options(resolution=options.resolution))
     parts = part_counts(flowed.meshes, options.split_part)
     if splits(parts):
@@ -220,7 +271,7 @@ def reconstruct_with_diagnostics(
             100 * options.lost_limit,
         )
         return Reconstruction(
-            opened,
+            fit_to_frames(seq, opened, options),
             AutoDiagnostics(1.0, openness, 0.0, float(flowed.mass_error), None, closing.lost),
         )
     log.info(
@@ -228,7 +279,7 @@ def reconstruct_with_diagnostics(
         "by the flow's surfaces", openness,
     )
     return Reconstruction(
-        closing.animation,
+        fit_to_frames(seq, closing.animation, options),
         AutoDiagnostics(
             0.0, openness, 0.0, float(flowed.mass_error), closing.off_surface, closing.lost
         ),
