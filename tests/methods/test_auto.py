@@ -9,9 +9,9 @@ import pytest
 import trimesh
 
 from fourd import AnimatedMesh, MeshSequence, synth
-from fourd.methods import DEFAULT_METHOD, reconstruct_with_diagnostics
 from fourd.geometry.neighbors import point_spacing
 from fourd.geometry.normals import vertex_normals
+from fourd.methods import DEFAULT_METHOD, reconstruct_with_diagnostics
 from fourd.methods.auto import Options, fit_to_frames, part_counts, splits, vector_area_fraction
 from fourd.metrics import evaluate
 

@@ -224,7 +224,7 @@ def fit_along_normals(
     for _ in range(iterations):
         normals = np.stack([vertex_normals(v, faces) for v in vertices])
         offsets = np.zeros(vertices.shape[:2])
-        for t, (points, tree) in enumerate(zip(frames, trees)):
+        for t, (points, tree) in enumerate(zip(frames, trees, strict=True)):
             if tree is None:
                 continue
             raw, support = normal_offsets(
