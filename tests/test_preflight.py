@@ -69,7 +69,10 @@ def test_many_small_frames_are_summed_up_and_all_small_is_an_error(caplog):
         assert len(check_frame_sizes(seq)) == 15
     assert len(caplog.records) == preflight.LISTED_FRAMES + 1
     assert caplog.records[-1].getMessage().startswith("and 5 more frames with fewer than 20 points")
-    with pytest.raises(InputError, match=r"every frame has fewer than 20 points \(the most, 9, in frame 1, frame_1\)"):
+    with pytest.raises(
+        InputError,
+        match=r"every frame has fewer than 20 points \(the most, 9, in frame 1, frame_1\)",
+    ):
         check_frame_sizes(_sequence([8, 9, 7]))
 
 
@@ -96,10 +99,15 @@ def test_memory_refusal_names_the_option(monkeypatch):
         check_memory(seq, "flow", module, options)
     message = str(info.value)
     assert message.startswith("method 'flow' would need about ")
-    assert "(resolution=1000, neighbourhood=27, 3 frames; an estimate) but 2.0 GiB is available" in message
+    assert (
+        "(resolution=1000, neighbourhood=27, 3 frames; an estimate) but 2.0 GiB is available"
+        in message
+    )
     assert message.endswith("lower resolution or reconstruct fewer frames")
     assert check_memory(seq, "flow", module, method_options("flow")) < 2 * 2**30
-    assert check_memory(seq, "perframe", method_module("perframe"), method_options("perframe")) is None
+    assert (
+        check_memory(seq, "perframe", method_module("perframe"), method_options("perframe")) is None
+    )
     monkeypatch.setattr(preflight, "available_memory", lambda: None)
     assert check_memory(seq, "flow", module, options) is None
 
@@ -123,8 +131,11 @@ def test_available_memory_reads_meminfo_a_cgroup_limit_or_psutil(tmp_path, monke
     import sys
     import types
 
-    monkeypatch.setitem(sys.modules, "psutil", types.SimpleNamespace(
-        virtual_memory=lambda: types.SimpleNamespace(available=12345)))
+    monkeypatch.setitem(
+        sys.modules,
+        "psutil",
+        types.SimpleNamespace(virtual_memory=lambda: types.SimpleNamespace(available=12345)),
+    )
     assert available_memory() == 12345
     monkeypatch.setitem(sys.modules, "psutil", None)  # not installed: no check
     assert available_memory() is None

@@ -118,18 +118,23 @@ def check_frame_sizes(
             f"every frame has fewer than {minimum} points (the most, {counts[most]}, in frame "
             f"{most}, {seq.names[most]}): too few to reconstruct a surface from"
         )
-    fate = (
-        "its mesh will be empty" if per_frame else "its shape will come from the other frames"
-    )
+    fate = "its mesh will be empty" if per_frame else "its shape will come from the other frames"
     for i in small[:LISTED_FRAMES]:
         log.warning(
             "frame %d (%s, time %g) has %d points, fewer than the %d a surface needs: %s",
-            i, seq.names[i], seq.frames[i].time, counts[i], minimum, fate,
+            i,
+            seq.names[i],
+            seq.frames[i].time,
+            counts[i],
+            minimum,
+            fate,
         )
     if len(small) > LISTED_FRAMES:
         log.warning(
             "and %d more frames with fewer than %d points (%s)",
-            len(small) - LISTED_FRAMES, minimum, _frame_list(small[LISTED_FRAMES:]),
+            len(small) - LISTED_FRAMES,
+            minimum,
+            _frame_list(small[LISTED_FRAMES:]),
         )
     return small
 
@@ -146,8 +151,13 @@ def check_times(seq: PointCloudSequence, options) -> list[float]:
             "output times %s lie outside the input's time range %g to %g: the result there is "
             "extrapolated, no input frame constrains it",
             ", ".join(f"{t:g}" for t in outside[:LISTED_FRAMES])
-            + (f" (and {len(outside) - LISTED_FRAMES} more)" if len(outside) > LISTED_FRAMES else ""),
-            first, last,
+            + (
+                f" (and {len(outside) - LISTED_FRAMES} more)"
+                if len(outside) > LISTED_FRAMES
+                else ""
+            ),
+            first,
+            last,
         )
     return outside
 
@@ -166,7 +176,9 @@ def check_memory(seq: PointCloudSequence, method: str, module: ModuleType, optio
         log.debug("available memory unknown: no memory check")
         return None
     needed = int(estimate(seq, options))
-    log.debug("%s: about %s of memory needed, %s available", method, _size(needed), _size(available))
+    log.debug(
+        "%s: about %s of memory needed, %s available", method, _size(needed), _size(available)
+    )
     if needed <= available:
         return needed
     names = tuple(getattr(module, "MEMORY_OPTIONS", ()))

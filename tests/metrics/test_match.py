@@ -23,7 +23,9 @@ def _truth(frames=4):
 def test_noisy_partial_and_per_frame_results_of_the_truth_pass():
     truth = _truth()
     rng = np.random.default_rng(0)
-    noisy = AnimatedMesh(truth.faces, truth.vertices + rng.normal(scale=0.03, size=truth.vertices.shape))
+    noisy = AnimatedMesh(
+        truth.faces, truth.vertices + rng.normal(scale=0.03, size=truth.vertices.shape)
+    )
     assert truth_mismatch(noisy, truth) is None
     # one-sided scans: only the half facing the cameras, one frame with nothing at all
     halves = []
@@ -83,5 +85,7 @@ def test_evaluate_files_refuses_unless_forced(tmp_path):
     np.savez(tmp_path / "mm.npz", vertices=truth.vertices * 1000, faces=truth.faces)
     with pytest.raises(InputError, match=r"truth\.npz does not look like the truth of .*mm\.npz"):
         evaluate_files(tmp_path / "mm.npz", tmp_path / "truth.npz", samples=500, floor=False)
-    report = evaluate_files(tmp_path / "mm.npz", tmp_path / "truth.npz", samples=500, floor=False, force=True)
+    report = evaluate_files(
+        tmp_path / "mm.npz", tmp_path / "truth.npz", samples=500, floor=False, force=True
+    )
     assert report["frames"] == 3

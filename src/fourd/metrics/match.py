@@ -106,8 +106,12 @@ def _bounds(value) -> np.ndarray | None:
     present = [v for v, _ in value.meshes if len(v)]
     if not present:
         return None
-    return np.stack([np.min([v.min(axis=0) for v in present], axis=0),
-                     np.max([v.max(axis=0) for v in present], axis=0)])
+    return np.stack(
+        [
+            np.min([v.min(axis=0) for v in present], axis=0),
+            np.max([v.max(axis=0) for v in present], axis=0),
+        ]
+    )
 
 
 def _vector(values: np.ndarray) -> str:

@@ -65,7 +65,9 @@ MEMORY_OPTIONS = ("resolution", "time_substeps", "max_substeps", "neighbourhood"
 
 
 def estimate_peak_bytes(
-    data: PointCloudSequence | np.ndarray, options: Options | None = None, *,
+    data: PointCloudSequence | np.ndarray,
+    options: Options | None = None,
+    *,
     frames: int | None = None,
 ) -> int:
     """Estimated peak memory of :func:`~.pipeline.run` beyond what the process holds already.
@@ -119,9 +121,8 @@ def estimate_peak_bytes(
     surface = per_slice * (options.resolution / coarse) ** 2 * slices
     fine = options.refine**3
     per_cell = CELL_BYTES + FINE_NODE_BYTES * fine
-    per_surface = (
-        SOLVER_BYTES * (options.neighbourhood / 7) ** 2
-        + BAND_NODE_BYTES * fine * (2 * options.band + 1)
+    per_surface = SOLVER_BYTES * (options.neighbourhood / 7) ** 2 + BAND_NODE_BYTES * fine * (
+        2 * options.band + 1
     )
     return int(cells * per_cell + surface * per_surface)
 
@@ -137,7 +138,9 @@ def _surface_cells(points: list[np.ndarray], bounds: np.ndarray, resolution: int
     ``resolution`` that hold at least two of the frame's points."""
     grid = build_grid(bounds, np.zeros(1), resolution=resolution, substeps=1)
     strides = np.array([grid.shape[1] * grid.shape[2], grid.shape[2], 1])
-    chosen = np.unique(np.linspace(0, len(points) - 1, min(len(points), SURFACE_FRAMES)).astype(int))
+    chosen = np.unique(
+        np.linspace(0, len(points) - 1, min(len(points), SURFACE_FRAMES)).astype(int)
+    )
     counts = []
     for index in chosen:
         frame = points[index]
