@@ -98,7 +98,7 @@ def _select_frames(seq, text: str | None, source):
 
 def cmd_reconstruct(args) -> int:
     from fourd.io.frames import load_sequence
-    from fourd.io.results import check_output, save
+    from fourd.io.results import save
     from fourd.methods import (
         DEFAULT_METHOD,
         method_module,
@@ -107,10 +107,8 @@ def cmd_reconstruct(args) -> int:
         resolve_alias,
     )
     from fourd.options import parse_assignments
-    from fourd.preflight import check_result_format
+    from fourd.preflight import check_output
 
-    # Everything that can be told without the data is checked before it is loaded.
-    kind = check_output(args.output, create_parents=True)
     output = Path(args.output)
     config_method, values = _read_config(args.config)
     values.update(parse_assignments(args.set or []))
@@ -130,7 +128,9 @@ def cmd_reconstruct(args) -> int:
             raise InputError(f"--cache: method {method!r} cannot resume from a cache yet")
         values["cache_dir"] = args.cache
     options = method_options(method, values)
-    check_result_format(method, module, kind, args.output)
+    # What can be told without the data is checked before it is loaded: the output can be
+    # written (a missing folder can be made) and its format holds the method's result.
+    check_output(args.output, method, module, create_parents=True)
     seq = load_sequence(args.input)
     seq = _select_frames(seq, args.frames, args.input)
     log.info("%s: %d frames, %d to %d points per frame", args.input, len(seq),
