@@ -2,6 +2,7 @@
 
 import dataclasses
 import os
+import time
 from pathlib import Path
 
 import numpy as np
@@ -111,12 +112,115 @@ def test_too_few_frames_for_a_sequence_method(tmp_path, capsys):
 
 def test_unwritable_output(tmp_path, capsys):
     folder = _folder(tmp_path)
-    _run_bad(capsys, ["reconstruct", str(folder), "-o", str(tmp_path / "no" / "such" / "o.npz")], "does not exist")
+    _run_bad(capsys, ["reconstruct", str(folder), "-o", str(folder / "frame_0.ply" / "o.npz")],
+             "frame_0.ply is a file, not a folder")
+    _run_bad(capsys, ["reconstruct", str(folder), "-o", str(folder / "frame_0.ply" / "deeper" / "o.npz")],
+             "frame_0.ply is a file, not a folder")
+    if Path("/proc").is_dir():  # writable bits for root, but no file can be made there
+        _run_bad(capsys, ["reconstruct", str(folder), "-o", "/proc/o.npz"], "/proc", "cannot write")
     if os.geteuid() != 0:
         locked = tmp_path / "locked"
         locked.mkdir()
         locked.chmod(0o500)
         _run_bad(capsys, ["reconstruct", str(folder), "-o", str(locked / "o.npz")], "not writable")
+
+
+@pytest.fixture
+def no_method_runs(monkeypatch):
+    """Every registered method's reconstruct fails the test when it is called."""
+
+    def fail(*args, **kwargs):
+        raise AssertionError("the method ran before the checks refused")
+
+    for name in METHODS:
+        module = method_module(name)
+        monkeypatch.setattr(module, "reconstruct", fail)
+
+
+@pytest.mark.usefixtures("no_method_runs")
+def test_a_grid_too_large_for_the_memory_is_refused_before_the_work(tmp_path, capsys):
+    folder = _folder(tmp_path, frames=3)
+    method_module("flow"), method_module("auto")  # imported: time the check, not the imports
+    for method in ("flow", "watertight", "auto"):
+        start = time.perf_counter()
+        _run_bad(capsys, ["reconstruct", str(folder), "-o", str(tmp_path / "x.npz"), "--method", method,
+                          "--set", "resolution=100000"],
+                 f"method '{method}' would need about", "resolution=100000", "lower resolution")
+        assert time.perf_counter() - start < 1.0
+    # --force skips the estimate (here: straight into the method, which fails the test)
+    with pytest.raises(AssertionError, match="the method ran"):
+        main(["reconstruct", str(folder), "-o", str(tmp_path / "x.npz"), "--method", "flow",
+              "--set", "resolution=100000", "--force"])
+
+
+@pytest.mark.usefixtures("no_method_runs")
+def test_per_frame_meshes_to_a_point_cache_are_refused_before_loading(tmp_path, capsys):
+    for method in ("perframe", "flow"):
+        _run_bad(capsys, ["reconstruct", str(tmp_path / "not-loaded"), "-o", str(tmp_path / "x.pc2"),
+                          "--method", method],
+                 "x.pc2", f"method '{method}' gives a mesh per frame",
+                 "use --method auto, kinematic or watertight, or write .npz, .glb, .usd or a folder")
+
+
+def test_frames_out_of_range_name_the_option_and_the_range(tmp_path, capsys):
+    folder = _folder(tmp_path, frames=3)
+    _run_bad(capsys, ["reconstruct", str(folder), "-o", str(tmp_path / "o.npz"), "--method", "perframe",
+                      "--frames", "50:60"],
+             "--frames 50:60 selects no frame: the input has 3 frames (0-2)")
+    _run_bad(capsys, ["reconstruct", str(folder), "-o", str(tmp_path / "o.npz"), "--method", "perframe",
+                      "--frames", "2:1"], "--frames 2:1 selects no frame")
+
+
+def test_frames_too_small_are_named_and_a_missing_output_folder_is_made(tmp_path, capsys):
+    folder = _folder(tmp_path, frames=3)
+    _ply(folder / "frame_1.ply", _sphere_points(count=6, seed=1))
+    out = tmp_path / "new" / "deeper" / "o.npz"
+    assert main(["reconstruct", str(folder), "-o", str(out), "--method", "perframe", "--frames", "1:9"]) == 0
+    err = capsys.readouterr().err
+    assert "--frames 1:9 reaches past the input's frames: the input has 3 frames (0-2); using 2 of them (1-2)" in err
+    assert "frame 0 (frame_1.ply, time 1) has 6 points, fewer than the 20 a surface needs: its mesh will be empty" in err
+    assert out.exists()
+    tiny = tmp_path / "tiny"
+    tiny.mkdir()
+    for i in range(2):
+        _ply(tiny / f"frame_{i}.ply", _sphere_points(count=10, seed=i))
+    _run_bad(capsys, ["reconstruct", str(tiny), "-o", str(tmp_path / "t.npz"), "--method", "perframe"],
+             "every frame has fewer than 20 points")
+
+
+def _truth_files(tmp_path):
+    rng = np.random.default_rng(0)
+    sphere = _sphere_points(count=300)
+    vertices = np.stack([sphere + [0.1 * t, 0, 0] for t in range(3)])
+    faces = np.zeros((0, 3), int)
+    paths = {}
+    for name, v in {"truth": vertices, "noisy": vertices + rng.normal(scale=0.01, size=vertices.shape),
+                    "millimetres": 1000 * vertices, "elsewhere": vertices + 5.0, "short": vertices[:2]}.items():
+        paths[name] = tmp_path / f"{name}.npz"
+        np.savez(paths[name], vertices=v, faces=faces)
+    return paths
+
+
+def test_evaluate_refuses_a_truth_that_does_not_match(tmp_path, capsys):
+    files = _truth_files(tmp_path)
+    truth = str(files["truth"])
+    for name, needle in [("millimetres", "bounding box"), ("elsewhere", "bounding box"),
+                         ("short", "the result has 2 frames but the truth has 3")]:
+        _run_bad(capsys, ["evaluate", str(files[name]), truth, "--json"],
+                 f"{truth} does not look like the truth of {files[name]}: ", needle, "--force")
+    capsys.readouterr()
+    assert main(["evaluate", str(files["short"]), truth, "--json", "--force"]) == 0
+    assert '"frames": 2' in capsys.readouterr().out
+
+
+def test_view_refuses_a_truth_that_does_not_match(tmp_path, capsys):
+    files = _truth_files(tmp_path)
+    _run_bad(capsys, ["view", str(files["millimetres"]), "--truth", str(files["truth"]), "-o", str(tmp_path / "v")],
+             "does not look like the truth of", "millimetres.npz", "truth.npz")
+    assert not (tmp_path / "v").exists()
+    assert main(["view", str(files["millimetres"]), "--truth", str(files["truth"]), "-o", str(tmp_path / "v"),
+                 "--force", "--quiet"]) == 0
+    assert (tmp_path / "v" / "index.html").exists()
 
 
 def test_unknown_output_extension(tmp_path, capsys):

@@ -80,43 +80,72 @@ def _configure_logging(quiet: bool, verbose: bool = False) -> None:
 
 
 
+def _select_frames(seq, text: str | None, source):
+    """``seq`` restricted to ``--frames A:B:S``; InputError naming ``--frames`` and the valid
+    range when it selects no frame, a warning when it reaches past the input's frames."""
+    chosen = _frames_slice(text)
+    count = len(seq)
+    indices = range(count)[chosen]
+    valid = f"the input has {count} frame{'s' if count != 1 else ''} (0-{count - 1})"
+    if len(indices) == 0:
+        raise InputError(f"--frames {text} selects no frame: {valid}", source)
+    beyond = [v for v in (chosen.start, chosen.stop) if v is not None and not -count <= v <= count]
+    if beyond:
+        log.warning("--frames %s reaches past the input's frames: %s; using %d of them (%d-%d)",
+                    text, valid, len(indices), min(indices), max(indices))
+    return seq[chosen]
+
+
 def cmd_reconstruct(args) -> int:
     from fourd.io.frames import load_sequence
-    from fourd.io.results import check_output, save
-    from fourd.methods import DEFAULT_METHOD, method_options, reconstruct
+    from fourd.io.results import save
+    from fourd.methods import (
+        DEFAULT_METHOD,
+        method_module,
+        method_options,
+        reconstruct,
+        resolve_alias,
+    )
     from fourd.options import parse_assignments
+    from fourd.preflight import check_output
 
-    check_output(args.output)
     output = Path(args.output)
     config_method, values = _read_config(args.config)
     values.update(parse_assignments(args.set or []))
     method = args.method or config_method or DEFAULT_METHOD
+    method, values = resolve_alias(method, values)
+    module = method_module(method)
     if args.times:
         import dataclasses
 
-        from fourd.methods import method_module
-
-        if "times" not in {f.name for f in dataclasses.fields(method_module(method).Options)}:
+        if "times" not in {f.name for f in dataclasses.fields(module.Options)}:
             raise InputError(f"--times: method {method!r} writes one frame per input frame only")
         values["times"] = args.times
     if args.cache:
         import dataclasses
 
-        from fourd.methods import method_module
-
-        if "cache_dir" not in {f.name for f in dataclasses.fields(method_module(method).Options)}:
+        if "cache_dir" not in {f.name for f in dataclasses.fields(module.Options)}:
             raise InputError(f"--cache: method {method!r} cannot resume from a cache yet")
         values["cache_dir"] = args.cache
     options = method_options(method, values)
+    # What can be told without the data is checked before it is loaded: the output can be
+    # written (a missing folder can be made) and its format holds the method's result.
+    check_output(args.output, method, module, create_parents=True)
     seq = load_sequence(args.input)
-    seq = seq[_frames_slice(args.frames)]
-    if len(seq) == 0:
-        raise InputError(f"--frames {args.frames} selects no frames", args.input)
+    seq = _select_frames(seq, args.frames, args.input)
     log.info("%s: %d frames, %d to %d points per frame", args.input, len(seq),
              min(len(f) for f in seq), max(len(f) for f in seq))
     start = time.perf_counter()
-    result = reconstruct(seq, method, options)
+    # (fourd.preflight.check_input runs here first: frame sizes, --times, memory)
+    result = reconstruct(seq, method, options, check_memory=not args.force)
     elapsed = time.perf_counter() - start
+    if not output.parent.exists():  # check_output made sure it can be created
+        try:
+            output.parent.mkdir(parents=True, exist_ok=True)
+        except OSError as error:
+            raise InputError(f"cannot create the output folder ({error.strerror or error})",
+                             args.output) from None
+        log.info("created the folder %s", output.parent)
     save(result, args.output)
     log.info("wrote %s (%d frames, %.2f s, %.2f s/frame)", output, result.frame_count, elapsed,
              elapsed / max(len(seq), 1))
@@ -138,7 +167,7 @@ def cmd_synth(args) -> int:
 def cmd_evaluate(args) -> int:
     from fourd.metrics import evaluate_files, format_report
 
-    report = evaluate_files(args.result, args.truth)
+    report = evaluate_files(args.result, args.truth, force=args.force)
     if args.json:
         print(json.dumps(jsonable(report), indent=2))
     else:
@@ -172,7 +201,15 @@ def cmd_view(args) -> int:
     from fourd.viz.viewer import write_viewer
 
     outdir = Path(args.output) if args.output else Path(str(Path(args.result).with_suffix("")) + "-view")
-    page = write_viewer(args.result, outdir, truth=args.truth, scans=args.input)
+    result, truth = args.result, args.truth
+    if truth is not None:
+        from fourd.io.results import load_result
+        from fourd.metrics import check_truth, load_truth
+
+        result = load_result(args.result)
+        truth = check_truth(result, load_truth(args.truth), args.result, args.truth,
+                            force=args.force)
+    page = write_viewer(result, outdir, truth=truth, scans=args.input)
     print(page)
     if args.open:
         import webbrowser
@@ -233,6 +270,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--times", help="output times, comma separated (methods that support it)")
     p.add_argument("--cache", metavar="DIR",
                    help="keep finished stages in DIR; rerunning the same command resumes from them")
+    p.add_argument("--force", action="store_true",
+                   help="run even when the up-front estimate of the memory needed exceeds the "
+                        "memory available")
 
     p = add("synth", "synthesize a ground-truth scene and scan it with virtual depth cameras", cmd_synth)
     p.add_argument("scene")
@@ -248,6 +288,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("result")
     p.add_argument("truth")
     p.add_argument("--json", action="store_true", help="print all metrics as JSON")
+    p.add_argument("--force", action="store_true",
+                   help="score a truth whose frame count or bounding box differs from the "
+                        "result's (frames matched by time)")
 
     p = add("bench", "run methods x scenes and write benchmarks/BENCHMARKS.md", cmd_bench)
     p.add_argument(
@@ -278,6 +321,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--input", help="the scans (folder) to show as points")
     p.add_argument("-o", "--output", help="folder for the page (default: RESULT-view/)")
     p.add_argument("--open", action="store_true", help="open the page in a browser")
+    p.add_argument("--force", action="store_true",
+                   help="use a truth whose frame count or bounding box differs from the result's")
 
     p = add("options", "list a method's options with their defaults and what they do", cmd_options)
     p.add_argument("method", nargs="?", help="method name (default: the project's default)")

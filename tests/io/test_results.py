@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import struct
 
 import numpy as np
@@ -397,3 +398,44 @@ def test_check_output_before_computing(tmp_path):
     with pytest.raises(InputError, match="not a folder"):
         check_output(tmp_path / "plain")
     assert not list(tmp_path.glob("walk*"))
+
+
+def test_check_output_missing_folders_that_can_be_created(tmp_path):
+    from fourd.io.results import check_output
+
+    target = tmp_path / "new" / "deeper" / "walk.npz"
+    assert check_output(target, create_parents=True) == "npz"
+    assert check_output(str(tmp_path / "new" / "frames") + "/", create_parents=True) == "folder"
+    assert list(tmp_path.iterdir()) == []  # nothing created, no probe left behind
+    (tmp_path / "plain").write_text("x")
+    for path in (tmp_path / "plain" / "walk.npz", tmp_path / "plain" / "sub" / "walk.npz"):
+        with pytest.raises(InputError, match=r"plain is a file, not a folder") as info:
+            check_output(path, create_parents=True)
+        assert str(info.value).startswith(str(path))
+
+
+def test_check_output_tries_a_file_where_the_permission_bits_say_yes(tmp_path, monkeypatch):
+    """Root passes every permission test, but /proc (or a read-only mount) takes no file: the
+    check makes and removes one, and names the folder and the reason."""
+    import fourd.io.results as results
+    from fourd.io.results import check_output
+
+    def refuse(*args, **kwargs):
+        raise OSError(30, "Read-only file system")
+
+    monkeypatch.setattr(results.tempfile, "mkstemp", refuse)
+    monkeypatch.setattr(results.tempfile, "mkdtemp", refuse)
+    for path in (tmp_path / "walk.npz", tmp_path / "new" / "walk.npz"):
+        with pytest.raises(InputError, match=rf"cannot write in the output folder {tmp_path} \(Read-only"):
+            check_output(path, create_parents=True)
+    monkeypatch.undo()
+    if os.path.isdir("/proc") and os.access("/proc", os.W_OK):
+        with pytest.raises(InputError, match=r"/proc/walk\.npz: cannot write in the output folder /proc"):
+            check_output("/proc/walk.npz")
+
+
+def test_one_connectivity_kinds_are_output_kinds():
+    from fourd.io.results import ONE_CONNECTIVITY_KINDS
+
+    assert ONE_CONNECTIVITY_KINDS == ("pc2",)
+    assert all(output_kind(f"walk.{kind}") == kind for kind in ONE_CONNECTIVITY_KINDS)

@@ -7,8 +7,10 @@ import ast
 import dataclasses
 from pathlib import Path
 
+import numpy as np
 import pytest
 
+import fourd
 import fourd.methods
 from fourd.methods import DEFAULT_METHOD, METHODS, method_module
 from fourd.methods.base import check_method_module, diagnostic_figures
@@ -36,6 +38,44 @@ def test_the_contract_check_names_what_is_missing():
     assert any("MIN_FRAMES" in p for p in problems)
     assert any("RESULT" in p for p in problems)
     assert "reconstruct is missing" in problems
+
+
+def test_the_contract_check_names_a_bad_memory_hook():
+    class Module:
+        @dataclasses.dataclass(frozen=True)
+        class Options:
+            resolution: int = 32
+
+        MIN_FRAMES = 1
+        RESULT = fourd.AnimatedMesh
+        estimate_peak_bytes = 3
+        MEMORY_OPTIONS = ("grid",)
+
+        @staticmethod
+        def reconstruct(seq, options=None):
+            return None
+
+    problems = check_method_module(Module)
+    assert "estimate_peak_bytes is not callable" in problems
+    assert any("MEMORY_OPTIONS" in p and "grid" in p for p in problems)
+
+
+@pytest.mark.parametrize("name", ["flow", "watertight", "auto"])
+def test_the_grid_methods_estimate_their_memory(name):
+    """The memory hook of every method with a grid: bytes from the options and the data, the
+    flow's at the same resolution for the compositions, none for an open surface (auto)."""
+    from fourd.methods import flow
+
+    rng = np.random.default_rng(0)
+    seq = fourd.PointCloudSequence.from_arrays([rng.normal(size=(500, 3)) for _ in range(3)])
+    module = method_module(name)
+    options = module.Options(resolution=24)
+    assert module.MEMORY_OPTIONS[0] == "resolution"
+    estimate = module.estimate_peak_bytes(seq, options)
+    assert isinstance(estimate, int)
+    assert estimate == flow.estimate_peak_bytes(seq, flow.Options(resolution=24)) > 0
+    if name == "auto":
+        assert module.estimate_peak_bytes(seq, module.Options(surface="open")) == 0
 
 
 def test_the_default_method_gives_one_connectivity():

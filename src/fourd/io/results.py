@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import logging
 import os
+import tempfile
 from pathlib import Path
 
 from fourd.animation import AnimatedMesh, MeshSequence
@@ -38,7 +39,20 @@ log = logging.getLogger("fourd.io.results")
 #: Output suffixes :func:`save` understands (besides folders).
 RESULT_SUFFIXES: tuple[str, ...] = (".npz", ".glb", *USD_SUFFIXES, ".pc2")
 
-__all__ = ["RESULT_SUFFIXES", "check_output", "load_result", "output_kind", "save"]
+#: Output kinds (:func:`output_kind`) that hold one connectivity for every frame. A
+#: MeshSequence still goes in, baked by :func:`fourd.io.pc2.one_connectivity`, but that mesh
+#: holds every frame's vertices and is written once per frame: ``T x (sum of N_t)`` points,
+#: quadratic in the frames. The other kinds keep each frame's own mesh.
+ONE_CONNECTIVITY_KINDS: tuple[str, ...] = ("pc2",)
+
+__all__ = [
+    "ONE_CONNECTIVITY_KINDS",
+    "RESULT_SUFFIXES",
+    "check_output",
+    "load_result",
+    "output_kind",
+    "save",
+]
 
 
 def output_kind(path: str | os.PathLike) -> str:
@@ -59,20 +73,45 @@ def output_kind(path: str | os.PathLike) -> str:
     )
 
 
-def check_output(path: str | os.PathLike) -> str:
+def check_output(path: str | os.PathLike, *, create_parents: bool = False) -> str:
     """Check, before any long computation, that :func:`save` can write ``path``.
 
-    Returns the output kind (see :func:`output_kind`). Raises InputError for an unknown
-    suffix, a missing or unwritable parent folder, an existing file where a folder output is
-    asked for, or a USD output without usd-core installed.
+    Parameters
+    ----------
+    path : path-like
+        The output (see the module docstring).
+    create_parents : bool
+        Accept a missing output folder when it can be created: its nearest existing ancestor
+        is a folder where new entries can be made (``fourd reconstruct`` then creates it
+        before saving). False: the output folder must exist, as :func:`save` needs.
+
+    Returns
+    -------
+    str
+        The output kind (see :func:`output_kind`).
+
+    Raises
+    ------
+    InputError
+        An unknown suffix; a file where a folder is expected (the output folder, or one of its
+        ancestors); a missing output folder (without ``create_parents``); a folder where no
+        file can be made (no permission, a read-only file system, ``/proc``), found by
+        creating and removing a temporary entry there; an existing file where a folder output
+        is asked for; a USD output without usd-core installed.
     """
     kind = output_kind(path)
     target = Path(path)
     parent = target.parent if str(target.parent) else Path(".")
-    if not parent.exists():
+    existing = parent
+    while not existing.exists() and existing != existing.parent:
+        existing = existing.parent
+    if not existing.is_dir():
+        raise InputError(f"{existing} is a file, not a folder", path)
+    if existing != parent and not create_parents:
         raise InputError("the output folder does not exist", parent)
-    if not os.access(parent, os.W_OK):
-        raise InputError("the output folder is not writable", parent)
+    if not os.access(existing, os.W_OK):
+        raise InputError("the output folder is not writable", existing)
+    _probe_writable(existing, folder_entry=existing != parent, output=path)
     if kind == "folder" and target.exists() and not target.is_dir():
         raise InputError("exists and is not a folder", target)
     if kind == "usd":
@@ -80,6 +119,23 @@ def check_output(path: str | os.PathLike) -> str:
 
         _pxr(path)
     return kind
+
+
+def _probe_writable(folder: Path, *, folder_entry: bool, output) -> None:
+    """Create and remove a temporary file (or, with ``folder_entry``, a folder) in ``folder``:
+    the permission bits do not tell (root may write anywhere but ``/proc``, a read-only
+    mount keeps its bits)."""
+    try:
+        if folder_entry:
+            os.rmdir(tempfile.mkdtemp(prefix=".fourd-check.", dir=folder))
+        else:
+            handle, name = tempfile.mkstemp(prefix=".fourd-check.", dir=folder)
+            os.close(handle)
+            os.remove(name)
+    except OSError as error:
+        raise InputError(
+            f"cannot write in the output folder {folder} ({error.strerror or error})", output
+        ) from None
 
 
 def save(

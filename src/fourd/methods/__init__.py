@@ -17,6 +17,7 @@ from fourd.animation import AnimatedMesh, MeshSequence
 from fourd.errors import InputError
 from fourd.methods.base import Reconstruction
 from fourd.options import make_options
+from fourd.preflight import check_input
 from fourd.sequence import PointCloudSequence
 
 log = logging.getLogger("fourd.methods")
@@ -85,30 +86,43 @@ def resolve_alias(name: str, values: dict | None) -> tuple[str, dict]:
 
 
 def reconstruct(
-    seq: PointCloudSequence, method: str | None = None, options=None, **values
+    seq: PointCloudSequence,
+    method: str | None = None,
+    options=None,
+    *,
+    check_memory: bool = True,
+    **values,
 ) -> AnimatedMesh | MeshSequence:
     """Reconstruct ``seq`` with ``method`` (default :data:`DEFAULT_METHOD`).
 
-    Options are either an ``Options`` instance of that method or keyword values.
+    Options are either an ``Options`` instance of that method or keyword values. Before the
+    method runs, :func:`fourd.preflight.check_input` checks the input against them (frames
+    with too few points, output times outside the input's, and, unless ``check_memory`` is
+    False, the estimated memory against the machine's).
     """
-    module, options = _method_and_options(seq, method, options, values)
+    module, options = _method_and_options(seq, method, options, values, check_memory)
     return module.reconstruct(seq, options)
 
 
 def reconstruct_with_diagnostics(
-    seq: PointCloudSequence, method: str | None = None, options=None, **values
+    seq: PointCloudSequence,
+    method: str | None = None,
+    options=None,
+    *,
+    check_memory: bool = True,
+    **values,
 ) -> Reconstruction:
     """:func:`reconstruct`, plus the method's own figures: a :class:`~.base.Reconstruction`
     whose ``diagnostics`` is the method's typed figures (``flow``:
     :class:`~fourd.methods.flow.FlowDiagnostics`), or None for a method without any."""
-    module, options = _method_and_options(seq, method, options, values)
+    module, options = _method_and_options(seq, method, options, values, check_memory)
     hook = getattr(module, "reconstruct_with_diagnostics", None)
     if hook is None:
         return Reconstruction(module.reconstruct(seq, options), None)
     return hook(seq, options)
 
 
-def _method_and_options(seq, method, options, values):
+def _method_and_options(seq, method, options, values, check_memory=True):
     name = method or DEFAULT_METHOD
     if options is None:
         name, values = resolve_alias(name, values)
@@ -122,5 +136,6 @@ def _method_and_options(seq, method, options, values):
     minimum = getattr(module, "MIN_FRAMES", 1)
     if len(seq) < minimum:
         raise InputError(f"method {name!r} needs at least {minimum} frames, the input has {len(seq)}")
+    check_input(seq, name, module, options, memory=check_memory)
     log.info("reconstructing %d frames with %s", len(seq), name)
     return module, options

@@ -54,13 +54,17 @@ log = logging.getLogger("fourd.methods.auto")
 MIN_FRAMES = 2
 #: An AnimatedMesh, or the flow's MeshSequence where the shape splits or merges (warned).
 RESULT = (AnimatedMesh, MeshSequence)
+#: The option :func:`estimate_peak_bytes` grows with (the flow's grid).
+MEMORY_OPTIONS = ("resolution",)
 
 __all__ = [
     "MIN_FRAMES",
     "AutoDiagnostics",
+    "MEMORY_OPTIONS",
     "Options",
     "fit_to_frames",
     "RESULT",
+    "estimate_peak_bytes",
     "part_counts",
     "reconstruct",
     "reconstruct_with_diagnostics",
@@ -233,6 +237,16 @@ def fit_to_frames(seq: PointCloudSequence, animation: AnimatedMesh, options: Opt
         "vertices near points)", float(np.median(np.abs(fit.offsets))), 100 * fit.supported.mean(),
     )
     return dataclasses.replace(animation, vertices=fit.vertices)
+
+
+def estimate_peak_bytes(seq: PointCloudSequence, options: Options | None = None) -> int:
+    """Estimated peak memory (bytes): the flow's at ``resolution``
+    (:func:`fourd.methods.flow.estimate_peak_bytes`) when the data may be a closed object;
+    0 with ``surface="open"`` (the kinematic method alone, whose memory is not estimated)."""
+    options = Options() if options is None else options
+    if options.surface == "open":
+        return 0
+    return flow.estimate_peak_bytes(seq, flow.Options(resolution=options.resolution))
 
 
 def reconstruct_with_diagnostics(

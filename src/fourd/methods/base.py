@@ -12,7 +12,14 @@ A method module (or package) exposes
 - ``reconstruct(seq, options) -> RESULT``;
 - optionally ``reconstruct_with_diagnostics(seq, options) -> Reconstruction``, when the
   method has figures of its own (``flow``'s mass conservation error): the result and a frozen
-  dataclass of floats, the same type whatever the options.
+  dataclass of floats, the same type whatever the options;
+- optionally ``estimate_peak_bytes(seq, options) -> int``, for a method whose memory grows
+  with its options (a grid's ``resolution``): the peak memory a run will need beyond what the
+  process holds, estimated from the options and the data in well under a second and without
+  allocating what it estimates, on the high side (``flow``: :mod:`fourd.methods.flow.memory`).
+  :func:`fourd.preflight.check_memory` refuses a run whose estimate exceeds the available
+  memory, naming the first of ``MEMORY_OPTIONS`` (a tuple of option names the estimate grows
+  with, the one to lower first), which goes with the hook.
 
 :func:`check_method_module` checks a module against this contract; a test runs it on every
 registry entry.
@@ -104,4 +111,12 @@ def check_method_module(module: ModuleType) -> list[str]:
     hook = getattr(module, "reconstruct_with_diagnostics", None)
     if hook is not None and not callable(hook):
         problems.append("reconstruct_with_diagnostics is not callable")
+    estimate = getattr(module, "estimate_peak_bytes", None)
+    if estimate is not None:
+        if not callable(estimate):
+            problems.append("estimate_peak_bytes is not callable")
+        names = getattr(module, "MEMORY_OPTIONS", None)
+        fields = {f.name for f in dataclasses.fields(options)} if dataclasses.is_dataclass(options) else set()
+        if not isinstance(names, tuple) or not names or not set(names) <= fields:
+            problems.append(f"MEMORY_OPTIONS must name options of the method, got {names!r}")
     return problems

@@ -34,6 +34,8 @@ log = logging.getLogger("fourd.methods.watertight")
 
 MIN_FRAMES = flow.MIN_FRAMES
 RESULT = AnimatedMesh
+#: The options :func:`estimate_peak_bytes` grows with (the flow's).
+MEMORY_OPTIONS = flow.MEMORY_OPTIONS
 
 #: A template vertex farther than this many cells of the sliding field's grid from both the
 #: flow's surface and its frame's points is off the surface, and a frame with more than
@@ -57,6 +59,7 @@ LOST_WARNING = 0.02
 BIND_EDGES = 1.5
 
 __all__ = [
+    "MEMORY_OPTIONS",
     "MIN_FRAMES",
     "OFF_SURFACE_CELLS",
     "OFF_SURFACE_WARNING",
@@ -68,6 +71,7 @@ __all__ = [
     "reconstruct_with_diagnostics",
     "close_animation",
     "Closing",
+    "estimate_peak_bytes",
     "LOST_WARNING",
     "close_on_flow",
     "rigid_blend",
@@ -318,6 +322,13 @@ def close_on_flow(
         )
     log.info("watertight: closing %.1f s", time.perf_counter() - clock)
     return Closing(animation, float(off_surface.max()), lost)
+
+
+def estimate_peak_bytes(seq: PointCloudSequence, options: Options | None = None) -> int:
+    """Estimated peak memory (bytes): the flow's (:func:`fourd.methods.flow.estimate_peak_bytes`),
+    which dominates; the kinematic sliding's is a fraction of it."""
+    options = Options() if options is None else options
+    return flow.estimate_peak_bytes(seq, flow_options(options))
 
 
 def reconstruct_with_diagnostics(

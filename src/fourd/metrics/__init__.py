@@ -3,10 +3,12 @@
 One concept per module: :mod:`~fourd.metrics.scores` (the metrics, see its docstring),
 :mod:`~fourd.metrics.sampling` (surface samples and exact closest points),
 :mod:`~fourd.metrics.topology` (components, boundaries, volume), :mod:`~fourd.metrics.files`
-(results and truths read from disk) and :mod:`~fourd.metrics.text` (the printed table).
+(results and truths read from disk), :mod:`~fourd.metrics.match` (whether a truth belongs to a
+result) and :mod:`~fourd.metrics.text` (the printed table).
 """
 
 from fourd.metrics.files import evaluate_files, load_truth
+from fourd.metrics.match import check_truth, truth_mismatch
 from fourd.metrics.sampling import bind_to_surface, bound_positions, sample_surface
 from fourd.metrics.scores import evaluate, metric_floor
 from fourd.metrics.text import REPORT_ROWS, format_report
@@ -17,6 +19,7 @@ __all__ = [
     "Topology",
     "bind_to_surface",
     "bound_positions",
+    "check_truth",
     "enclosed_volume",
     "evaluate",
     "evaluate_files",
@@ -25,4 +28,5 @@ __all__ = [
     "metric_floor",
     "sample_surface",
     "topology",
+    "truth_mismatch",
 ]

@@ -9,6 +9,7 @@ import numpy as np
 
 from fourd.animation import AnimatedMesh
 from fourd.errors import InputError
+from fourd.metrics.match import check_truth
 from fourd.metrics.scores import evaluate, metric_floor
 
 
@@ -61,13 +62,19 @@ def evaluate_files(
     samples: int = 60000,
     seed: int = 0,
     floor: bool = True,
+    force: bool = False,
 ) -> dict:
     """:func:`evaluate` a saved result against a saved truth (see :func:`load_truth`); with
-    ``floor`` the truth's :func:`metric_floor` is added under ``"floor"``."""
+    ``floor`` the truth's :func:`metric_floor` is added under ``"floor"``.
+
+    A truth with another frame count or a bounding box unlike the result's is refused
+    (InputError naming both files, :func:`~fourd.metrics.match.check_truth`); ``force``
+    scores it anyway (frames matched by time where the counts differ)."""
     result = _load_result(Path(result_path)) if Path(result_path).exists() else None
     if result is None:
         raise InputError("no such file or folder", result_path)
     truth = load_truth(truth_path)
+    truth = check_truth(result, truth, result_path, truth_path, force=force)
     report = evaluate(result, truth, samples=samples, seed=seed)
     report["result_path"] = os.fspath(result_path)
     report["truth_path"] = os.fspath(truth_path)

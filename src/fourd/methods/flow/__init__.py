@@ -18,6 +18,9 @@ Pipeline (modules of this package):
    inner solves by AMG (:mod:`.amg`);
 5. :mod:`.post` -- refinement near the surface, Laplace solve, :class:`FlowField`, marching cubes.
 
+:func:`estimate_peak_bytes` (:mod:`.memory`) tells the memory a run will need before it starts
+(the up-front check of :mod:`fourd.preflight`).
+
 References
 ----------
 Sharf, Alcantara, Greif, Lewiner, Sheffer, Amenta, Cohen-Or: Space-time surface reconstruction
@@ -25,6 +28,7 @@ using incompressible flow. ACM Transactions on Graphics 27(5), SIGGRAPH Asia 200
 (``002_382acf333feb7a6e.txt``).
 """
 
+from fourd.methods.flow.memory import MEMORY_OPTIONS, estimate_peak_bytes
 from fourd.methods.flow.options import MIN_FRAMES, RESULT, Options
 from fourd.methods.flow.pipeline import (
     FlowDiagnostics,
@@ -39,12 +43,14 @@ from fourd.methods.flow.post import FlowField
 from fourd.methods.flow.saddle import SaddleSolution, solve_saddle
 
 __all__ = [
+    "MEMORY_OPTIONS",
     "MIN_FRAMES",
     "FlowDiagnostics",
     "FlowField",
     "FlowResult",
     "Options",
     "SaddleSolution",
+    "estimate_peak_bytes",
     "mass_conservation_error",
     "reconstruct",
     "reconstruct_with_diagnostics",
