@@ -24,6 +24,10 @@ from fourd.methods.kinematic.urshape import extract_template, template_cell_size
 
 log = logging.getLogger("fourd.methods.kinematic")
 
+#: An automatic template cell is at least the longest side of the box over this many cells
+#: (marching cubes over 600^3 grid points is the most the urshape extraction allows).
+MAX_TEMPLATE_CELLS = 600
+
 
 def animate(
     field,
@@ -70,8 +74,12 @@ def animate(
     """
     started = _time.perf_counter()
     times = np.asarray(times, dtype=float)
-    cell = options.cell_size or template_cell_size(points[0], spacing, options.template_vertices)
     box = np.array([points[0].min(axis=0), points[0].max(axis=0)]) if bounds is None else bounds
+    cell = options.cell_size or max(
+        template_cell_size(points[0], spacing, options.template_vertices),
+        # a few scattered points estimate a tiny area: keep the grid within bounds
+        float(np.max(np.ptp(np.asarray(box, dtype=float), axis=0))) / MAX_TEMPLATE_CELLS,
+    )
 
     # the area estimate of template_cell_size is rough on curved or thin shapes
     # (dfaust-hopping: 1.7x the target), so an automatic cell size is corrected once from the
