@@ -17,7 +17,7 @@ True
 
 from __future__ import annotations
 
-from fourd import synth
+from fourd import deform, synth
 from fourd.animation import AnimatedMesh, MeshSequence
 from fourd.errors import InputError
 from fourd.methods import available_methods, reconstruct
@@ -64,6 +64,7 @@ __all__ = [
     "MeshSequence",
     "PointCloudSequence",
     "available_methods",
+    "deform",
     "evaluate",
     "load_result",
     "load_sequence",

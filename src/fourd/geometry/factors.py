@@ -15,6 +15,7 @@ from dataclasses import dataclass
 
 import numba
 import numpy as np
+import pymetis
 import scipy.sparse as sp
 
 
@@ -111,3 +112,32 @@ def _solve_ordered3(lp, li, lx, up, ui, ux, inverse, rhs, order, y, out):
         out[target, 0] = y[i, 0]
         out[target, 1] = y[i, 1]
         out[target, 2] = y[i, 2]
+
+
+def elimination_order(laplacian: sp.csr_matrix) -> np.ndarray:
+    """A fill-reducing order [N] of the unknowns of a sparse symmetric matrix (its structure;
+    the diagonal is ignored): METIS's nested dissection of its graph, computed once and reused
+    by every factorisation with the same structure (kinematic's sliding: the reduced systems of
+    every step, 2 or 3 unknowns per vertex; material-aware deformation's repositioning).
+
+    Nested dissection rather than minimum degree: SuperLU's factorisation of the reduced
+    system of a step took 67 instead of 95 ms on dfaust-hopping (20,430 unknowns) and 86
+    instead of 145 ms on rigid-turn (20,088) in this order, with about as many nonzeros in
+    the factors: its separators give SuperLU larger supernodes."""
+    n = laplacian.shape[0]
+    if n < 2:
+        return np.arange(n)
+    # the structure of L (explicit zeros too), symmetric, without the diagonal
+    coo = sp.coo_matrix(laplacian)
+    off = coo.row != coo.col
+    if not off.any():
+        return np.arange(n)
+    rows, cols = np.concatenate([coo.row[off], coo.col[off]]), np.concatenate([coo.col[off], coo.row[off]])
+    graph = sp.csr_matrix((np.ones(len(rows)), (rows, cols)), shape=(n, n))
+    graph.sort_indices()
+    perm, _ = pymetis.nested_dissection(
+        adjacency=pymetis.CSRAdjacency(
+            graph.indptr.astype(np.int64), graph.indices.astype(np.int64)
+        )
+    )
+    return np.asarray(perm, dtype=np.int64)

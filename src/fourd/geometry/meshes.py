@@ -138,3 +138,28 @@ def median_edge_length(vertices: np.ndarray, faces: np.ndarray) -> float:
     faces = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
     lengths = np.linalg.norm(vertices[faces[:, [1, 2, 0]]] - vertices[faces], axis=2)
     return float(np.median(lengths))
+
+
+def face_adjacency(faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Pairs of faces sharing an edge, and that edge.
+
+    Returns ``(pairs, edges)``: int64 [E, 2] face indices (``pairs[:, 0] < pairs[:, 1]``) and
+    int64 [E, 2] the shared edge's vertex indices (sorted), in a deterministic order (by
+    edge). An edge with more than two faces (non-manifold) links its faces in consecutive
+    pairs; a boundary edge links none.
+
+    Examples
+    --------
+    >>> pairs, edges = face_adjacency(np.array([[0, 1, 2], [0, 2, 3], [4, 5, 6]]))
+    >>> pairs.tolist(), edges.tolist()
+    ([[0, 1]], [[0, 2]])
+    """
+    faces = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
+    edges = np.sort(faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+    owner = np.repeat(np.arange(len(faces)), 3)
+    order = np.lexsort((owner, edges[:, 1], edges[:, 0]))
+    edges, owner = edges[order], owner[order]
+    same = np.all(edges[1:] == edges[:-1], axis=1)
+    first, second = owner[:-1][same], owner[1:][same]
+    pairs = np.stack([np.minimum(first, second), np.maximum(first, second)], axis=1)
+    return pairs, edges[:-1][same]

@@ -10,10 +10,10 @@ from typing import NamedTuple
 
 import numba
 import numpy as np
-import pymetis
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
+from fourd.geometry.factors import elimination_order
 from fourd.geometry.laplacian import cotangent_weights, weights_laplacian
 from fourd.geometry.meshes import median_edge_length
 
@@ -64,35 +64,6 @@ def slide_precompute(rest_vertices: np.ndarray, faces: np.ndarray) -> SlidePreco
         order,
         ordered,
     )
-
-
-def elimination_order(laplacian: sp.csr_matrix) -> np.ndarray:
-    """A fill-reducing vertex order [N] for the sparse factorisations of the sliding: METIS's
-    nested dissection of the template's vertex graph, computed once. The reduced systems of
-    every step share this graph (2 or 3 unknowns per vertex), so their factorisations take
-    this order instead of ordering again each step.
-
-    Nested dissection rather than minimum degree: SuperLU's factorisation of the reduced
-    system of a step took 67 instead of 95 ms on dfaust-hopping (20,430 unknowns) and 86
-    instead of 145 ms on rigid-turn (20,088) in this order, with about as many nonzeros in
-    the factors: its separators give SuperLU larger supernodes."""
-    n = laplacian.shape[0]
-    if n < 2:
-        return np.arange(n)
-    # the structure of L (explicit zeros too), symmetric, without the diagonal
-    coo = sp.coo_matrix(laplacian)
-    off = coo.row != coo.col
-    if not off.any():
-        return np.arange(n)
-    rows, cols = np.concatenate([coo.row[off], coo.col[off]]), np.concatenate([coo.col[off], coo.row[off]])
-    graph = sp.csr_matrix((np.ones(len(rows)), (rows, cols)), shape=(n, n))
-    graph.sort_indices()
-    perm, _ = pymetis.nested_dissection(
-        adjacency=pymetis.CSRAdjacency(
-            graph.indptr.astype(np.int64), graph.indices.astype(np.int64)
-        )
-    )
-    return np.asarray(perm, dtype=np.int64)
 
 
 def _tangent_bases(normals: np.ndarray) -> np.ndarray:
