@@ -236,6 +236,37 @@ def cmd_options(args) -> int:
     return 0
 
 
+def cmd_learn_material(args) -> int:
+    from fourd.deform import learn_material, save_material
+    from fourd.deform.files import read_poses
+
+    rest, poses, faces = read_poses(args.result)
+    material = learn_material(rest, poses, faces)
+    save_material(material, args.output)
+    print(f"{args.output}: bending stiffness of {len(material.bending)} edges and shearing "
+          f"stiffness of {len(material.shearing)} faces, learned from {len(poses)} poses")
+    return 0
+
+
+def cmd_deform(args) -> int:
+    from fourd.deform import Deformer, load_material
+    from fourd.deform.files import read_anchors, read_mesh, write_mesh
+
+    vertices, faces = read_mesh(args.mesh)
+    material = None
+    if args.material:
+        material = load_material(args.material)
+        material.check(faces)
+    spec = read_anchors(args.anchors, len(vertices), len(faces))
+    deformer = Deformer(vertices, faces, material, anchors=spec.faces, fixed=spec.fixed,
+                        handles=spec.handles, search=args.search)
+    posed = deformer.pose(spec.transforms, spec.positions if len(spec.handles) else None,
+                          axes=spec.axes)
+    write_mesh(args.output, posed, faces)
+    print(args.output)
+    return 0
+
+
 def cmd_info(args) -> int:
     from fourd.info import describe
 
@@ -330,6 +361,21 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = add("info", "describe an input folder or a result", cmd_info)
     p.add_argument("path")
+    p = add("learn-material", "learn bending and shearing stiffness from an animated mesh's "
+            "frames (thesis 004, 2.7)", cmd_learn_material)
+    p.add_argument("result", help="an animated mesh with one connectivity (.npz, a folder, ...)")
+    p.add_argument("-o", "--output", required=True, help="the material (.npz)")
+
+    p = add("deform", "pose a mesh with material-aware deformation from an anchors file "
+            "(thesis 004, ch. 2; the file's format: fourd.deform.files)", cmd_deform)
+    p.add_argument("mesh", help=".obj, .ply, or a result (its rest shape)")
+    p.add_argument("--anchors", required=True, help="JSON: anchor triangles with rotations, "
+                   "fixed vertices, dragged vertices")
+    p.add_argument("--material", help="a material from learn-material (default uniform)")
+    p.add_argument("--search", choices=("binary", "parabola"), default="binary",
+                   help="the rotation search for dragged vertices")
+    p.add_argument("-o", "--output", required=True, help="the posed mesh (.obj or .ply)")
+
     return parser
 
 

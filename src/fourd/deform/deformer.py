@@ -129,8 +129,8 @@ class Deformer:
             Where the dragged vertices go (required when the deformer has ``handles``).
         axes : float64 [H, 3], optional
             Rotation axis of each dragged vertex's anchor (in an interactive tool, the view
-            direction). Default: the normal of the plane through the fixed vertices' centroid,
-            the vertex's rest position and its new position.
+            direction). Default (also for a zero row): the normal of the plane through the
+            fixed vertices' centroid, the vertex's rest position and its new position.
         """
         k = self.user_anchor_count
         given = np.broadcast_to(np.eye(3), (k, 3, 3)) if transforms is None else np.asarray(transforms, float)
@@ -145,7 +145,10 @@ class Deformer:
         if positions is None:
             raise InputError("this deformer has dragged vertices: give their positions")
         positions = np.asarray(positions, dtype=np.float64).reshape(len(self.handles), 3)
-        axes = self._default_axes(positions) if axes is None else np.asarray(axes, float).reshape(-1, 3)
+        default = self._default_axes(positions)
+        axes = default if axes is None else np.array(axes, dtype=float).reshape(len(self.handles), 3)
+        missing = np.linalg.norm(axes, axis=1) == 0
+        axes[missing] = default[missing]
         axes = axes / np.maximum(np.linalg.norm(axes, axis=1, keepdims=True), 1e-300)
 
         def energy_of(h, angle):
