@@ -1,0 +1,118 @@
+"""Material-aware deformation (fourd.deform): the issue's speed targets and the learned horse.
+
+Run: ``.venv/bin/python benchmarks/bm_deform.py``. Prints
+
+* on crane's first frame (``../shared/data/crane.npz``: 10,002 vertices, 20,000 triangles), with
+  six anchor triangles at the extremities: the precomputation (median of 3) and one pose from
+  anchor rotations (median of 50; targets 1 s and 20 ms on 2 cores), and one pose from a dragged
+  vertex (the binary rotation search);
+* on horse-gallop (48 frames), the time to learn the material from its frames, and the learned
+  bending stiffness along each leg (geodesic distance from the body: 0 at the body, 1 at the
+  hoof; the 10th percentile per tenth of the leg, where the few flexible edges show);
+  the picture goes to ``benchmarks/plots/horse-stiffness.png`` (red: flexible).
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import connected_components, dijkstra
+
+from fourd.deform import Deformer, learn_material, rotation_about
+from fourd.geometry.meshes import face_adjacency
+
+DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
+
+
+def _median_seconds(work, repeats):
+    times = []
+    for _ in range(repeats):
+        started = time.perf_counter()
+        work()
+        times.append(time.perf_counter() - started)
+    return float(np.median(times))
+
+
+def _extremal_faces(vertices, faces):
+    centres = vertices[faces].mean(axis=1)
+    return np.unique([int(np.argmin(centres[:, k])) for k in range(3)] + [int(np.argmax(centres[:, k])) for k in range(3)])
+
+
+def speed() -> None:
+    data = np.load(DATA / "crane.npz")
+    vertices, faces = data["vertices"][0].astype(float), data["faces"].astype(np.int64)
+    anchors = _extremal_faces(vertices, faces)
+    build = lambda: Deformer(vertices, faces, anchors=anchors)  # noqa: E731
+    build()  # compile the kernels once
+    precompute = _median_seconds(build, 3)
+    deformer = build()
+    rng = np.random.default_rng(0)
+    transforms = np.stack([rotation_about(rng.normal(size=3), rng.uniform(0, 1)) for _ in anchors])
+    transforms[0] = np.eye(3)
+    deformer.pose(transforms)
+    pose = _median_seconds(lambda: deformer.pose(transforms), 50)
+    print(f"crane frame 0: {len(vertices)} vertices, {len(faces)} triangles, {len(anchors)} anchors")
+    print(f"  precomputation {precompute:.3f} s (target 1 s), pose {1000 * pose:.1f} ms (target 20 ms)")
+    tip = int(faces[anchors[-1], 0])
+    dragger = Deformer(vertices, faces, anchors=anchors[:1], fixed=faces[anchors[0]], handles=[tip])
+    target = vertices[tip] + 0.1 * np.ptp(vertices, axis=0).max() * np.array([1.0, 0.0, 0.0])
+    drag = _median_seconds(lambda: dragger.pose(positions=[target]), 5)
+    print(f"  pose from one dragged vertex (binary search): {1000 * drag:.0f} ms")
+
+
+def horse() -> None:
+    data = np.load(DATA / "horse-gallop.npz")
+    frames, faces = data["vertices"].astype(float), data["faces"].astype(np.int64)
+    rest = frames[0]
+    started = time.perf_counter()
+    material = learn_material(rest, frames[1:], faces)
+    print(f"horse-gallop: learned from {len(frames) - 1} poses in {time.perf_counter() - started:.2f} s")
+    _, edges = face_adjacency(faces)
+    pairs = np.unique(np.sort(faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1), axis=0)
+    lengths = np.linalg.norm(rest[pairs[:, 0]] - rest[pairs[:, 1]], axis=1)
+    below = rest[:, 1] < 0.55  # the legs, below the belly (Y up; the horse is 1.36 tall)
+    keep = below[pairs[:, 0]] & below[pairs[:, 1]]
+    graph = sp.coo_matrix((lengths[keep], (pairs[keep, 0], pairs[keep, 1])), shape=(len(rest),) * 2).tocsr()
+    _, labels = connected_components(graph, directed=False)
+    sizes = np.bincount(labels[below])
+    for leg in np.argsort(sizes)[::-1][:4]:
+        members = np.flatnonzero((labels == leg) & below)
+        top = members[rest[members, 1] > rest[members, 1].max() - 0.03]
+        distance = dijkstra(graph, indices=top, min_only=True)
+        along = np.full(len(rest), np.nan)
+        reached = members[np.isfinite(distance[members])]
+        along[reached] = distance[reached] / distance[reached].max()
+        edge_along = along[edges].mean(axis=1)
+        profile = [np.quantile(material.bending[(edge_along >= a) & (edge_along < a + 0.1)], 0.1)
+                   for a in np.arange(0.0, 1.0, 0.1)]
+        x, z = rest[members, 0].mean(), rest[members, 2].mean()
+        print(f"  leg at x={x:+.2f} z={z:+.2f}: " + " ".join(f"{p:.2f}" for p in profile))
+    _picture(rest, faces, edges, material.bending)
+
+
+def _picture(rest, faces, edges, bending) -> None:
+    from PIL import Image
+
+    from fourd.viz.camera import fit_camera
+    from fourd.viz.raster import render
+
+    stiffness = np.full(len(rest), np.inf)
+    np.minimum.at(stiffness, edges[:, 0], bending)
+    np.minimum.at(stiffness, edges[:, 1], bending)
+    flexible = (stiffness.max() - stiffness) / max(np.ptp(stiffness), 1e-12)
+    flexible = np.sqrt(np.clip(flexible / max(np.quantile(flexible, 0.98), 1e-12), 0, 1))
+    colors = np.stack([np.full_like(flexible, 0.9), 0.9 * (1 - flexible), 0.9 * (1 - flexible)], axis=1)
+    camera = fit_camera(np.array([rest.min(axis=0), rest.max(axis=0)]), azimuth=90, elevation=10)
+    image = render(camera=camera, width=700, height=500, vertices=rest, faces=faces,
+                   vertex_colors=colors, texture="none")
+    path = Path(__file__).resolve().parent / "plots" / "horse-stiffness.png"
+    Image.fromarray(image).save(path)
+    print(f"  picture: {path.relative_to(Path.cwd()) if path.is_relative_to(Path.cwd()) else path}")
+
+
+if __name__ == "__main__":
+    speed()
+    horse()
