@@ -15,8 +15,7 @@ Layout of a written archive (Ogawa)::
 
 An :class:`~fourd.animation.AnimatedMesh` keeps one topology (``kHomogenousTopology``: every
 reader sees a deforming mesh); a :class:`~fourd.animation.MeshSequence` writes each frame's
-own faces (``kHeterogenousTopology``, which Blender, Houdini and Maya play as a changing
-mesh). Frame times go into a uniform ``TimeSampling`` when evenly spaced, an acyclic one
+own faces (``kHeterogenousTopology``, which Blender and Houdini play as a changing mesh). Frame times go into a uniform ``TimeSampling`` when evenly spaced, an acyclic one
 otherwise (see :mod:`fourd.io.timebase`); the archive records the frame rate as its DCC FPS
 hint. Alembic winds polygons clockwise (right-handed Y up), fourd counter-clockwise: the
 indices are reversed on writing and again on reading.
