@@ -159,7 +159,7 @@ def test_per_frame_meshes_to_a_point_cache_are_refused_before_loading(tmp_path, 
         _run_bad(capsys, ["reconstruct", str(tmp_path / "not-loaded"), "-o", str(tmp_path / "x.pc2"),
                           "--method", method],
                  "x.pc2", f"method '{method}' gives a mesh per frame",
-                 "use --method auto, kinematic or watertight, or write .npz, .glb, .usd or a folder")
+                 "use --method auto, kinematic or watertight, or write .npz, .glb, .usd, .abc or a folder")
 
 
 def test_frames_out_of_range_name_the_option_and_the_range(tmp_path, capsys):
@@ -300,3 +300,148 @@ def test_options_lists_every_option_of_a_method(capsys):
     assert "resolution = 32  (int)" in out
     assert main(["options", "nosuch"]) == 2
     assert "unknown method 'nosuch'" in capsys.readouterr().err
+
+
+# ------------------------------------------------- time base, up axis, scale, Alembic
+
+
+def _fake_reconstruct(monkeypatch, calls=None):
+    """Replace the reconstruction by a known result (a sphere moving along x, one frame per
+    input frame at the input's times): the output options are what is tested."""
+    import trimesh
+
+    import fourd.methods
+    from fourd.animation import AnimatedMesh
+
+    sphere = trimesh.creation.icosphere(subdivisions=1)
+
+    def fake(seq, method, options, **kwargs):
+        if calls is not None:
+            calls.append(method)
+        vertices = np.stack([sphere.vertices + [0.1 * k, 0, 0] for k in range(len(seq))])
+        return AnimatedMesh(sphere.faces, vertices, times=seq.times)
+
+    monkeypatch.setattr(fourd.methods, "reconstruct", fake)
+    return fake
+
+
+def _glb_keys(path):
+    import pygltflib
+
+    gltf = pygltflib.GLTF2.load(path)
+    blob = gltf.binary_blob()
+
+    def values(index, width):
+        accessor = gltf.accessors[index]
+        view = gltf.bufferViews[accessor.bufferView]
+        start = (view.byteOffset or 0) + (accessor.byteOffset or 0)
+        return np.frombuffer(blob, np.float32, accessor.count * width, start).reshape(accessor.count, width)
+
+    times = values(gltf.animations[0].samplers[0].input, 1)[:, 0]
+    return times, values(gltf.meshes[0].primitives[0].attributes.POSITION, 3)
+
+
+def test_fps_up_and_scale_reach_the_written_files(tmp_path, monkeypatch):
+    from fourd.io.axes import z_up_to_y_up
+    from fourd.io.pc2 import read_pc2
+
+    fake = _fake_reconstruct(monkeypatch)
+    folder = _folder(tmp_path, frames=3)  # no times.txt: frame numbers 0, 1, 2
+    truth = fake(__import__("fourd").load_sequence(folder), "auto", None)
+    options = ["--fps", "24", "--up", "z", "--scale", "2", "--quiet"]
+    assert main(["reconstruct", str(folder), "-o", str(tmp_path / "o.glb"), *options]) == 0
+    times, base = _glb_keys(tmp_path / "o.glb")
+    assert np.allclose(times, [0, 1 / 24, 2 / 24])
+    assert np.abs(base - z_up_to_y_up(2 * truth.vertices[0])).max() <= 1e-5
+    assert main(["reconstruct", str(folder), "-o", str(tmp_path / "o.pc2"), *options]) == 0
+    cache = read_pc2(tmp_path / "o.pc2")
+    assert (cache.start, cache.rate) == (0.0, 1.0)
+    assert np.abs(cache.vertices - 2 * truth.vertices).max() <= 1e-5  # no up axis in .pc2
+    if _importable("pxr"):
+        from pxr import Usd, UsdGeom
+
+        assert main(["reconstruct", str(folder), "-o", str(tmp_path / "o.usda"), *options]) == 0
+        stage = Usd.Stage.Open(str(tmp_path / "o.usda"))
+        assert stage.GetTimeCodesPerSecond() == 24 and UsdGeom.GetStageUpAxis(stage) == "Z"
+        points = UsdGeom.Mesh(stage.GetPrimAtPath("/Root/Mesh")).GetPointsAttr()
+        assert points.GetTimeSamples() == [0.0, 1.0, 2.0]
+        assert np.abs(np.array(points.Get(2)) - 2 * truth.vertices[2]).max() <= 1e-5
+    if _importable("alembic3d"):
+        from fourd.io.abc import read_abc
+
+        assert main(["reconstruct", str(folder), "-o", str(tmp_path / "o.abc"), *options]) == 0
+        back = read_abc(tmp_path / "o.abc")
+        assert back.times.tolist() == [0.0, 1.0, 2.0]
+        assert np.abs(back.vertices - z_up_to_y_up(2 * truth.vertices)).max() <= 1e-5
+
+
+def test_times_txt_of_seconds_keep_their_seconds(tmp_path, monkeypatch, capsys):
+    from fourd.io.pc2 import read_pc2
+
+    _fake_reconstruct(monkeypatch)
+    folder = _folder(tmp_path, frames=3)
+    (folder / "times.txt").write_text("0.50\n0.54\n0.58\n")  # time stamps of a 25 fps capture
+    assert main(["reconstruct", str(folder), "-o", str(tmp_path / "o.glb")]) == 0
+    assert "times are seconds, 25 fps" in capsys.readouterr().err
+    assert np.allclose(_glb_keys(tmp_path / "o.glb")[0], [0.5, 0.54, 0.58])
+    assert main(["reconstruct", str(folder), "-o", str(tmp_path / "o.pc2"), "--quiet"]) == 0
+    cache = read_pc2(tmp_path / "o.pc2")
+    assert (cache.start, cache.rate) == (12.5, pytest.approx(1.0))
+    assert main(["reconstruct", str(folder), "-o", str(tmp_path / "o.pc2"), "--fps", "100", "-q"]) == 0
+    assert read_pc2(tmp_path / "o.pc2").start == 50.0  # another timeline rate, same seconds
+
+
+def test_bad_output_options_stop_before_the_work(tmp_path, monkeypatch, capsys):
+    calls = []
+    _fake_reconstruct(monkeypatch, calls)
+    folder = _folder(tmp_path, frames=2)
+    out = str(tmp_path / "o.glb")
+    _run_bad(capsys, ["reconstruct", str(folder), "-o", out, "--fps", "0"], "--fps must be a positive number")
+    _run_bad(capsys, ["reconstruct", str(folder), "-o", out, "--scale", "-2"], "--scale must be a positive number")
+    _run_bad(capsys, ["reconstruct", str(folder), "-o", out, "--scale", "nan"], "--scale")
+    for argv in (["--up", "x"], ["--fps", "fast"]):
+        with pytest.raises(SystemExit) as info:
+            main(["reconstruct", str(folder), "-o", out, *argv])
+        assert info.value.code == 2
+    assert calls == [] and not (tmp_path / "o.glb").exists()
+
+
+def test_abc_without_alembic3d_is_one_line_before_the_work(tmp_path, monkeypatch, capsys):
+    import builtins
+
+    calls = []
+    _fake_reconstruct(monkeypatch, calls)
+    real_import = builtins.__import__
+
+    def no_alembic(name, *args, **kwargs):
+        if name in ("alembic3d", "imath") or name.startswith("alembic3d."):
+            raise ImportError(f"No module named {name!r}")
+        return real_import(name, *args, **kwargs)
+
+    monkeypatch.setattr(builtins, "__import__", no_alembic)
+    folder = _folder(tmp_path, frames=2)
+    _run_bad(capsys, ["reconstruct", str(folder), "-o", str(tmp_path / "o.abc")],
+             "o.abc: writing .abc needs the alembic3d package: pip install 'fourd[abc]'")
+    assert calls == []
+
+
+def test_info_and_evaluate_read_an_abc_result(tmp_path, monkeypatch, capsys):
+    pytest.importorskip("alembic3d", reason="alembic3d (the fourd[abc] extra) is not installed")
+    import fourd
+
+    fake = _fake_reconstruct(monkeypatch)
+    folder = _folder(tmp_path, frames=2)
+    fourd.save(fake(fourd.load_sequence(folder), "auto", None), tmp_path / "truth.npz")
+    assert main(["reconstruct", str(folder), "-o", str(tmp_path / "o.abc"), "-q"]) == 0
+    assert main(["info", str(tmp_path / "o.abc")]) == 0
+    out = capsys.readouterr().out
+    assert "animated mesh: 2 frames, 42 vertices, 80 faces" in out and "times 0 .. 1" in out
+    assert main(["evaluate", str(tmp_path / "o.abc"), str(tmp_path / "truth.npz"), "--json"]) == 0
+    report = __import__("json").loads(capsys.readouterr().out)
+    assert report["correspondence_mean"] < 1e-6  # the same mesh, vertex for vertex
+
+
+def _importable(name: str) -> bool:
+    import importlib.util
+
+    return importlib.util.find_spec(name) is not None

@@ -153,9 +153,9 @@ def test_per_frame_meshes_cannot_go_to_a_point_cache():
         assert str(info.value) == (
             f"walk.pc2: a .pc2 file holds one mesh connectivity for all frames, but method "
             f"'{name}' gives a mesh per frame, each with its own: use --method auto, kinematic "
-            "or watertight, or write .npz, .glb, .usd or a folder"
+            "or watertight, or write .npz, .glb, .usd, .abc or a folder"
         )
-        for kind in ("npz", "glb", "usd", "folder"):
+        for kind in ("npz", "glb", "usd", "abc", "folder"):
             check_result_format(name, method_module(name), kind)
     # the default may give either; its MeshSequence is baked into one connectivity later
     for name in ("auto", "kinematic", "watertight"):

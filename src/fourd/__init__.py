@@ -35,15 +35,17 @@ def load_sequence(path) -> PointCloudSequence:
 
 def save(result, path, **options):
     """Write an :class:`AnimatedMesh` or :class:`MeshSequence`; the format follows the extension
-    (``.npz``, ``.glb``, ``.usd/.usda/.usdc``, ``.pc2``, or a folder). Options go to
-    :func:`fourd.io.results.save` (``mesh_format``, ``fps``, ``interpolation``)."""
+    (``.npz``, ``.glb``, ``.usd/.usda/.usdc``, ``.abc``, ``.pc2``, or a folder). Options go to
+    :func:`fourd.io.results.save` (``mesh_format``, ``fps``, ``time_unit``, ``interpolation``,
+    ``up``, ``scale``)."""
     from fourd.io.results import save as _save
 
     return _save(result, path, **options)
 
 
 def load_result(path):
-    """Read a result written by :func:`save` (``.npz``, or a folder of per-frame meshes)."""
+    """Read a result written by :func:`save` (``.npz``, ``.abc``, or a folder of per-frame
+    meshes)."""
     from fourd.io.results import load_result as _load
 
     return _load(path)

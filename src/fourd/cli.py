@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import math
 import os
 import sys
 import time
@@ -96,9 +97,27 @@ def _select_frames(seq, text: str | None, source):
     return seq[chosen]
 
 
+def _positive(value: float | None, option: str) -> float | None:
+    """``value`` when it is None or a positive finite number, else InputError naming ``option``."""
+    if value is not None and not (math.isfinite(value) and value > 0):
+        raise InputError(f"{option} must be a positive number, got {value:g}")
+    return value
+
+
+def _time_note(base, kind: str) -> str:
+    """How the written file reads the times, for the log (empty for formats without a time
+    base)."""
+    if kind not in ("glb", "usd", "abc", "pc2"):
+        return ""
+    if base.unit == "frames":
+        return f"; times are frame numbers at {base.fps:g} fps"
+    return f"; times are seconds, {base.fps:.6g} fps"
+
+
 def cmd_reconstruct(args) -> int:
     from fourd.io.frames import load_sequence
     from fourd.io.results import save
+    from fourd.io.timebase import time_base, time_unit_of
     from fourd.methods import (
         DEFAULT_METHOD,
         method_module,
@@ -110,6 +129,8 @@ def cmd_reconstruct(args) -> int:
     from fourd.preflight import check_output
 
     output = Path(args.output)
+    fps = _positive(args.fps, "--fps")
+    scale = _positive(args.scale, "--scale")
     config_method, values = _read_config(args.config)
     values.update(parse_assignments(args.set or []))
     method = args.method or config_method or DEFAULT_METHOD
@@ -130,9 +151,12 @@ def cmd_reconstruct(args) -> int:
     options = method_options(method, values)
     # What can be told without the data is checked before it is loaded: the output can be
     # written (a missing folder can be made) and its format holds the method's result.
-    check_output(args.output, method, module, create_parents=True)
+    kind = check_output(args.output, method, module, create_parents=True)
     seq = load_sequence(args.input)
     seq = _select_frames(seq, args.frames, args.input)
+    # The input's times say what the result's count (also at --times between them): whole
+    # numbers are frame numbers at --fps (default 30), anything else seconds.
+    base = time_base(seq.times, fps=fps, unit=time_unit_of(seq.times))
     log.info("%s: %d frames, %d to %d points per frame", args.input, len(seq),
              min(len(f) for f in seq), max(len(f) for f in seq))
     start = time.perf_counter()
@@ -146,9 +170,9 @@ def cmd_reconstruct(args) -> int:
             raise InputError(f"cannot create the output folder ({error.strerror or error})",
                              args.output) from None
         log.info("created the folder %s", output.parent)
-    save(result, args.output)
-    log.info("wrote %s (%d frames, %.2f s, %.2f s/frame)", output, result.frame_count, elapsed,
-             elapsed / max(len(seq), 1))
+    save(result, args.output, fps=base.fps, time_unit=base.unit, up=args.up, scale=scale)
+    log.info("wrote %s (%d frames, %.2f s, %.2f s/frame%s)", output, result.frame_count, elapsed,
+             elapsed / max(len(seq), 1), _time_note(base, kind))
     return 0
 
 
@@ -293,7 +317,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = add("reconstruct", "reconstruct an animated mesh from a folder of scans", cmd_reconstruct)
     p.add_argument("input", help="folder of frame files (ply/obj/xyz/pts/npy/npz) or one .npz")
     p.add_argument("-o", "--output", required=True,
-                   help="result: .npz, .glb, .usd/.usda/.usdc, .pc2 (+ .obj), or a folder")
+                   help="result: .npz, .glb, .usd/.usda/.usdc, .abc, .pc2 (+ .obj), or a folder")
     p.add_argument("--method", help="reconstruction method (default: the project's default)")
     p.add_argument("--config", help="TOML file with `method = ...` and an [options] table")
     p.add_argument("--set", action="append", metavar="KEY=VALUE", help="set a method option")
@@ -304,6 +328,21 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--force", action="store_true",
                    help="run even when the up-front estimate of the memory needed exceeds the "
                         "memory available")
+    p.add_argument("--fps", type=float, metavar="F",
+                   help="frames per second of the written animation (.glb, .usd, .abc, .pc2). "
+                        "Input times that are whole numbers (no times.txt: 0, 1, 2, ...) are "
+                        "frame numbers played at F (default 30); times with fractions "
+                        "(a times.txt of time stamps) are seconds and F is the rate of the "
+                        "frame-based timelines (USD time codes, .pc2 frames; default measured "
+                        "from the times). --fps 1 reads whole-number times as seconds")
+    p.add_argument("--up", choices=("y", "z"), default="y",
+                   help="the data's up axis (default y). z: .glb and .abc (Y up by "
+                        "specification/convention) are rotated (x, y, z) -> (x, z, -y), USD "
+                        "gets upAxis Z; .npz, .pc2 and folders keep the data's axes")
+    p.add_argument("--scale", type=float, default=1.0, metavar="S",
+                   help="multiply every written position by S (all formats), e.g. 0.001 for "
+                        "millimetre scans: glTF and fourd's USD (metersPerUnit 1) take "
+                        "positions as metres")
 
     p = add("synth", "synthesize a ground-truth scene and scan it with virtual depth cameras", cmd_synth)
     p.add_argument("scene")

@@ -12,6 +12,8 @@ from fourd.sequence import PointCloudSequence
 
 
 def _is_result(path: Path) -> bool:
+    if path.suffix.lower() == ".abc":
+        return True
     if path.suffix == ".npz":
         try:
             with np.load(path) as data:
@@ -52,7 +54,7 @@ def describe_result(result) -> str:
 
 
 def describe(path) -> str:
-    """Describe ``path``: a result (.npz with faces, or a folder of meshes) or an input sequence."""
+    """Describe ``path``: a result (.npz with faces, an Alembic .abc) or an input sequence."""
     path = Path(path)
     if not path.exists():
         raise InputError("does not exist", path)

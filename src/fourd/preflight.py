@@ -83,8 +83,8 @@ def check_result_format(
     choice = f"--method {_either(others)}, or " if others else ""
     raise InputError(
         f"a .{kind} file holds one mesh connectivity for all frames, but method {method!r} "
-        f"gives a mesh per frame, each with its own: use {choice}write .npz, .glb, .usd or a "
-        "folder",
+        f"gives a mesh per frame, each with its own: use {choice}write .npz, .glb, .usd, .abc "
+        "or a folder",
         path,
     )
 

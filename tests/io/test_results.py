@@ -192,7 +192,7 @@ def test_usd_time_sampled_points(tmp_path, suffix):
     from pxr import Usd, UsdGeom
 
     anim = _animation(frames=4)
-    save(anim, tmp_path / f"walk{suffix}", fps=24)
+    save(anim, tmp_path / f"walk{suffix}", fps=24, time_unit="frames")
     assert pxr is not None
     stage = Usd.Stage.Open(str(tmp_path / f"walk{suffix}"))
     assert stage.GetStartTimeCode() == anim.times[0] and stage.GetEndTimeCode() == anim.times[-1]
@@ -390,8 +390,8 @@ def test_check_output_before_computing(tmp_path):
 
     assert check_output(tmp_path / "walk.glb") == "glb"
     assert check_output(str(tmp_path / "frames") + "/") == "folder"
-    with pytest.raises(InputError, match=r"walk\.abc"):
-        check_output(tmp_path / "walk.abc")
+    with pytest.raises(InputError, match=r"walk\.fbx"):
+        check_output(tmp_path / "walk.fbx")
     with pytest.raises(InputError, match="does not exist"):
         check_output(tmp_path / "missing" / "walk.npz")
     (tmp_path / "plain").write_text("x")
@@ -439,3 +439,118 @@ def test_one_connectivity_kinds_are_output_kinds():
 
     assert ONE_CONNECTIVITY_KINDS == ("pc2",)
     assert all(output_kind(f"walk.{kind}") == kind for kind in ONE_CONNECTIVITY_KINDS)
+
+
+# ------------------------------------------------------- time base, up axis and scale
+
+
+def _frames_anim(frames=3) -> AnimatedMesh:
+    """A small animation whose times are frame numbers (0, 1, 2, ...)."""
+    anim = _animation(frames=frames, subdivisions=1)
+    return AnimatedMesh(anim.faces, anim.vertices, observed=anim.observed)
+
+
+def _glb_times_and_base(path):
+    import pygltflib
+
+    gltf = pygltflib.GLTF2.load(path)
+    blob = gltf.binary_blob()
+    primitive = gltf.meshes[0].primitives[0]
+    times = _accessor(gltf, blob, gltf.animations[0].samplers[0].input)
+    return times, _accessor(gltf, blob, primitive.attributes.POSITION), _accessor(
+        gltf, blob, primitive.attributes.NORMAL
+    )
+
+
+def test_glb_keyframes_are_seconds_from_the_time_base(tmp_path):
+    anim = _frames_anim()
+    save(anim, tmp_path / "default.glb")  # frame numbers at 30 fps
+    times, _, _ = _glb_times_and_base(tmp_path / "default.glb")
+    assert np.allclose(times, [0, 1 / 30, 2 / 30])
+    save(anim, tmp_path / "film.glb", fps=24)
+    assert np.allclose(_glb_times_and_base(tmp_path / "film.glb")[0], [0, 1 / 24, 2 / 24])
+    stamped = AnimatedMesh(anim.faces, anim.vertices, times=[10.0, 10.04, 10.08])
+    save(stamped, tmp_path / "stamped.glb", fps=50)  # seconds stay seconds whatever the rate
+    assert np.allclose(_glb_times_and_base(tmp_path / "stamped.glb")[0], [10.0, 10.04, 10.08])
+    save(anim, tmp_path / "seconds.glb", time_unit="seconds")
+    assert np.allclose(_glb_times_and_base(tmp_path / "seconds.glb")[0], [0, 1, 2])
+
+
+def test_glb_z_up_data_is_turned_y_up_and_scaled(tmp_path):
+    from fourd.io.axes import z_up_to_y_up
+
+    anim = _frames_anim()
+    save(anim, tmp_path / "z.glb", up="z", scale=2.0)
+    _, base, normals = _glb_times_and_base(tmp_path / "z.glb")
+    expected = z_up_to_y_up(2.0 * anim.vertices[0])
+    assert np.abs(base - expected).max() <= 1e-5
+    # the normals turn with the points: they still point out of the (centred) sphere
+    outward = np.einsum("ij,ij->i", normals, expected - expected.mean(axis=0))
+    assert (outward > 0).mean() > 0.95
+
+
+def test_usd_stage_metadata_time_codes_and_normals(tmp_path):
+    pytest.importorskip("pxr", reason="usd-core (the fourd[usd] extra) is not installed")
+    from pxr import Usd, UsdGeom
+
+    anim = _frames_anim(frames=4)
+    save(anim, tmp_path / "walk.usda", fps=24, up="z", scale=0.5)
+    stage = Usd.Stage.Open(str(tmp_path / "walk.usda"))
+    assert UsdGeom.GetStageUpAxis(stage) == UsdGeom.Tokens.z
+    assert UsdGeom.GetStageMetersPerUnit(stage) == 1.0
+    assert stage.GetTimeCodesPerSecond() == 24 and stage.GetFramesPerSecond() == 24
+    assert (stage.GetStartTimeCode(), stage.GetEndTimeCode()) == (0.0, 3.0)
+    mesh = UsdGeom.Mesh(stage.GetPrimAtPath("/Root/Mesh"))
+    points = mesh.GetPointsAttr()
+    normals = mesh.GetNormalsAttr()
+    assert mesh.GetNormalsInterpolation() == UsdGeom.Tokens.vertex
+    assert points.GetTimeSamples() == [0.0, 1.0, 2.0, 3.0] == normals.GetTimeSamples()
+    for k in range(4):
+        # Z up is declared, not applied: the points are the data's, scaled
+        assert np.abs(np.array(points.Get(k)) - 0.5 * anim.vertices[k]).max() <= 1e-6
+        n = np.array(normals.Get(k))
+        assert n.shape == (anim.vertex_count, 3)
+        assert np.allclose(np.linalg.norm(n, axis=1), 1.0, atol=1e-5)
+
+
+def test_usd_time_codes_of_seconds_are_frames_at_the_measured_rate(tmp_path):
+    pytest.importorskip("pxr", reason="usd-core (the fourd[usd] extra) is not installed")
+    from pxr import Usd, UsdGeom
+
+    anim = _frames_anim()
+    stamped = AnimatedMesh(anim.faces, anim.vertices, times=[2.0, 2.04, 2.08])
+    save(stamped, tmp_path / "walk.usdc")
+    stage = Usd.Stage.Open(str(tmp_path / "walk.usdc"))
+    assert stage.GetTimeCodesPerSecond() == 25 and UsdGeom.GetStageUpAxis(stage) == "Y"
+    points = UsdGeom.Mesh(stage.GetPrimAtPath("/Root/Mesh")).GetPointsAttr()
+    assert points.GetTimeSamples() == [50.0, 51.0, 52.0]
+
+
+def test_pc2_counts_frames_of_the_time_base(tmp_path):
+    anim = _frames_anim()
+    stamped = AnimatedMesh(anim.faces, anim.vertices, times=[2.0, 2.04, 2.08])
+    save(stamped, tmp_path / "walk.pc2")
+    cache = read_pc2(tmp_path / "walk.pc2")
+    assert (cache.start, cache.rate) == (50.0, pytest.approx(1.0))
+    save(stamped, tmp_path / "walk.pc2", fps=100, scale=3.0, up="z")  # up: .pc2 has none
+    cache = read_pc2(tmp_path / "walk.pc2")
+    assert (cache.start, cache.rate) == (200.0, pytest.approx(4.0))
+    assert np.abs(cache.vertices - 3.0 * anim.vertices).max() <= 1e-5
+
+
+def test_scale_reaches_npz_and_folders_and_bad_options_write_nothing(tmp_path):
+    anim = _frames_anim(frames=2)
+    save(anim, tmp_path / "walk.npz", scale=10.0, up="z")
+    assert np.abs(load_result(tmp_path / "walk.npz").vertices - 10 * anim.vertices).max() <= 1e-4
+    save(anim, tmp_path / "frames", scale=0.1)
+    assert np.abs(load_result(tmp_path / "frames").vertices - 0.1 * anim.vertices).max() <= 1e-6
+    for options, words in (
+        ({"scale": 0}, "scale must be"),
+        ({"up": "x"}, "'y' or 'z'"),
+        ({"fps": -1}, "fps must be"),
+        ({"time_unit": "hours"}, "'frames' or 'seconds'"),
+    ):
+        for name in ("bad.glb", "bad.pc2", "bad.npz"):
+            with pytest.raises(InputError, match=words):
+                save(anim, tmp_path / name, **options)
+    assert not list(tmp_path.glob("bad*"))

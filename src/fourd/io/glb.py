@@ -10,6 +10,9 @@ plays the clip with an ``AnimationMixer``.
 A :class:`~fourd.animation.MeshSequence` becomes one node per frame, each with its own mesh,
 and an animation of the nodes' ``scale`` (1 while the frame is current, 0 otherwise, STEP).
 
+Keyframe times are the frame times in seconds (:mod:`fourd.io.timebase`). glTF is Y up by
+specification: Z-up data (``up="z"``) is rotated on writing, ``(x, y, z) -> (x, z, -y)``.
+
 References
 ----------
 Khronos Group, "glTF 2.0 Specification", sections 3.7.2.2 (morph targets) and 3.11 (animations).
@@ -25,6 +28,8 @@ from fourd.animation import AnimatedMesh, MeshSequence
 from fourd.errors import InputError
 from fourd.geometry.normals import vertex_normals
 from fourd.io.atomic import atomic_path
+from fourd.io.axes import Z_UP_TO_Y_UP, check_up, transformed
+from fourd.io.timebase import TimeBase, time_base
 
 ARRAY_BUFFER = 34962
 ELEMENT_ARRAY_BUFFER = 34963
@@ -108,14 +113,14 @@ def _new_gltf():
     return gltf
 
 
-def _seconds(times: np.ndarray, fps: float | None) -> np.ndarray:
-    seconds = np.asarray(times, dtype=np.float64) / (fps if fps else 1.0)
+def _seconds(times: np.ndarray, clock: TimeBase) -> np.ndarray:
+    seconds = clock.seconds(times)
     if seconds[0] < 0:  # glTF keyframe times must be non-negative
         seconds = seconds - seconds[0]
     return seconds.astype(np.float32)
 
 
-def _animated(gltf, blob: _Blob, anim: AnimatedMesh, *, fps, interpolation) -> None:
+def _animated(gltf, blob: _Blob, anim: AnimatedMesh, *, clock: TimeBase, interpolation) -> None:
     from pygltflib import (
         Animation,
         AnimationChannel,
@@ -163,7 +168,7 @@ def _animated(gltf, blob: _Blob, anim: AnimatedMesh, *, fps, interpolation) -> N
     weights = np.zeros((count, count - 1), dtype=np.float32)
     weights[np.arange(1, count), np.arange(count - 1)] = 1.0
     sampler = AnimationSampler(
-        input=blob.add(_seconds(anim.times, fps), "SCALAR", bounds=True),
+        input=blob.add(_seconds(anim.times, clock), "SCALAR", bounds=True),
         output=blob.add(weights.ravel(), "SCALAR"),
         interpolation=interpolation,
     )
@@ -178,7 +183,7 @@ def _animated(gltf, blob: _Blob, anim: AnimatedMesh, *, fps, interpolation) -> N
     )
 
 
-def _sequence(gltf, blob: _Blob, seq: MeshSequence, *, fps) -> None:
+def _sequence(gltf, blob: _Blob, seq: MeshSequence, *, clock: TimeBase) -> None:
     from pygltflib import (
         Animation,
         AnimationChannel,
@@ -192,7 +197,7 @@ def _sequence(gltf, blob: _Blob, seq: MeshSequence, *, fps) -> None:
 
     count = len(seq.meshes)
     channels, samplers = [], []
-    time_accessor = blob.add(_seconds(seq.times, fps), "SCALAR", bounds=True) if count > 1 else None
+    time_accessor = blob.add(_seconds(seq.times, clock), "SCALAR", bounds=True) if count > 1 else None
     for k, (vertices, faces) in enumerate(seq.meshes):
         node = Node(name=f"frame_{k}", scale=[1.0, 1.0, 1.0] if k == 0 else [0.0, 0.0, 0.0])
         if len(vertices):
@@ -235,7 +240,9 @@ def write_glb(
     result: AnimatedMesh | MeshSequence,
     *,
     fps: float | None = None,
+    time_unit: str | None = None,
     interpolation: str = "LINEAR",
+    up: str = "y",
 ) -> None:
     """Write ``result`` as a glTF 2.0 binary file, atomically.
 
@@ -243,11 +250,14 @@ def write_glb(
     ----------
     path : path-like
     result : AnimatedMesh or MeshSequence
-    fps : float, optional
-        When given, ``times`` are frame numbers at this rate (keyframe time = time / fps);
-        by default ``times`` are seconds (shifted to start at 0 if negative).
+    fps, time_unit : optional
+        The time base of ``result.times`` (:func:`fourd.io.timebase.time_base`: whole numbers
+        are frame numbers at ``fps``, default 30, anything else seconds); keyframe times are
+        the times in seconds, shifted to start at 0 if negative.
     interpolation : {"LINEAR", "STEP"}
         Between frames of an AnimatedMesh: blend (LINEAR) or hold (STEP).
+    up : {"y", "z"}
+        The data's up axis; Z-up data is rotated to glTF's Y up.
     """
     try:
         import pygltflib  # noqa: F401
@@ -256,14 +266,17 @@ def write_glb(
     interpolation = interpolation.upper()
     if interpolation not in ("LINEAR", "STEP"):
         raise InputError(f"interpolation must be LINEAR or STEP, got {interpolation!r}", path)
+    if not isinstance(result, AnimatedMesh | MeshSequence):
+        raise InputError(f"cannot write a {type(result).__name__} as .glb", path)
+    clock = time_base(result.times, fps=fps, unit=time_unit)
+    if check_up(up) == "z":
+        result = transformed(result, Z_UP_TO_Y_UP)
     gltf = _new_gltf()
     blob = _Blob(gltf)
     if isinstance(result, AnimatedMesh):
-        _animated(gltf, blob, result, fps=fps, interpolation=interpolation)
-    elif isinstance(result, MeshSequence):
-        _sequence(gltf, blob, result, fps=fps)
+        _animated(gltf, blob, result, clock=clock, interpolation=interpolation)
     else:
-        raise InputError(f"cannot write a {type(result).__name__} as .glb", path)
+        _sequence(gltf, blob, result, clock=clock)
     gltf.set_binary_blob(blob.finish())
     with atomic_path(path, suffix=".glb") as tmp:
         gltf.save_binary(str(tmp))

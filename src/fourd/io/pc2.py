@@ -19,6 +19,7 @@ from fourd.animation import AnimatedMesh, MeshSequence
 from fourd.errors import InputError
 from fourd.io.atomic import atomic_path
 from fourd.io.meshfiles import write_obj
+from fourd.io.timebase import time_base
 
 log = logging.getLogger("fourd.io.pc2")
 
@@ -71,11 +72,20 @@ def one_connectivity(meshes: MeshSequence) -> AnimatedMesh:
     return AnimatedMesh(faces=faces, vertices=vertices, times=meshes.times, observed=observed)
 
 
-def write_pc2(path: str | os.PathLike, anim: AnimatedMesh) -> Path:
+def write_pc2(
+    path: str | os.PathLike,
+    anim: AnimatedMesh,
+    *,
+    fps: float | None = None,
+    time_unit: str | None = None,
+) -> Path:
     """Write ``anim`` as ``path`` (``.pc2``) plus the topology ``path.with_suffix(".obj")``.
 
-    ``times`` are read as frame numbers: the start frame is ``times[0]`` and the sample rate
-    the mean time step (uneven steps are logged). A :class:`MeshSequence` (meshes whose
+    The header counts frames: ``times`` become frame numbers through their time base
+    (``fps``, ``time_unit``: :func:`fourd.io.timebase.time_base`; frame numbers stay as they
+    are, seconds are multiplied by the frame rate), the start frame is the first of them and
+    the sample rate (frames per sample) their mean step (uneven steps are logged). A
+    :class:`MeshSequence` (meshes whose
     connectivity changes, e.g. a shape that splits) is written through
     :func:`one_connectivity`. Returns the path of the ``.obj``.
     """
@@ -91,7 +101,7 @@ def write_pc2(path: str | os.PathLike, anim: AnimatedMesh) -> Path:
             path,
         )
     path = Path(path)
-    times = anim.times
+    times = time_base(anim.times, fps=fps, unit=time_unit).frames(anim.times)
     steps = np.diff(times)
     rate = float(steps.mean()) if len(steps) else 1.0
     if len(steps) and np.ptp(steps) > 1e-6 * max(1.0, abs(rate)):

@@ -1,5 +1,5 @@
 """Reconstruction results on disk: :func:`save` picks the format from the output path,
-:func:`load_result` reads ``.npz`` and folders back.
+:func:`load_result` reads ``.npz``, ``.abc`` and folders back.
 
 ==========================  ===================================================================
 ``.npz``                    (:mod:`fourd.io.npz`) ``vertices`` float32 [T, N, 3], ``faces`` int32 [F, 3], ``times``
@@ -9,6 +9,8 @@
 ``.glb``                    glTF 2.0 binary: morph targets + weights animation
                             (:mod:`fourd.io.glb`).
 ``.usd`` ``.usda`` ``.usdc``  time-sampled ``UsdGeom.Mesh`` (needs usd-core: ``fourd[usd]``).
+``.abc``                    Alembic ``OPolyMesh`` with time-sampled points and normals (needs
+                            alembic3d: ``fourd[abc]``; :mod:`fourd.io.abc`).
 ``.pc2``                    Blender point cache + ``.obj`` topology beside it.
 folder                      an existing folder, a path ending in ``/`` or a path without a
                             suffix: ``frame_0000.obj`` ... (or ``.ply``), ``times.txt`` and, for
@@ -17,6 +19,10 @@ folder                      an existing folder, a path ending in ``/`` or a path
 
 Every file is written under a temporary name and renamed into place (:mod:`fourd.io.atomic`),
 so an interrupted run never leaves a partial file under the requested name.
+
+Times are converted for each format through one time base (:mod:`fourd.io.timebase`: frame
+numbers or seconds, and a frame rate); ``scale`` and ``up`` (:mod:`fourd.io.axes`) change the
+written positions and the declared up axis, never the reconstruction.
 """
 
 from __future__ import annotations
@@ -28,16 +34,19 @@ from pathlib import Path
 
 from fourd.animation import AnimatedMesh, MeshSequence
 from fourd.errors import InputError
+from fourd.io.abc import read_abc, write_abc
+from fourd.io.axes import check_up, scaled
 from fourd.io.glb import write_glb
 from fourd.io.meshfolder import read_mesh_folder, write_mesh_folder
 from fourd.io.npz import read_npz, write_npz
 from fourd.io.pc2 import write_pc2
+from fourd.io.timebase import time_base
 from fourd.io.usd import USD_SUFFIXES, write_usd
 
 log = logging.getLogger("fourd.io.results")
 
 #: Output suffixes :func:`save` understands (besides folders).
-RESULT_SUFFIXES: tuple[str, ...] = (".npz", ".glb", *USD_SUFFIXES, ".pc2")
+RESULT_SUFFIXES: tuple[str, ...] = (".npz", ".glb", *USD_SUFFIXES, ".abc", ".pc2")
 
 #: Output kinds (:func:`output_kind`) that hold one connectivity for every frame. A
 #: MeshSequence still goes in, baked by :func:`fourd.io.pc2.one_connectivity`, but that mesh
@@ -57,7 +66,7 @@ __all__ = [
 
 def output_kind(path: str | os.PathLike) -> str:
     """The format :func:`save` would write to ``path``: ``"npz"``, ``"glb"``, ``"usd"``,
-    ``"pc2"`` or ``"folder"``; InputError for an unknown suffix."""
+    ``"abc"``, ``"pc2"`` or ``"folder"``; InputError for an unknown suffix."""
     text = os.fspath(path)
     target = Path(text)
     if text.endswith(("/", os.sep)) or target.is_dir() or not target.suffix:
@@ -68,7 +77,7 @@ def output_kind(path: str | os.PathLike) -> str:
     if suffix in RESULT_SUFFIXES:
         return suffix[1:]
     raise InputError(
-        f"unknown output format {suffix!r}: use .npz, .glb, .usd, .usda, .usdc, .pc2 or a folder (a path ending in /)",
+        f"unknown output format {suffix!r}: use .npz, .glb, .usd, .usda, .usdc, .abc, .pc2 or a folder (a path ending in /)",
         path,
     )
 
@@ -97,7 +106,8 @@ def check_output(path: str | os.PathLike, *, create_parents: bool = False) -> st
         ancestors); a missing output folder (without ``create_parents``); a folder where no
         file can be made (no permission, a read-only file system, ``/proc``), found by
         creating and removing a temporary entry there; an existing file where a folder output
-        is asked for; a USD output without usd-core installed.
+        is asked for; a USD output without usd-core installed, an ``.abc`` output without
+        alembic3d.
     """
     kind = output_kind(path)
     target = Path(path)
@@ -118,6 +128,10 @@ def check_output(path: str | os.PathLike, *, create_parents: bool = False) -> st
         from fourd.io.usd import _pxr
 
         _pxr(path)
+    if kind == "abc":
+        from fourd.io.abc import _alembic
+
+        _alembic(path)
     return kind
 
 
@@ -144,7 +158,10 @@ def save(
     *,
     mesh_format: str = "obj",
     fps: float | None = None,
+    time_unit: str | None = None,
     interpolation: str = "LINEAR",
+    up: str = "y",
+    scale: float = 1.0,
 ) -> Path:
     """Write a reconstruction; the format follows ``path`` (see the module docstring).
 
@@ -155,9 +172,21 @@ def save(
     mesh_format : {"obj", "ply"}
         Per-frame mesh files of a folder output.
     fps : float, optional
-        For ``.glb`` and USD: ``times`` are frame numbers at this rate (default: seconds).
+        Frames per second (:func:`fourd.io.timebase.time_base`): the duration of a frame when
+        the times are frame numbers (default 30), the rate of the frame-based timelines (USD
+        time codes, ``.pc2`` frames) when they are seconds (default: measured from them).
+    time_unit : {"frames", "seconds"}, optional
+        What ``result.times`` count; by default whole numbers are frame numbers, anything
+        else seconds. Used by ``.glb``, USD, ``.abc`` and ``.pc2``.
     interpolation : {"LINEAR", "STEP"}
         ``.glb`` keyframe interpolation between frames.
+    up : {"y", "z"}
+        The data's up axis (:mod:`fourd.io.axes`): ``"z"`` rotates ``.glb`` and ``.abc``
+        positions to their Y up and writes USD's ``upAxis`` as ``Z``; the other formats keep
+        the data's axes.
+    scale : float
+        Every written position is multiplied by it (all formats), e.g. 0.001 for millimetres
+        to metres.
 
     Returns
     -------
@@ -167,8 +196,8 @@ def save(
     Raises
     ------
     InputError
-        Unknown suffix, missing or unwritable output folder, a result that the format cannot
-        hold (``.pc2`` of a MeshSequence), USD without usd-core.
+        Unknown suffix, missing or unwritable output folder, USD without usd-core, ``.abc``
+        without alembic3d, a bad ``fps``, ``time_unit``, ``up`` or ``scale``.
     """
     if not isinstance(result, AnimatedMesh | MeshSequence):
         raise InputError(
@@ -176,15 +205,22 @@ def save(
         )
     kind = output_kind(path)
     target = Path(path)
+    up = check_up(up)
+    time_base(result.times, fps=fps, unit=time_unit)  # checks them whatever the format
+    if scale != 1:
+        result = scaled(result, scale)
+    timing = {"fps": fps, "time_unit": time_unit}
     try:
         if kind == "npz":
             write_npz(target, result)
         elif kind == "glb":
-            write_glb(target, result, fps=fps, interpolation=interpolation)
+            write_glb(target, result, interpolation=interpolation, up=up, **timing)
         elif kind == "usd":
-            write_usd(target, result, fps=fps)
+            write_usd(target, result, up=up, **timing)
+        elif kind == "abc":
+            write_abc(target, result, up=up, **timing)
         elif kind == "pc2":
-            write_pc2(target, result)
+            write_pc2(target, result, **timing)
         else:
             write_mesh_folder(target, result, mesh_format=mesh_format)
     except InputError:
@@ -197,7 +233,8 @@ def save(
 
 
 def load_result(path: str | os.PathLike) -> AnimatedMesh | MeshSequence:
-    """Read a result written by :func:`save`: an ``.npz`` or a folder of per-frame meshes.
+    """Read a result written by :func:`save`: an ``.npz``, an ``.abc`` (:func:`fourd.io.abc.read_abc`,
+    any Alembic archive's first polygon mesh; needs alembic3d) or a folder of per-frame meshes.
 
     A folder whose meshes all share the same faces (and vertex count) is an AnimatedMesh
     (``observed`` from ``observed.npy``, all True without it); otherwise a MeshSequence.
@@ -210,7 +247,9 @@ def load_result(path: str | os.PathLike) -> AnimatedMesh | MeshSequence:
         return read_mesh_folder(path)
     if path.suffix.lower() == ".npz":
         return read_npz(path)
-    raise InputError("can read back results in .npz or a folder of .obj/.ply meshes", path)
+    if path.suffix.lower() == ".abc":
+        return read_abc(path)
+    raise InputError("can read back results in .npz, .abc or a folder of .obj/.ply meshes", path)
 
 
 def as_result(result) -> AnimatedMesh | MeshSequence:

@@ -1,9 +1,16 @@
 """USD export (``.usd``, ``.usda``, ``.usdc``) through usd-core's ``pxr`` (an optional extra).
 
 An :class:`~fourd.animation.AnimatedMesh` becomes one ``UsdGeom.Mesh`` at ``/Root/Mesh`` with
-fixed ``faceVertexCounts``/``faceVertexIndices`` and time-sampled ``points`` and ``extent``
-(one sample per frame); a point-only result (no faces) becomes a ``UsdGeom.Points``. A
-:class:`~fourd.animation.MeshSequence` becomes one mesh whose topology is time-sampled too.
+fixed ``faceVertexCounts``/``faceVertexIndices`` and time-sampled ``points``, ``normals``
+(``vertex`` interpolation) and ``extent`` (one sample per frame); a point-only result (no
+faces) becomes a ``UsdGeom.Points``. A :class:`~fourd.animation.MeshSequence` becomes one
+mesh whose topology is time-sampled too.
+
+The stage's metadata: ``upAxis`` (``Y``, or ``Z`` for Z-up data: the points are not rotated),
+``metersPerUnit`` 1 (positions are taken to be metres: scale other units with ``scale``, e.g.
+``--scale 0.001`` for millimetres; USD's own fallback would be centimetres),
+``timeCodesPerSecond`` = ``framesPerSecond`` = the frame rate, and start and end time codes.
+The time code of a frame is its frame number at that rate (:mod:`fourd.io.timebase`).
 
 References
 ----------
@@ -19,9 +26,14 @@ import numpy as np
 
 from fourd.animation import AnimatedMesh, MeshSequence
 from fourd.errors import InputError
+from fourd.geometry.normals import vertex_normals
 from fourd.io.atomic import atomic_path
+from fourd.io.axes import check_up
+from fourd.io.timebase import time_base
 
 USD_SUFFIXES = (".usd", ".usda", ".usdc")
+#: The stage's ``metersPerUnit``: fourd writes positions as metres.
+METERS_PER_UNIT = 1.0
 
 
 def _pxr(path):
@@ -35,23 +47,36 @@ def _pxr(path):
 
 
 def write_usd(
-    path: str | os.PathLike, result: AnimatedMesh | MeshSequence, *, fps: float | None = None
+    path: str | os.PathLike,
+    result: AnimatedMesh | MeshSequence,
+    *,
+    fps: float | None = None,
+    time_unit: str | None = None,
+    up: str = "y",
 ) -> None:
-    """Write ``result`` as a USD stage, atomically.
+    """Write ``result`` as a USD stage (see the module docstring), atomically.
 
-    Time code of frame ``k`` is ``times[k]``; ``timeCodesPerSecond`` (and
-    ``framesPerSecond``) is ``fps`` when given (times are frame numbers), else 1 (times are
-    seconds). The stage's start and end time codes are the first and last times; ``Y`` is up.
+    Parameters
+    ----------
+    path : path-like
+    result : AnimatedMesh or MeshSequence
+    fps, time_unit : optional
+        The time base of ``result.times`` (:func:`fourd.io.timebase.time_base`): the time code
+        of frame ``k`` is ``times[k]`` as a frame number at ``fps`` frames per second, which
+        is the stage's ``timeCodesPerSecond`` and ``framesPerSecond``.
+    up : {"y", "z"}
+        The stage's ``upAxis``; the points are written as they are.
 
     Raises
     ------
     InputError
-        When ``pxr`` is not importable (saying ``pip install "fourd[usd]"``) or the suffix is
-        not ``.usd``, ``.usda`` or ``.usdc``.
+        When ``pxr`` is not importable (saying ``pip install "fourd[usd]"``), the suffix is
+        not ``.usd``, ``.usda`` or ``.usdc``, or ``fps``, ``time_unit`` or ``up`` is wrong.
     """
     suffix = os.fspath(path).lower()
     if not suffix.endswith(USD_SUFFIXES):
         raise InputError("a USD file must end in .usd, .usda or .usdc", path)
+    up = check_up(up)
     Sdf, Usd, UsdGeom, Vt = _pxr(path)
     if isinstance(result, AnimatedMesh):
         frames = [(result.vertices[k], result.faces) for k in range(result.frame_count)]
@@ -61,14 +86,16 @@ def write_usd(
         fixed_topology = False
     else:
         raise InputError(f"cannot write a {type(result).__name__} as USD", path)
-    codes = np.asarray(result.times, dtype=np.float64)
-    rate = float(fps) if fps else 1.0
+    base = time_base(result.times, fps=fps, unit=time_unit)
+    codes = base.frames(result.times)
+    rate = float(base.fps)
     points_only = all(len(f) == 0 for _, f in frames)
     with atomic_path(path) as tmp:
         with contextlib.suppress(OSError):
             os.remove(tmp)  # Usd.Stage.CreateNew wants to create the file itself
         stage = Usd.Stage.CreateNew(str(tmp))
-        UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.y)
+        UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.z if up == "z" else UsdGeom.Tokens.y)
+        UsdGeom.SetStageMetersPerUnit(stage, METERS_PER_UNIT)
         root = UsdGeom.Xform.Define(stage, "/Root")
         stage.SetDefaultPrim(root.GetPrim())
         stage.SetStartTimeCode(float(codes[0]))
@@ -89,6 +116,10 @@ def write_usd(
                 indices_attr.Set(Vt.IntArray.FromNumpy(faces.astype(np.int32).ravel()))
         points_attr = geom.CreatePointsAttr()
         extent_attr = geom.CreateExtentAttr()
+        normals_attr = None
+        if not points_only:
+            normals_attr = geom.CreateNormalsAttr()
+            geom.SetNormalsInterpolation(UsdGeom.Tokens.vertex)
         for k, (vertices, faces) in enumerate(frames):
             code = Usd.TimeCode(float(codes[k]))
             points = vertices.astype(np.float32)
@@ -96,6 +127,9 @@ def write_usd(
             if len(points):
                 extent = np.stack([points.min(axis=0), points.max(axis=0)])
                 extent_attr.Set(Vt.Vec3fArray.FromNumpy(extent), code)
+            if normals_attr is not None:
+                normals = vertex_normals(vertices, faces).astype(np.float32)
+                normals_attr.Set(Vt.Vec3fArray.FromNumpy(normals), code)
             if not points_only and not fixed_topology:
                 counts_attr.Set(Vt.IntArray.FromNumpy(np.full(len(faces), 3, dtype=np.int32)), code)
                 indices_attr.Set(Vt.IntArray.FromNumpy(faces.astype(np.int32).ravel()), code)
