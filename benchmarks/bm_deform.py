@@ -113,6 +113,36 @@ def _picture(rest, faces, edges, bending) -> None:
     print(f"  picture: {path.relative_to(Path.cwd()) if path.is_relative_to(Path.cwd()) else path}")
 
 
+def example() -> None:
+    """The README's picture: horse-gallop's first frame, one leg swung back by rotating its hoof
+    triangle 0.9 rad about x while the body, head, tail and another hoof hold, with a uniform
+    material (middle) and the material learned from the gallop (right)."""
+    from PIL import Image
+
+    from fourd.deform import uniform_material
+    from fourd.viz.camera import fit_camera
+    from fourd.viz.raster import render
+
+    data = np.load(DATA / "horse-gallop.npz")
+    frames, faces = data["vertices"].astype(float), data["faces"].astype(np.int64)
+    rest = frames[0]
+    centres = rest[faces].mean(axis=1)
+    nearest = lambda point: int(np.argmin(np.linalg.norm(centres - point, axis=1)))  # noqa: E731
+    # body, the swung hoof, head, tail tip, another hoof (positions in the first frame)
+    anchors = [nearest(p) for p in ([0, 1.0, -0.26], [-0.11, 0.02, 0.1], [0, 1.3, 0.6],
+                                     [0, 0.75, -1.3], [0.1, 0.02, -0.66])]
+    transforms = np.stack([np.eye(3), rotation_about([1, 0, 0], 0.9)] + [np.eye(3)] * 3)
+    camera = fit_camera(np.array([rest.min(axis=0) - 0.2, rest.max(axis=0) + 0.2]), azimuth=90, elevation=10)
+    tiles = [render(camera=camera, width=420, height=360, vertices=rest, faces=faces, texture="none")]
+    for material in (uniform_material(faces), learn_material(rest, frames[1:], faces)):
+        posed = Deformer(rest, faces, material, anchors=anchors).pose(transforms)
+        tiles.append(render(camera=camera, width=420, height=360, vertices=posed, faces=faces, texture="none"))
+    path = Path(__file__).resolve().parent / "plots" / "deform-example.png"
+    Image.fromarray(np.concatenate(tiles, axis=1)).save(path)
+    print(f"example: {path}")
+
+
 if __name__ == "__main__":
     speed()
     horse()
+    example()
