@@ -16,7 +16,7 @@ from fourd.methods import DEFAULT_METHOD, METHODS, method_module
 from fourd.methods.base import check_method_module, diagnostic_figures
 
 #: Registry entries that combine methods: they may import the methods they combine.
-COMPOSITIONS = {"auto", "watertight"}
+COMPOSITIONS = {"auto", "learned", "watertight"}
 SOURCE = Path(fourd.methods.__file__).parent
 
 

@@ -28,6 +28,7 @@ METHODS: dict[str, str] = {
     "kinematic": "fourd.methods.kinematic",
     "flow": "fourd.methods.flow",
     "watertight": "fourd.methods.watertight",
+    "learned": "fourd.methods.learned",
     "perframe": "fourd.methods.perframe",
 }
 

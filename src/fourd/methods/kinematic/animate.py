@@ -40,6 +40,7 @@ def animate(
     closed: bool = False,
     bounds: np.ndarray | None = None,
     project_smoothed: bool = False,
+    edge_stiffness: tuple | None = None,
 ) -> AnimatedMesh:
     """Urshape at ``times[0]`` and its sliding along ``field`` (sections 4 and 5 with this
     method's data term): everything of :func:`reconstruct` after the 4D fit, for any
@@ -71,6 +72,9 @@ def animate(
         noise back (``flow`` ``coherent=true`` on ``dfaust-hopping``, 20k samples: jitter
         0.89 unprojected, 1.74 all projected, 0.94 with this rule; crane Chamfer /
         completeness-95 0.0034 / 0.0073, 0.0031 / 0.0060 and 0.0032 / 0.0062).
+    edge_stiffness : tuple, optional
+        ``(edges [E, 2], values [E])``: factors on the sliding's ARAP weights of those urshape
+        edges (:attr:`SlideOptions.edge_stiffness`).
     """
     started = _time.perf_counter()
     times = np.asarray(times, dtype=float)
@@ -138,6 +142,7 @@ def animate(
         projection_limit=PROJECTION_LIMIT,
         still_normals=options.still_normals,
         previous_shape=options.slide_memory,
+        edge_stiffness=edge_stiffness,
     )
     t0 = float(times[0])
     forward = out_times >= t0

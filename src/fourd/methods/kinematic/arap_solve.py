@@ -35,11 +35,19 @@ class SlidePrecompute(NamedTuple):
     ordered_laplacian: sp.csr_matrix
 
 
-def slide_precompute(rest_vertices: np.ndarray, faces: np.ndarray) -> SlidePrecompute:
+def slide_precompute(
+    rest_vertices: np.ndarray, faces: np.ndarray, edge_stiffness=None
+) -> SlidePrecompute:
     """Cotangent weights (clamped at zero), Laplacian ``L`` and directed edge lists of the
-    template."""
+    template.
+
+    ``edge_stiffness`` (optional) is ``(edges [E, 2], values [E])``: per template edge (vertex
+    pairs, either order) a factor on its weight, e.g. the bending stiffness learned from a
+    first tracking (:func:`fourd.deform.learn_material`); edges not listed keep theirs."""
     rest = np.asarray(rest_vertices, dtype=np.float64)
     Wc = cotangent_weights(rest, faces, clamp_negative=True).tocsr()
+    if edge_stiffness is not None:
+        Wc = _scaled_weights(Wc, *edge_stiffness)
     Wc.sort_indices()
     W = Wc.tocoo()
     n = len(rest)
@@ -64,6 +72,21 @@ def slide_precompute(rest_vertices: np.ndarray, faces: np.ndarray) -> SlidePreco
         order,
         ordered,
     )
+
+
+def _scaled_weights(weights: sp.csr_matrix, edges: np.ndarray, values: np.ndarray) -> sp.csr_matrix:
+    """``weights`` [N, N] with the entries of ``edges`` [E, 2] (both directions) times ``values``."""
+    n = weights.shape[0]
+    coo = weights.tocoo()
+    edges = np.sort(np.asarray(edges, dtype=np.int64).reshape(-1, 2), axis=1)
+    keys = edges[:, 0] * n + edges[:, 1]
+    order = np.argsort(keys)
+    keys, values = keys[order], np.asarray(values, dtype=np.float64)[order]
+    entry = np.minimum(coo.row, coo.col).astype(np.int64) * n + np.maximum(coo.row, coo.col)
+    position = np.minimum(np.searchsorted(keys, entry), max(len(keys) - 1, 0))
+    found = (keys[position] == entry) if len(keys) else np.zeros(len(entry), bool)
+    factor = np.where(found, values[position] if len(keys) else 1.0, 1.0)
+    return sp.csr_matrix((coo.data * factor, (coo.row, coo.col)), shape=weights.shape)
 
 
 def _tangent_bases(normals: np.ndarray) -> np.ndarray:

@@ -22,7 +22,9 @@ from fourd.sequence import PointCloudSequence
 log = logging.getLogger("fourd.methods.kinematic")
 
 
-def reconstruct(seq: PointCloudSequence, options: Options | None = None) -> AnimatedMesh:
+def reconstruct(
+    seq: PointCloudSequence, options: Options | None = None, *, edge_stiffness: tuple | None = None
+) -> AnimatedMesh:
     """Animated mesh from a point-cloud sequence by 4D MPU + urshape + ARAP sliding.
 
     Returns an :class:`AnimatedMesh` with ``rest`` the urshape; one frame per output time
@@ -71,7 +73,10 @@ def reconstruct(seq: PointCloudSequence, options: Options | None = None) -> Anim
     fitted = _time.perf_counter()
     log.info("4D fit: %.2f s", fitted - started)
 
-    result = animate(field, points, normals, times, spacing=spacing, options=options)
+    result = animate(
+        field, points, normals, times, spacing=spacing, options=options,
+        edge_stiffness=edge_stiffness,
+    )
     finished = _time.perf_counter()
     log.info(
         "kinematic: %d frames in %.2f s (fit %.2f, urshape and sliding %.2f)",

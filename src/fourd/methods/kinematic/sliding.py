@@ -54,7 +54,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Literal, NamedTuple
 
 import numpy as np
@@ -181,6 +181,10 @@ class SlideOptions:
         with 4 iterations and 0.0027 / 0.0032 with 1 (``experiments/registration_oracle.py
         --slide-iterations``). See the ``kinematic`` method's ``slide_memory`` for what 0.8
         measured.
+    edge_stiffness : tuple or None
+        ``(edges [E, 2], values [E])``: factors on the ARAP weights of those template edges
+        (:func:`~fourd.methods.kinematic.arap_solve.slide_precompute`), e.g. the bending
+        stiffness learned from a first tracking; None: the cotangent weights alone (the paper).
     """
 
     iterations: int = 4
@@ -205,6 +209,7 @@ class SlideOptions:
     linearize_at: Literal["previous", "guess"] = "guess"
     still_normals: float = 0.2
     previous_shape: float = 0.0
+    edge_stiffness: tuple | None = field(default=None, compare=False, repr=False)
 
     def __post_init__(self):
         if not 0.0 <= self.previous_shape < 1.0:
@@ -496,7 +501,7 @@ def slide(
         raise ValueError(
             f"surfaces must hold one entry per time ({len(times)}), got {len(surfaces)}"
         )
-    pre = slide_precompute(rest, faces)
+    pre = slide_precompute(rest, faces, options.edge_stiffness)
     epsilon = options.epsilon or 2.0 * pre.edge_length
     trees = None
     if data is not None:
