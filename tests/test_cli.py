@@ -1,6 +1,7 @@
 """The command line: exit status 2 and one line naming the file for every kind of bad input."""
 
 import dataclasses
+import json
 import os
 import time
 from pathlib import Path
@@ -300,3 +301,26 @@ def test_options_lists_every_option_of_a_method(capsys):
     assert "resolution = 32  (int)" in out
     assert main(["options", "nosuch"]) == 2
     assert "unknown method 'nosuch'" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("suffix", [".glb", ".pc2", ".usda", "/"])
+def test_evaluate_and_view_read_every_result_format(tmp_path, capsys, suffix):
+    if suffix == ".usda":
+        pytest.importorskip("pxr", reason="usd-core (the fourd[usd] extra) is not installed")
+    import trimesh
+
+    from fourd.animation import AnimatedMesh
+    from fourd.io.results import save
+
+    sphere = trimesh.creation.icosphere(subdivisions=1)
+    vertices = np.stack([sphere.vertices + [0.1 * t, 0, 0] for t in range(3)])
+    truth = AnimatedMesh(sphere.faces, vertices)
+    save(truth, tmp_path / "truth.npz")
+    result = str(tmp_path / "result") + suffix
+    save(AnimatedMesh(sphere.faces, vertices * 1.01), result)
+    assert main(["evaluate", result, str(tmp_path / "truth.npz"), "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report["frames"] == 3 and 0 < report["chamfer"] < 0.01
+    assert main(["view", result, "--truth", str(tmp_path / "truth.npz"), "-o", str(tmp_path / "v"),
+                 "--quiet"]) == 0
+    assert (tmp_path / "v" / "index.html").is_file()

@@ -243,6 +243,11 @@ def cmd_info(args) -> int:
     return 0
 
 
+#: What a RESULT argument may be (every format ``fourd reconstruct -o`` writes).
+_RESULT_HELP = ("a result: .npz, .glb, .usd/.usda/.usdc (needs usd-core), .pc2 (with its .obj "
+                "beside it) or a folder of per-frame meshes")
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="fourd",
@@ -285,8 +290,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=0)
 
     p = add("evaluate", "metrics of a result against ground truth", cmd_evaluate)
-    p.add_argument("result")
-    p.add_argument("truth")
+    p.add_argument("result", help=_RESULT_HELP)
+    p.add_argument("truth", help="the ground truth: a result in any of those formats, a "
+                                 "points .npz [T, P, 3], or a folder from `fourd synth`")
     p.add_argument("--json", action="store_true", help="print all metrics as JSON")
     p.add_argument("--force", action="store_true",
                    help="score a truth whose frame count or bounding box differs from the "
@@ -328,8 +334,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("method", nargs="?", help="method name (default: the project's default)")
     p.add_argument("--long", action="store_true", help="the whole description, not its first sentence")
 
-    p = add("info", "describe an input folder or a result", cmd_info)
-    p.add_argument("path")
+    p = add("info", "describe an input folder or a result: kind, frames, vertices, faces, "
+                    "connectivity, time range", cmd_info)
+    p.add_argument("path", help="a folder of scans, or " + _RESULT_HELP)
     return parser
 
 
