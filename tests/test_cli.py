@@ -324,3 +324,23 @@ def test_evaluate_and_view_read_every_result_format(tmp_path, capsys, suffix):
     assert main(["view", result, "--truth", str(tmp_path / "truth.npz"), "-o", str(tmp_path / "v"),
                  "--quiet"]) == 0
     assert (tmp_path / "v" / "index.html").is_file()
+
+
+def test_bench_never_writes_the_tracked_record_unless_told(tmp_path, monkeypatch):
+    """Without -o the report goes to the git-ignored benchmarks/out/ (the quick run to its own
+    file there); only -o benchmarks/BENCHMARKS.md rewrites the record."""
+    import fourd.bench
+
+    calls = []
+    monkeypatch.setattr(fourd.bench, "run_bench", lambda **kw: calls.append(("run", kw)))
+    monkeypatch.setattr(fourd.bench, "merge_reports", lambda parts, out, notes: calls.append(("merge", out)))
+    assert main(["bench", "--quiet"]) == 0
+    assert main(["bench", "--quick", "--quiet"]) == 0
+    assert main(["bench", "--merge", "a.json", "--quiet"]) == 0
+    assert main(["bench", "--quiet", "-o", "benchmarks/BENCHMARKS.md"]) == 0
+    outputs = [Path(kw["output"]) if kind == "run" else Path(kw) for kind, kw in calls]
+    assert outputs == [Path("benchmarks/out/BENCHMARKS.md"), Path("benchmarks/out/BENCHMARKS-quick.md"),
+                       Path("benchmarks/out/BENCHMARKS.md"), Path("benchmarks/BENCHMARKS.md")]
+    assert calls[1][1]["quick"] is True
+    ignored = (Path(__file__).resolve().parents[1] / ".gitignore").read_text().split()
+    assert "benchmarks/out/" in ignored

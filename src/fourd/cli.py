@@ -176,15 +176,18 @@ def cmd_evaluate(args) -> int:
 
 
 def cmd_bench(args) -> int:
-    from fourd.bench import merge_reports, run_bench
+    from fourd.bench import default_output, merge_reports, run_bench
 
+    # Without -o the report goes to the git-ignored benchmarks/out/, never over the tracked
+    # benchmarks/BENCHMARKS.md (rewrite that one by naming it).
+    output = args.output or default_output(args.quick and not args.merge)
     if args.merge:
-        merge_reports(args.merge, args.output, notes=args.note or [])
-        log.info("wrote %s", args.output)
+        merge_reports(args.merge, output, notes=args.note or [])
+        log.info("wrote %s", output)
         return 0
     run_bench(methods=args.methods, scenes=args.scenes, quick=args.quick, repeats=args.repeats,
-              output=args.output, baselines=args.baselines, seed=args.seed, timeout=args.timeout)
-    log.info("wrote %s", args.output)
+              output=output, baselines=args.baselines, seed=args.seed, timeout=args.timeout)
+    log.info("wrote %s", output)
     return 0
 
 
@@ -298,7 +301,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="score a truth whose frame count or bounding box differs from the "
                         "result's (frames matched by time)")
 
-    p = add("bench", "run methods x scenes and write benchmarks/BENCHMARKS.md", cmd_bench)
+    p = add("bench", "run methods x scenes and write a report (benchmarks/out/BENCHMARKS.md "
+                     "unless -o names another)", cmd_bench)
     p.add_argument(
         "--methods",
         nargs="+",
@@ -306,7 +310,11 @@ def build_parser() -> argparse.ArgumentParser:
         "takes them (e.g. watertight, flow:missing_frames=1,2,resolution=64)",
     )
     p.add_argument("--scenes", nargs="+")
-    p.add_argument("-o", "--output", default="benchmarks/BENCHMARKS.md")
+    p.add_argument("-o", "--output",
+                   help="the Markdown report, with .json and plots beside it (default: "
+                        "benchmarks/out/BENCHMARKS.md, with --quick benchmarks/out/"
+                        "BENCHMARKS-quick.md, both git-ignored; -o benchmarks/BENCHMARKS.md "
+                        "rewrites the tracked record)")
     p.add_argument("--quick", action="store_true", help="a tiny run that exercises the whole path")
     p.add_argument("--repeats", type=int, default=1, help="timing repeats (median reported)")
     p.add_argument("--baselines", action="store_true",
