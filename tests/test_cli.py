@@ -293,12 +293,46 @@ def test_an_interrupted_run_resumes_from_its_cache(tmp_path, monkeypatch):
     assert calls == [2.0] and out.exists()
 
 
-def test_options_lists_every_option_of_a_method(capsys):
-    assert main(["options", "flow"]) == 0
+def _described(out: str) -> tuple[list[str], list[str]]:
+    """The option names with a ``name = default`` header in ``fourd options`` output, and the
+    description paragraphs (one per header line)."""
+    import re
+
+    names, texts = [], []
+    for block in out.split("\n\n"):
+        lines = block.splitlines()
+        if lines and re.match(r"^  \w+ = ", lines[0]):
+            names += re.findall(r"(?:^  |, )(\w+) = ", lines[0])
+            texts.append(" ".join(line.strip() for line in lines[1:]))
+    return names, texts
+
+
+@pytest.mark.parametrize("method", list(METHODS))
+def test_options_shows_the_common_ones_and_the_rest_under_all(capsys, method):
+    module = method_module(method)
+    fields = [f.name for f in dataclasses.fields(module.Options)]
+    common = module.COMMON_OPTIONS
+    assert 0 < len(common) <= 8 and len(common) < len(fields)
+    assert main(["options", method]) == 0
     out = capsys.readouterr().out
-    fields = [f.name for f in dataclasses.fields(method_module("flow").Options)]
-    assert all(f"\n  {name} = " in out for name in fields)
-    assert "resolution = 32  (int)" in out
+    names, _ = _described(out)
+    assert set(common) <= set(names) and len(names) <= len(common) + 2  # an entry's partner
+    expert = out.split("expert options", 1)[1]
+    assert f"fourd options {method} --all" in out
+    assert all(name in expert for name in fields if name not in names)
+    assert main(["options", method, "--all"]) == 0
+    everything = capsys.readouterr().out
+    names, texts = _described(everything)
+    assert sorted(names) == sorted(fields)  # every option described, each once
+    assert len(set(texts)) == len(texts) and all(texts), "a description shown twice or empty"
+    assert "..." not in everything  # nothing cut short
+    assert main(["options", method, "--long"]) == 0  # the old name still works
+    assert capsys.readouterr().out == everything
+
+
+def test_options_of_an_unknown_method(capsys):
+    assert main(["options", "flow"]) == 0
+    assert "resolution = 32  (int)" in capsys.readouterr().out
     assert main(["options", "nosuch"]) == 2
     assert "unknown method 'nosuch'" in capsys.readouterr().err
 

@@ -222,20 +222,13 @@ def cmd_view(args) -> int:
 
 
 def cmd_options(args) -> int:
-    import textwrap
-
     from fourd.methods import DEFAULT_METHOD, method_module
-    from fourd.options import option_docs
+    from fourd.options import format_options
 
     name = args.method or DEFAULT_METHOD
-    docs = option_docs(method_module(name).Options)
-    print(f"options of method {name} (fourd reconstruct --method {name} --set KEY=VALUE; "
-          f"fourd options {name} --long for the whole text):")
-    for doc in docs:
-        text = doc.text if args.long else doc.summary
-        print(f"\n  {doc.name} = {doc.default!r}  ({doc.type})")
-        print(textwrap.fill(text or "(undocumented)", width=96, initial_indent="      ",
-                            subsequent_indent="      "))
+    module = method_module(name)
+    print(format_options(module.Options, getattr(module, "COMMON_OPTIONS", None),
+                         everything=args.all, method=name))
     return 0
 
 
@@ -340,7 +333,9 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = add("options", "list a method's options with their defaults and what they do", cmd_options)
     p.add_argument("method", nargs="?", help="method name (default: the project's default)")
-    p.add_argument("--long", action="store_true", help="the whole description, not its first sentence")
+    p.add_argument("--all", "--long", dest="all", action="store_true",
+                   help="describe the expert options too, not only the ones to change first "
+                        "(--long is the old name)")
 
     p = add("info", "describe an input folder or a result: kind, frames, vertices, faces, "
                     "connectivity, time range", cmd_info)
