@@ -378,3 +378,18 @@ def test_bench_never_writes_the_tracked_record_unless_told(tmp_path, monkeypatch
     assert calls[1][1]["quick"] is True
     ignored = (Path(__file__).resolve().parents[1] / ".gitignore").read_text().split()
     assert "benchmarks/out/" in ignored
+
+
+def test_help_lists_the_scenes_and_the_methods(capsys):
+    from fourd.methods import DEFAULT_METHOD
+    from fourd.synth.scenes import SCENES
+
+    with pytest.raises(SystemExit):
+        main(["synth", "--help"])
+    out = capsys.readouterr().out
+    assert all(f"  {name} " in out and text in out for name, text in SCENES.items())
+    with pytest.raises(SystemExit):
+        main(["reconstruct", "--help"])
+    out = " ".join(capsys.readouterr().out.split())
+    assert f"(default: {DEFAULT_METHOD};" in out
+    assert all(name in out.split("--method METHOD", 2)[2] for name in METHODS)

@@ -31,3 +31,16 @@ def test_a_changed_figure_is_caught():
     report = json.loads((ROOT / "benchmarks" / "BENCHMARKS.json").read_text())
     report["scenes"]["crane"]["rows"]["kinematic"]["metrics"]["correspondence_mean"] += 0.001
     assert readme_table.rewrite(readme, report) != readme
+
+
+def test_the_readme_lists_the_scenes_of_the_synth_registry():
+    from fourd.synth.scenes import SCENES
+
+    readme = (ROOT / "README.md").read_text()
+    rows = [line for line in readme.splitlines() if line.startswith("| `") and line.count("|") == 3]
+    listed = {line.split("`")[1]: line.split("|")[2].strip() for line in rows if line.split("`")[1] in SCENES}
+    expected = [f"| `{name}` | {text} |" for name, text in SCENES.items()]
+    start = readme.index(expected[0])
+    assert readme[start:].startswith("\n".join(expected) + "\n"), (
+        "README.md's scene table differs from fourd.synth.scenes.SCENES")
+    assert listed == SCENES

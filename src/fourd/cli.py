@@ -239,22 +239,49 @@ def cmd_info(args) -> int:
     return 0
 
 
+class _Parser(argparse.ArgumentParser):
+    """An ArgumentParser whose ``epilog`` may be a function, called only when the help is shown
+    (``fourd synth --help`` lists the scenes without every command importing them)."""
+
+    def format_help(self) -> str:
+        if callable(self.epilog):
+            self.epilog = self.epilog()
+        return super().format_help()
+
+
+def _scenes_epilog() -> str:
+    """The scenes of the synth registry (:data:`fourd.synth.scenes.SCENES`), one a line."""
+    from fourd.synth.scenes import SCENES
+
+    width = max(len(name) for name in SCENES)
+    lines = [f"  {name:<{width}}  {text}" for name, text in SCENES.items()]
+    return ("scenes:\n" + "\n".join(lines) + "\n\nThe shared-data scenes are read from "
+            "../shared/data beside the project (or $FOURD_DATA); nothing is downloaded.")
+
+
+def _method_help() -> str:
+    from fourd.methods import DEFAULT_METHOD, METHODS
+
+    return (f"reconstruction method: {', '.join(METHODS)} (default: {DEFAULT_METHOD}; "
+            "fourd options METHOD lists its options)")
+
+
 #: What a RESULT argument may be (every format ``fourd reconstruct -o`` writes).
 _RESULT_HELP = ("a result: .npz, .glb, .usd/.usda/.usdc (needs usd-core), .pc2 (with its .obj "
                 "beside it) or a folder of per-frame meshes")
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="fourd",
         description="Animated meshes from time-varying point clouds (4D scans).",
     )
     parser.add_argument("--version", action="version", version=f"fourd {_version()}")
-    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
     sub.required = True
 
-    def add(name, help_text, func):
-        p = sub.add_parser(name, help=help_text, description=help_text)
+    def add(name, help_text, func, **kwargs):
+        p = sub.add_parser(name, help=help_text, description=help_text, **kwargs)
         p.add_argument("--quiet", "-q", action="store_true", help="no progress bars or messages")
         p.add_argument("--verbose", "-v", action="store_true", help="debug messages")
         p.set_defaults(func=func)
@@ -264,7 +291,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("input", help="folder of frame files (ply/obj/xyz/pts/npy/npz) or one .npz")
     p.add_argument("-o", "--output", required=True,
                    help="result: .npz, .glb, .usd/.usda/.usdc, .pc2 (+ .obj), or a folder")
-    p.add_argument("--method", help="reconstruction method (default: the project's default)")
+    p.add_argument("--method", help=_method_help())
     p.add_argument("--config", help="TOML file with `method = ...` and an [options] table")
     p.add_argument("--set", action="append", metavar="KEY=VALUE", help="set a method option")
     p.add_argument("--frames", metavar="A:B:S", help="use input frames A:B:S (Python slice)")
@@ -275,10 +302,13 @@ def build_parser() -> argparse.ArgumentParser:
                    help="run even when the up-front estimate of the memory needed exceeds the "
                         "memory available")
 
-    p = add("synth", "synthesize a ground-truth scene and scan it with virtual depth cameras", cmd_synth)
-    p.add_argument("scene")
-    p.add_argument("outdir")
-    p.add_argument("--frames", type=int, default=None)
+    p = add("synth", "synthesize a ground-truth scene and scan it with virtual depth cameras", cmd_synth,
+            epilog=_scenes_epilog, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("scene", help="one of the scenes below")
+    p.add_argument("outdir", help="folder for the scans (frame_*.ply, times.txt, sensors.json) "
+                                  "and the truth (truth.npz)")
+    p.add_argument("--frames", type=int, default=None,
+                   help="frames to make (default: 20, or what a shared scene has)")
     p.add_argument("--cameras", type=int, default=3)
     p.add_argument("--noise", type=float, default=0.002, help="fraction of the bounding-box diagonal")
     p.add_argument("--outliers", type=float, default=0.02, help="fraction of points")
