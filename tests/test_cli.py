@@ -357,7 +357,21 @@ def test_evaluate_and_view_read_every_result_format(tmp_path, capsys, suffix):
     assert report["frames"] == 3 and 0 < report["chamfer"] < 0.01
     assert main(["view", result, "--truth", str(tmp_path / "truth.npz"), "-o", str(tmp_path / "v"),
                  "--quiet"]) == 0
-    assert (tmp_path / "v" / "index.html").is_file()
+    from fourd.viz.viewer import read_viewer_data
+
+    data = read_viewer_data(tmp_path / "v" / "index.html")
+    assert data["hasErrors"] and data["metrics"]["chamfer"] == pytest.approx(report["chamfer"])
+
+
+def test_view_help_says_it_writes_a_folder_and_how_to_serve_it(capsys):
+    from fourd.viz.viewer import EMBED_GLB_LIMIT
+
+    with pytest.raises(SystemExit):
+        main(["view", "--help"])
+    out = " ".join(capsys.readouterr().out.split())
+    assert "write a folder" in out and "index.html" in out
+    assert "python -m http.server -d OUTDIR" in out and "file://" in out
+    assert f"A .glb over {EMBED_GLB_LIMIT // 1_000_000} MB is not inlined" in out
 
 
 def test_bench_never_writes_the_tracked_record_unless_told(tmp_path, monkeypatch):

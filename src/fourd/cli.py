@@ -201,19 +201,25 @@ def cmd_demo(args) -> int:
 
 
 def cmd_view(args) -> int:
-    from fourd.viz.viewer import write_viewer
+    from fourd.viz.viewer import EMBED_GLB_LIMIT, write_viewer
 
     outdir = Path(args.output) if args.output else Path(str(Path(args.result).with_suffix("")) + "-view")
-    result, truth = args.result, args.truth
+    result, truth, metrics = args.result, args.truth, None
     if truth is not None:
         from fourd.io.results import load_result
-        from fourd.metrics import check_truth, load_truth
+        from fourd.metrics import check_truth, evaluate, load_truth
 
         result = load_result(args.result)
         truth = check_truth(result, load_truth(args.truth), args.result, args.truth,
                             force=args.force)
-    page = write_viewer(result, outdir, truth=truth, scans=args.input)
+        # the page's metrics panel: what `fourd evaluate RESULT TRUTH` reports
+        metrics = evaluate(result, truth)
+    page = write_viewer(result, outdir, truth=truth, scans=args.input, metrics=metrics)
     print(page)
+    glb = page.parent / "result.glb"
+    if glb.exists() and glb.stat().st_size > EMBED_GLB_LIMIT:
+        log.info("the .glb is too big to inline: to play it, serve the folder "
+                 "(python -m http.server -d %s) and open http://localhost:8000/", page.parent)
     if args.open:
         import webbrowser
 
@@ -265,6 +271,15 @@ def _method_help() -> str:
     return (f"reconstruction method: {', '.join(METHODS)} (default: {DEFAULT_METHOD}; "
             "fourd options METHOD lists its options)")
 
+
+_VIEW_EPILOG = """\
+The viewer is a folder (default RESULT-view/): open its index.html in a browser. The page
+inlines three.js, the frames and the exported .glb, so it works from the file system and
+loads nothing from the network. A .glb over 24 MB is not inlined, and browsers block a page
+opened from file:// from loading it: to play it, serve the folder and open it over http://
+
+  python -m http.server -d OUTDIR      # then open http://localhost:8000/
+"""
 
 #: What a RESULT argument may be (every format ``fourd reconstruct -o`` writes).
 _RESULT_HELP = ("a result: .npz, .glb, .usd/.usda/.usdc (needs usd-core), .pc2 (with its .obj "
@@ -352,9 +367,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("outdir", nargs="?", default="demo-out")
     p.add_argument("--method", help="method to use (default: the project's default)")
 
-    p = add("view", "write a self-contained HTML viewer for a result", cmd_view)
-    p.add_argument("result")
-    p.add_argument("--truth", help="ground truth (.npz) for error colouring")
+    p = add("view", "write a folder with a self-contained HTML viewer of a result "
+                    "(index.html, result.glb, viewer.js, ...)", cmd_view,
+            epilog=_VIEW_EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("result", help=_RESULT_HELP)
+    p.add_argument("--truth", help="ground truth (as for fourd evaluate): colours each vertex by "
+                                   "its distance to it and fills the metrics panel")
     p.add_argument("--input", help="the scans (folder) to show as points")
     p.add_argument("-o", "--output", help="folder for the page (default: RESULT-view/)")
     p.add_argument("--open", action="store_true", help="open the page in a browser")
