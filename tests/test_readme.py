@@ -44,3 +44,13 @@ def test_the_readme_lists_the_scenes_of_the_synth_registry():
     assert readme[start:].startswith("\n".join(expected) + "\n"), (
         "README.md's scene table differs from fourd.synth.scenes.SCENES")
     assert listed == SCENES
+
+
+def test_the_readme_says_how_long_the_main_commands_take_and_what_they_need():
+    readme = " ".join((ROOT / "README.md").read_text().split())
+    assert "measured on the 2-core development machine: `make demo` about 1-2 minutes" in readme
+    assert "`make test` about 7 minutes (the full CI run, installs included)" in readme
+    assert "needs the package index" in readme
+    browser_tests = "tests/viz/test_viewer_browser.py"
+    assert f"Without Chromium, `make test` skips the viewer's browser tests (`{browser_tests}`" in readme
+    assert (ROOT / browser_tests).is_file() and "npm ci" in (ROOT / browser_tests).read_text()
