@@ -379,7 +379,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--force", action="store_true",
                    help="use a truth whose frame count or bounding box differs from the result's")
 
-    p = add("options", "list a method's options with their defaults and what they do", cmd_options)
+    p = add("options", "a method's options to change first, with their defaults and what they do "
+                       "(--all: the expert ones too)", cmd_options)
     p.add_argument("method", nargs="?", help="method name (default: the project's default)")
     p.add_argument("--all", "--long", dest="all", action="store_true",
                    help="describe the expert options too, not only the ones to change first "
