@@ -18,11 +18,13 @@ demo: $(STAMP)
 test: $(STAMP)
 	$(PY) -m pytest -q
 
+# Both write into benchmarks/out/ (git-ignored); the tracked record is rewritten only on
+# purpose: fourd bench -o benchmarks/BENCHMARKS.md
 bench: $(STAMP)
 	$(VENV)/bin/fourd bench
 
 bench-quick: $(STAMP)
-	$(VENV)/bin/fourd bench --quick -o benchmarks/out/BENCHMARKS-quick.md
+	$(VENV)/bin/fourd bench --quick
 
 lint: $(STAMP)
 	$(VENV)/bin/ruff check src tests benchmarks experiments

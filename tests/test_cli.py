@@ -1,6 +1,7 @@
 """The command line: exit status 2 and one line naming the file for every kind of bad input."""
 
 import dataclasses
+import json
 import os
 import time
 from pathlib import Path
@@ -159,7 +160,7 @@ def test_per_frame_meshes_to_a_point_cache_are_refused_before_loading(tmp_path, 
         _run_bad(capsys, ["reconstruct", str(tmp_path / "not-loaded"), "-o", str(tmp_path / "x.pc2"),
                           "--method", method],
                  "x.pc2", f"method '{method}' gives a mesh per frame",
-                 "use --method auto, kinematic or watertight, or write .npz, .glb, .usd, .abc or a folder")
+                 "use --method auto, kinematic, watertight or learned, or write .npz, .glb, .usd, .abc or a folder")
 
 
 def test_frames_out_of_range_name_the_option_and_the_range(tmp_path, capsys):
@@ -292,12 +293,46 @@ def test_an_interrupted_run_resumes_from_its_cache(tmp_path, monkeypatch):
     assert calls == [2.0] and out.exists()
 
 
-def test_options_lists_every_option_of_a_method(capsys):
-    assert main(["options", "flow"]) == 0
+def _described(out: str) -> tuple[list[str], list[str]]:
+    """The option names with a ``name = default`` header in ``fourd options`` output, and the
+    description paragraphs (one per header line)."""
+    import re
+
+    names, texts = [], []
+    for block in out.split("\n\n"):
+        lines = block.splitlines()
+        if lines and re.match(r"^  \w+ = ", lines[0]):
+            names += re.findall(r"(?:^  |, )(\w+) = ", lines[0])
+            texts.append(" ".join(line.strip() for line in lines[1:]))
+    return names, texts
+
+
+@pytest.mark.parametrize("method", list(METHODS))
+def test_options_shows_the_common_ones_and_the_rest_under_all(capsys, method):
+    module = method_module(method)
+    fields = [f.name for f in dataclasses.fields(module.Options)]
+    common = module.COMMON_OPTIONS
+    assert 0 < len(common) <= 8 and len(common) < len(fields)
+    assert main(["options", method]) == 0
     out = capsys.readouterr().out
-    fields = [f.name for f in dataclasses.fields(method_module("flow").Options)]
-    assert all(f"\n  {name} = " in out for name in fields)
-    assert "resolution = 32  (int)" in out
+    names, _ = _described(out)
+    assert set(common) <= set(names) and len(names) <= len(common) + 2  # an entry's partner
+    expert = out.split("expert options", 1)[1]
+    assert f"fourd options {method} --all" in out
+    assert all(name in expert for name in fields if name not in names)
+    assert main(["options", method, "--all"]) == 0
+    everything = capsys.readouterr().out
+    names, texts = _described(everything)
+    assert sorted(names) == sorted(fields)  # every option described, each once
+    assert len(set(texts)) == len(texts) and all(texts), "a description shown twice or empty"
+    assert "..." not in everything  # nothing cut short
+    assert main(["options", method, "--long"]) == 0  # the old name still works
+    assert capsys.readouterr().out == everything
+
+
+def test_options_of_an_unknown_method(capsys):
+    assert main(["options", "flow"]) == 0
+    assert "resolution = 32  (int)" in capsys.readouterr().out
     assert main(["options", "nosuch"]) == 2
     assert "unknown method 'nosuch'" in capsys.readouterr().err
 
@@ -435,7 +470,8 @@ def test_info_and_evaluate_read_an_abc_result(tmp_path, monkeypatch, capsys):
     assert main(["reconstruct", str(folder), "-o", str(tmp_path / "o.abc"), "-q"]) == 0
     assert main(["info", str(tmp_path / "o.abc")]) == 0
     out = capsys.readouterr().out
-    assert "animated mesh: 2 frames, 42 vertices, 80 faces" in out and "times 0 .. 1" in out
+    assert "kind: animated mesh" in out and "frames: 2, times 0 .. 1" in out
+    assert "vertices: 42" in out and "faces: 80" in out
     assert main(["evaluate", str(tmp_path / "o.abc"), str(tmp_path / "truth.npz"), "--json"]) == 0
     report = __import__("json").loads(capsys.readouterr().out)
     assert report["correspondence_mean"] < 1e-6  # the same mesh, vertex for vertex
@@ -445,3 +481,75 @@ def _importable(name: str) -> bool:
     import importlib.util
 
     return importlib.util.find_spec(name) is not None
+
+
+@pytest.mark.parametrize("suffix", [".glb", ".pc2", ".usda", "/"])
+def test_evaluate_and_view_read_every_result_format(tmp_path, capsys, suffix):
+    if suffix == ".usda":
+        pytest.importorskip("pxr", reason="usd-core (the fourd[usd] extra) is not installed")
+    import trimesh
+
+    from fourd.animation import AnimatedMesh
+    from fourd.io.results import save
+
+    sphere = trimesh.creation.icosphere(subdivisions=1)
+    vertices = np.stack([sphere.vertices + [0.1 * t, 0, 0] for t in range(3)])
+    truth = AnimatedMesh(sphere.faces, vertices)
+    save(truth, tmp_path / "truth.npz")
+    result = str(tmp_path / "result") + suffix
+    save(AnimatedMesh(sphere.faces, vertices * 1.01), result)
+    assert main(["evaluate", result, str(tmp_path / "truth.npz"), "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report["frames"] == 3 and 0 < report["chamfer"] < 0.01
+    assert main(["view", result, "--truth", str(tmp_path / "truth.npz"), "-o", str(tmp_path / "v"),
+                 "--quiet"]) == 0
+    from fourd.viz.viewer import read_viewer_data
+
+    data = read_viewer_data(tmp_path / "v" / "index.html")
+    assert data["hasErrors"] and data["metrics"]["chamfer"] == pytest.approx(report["chamfer"])
+
+
+def test_view_help_says_it_writes_a_folder_and_how_to_serve_it(capsys):
+    from fourd.viz.viewer import EMBED_GLB_LIMIT
+
+    with pytest.raises(SystemExit):
+        main(["view", "--help"])
+    out = " ".join(capsys.readouterr().out.split())
+    assert "write a folder" in out and "index.html" in out
+    assert "python -m http.server -d OUTDIR" in out and "file://" in out
+    assert f"A .glb over {EMBED_GLB_LIMIT // 1_000_000} MB is not inlined" in out
+
+
+def test_bench_never_writes_the_tracked_record_unless_told(tmp_path, monkeypatch):
+    """Without -o the report goes to the git-ignored benchmarks/out/ (the quick run to its own
+    file there); only -o benchmarks/BENCHMARKS.md rewrites the record."""
+    import fourd.bench
+
+    calls = []
+    monkeypatch.setattr(fourd.bench, "run_bench", lambda **kw: calls.append(("run", kw)))
+    monkeypatch.setattr(fourd.bench, "merge_reports", lambda parts, out, notes: calls.append(("merge", out)))
+    assert main(["bench", "--quiet"]) == 0
+    assert main(["bench", "--quick", "--quiet"]) == 0
+    assert main(["bench", "--merge", "a.json", "--quiet"]) == 0
+    assert main(["bench", "--quiet", "-o", "benchmarks/BENCHMARKS.md"]) == 0
+    outputs = [Path(kw["output"]) if kind == "run" else Path(kw) for kind, kw in calls]
+    assert outputs == [Path("benchmarks/out/BENCHMARKS.md"), Path("benchmarks/out/BENCHMARKS-quick.md"),
+                       Path("benchmarks/out/BENCHMARKS.md"), Path("benchmarks/BENCHMARKS.md")]
+    assert calls[1][1]["quick"] is True
+    ignored = (Path(__file__).resolve().parents[1] / ".gitignore").read_text().split()
+    assert "benchmarks/out/" in ignored
+
+
+def test_help_lists_the_scenes_and_the_methods(capsys):
+    from fourd.methods import DEFAULT_METHOD
+    from fourd.synth.scenes import SCENES
+
+    with pytest.raises(SystemExit):
+        main(["synth", "--help"])
+    out = capsys.readouterr().out
+    assert all(f"  {name} " in out and text in out for name, text in SCENES.items())
+    with pytest.raises(SystemExit):
+        main(["reconstruct", "--help"])
+    out = " ".join(capsys.readouterr().out.split())
+    assert f"(default: {DEFAULT_METHOD};" in out
+    assert all(name in out.split("--method METHOD", 2)[2] for name in METHODS)

@@ -102,3 +102,19 @@ def test_methods_agree_on_the_name_of_the_normals_neighbourhood():
     for method in ("perframe", "kinematic"):
         names = {f for f in method_module(method).Options.__dataclass_fields__}
         assert "normals_k" in names and "normal_k" not in names
+
+
+def test_format_options_shows_an_entry_of_several_fields_once():
+    from fourd.options import format_options
+
+    short = format_options(Documented, ("radius", "hi"), method="m")
+    assert "  radius = 1.0  (float)\n      Search radius (e.g. 2 spacings). A second sentence." in short
+    assert "  lo = 0.0  (float), hi = 4  (int)\n      Bounds" in short  # hi brings its partner
+    assert short.count("Bounds") == 1 and "Frames per fit" not in short
+    assert short.endswith("2 expert options (fourd options m --all describes them):\n  window, hidden")
+    full = format_options(Documented, ("radius",), everything=True, method="m")
+    assert full.count("Bounds") == 1 and "expert options:" in full
+    assert "each with its own tree, which keeps the memory linear" in " ".join(full.split())
+    assert "(undocumented)" in full
+    with pytest.raises(ValueError, match="nope"):
+        format_options(Documented, ("nope",))

@@ -200,15 +200,18 @@ def cmd_evaluate(args) -> int:
 
 
 def cmd_bench(args) -> int:
-    from fourd.bench import merge_reports, run_bench
+    from fourd.bench import default_output, merge_reports, run_bench
 
+    # Without -o the report goes to the git-ignored benchmarks/out/, never over the tracked
+    # benchmarks/BENCHMARKS.md (rewrite that one by naming it).
+    output = args.output or default_output(args.quick and not args.merge)
     if args.merge:
-        merge_reports(args.merge, args.output, notes=args.note or [])
-        log.info("wrote %s", args.output)
+        merge_reports(args.merge, output, notes=args.note or [])
+        log.info("wrote %s", output)
         return 0
     run_bench(methods=args.methods, scenes=args.scenes, quick=args.quick, repeats=args.repeats,
-              output=args.output, baselines=args.baselines, seed=args.seed, timeout=args.timeout)
-    log.info("wrote %s", args.output)
+              output=output, baselines=args.baselines, seed=args.seed, timeout=args.timeout)
+    log.info("wrote %s", output)
     return 0
 
 
@@ -222,19 +225,25 @@ def cmd_demo(args) -> int:
 
 
 def cmd_view(args) -> int:
-    from fourd.viz.viewer import write_viewer
+    from fourd.viz.viewer import EMBED_GLB_LIMIT, write_viewer
 
     outdir = Path(args.output) if args.output else Path(str(Path(args.result).with_suffix("")) + "-view")
-    result, truth = args.result, args.truth
+    result, truth, metrics = args.result, args.truth, None
     if truth is not None:
         from fourd.io.results import load_result
-        from fourd.metrics import check_truth, load_truth
+        from fourd.metrics import check_truth, evaluate, load_truth
 
         result = load_result(args.result)
         truth = check_truth(result, load_truth(args.truth), args.result, args.truth,
                             force=args.force)
-    page = write_viewer(result, outdir, truth=truth, scans=args.input)
+        # the page's metrics panel: what `fourd evaluate RESULT TRUTH` reports
+        metrics = evaluate(result, truth)
+    page = write_viewer(result, outdir, truth=truth, scans=args.input, metrics=metrics)
     print(page)
+    glb = page.parent / "result.glb"
+    if glb.exists() and glb.stat().st_size > EMBED_GLB_LIMIT:
+        log.info("the .glb is too big to inline: to play it, serve the folder "
+                 "(python -m http.server -d %s) and open http://localhost:8000/", page.parent)
     if args.open:
         import webbrowser
 
@@ -243,20 +252,13 @@ def cmd_view(args) -> int:
 
 
 def cmd_options(args) -> int:
-    import textwrap
-
     from fourd.methods import DEFAULT_METHOD, method_module
-    from fourd.options import option_docs
+    from fourd.options import format_options
 
     name = args.method or DEFAULT_METHOD
-    docs = option_docs(method_module(name).Options)
-    print(f"options of method {name} (fourd reconstruct --method {name} --set KEY=VALUE; "
-          f"fourd options {name} --long for the whole text):")
-    for doc in docs:
-        text = doc.text if args.long else doc.summary
-        print(f"\n  {doc.name} = {doc.default!r}  ({doc.type})")
-        print(textwrap.fill(text or "(undocumented)", width=96, initial_indent="      ",
-                            subsequent_indent="      "))
+    module = method_module(name)
+    print(format_options(module.Options, getattr(module, "COMMON_OPTIONS", None),
+                         everything=args.all, method=name))
     return 0
 
 
@@ -298,17 +300,58 @@ def cmd_info(args) -> int:
     return 0
 
 
+class _Parser(argparse.ArgumentParser):
+    """An ArgumentParser whose ``epilog`` may be a function, called only when the help is shown
+    (``fourd synth --help`` lists the scenes without every command importing them)."""
+
+    def format_help(self) -> str:
+        if callable(self.epilog):
+            self.epilog = self.epilog()
+        return super().format_help()
+
+
+def _scenes_epilog() -> str:
+    """The scenes of the synth registry (:data:`fourd.synth.scenes.SCENES`), one a line."""
+    from fourd.synth.scenes import SCENES
+
+    width = max(len(name) for name in SCENES)
+    lines = [f"  {name:<{width}}  {text}" for name, text in SCENES.items()]
+    return ("scenes:\n" + "\n".join(lines) + "\n\nThe shared-data scenes are read from "
+            "../shared/data beside the project (or $FOURD_DATA); nothing is downloaded.")
+
+
+def _method_help() -> str:
+    from fourd.methods import DEFAULT_METHOD, METHODS
+
+    return (f"reconstruction method: {', '.join(METHODS)} (default: {DEFAULT_METHOD}; "
+            "fourd options METHOD lists its options)")
+
+
+_VIEW_EPILOG = """\
+The viewer is a folder (default RESULT-view/): open its index.html in a browser. The page
+inlines three.js, the frames and the exported .glb, so it works from the file system and
+loads nothing from the network. A .glb over 24 MB is not inlined, and browsers block a page
+opened from file:// from loading it: to play it, serve the folder and open it over http://
+
+  python -m http.server -d OUTDIR      # then open http://localhost:8000/
+"""
+
+#: What a RESULT argument may be (every format ``fourd reconstruct -o`` writes).
+_RESULT_HELP = ("a result: .npz, .glb, .usd/.usda/.usdc (needs usd-core), .abc (needs alembic3d), .pc2 (with its .obj "
+                "beside it) or a folder of per-frame meshes")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="fourd",
         description="Animated meshes from time-varying point clouds (4D scans).",
     )
     parser.add_argument("--version", action="version", version=f"fourd {_version()}")
-    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
     sub.required = True
 
-    def add(name, help_text, func):
-        p = sub.add_parser(name, help=help_text, description=help_text)
+    def add(name, help_text, func, **kwargs):
+        p = sub.add_parser(name, help=help_text, description=help_text, **kwargs)
         p.add_argument("--quiet", "-q", action="store_true", help="no progress bars or messages")
         p.add_argument("--verbose", "-v", action="store_true", help="debug messages")
         p.set_defaults(func=func)
@@ -318,7 +361,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("input", help="folder of frame files (ply/obj/xyz/pts/npy/npz) or one .npz")
     p.add_argument("-o", "--output", required=True,
                    help="result: .npz, .glb, .usd/.usda/.usdc, .abc, .pc2 (+ .obj), or a folder")
-    p.add_argument("--method", help="reconstruction method (default: the project's default)")
+    p.add_argument("--method", help=_method_help())
     p.add_argument("--config", help="TOML file with `method = ...` and an [options] table")
     p.add_argument("--set", action="append", metavar="KEY=VALUE", help="set a method option")
     p.add_argument("--frames", metavar="A:B:S", help="use input frames A:B:S (Python slice)")
@@ -344,10 +387,13 @@ def build_parser() -> argparse.ArgumentParser:
                         "millimetre scans: glTF and fourd's USD (metersPerUnit 1) take "
                         "positions as metres")
 
-    p = add("synth", "synthesize a ground-truth scene and scan it with virtual depth cameras", cmd_synth)
-    p.add_argument("scene")
-    p.add_argument("outdir")
-    p.add_argument("--frames", type=int, default=None)
+    p = add("synth", "synthesize a ground-truth scene and scan it with virtual depth cameras", cmd_synth,
+            epilog=_scenes_epilog, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("scene", help="one of the scenes below")
+    p.add_argument("outdir", help="folder for the scans (frame_*.ply, times.txt, sensors.json) "
+                                  "and the truth (truth.npz)")
+    p.add_argument("--frames", type=int, default=None,
+                   help="frames to make (default: 20, or what a shared scene has)")
     p.add_argument("--cameras", type=int, default=3)
     p.add_argument("--noise", type=float, default=0.002, help="fraction of the bounding-box diagonal")
     p.add_argument("--outliers", type=float, default=0.02, help="fraction of points")
@@ -355,14 +401,16 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=0)
 
     p = add("evaluate", "metrics of a result against ground truth", cmd_evaluate)
-    p.add_argument("result")
-    p.add_argument("truth")
+    p.add_argument("result", help=_RESULT_HELP)
+    p.add_argument("truth", help="the ground truth: a result in any of those formats, a "
+                                 "points .npz [T, P, 3], or a folder from `fourd synth`")
     p.add_argument("--json", action="store_true", help="print all metrics as JSON")
     p.add_argument("--force", action="store_true",
                    help="score a truth whose frame count or bounding box differs from the "
                         "result's (frames matched by time)")
 
-    p = add("bench", "run methods x scenes and write benchmarks/BENCHMARKS.md", cmd_bench)
+    p = add("bench", "run methods x scenes and write a report (benchmarks/out/BENCHMARKS.md "
+                     "unless -o names another)", cmd_bench)
     p.add_argument(
         "--methods",
         nargs="+",
@@ -370,7 +418,11 @@ def build_parser() -> argparse.ArgumentParser:
         "takes them (e.g. watertight, flow:missing_frames=1,2,resolution=64)",
     )
     p.add_argument("--scenes", nargs="+")
-    p.add_argument("-o", "--output", default="benchmarks/BENCHMARKS.md")
+    p.add_argument("-o", "--output",
+                   help="the Markdown report, with .json and plots beside it (default: "
+                        "benchmarks/out/BENCHMARKS.md, with --quick benchmarks/out/"
+                        "BENCHMARKS-quick.md, both git-ignored; -o benchmarks/BENCHMARKS.md "
+                        "rewrites the tracked record)")
     p.add_argument("--quick", action="store_true", help="a tiny run that exercises the whole path")
     p.add_argument("--repeats", type=int, default=1, help="timing repeats (median reported)")
     p.add_argument("--baselines", action="store_true",
@@ -385,21 +437,28 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("outdir", nargs="?", default="demo-out")
     p.add_argument("--method", help="method to use (default: the project's default)")
 
-    p = add("view", "write a self-contained HTML viewer for a result", cmd_view)
-    p.add_argument("result")
-    p.add_argument("--truth", help="ground truth (.npz) for error colouring")
+    p = add("view", "write a folder with a self-contained HTML viewer of a result "
+                    "(index.html, result.glb, viewer.js, ...)", cmd_view,
+            epilog=_VIEW_EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("result", help=_RESULT_HELP)
+    p.add_argument("--truth", help="ground truth (as for fourd evaluate): colours each vertex by "
+                                   "its distance to it and fills the metrics panel")
     p.add_argument("--input", help="the scans (folder) to show as points")
     p.add_argument("-o", "--output", help="folder for the page (default: RESULT-view/)")
     p.add_argument("--open", action="store_true", help="open the page in a browser")
     p.add_argument("--force", action="store_true",
                    help="use a truth whose frame count or bounding box differs from the result's")
 
-    p = add("options", "list a method's options with their defaults and what they do", cmd_options)
+    p = add("options", "a method's options to change first, with their defaults and what they do "
+                       "(--all: the expert ones too)", cmd_options)
     p.add_argument("method", nargs="?", help="method name (default: the project's default)")
-    p.add_argument("--long", action="store_true", help="the whole description, not its first sentence")
+    p.add_argument("--all", "--long", dest="all", action="store_true",
+                   help="describe the expert options too, not only the ones to change first "
+                        "(--long is the old name)")
 
-    p = add("info", "describe an input folder or a result", cmd_info)
-    p.add_argument("path")
+    p = add("info", "describe an input folder or a result: kind, frames, vertices, faces, "
+                    "connectivity, time range", cmd_info)
+    p.add_argument("path", help="a folder of scans, or " + _RESULT_HELP)
     p = add("learn-material", "learn bending and shearing stiffness from an animated mesh's "
             "frames (thesis 004, 2.7)", cmd_learn_material)
     p.add_argument("result", help="an animated mesh with one connectivity (.npz, a folder, ...)")

@@ -1,4 +1,5 @@
-"""``fourd info``: a short description of an input folder or a result file."""
+"""``fourd info``: a short description of an input folder or a result, in any format fourd
+writes (``.npz``, ``.glb``, USD, ``.pc2`` with its ``.obj``, a folder of per-frame meshes)."""
 
 from __future__ import annotations
 
@@ -10,17 +11,57 @@ from fourd.animation import AnimatedMesh, MeshSequence
 from fourd.errors import InputError
 from fourd.sequence import PointCloudSequence
 
+#: Result kind (:func:`fourd.io.results.result_kind`) -> how ``fourd info`` names the format.
+FORMAT_NAMES = {
+    "npz": "fourd .npz",
+    "glb": "glTF binary (.glb)",
+    "usd": "USD stage",
+    "pc2": "point cache (.pc2 with its .obj)",
+    "abc": "Alembic archive (.abc)",
+    "folder": "folder of per-frame meshes",
+}
 
-def _is_result(path: Path) -> bool:
-    if path.suffix.lower() == ".abc":
+#: Files a folder result holds besides its meshes (:mod:`fourd.io.meshfolder`).
+_FOLDER_SIDECARS = ("times.txt", "observed.npy")
+
+
+def _is_result_npz(path: Path) -> bool:
+    try:
+        with np.load(path) as data:
+            return "faces" in data.files or "kind" in data.files
+    except (OSError, ValueError):
+        raise InputError("cannot read this .npz file", path) from None
+
+
+def _is_result_folder(path: Path) -> bool:
+    """A folder written by :func:`fourd.save`: it has ``observed.npy``, or it holds only
+    ``.obj``/``.ply`` meshes (with faces) and ``times.txt``. A scan folder (points, or meshes
+    beside ``sensors.json``, a truth, ...) is an input."""
+    if (path / "observed.npy").is_file():
         return True
-    if path.suffix == ".npz":
-        try:
-            with np.load(path) as data:
-                return "faces" in data.files or data.get("kind", None) is not None
-        except (OSError, ValueError):
-            raise InputError("cannot read this .npz file", path) from None
-    return False
+    files = [p for p in path.iterdir() if p.is_file() and not p.name.startswith(".")]
+    meshes = sorted(p for p in files if p.suffix.lower() in (".obj", ".ply"))
+    if not meshes or any(p not in meshes and p.name not in _FOLDER_SIDECARS for p in files):
+        return False
+    from fourd.io.meshfiles import read_obj
+    from fourd.io.ply import read_ply
+
+    first = meshes[0]
+    mesh = read_obj(first) if first.suffix.lower() == ".obj" else read_ply(first)
+    return mesh.faces is not None and len(mesh.faces) > 0
+
+
+def is_result(path) -> bool:
+    """Whether ``path`` (which exists) is a result rather than an input sequence."""
+    from fourd.io.results import RESULT_SUFFIXES
+
+    path = Path(path)
+    if path.is_dir():
+        return _is_result_folder(path)
+    suffix = path.suffix.lower()
+    if suffix == ".npz":
+        return _is_result_npz(path)
+    return suffix in RESULT_SUFFIXES
 
 
 def describe_sequence(seq: PointCloudSequence) -> str:
@@ -36,32 +77,66 @@ def describe_sequence(seq: PointCloudSequence) -> str:
     return "\n".join(lines)
 
 
-def describe_result(result) -> str:
+def _range(values) -> str:
+    lo, hi = int(np.min(values)), int(np.max(values))
+    return f"{lo}" if lo == hi else f"{lo} .. {hi}"
+
+
+def describe_result(result, *, observed_stored: bool = True) -> str:
+    """Lines ``kind``, ``connectivity``, ``frames`` (with the time range), ``vertices``,
+    ``faces`` and, for an AnimatedMesh, the filled-in share and the rest pose; then the
+    bounds. ``observed_stored`` False: the format does not hold the ``observed`` flags."""
+    frames = f"frames: {result.frame_count}, times {result.times[0]:g} .. {result.times[-1]:g}"
     if isinstance(result, AnimatedMesh):
-        filled = 1.0 - result.observed.mean()
-        return "\n".join([
-            f"animated mesh: {result.frame_count} frames, {result.vertex_count} vertices, "
-            f"{len(result.faces)} faces (one connectivity)",
-            f"times {result.times[0]:g} .. {result.times[-1]:g}; filled-in vertex-frames {filled:.1%}; "
-            f"rest pose {'yes' if result.rest is not None else 'no'}",
-            f"bounds diagonal {result.diagonal():.4g}",
-        ])
-    if isinstance(result, MeshSequence):
-        counts = np.array([len(f) for _, f in result.meshes])
-        return (f"mesh sequence: {result.frame_count} frames (per-frame connectivity), "
-                f"faces per frame {counts.min()} .. {counts.max()}")
-    raise InputError(f"not a result: {type(result).__name__}")
+        points_only = len(result.faces) == 0
+        if observed_stored:
+            filled = f"{1.0 - result.observed.mean():.1%} of vertex-frames"
+        else:
+            filled = "not stored in this format"
+        lines = [
+            "kind: animated " + ("point set (no faces)" if points_only else "mesh"),
+            f"connectivity: one for all {result.frame_count} frames (vertex i is the same "
+            "point in every frame)",
+            frames,
+            f"vertices: {result.vertex_count}",
+            f"faces: {len(result.faces)}",
+            f"filled in (not observed): {filled}",
+            f"rest pose: {'yes' if result.rest is not None else 'no'}",
+        ]
+    elif isinstance(result, MeshSequence):
+        vertices = [len(v) for v, _ in result.meshes]
+        faces = [len(f) for _, f in result.meshes]
+        lines = [
+            "kind: per-frame meshes",
+            "connectivity: each frame its own (no correspondence between frames)",
+            frames,
+            f"vertices per frame: {_range(vertices)}",
+            f"faces per frame: {_range(faces)}",
+        ]
+    else:
+        raise InputError(f"not a result: {type(result).__name__}")
+    lo, hi = result.bounds()
+    lines.append(
+        f"bounds: {np.round(lo, 4).tolist()} .. {np.round(hi, 4).tolist()} "
+        f"(diagonal {result.diagonal():.4g})"
+    )
+    return "\n".join(lines)
 
 
 def describe(path) -> str:
-    """Describe ``path``: a result (.npz with faces, an Alembic .abc) or an input sequence."""
+    """Describe ``path``: a result (see the module docstring) or an input sequence."""
     path = Path(path)
     if not path.exists():
         raise InputError("does not exist", path)
-    if _is_result(path):
-        from fourd.io.results import load_result
+    if is_result(path):
+        from fourd.io.results import OBSERVED_KINDS, load_result, result_kind
 
-        return f"{path}\n" + describe_result(load_result(path))
+        kind = result_kind(path)
+        stored = kind in OBSERVED_KINDS and (kind != "folder" or (path / "observed.npy").is_file())
+        result = load_result(path)
+        return f"{path}: result, {FORMAT_NAMES[kind]}\n" + describe_result(
+            result, observed_stored=stored
+        )
     from fourd.io.frames import load_sequence
 
-    return f"{path}\n" + describe_sequence(load_sequence(path))
+    return f"{path}: input\n" + describe_sequence(load_sequence(path))

@@ -107,12 +107,14 @@ def parse_assignments(assignments: list[str]) -> dict[str, str]:
 @dataclasses.dataclass(frozen=True)
 class OptionDoc:
     """One documented option of a method: its name, type as written in the docstring, default
-    value and description (the docstring's text, whitespace collapsed)."""
+    value and description (the docstring's text, whitespace collapsed); ``entry`` names every
+    field the same docstring entry describes (``a, b : float``), itself included."""
 
     name: str
     type: str
     default: Any
     description: str
+    entry: tuple[str, ...] = ()
 
     @property
     def text(self) -> str:
@@ -160,7 +162,7 @@ def option_docs(options_class) -> list[OptionDoc]:
     lines = doc.splitlines()
     start = next((i + 2 for i, line in enumerate(lines[:-1])
                   if line.strip() == "Attributes" and set(lines[i + 1].strip()) == {"-"}), len(lines))
-    entries: dict[str, tuple[str, list[str]]] = {}
+    entries: dict[str, tuple[str, list[str], tuple[str, ...]]] = {}
     current: list[str] | None = None
     for i in range(start, len(lines)):
         line = lines[i]
@@ -174,12 +176,80 @@ def option_docs(options_class) -> list[OptionDoc]:
             if len(types_) != len(names):  # `a, b : float`: one type for all
                 types_ = [header.group(2).strip()] * len(names)
             for name, type_text in zip(names, types_, strict=True):
-                entries[name] = (type_text, current)
+                entries[name] = (type_text, current, tuple(names))
         elif current is not None and line.strip():
             current.append(line.strip())
     result = []
+    fields = [field.name for field in dataclasses.fields(options_class)]
+    # a subclass (a composition's options) describes its own fields; the rest come from its bases
+    inherited = {}
+    for base in options_class.__mro__[1:]:
+        if dataclasses.is_dataclass(base) and base.__doc__:
+            for doc in option_docs(base):
+                inherited.setdefault(doc.name, (doc.type, [doc.description] if doc.description else [], doc.entry))
     for field in dataclasses.fields(options_class):
-        type_text, text = entries.get(field.name, (str(field.type), []))
+        fallback = inherited.get(field.name, (str(field.type), [], (field.name,)))
+        type_text, text, names = entries.get(field.name, fallback)
         default = field.default if field.default is not dataclasses.MISSING else None
-        result.append(OptionDoc(field.name, type_text, default, " ".join(text)))
+        entry = tuple(name for name in names if name in fields) or (field.name,)
+        result.append(OptionDoc(field.name, type_text, default, " ".join(text), entry))
     return result
+
+
+def format_options(
+    options_class, common: tuple[str, ...] | None = None, *, everything: bool = False,
+    method: str = "", width: int = 96,
+) -> str:
+    """The text of ``fourd options METHOD``.
+
+    The ``common`` options (a method's ``COMMON_OPTIONS``; None: all of them) come first,
+    each with its whole description; the others follow under a heading with ``everything``,
+    else only their names. Fields described by one docstring entry (``a, b : float``) are
+    shown together, with their description once.
+    """
+    import textwrap
+
+    docs = option_docs(options_class)
+    by_name = {doc.name: doc for doc in docs}
+    common = tuple(by_name) if common is None else tuple(common)
+    unknown = [name for name in common if name not in by_name]
+    if unknown:
+        raise ValueError(f"common options {unknown} are not fields of {options_class.__name__}")
+
+    def groups(names) -> list[list[OptionDoc]]:
+        """The entries of ``names``, in order, each entry once with all of its fields."""
+        seen: set[str] = set()
+        out = []
+        for name in names:
+            if name in seen:
+                continue
+            group = [by_name[n] for n in by_name[name].entry]
+            seen.update(doc.name for doc in group)
+            out.append(group)
+        return out
+
+    def block(group: list[OptionDoc]) -> str:
+        head = ", ".join(f"{doc.name} = {doc.default!r}  ({doc.type})" for doc in group)
+        body = textwrap.fill(group[0].text or "(undocumented)", width=width,
+                             initial_indent="      ", subsequent_indent="      ")
+        return f"  {head}\n{body}"
+
+    first = groups(common)
+    shown = {doc.name for group in first for doc in group}
+    rest = groups(name for name in by_name if name not in shown)
+    call = f"fourd options {method}" if method else "fourd options METHOD"
+    set_hint = f"fourd reconstruct --method {method} --set KEY=VALUE" if method else "--set KEY=VALUE"
+    title = f"options of method {method}" if method else f"options of {options_class.__name__}"
+    blocks = [f"{title} ({set_hint}):"]
+    if rest and everything:
+        blocks.append("the options to change first:")
+    blocks += [block(group) for group in first]
+    if rest and everything:
+        blocks.append("expert options:")
+        blocks += [block(group) for group in rest]
+    elif rest:
+        names = [doc.name for group in rest for doc in group]
+        listing = textwrap.fill(", ".join(names), width=width, initial_indent="  ",
+                                subsequent_indent="  ")
+        blocks.append(f"{len(names)} expert options ({call} --all describes them):\n{listing}")
+    return "\n\n".join(blocks)

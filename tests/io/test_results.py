@@ -301,6 +301,111 @@ def test_folder_of_a_mesh_sequence_and_existing_folder(tmp_path):
     assert (tmp_path / "noext" / "frame_0002.obj").is_file()
 
 
+# ------------------------------------------------------------------------- reading back
+
+_READ_BACK = [
+    (".npz", True, True),
+    (".glb", False, False),
+    (".usda", False, False),
+    (".usdc", False, False),
+    (".pc2", False, False),
+    (".abc", True, False),
+    ("/", True, False),
+]
+
+
+@pytest.mark.parametrize(("suffix", "keeps_observed", "keeps_rest"), _READ_BACK)
+def test_every_format_reads_back_as_written(tmp_path, suffix, keeps_observed, keeps_rest):
+    """load_result reads what save wrote, in every format: the same faces, vertices within
+    float32 rounding, the times (.pc2: as frame numbers), observed where the format holds it."""
+    if suffix.startswith(".usd"):
+        pytest.importorskip("pxr", reason="usd-core (the fourd[usd] extra) is not installed")
+    if suffix == ".abc":
+        pytest.importorskip("alembic3d", reason="alembic3d (the fourd[abc] extra) is not installed")
+    anim = _animation(frames=4)
+    target = str(tmp_path / "walk") + suffix
+    save(anim, target)
+    back = load_result(target)
+    assert isinstance(back, AnimatedMesh)
+    assert np.array_equal(back.faces, anim.faces)
+    assert np.abs(back.vertices - anim.vertices).max() <= 1e-5
+    if suffix == ".pc2":  # a point cache counts frames: the times come back as frame numbers
+        rate = 1.0 / float(np.median(np.diff(anim.times)))
+        assert np.allclose(back.times, anim.times * rate, atol=1e-4)
+    else:
+        assert np.allclose(back.times, anim.times, atol=1e-6)
+    if keeps_observed:
+        assert np.array_equal(back.observed, anim.observed)
+    else:
+        assert back.observed.all()
+    assert (back.rest is not None) == keeps_rest
+
+
+@pytest.mark.parametrize("suffix", [".npz", ".glb", ".usda", "/"])
+def test_per_frame_meshes_read_back_as_per_frame_meshes(tmp_path, suffix):
+    if suffix.startswith(".usd"):
+        pytest.importorskip("pxr", reason="usd-core (the fourd[usd] extra) is not installed")
+    seq = _sequence()
+    target = str(tmp_path / "seq") + suffix
+    save(seq, target)
+    back = load_result(target)
+    assert isinstance(back, MeshSequence) and np.allclose(back.times, seq.times)
+    for (v, f), (v2, f2) in zip(seq.meshes, back.meshes, strict=True):
+        assert np.array_equal(f, f2) and np.abs(v - v2).max() <= 1e-6
+
+
+def test_glb_points_and_a_single_frame_read_back(tmp_path):
+    rng = np.random.default_rng(4)
+    points = AnimatedMesh(np.zeros((0, 3), int), rng.normal(size=(3, 50, 3)))
+    save(points, tmp_path / "points.glb")
+    back = load_result(tmp_path / "points.glb")
+    assert back.faces.shape == (0, 3) and np.abs(back.vertices - points.vertices).max() <= 1e-6
+    first = _animation(frames=2)
+    one = AnimatedMesh(first.faces, first.vertices[:1])
+    save(one, tmp_path / "one.glb")
+    assert load_result(tmp_path / "one.glb").vertices.shape == one.vertices.shape
+
+
+def test_reading_back_bad_files_names_them(tmp_path):
+    (tmp_path / "junk.glb").write_bytes(b"glTF" + bytes(8))
+    with pytest.raises(InputError, match=r"junk\.glb: is not a readable \.glb"):
+        load_result(tmp_path / "junk.glb")
+    (tmp_path / "text.glb").write_text("hello")
+    with pytest.raises(InputError, match=r"text\.glb: not a glTF binary"):
+        load_result(tmp_path / "text.glb")
+    save(_animation(frames=2), tmp_path / "walk.pc2")
+    (tmp_path / "walk.obj").unlink()
+    with pytest.raises(InputError, match=r"walk\.pc2: the topology walk\.obj is missing"):
+        load_result(tmp_path / "walk.pc2")
+    save(_animation(frames=2), tmp_path / "walk.pc2")
+    (tmp_path / "walk.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
+    with pytest.raises(InputError, match="162 points but walk.obj has 3 vertices"):
+        load_result(tmp_path / "walk.pc2")
+
+
+def test_reading_usd_without_pxr_says_what_to_install(tmp_path, monkeypatch):
+    import builtins
+
+    (tmp_path / "walk.usda").write_text("#usda 1.0\n")
+    real_import = builtins.__import__
+
+    def no_pxr(name, *args, **kwargs):
+        if name == "pxr" or name.startswith("pxr."):
+            raise ImportError("No module named 'pxr'")
+        return real_import(name, *args, **kwargs)
+
+    monkeypatch.setattr(builtins, "__import__", no_pxr)
+    with pytest.raises(InputError, match=r'walk\.usda: reading USD needs usd-core.*"fourd\[usd\]"'):
+        load_result(tmp_path / "walk.usda")
+
+
+def test_every_writable_format_has_a_reader():
+    from fourd.io.results import READERS, RESULT_SUFFIXES, USD_SUFFIXES
+
+    kinds = {"usd" if s in USD_SUFFIXES else s[1:] for s in RESULT_SUFFIXES} | {"folder"}
+    assert kinds == set(READERS)
+
+
 # ------------------------------------------------------------------------- bad outputs
 
 
@@ -380,9 +485,9 @@ def test_load_result_problems(tmp_path):
     (tmp_path / "empty").mkdir()
     with pytest.raises(InputError, match="empty"):
         load_result(tmp_path / "empty")
-    save(_animation(frames=2), tmp_path / "walk.glb")
-    with pytest.raises(InputError, match="walk.glb"):
-        load_result(tmp_path / "walk.glb")
+    (tmp_path / "walk.xyz3").write_text("x")
+    with pytest.raises(InputError, match=r"walk\.xyz3: not a result format"):
+        load_result(tmp_path / "walk.xyz3")
 
 
 def test_check_output_before_computing(tmp_path):

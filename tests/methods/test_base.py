@@ -60,6 +60,26 @@ def test_the_contract_check_names_a_bad_memory_hook():
     assert any("MEMORY_OPTIONS" in p and "grid" in p for p in problems)
 
 
+def test_the_contract_check_names_a_bad_common_options_list():
+    class Module:
+        @dataclasses.dataclass(frozen=True)
+        class Options:
+            resolution: int = 32
+            seed: int = 0
+
+        MIN_FRAMES = 1
+        RESULT = fourd.AnimatedMesh
+        COMMON_OPTIONS = ("resolution", "grid")
+
+        @staticmethod
+        def reconstruct(seq, options=None):
+            return None
+
+    assert any("COMMON_OPTIONS" in p and "grid" in p for p in check_method_module(Module))
+    Module.COMMON_OPTIONS = ("resolution",)
+    assert check_method_module(Module) == []
+
+
 @pytest.mark.parametrize("name", ["flow", "watertight", "auto"])
 def test_the_grid_methods_estimate_their_memory(name):
     """The memory hook of every method with a grid: bytes from the options and the data, the

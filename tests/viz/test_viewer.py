@@ -76,6 +76,7 @@ def test_write_viewer_animated_mesh(tmp_path):
         anim.vertices, axis=2
     )  # a vertex is this far from its scaled self
     assert data["hasErrors"] and np.all(errors <= bound + 1e-6) and errors.mean() > 0
+    assert data["truthDiagonal"] == pytest.approx(truth.diagonal())  # the legend's "% of"
     assert len(data["points"]) == 4
     assert json.loads((out / "metrics.json").read_text()) == {"chamfer": 0.01, "nan": None}
 
@@ -139,3 +140,16 @@ def test_write_viewer_from_saved_result_and_metrics_file(tmp_path):
     assert data["metrics"] == {"hausdorff": 0.5}
     positions = decode(data["positions"], "<f4", anim.vertices.shape)
     assert np.allclose(positions, anim.vertices, atol=1e-6)
+
+
+def test_the_page_has_an_error_legend_and_whole_metric_keys(tmp_path):
+    """The legend (colour bar, ticks, what the colours mean) is in the page, and the metrics
+    table no longer breaks its key names at any letter (tests/viz/test_viewer_browser.py
+    measures both in Chromium)."""
+    index = viewer.write_viewer(deforming_sphere(frames=2), tmp_path / "v")
+    page = index.read_text()
+    for element in ("fourd-error-legend", "fourd-colorbar", "fourd-colorbar-hi", "fourd-colorbar-text"):
+        assert f'id="{element}"' in page
+    css = (tmp_path / "v" / "viewer.css").read_text()
+    assert "break-all" not in css and "td.fourd-key" in css
+    assert 'createElement("wbr")' in page

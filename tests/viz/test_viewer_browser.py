@@ -137,9 +137,16 @@ def test_viewer_plays_animated_mesh_and_its_glb_in_chromium(tmp_path, serve):
     truth = AnimatedMesh(anim.faces, anim.vertices * 1.03)
     scans = PointCloudSequence.from_arrays([v[::4] for v in anim.vertices])
     outdir = tmp_path / "view"
-    write_viewer(
-        anim, outdir, truth=truth, scans=scans, metrics={"chamfer": 0.01}, title="browser test"
-    )
+    metrics = {  # the shape of fourd.evaluate's report: long keys, nested, per-frame curves
+        "chamfer": 0.01,
+        "correspondence_mean": 0.0123,
+        "nonmanifold_edges_max": 0,
+        "timing": None,
+        "per_frame": {"correspondence": [0.01, 0.02, 0.015], "closed_manifold": [True, False]},
+        "floor": {"completeness_95": 0.001},
+        "result_path": "/tmp/" + "a-long-folder-name/" * 12 + "the-result-of-a-long-run.glb",
+    }
+    write_viewer(anim, outdir, truth=truth, scans=scans, metrics=metrics, title="browser test")
     has_glb = (outdir / "result.glb").exists()
     glb_frames = ["--glb-frames", f"0,2,{last}"] if has_glb else []
     report = _drive(
@@ -157,6 +164,15 @@ def test_viewer_plays_animated_mesh_and_its_glb_in_chromium(tmp_path, serve):
     info = report["info"]
     assert info["kind"] == "animated" and info["frameCount"] == anim.frame_count
     assert info["hasErrors"] and info["hasPoints"] and info["hasObserved"]
+
+    # the side panel: a colour legend with its scale, the metrics, key names whole
+    panel = report["panel"]
+    assert panel["legendShown"] and panel["legendTicks"][0] == "0"
+    assert panel["legendTicks"][2].startswith("\u2265 ") and "truth's surface" in panel["legendText"]
+    assert panel["metricRows"] == 8
+    assert "per_frame.correspondence" in panel["metricKeys"]
+    assert max(panel["keyLines"]) <= 2, panel  # broken after "." or "_" at most, not per letter
+    assert panel["keyLines"][panel["metricKeys"].index("chamfer")] == 1
 
     first, final = report["frames"]
     assert first["set"]["frame"] == 0 and final["set"]["frame"] == last

@@ -11,7 +11,7 @@ from fourd.bench.case import run_case
 from fourd.bench.machine import machine_info
 from fourd.bench.merge import merge_reports
 from fourd.bench.report import COLUMNS, format_cell, format_markdown, write_report
-from fourd.bench.runner import run_bench
+from fourd.bench.runner import DEFAULT_OUTPUT, QUICK_OUTPUT, RECORD, default_output, run_bench
 from fourd.bench.suite import (
     HELD_OUT_SCENES,
     PEERS,
@@ -26,6 +26,9 @@ from fourd.bench.suite import (
 
 __all__ = [
     "COLUMNS",
+    "DEFAULT_OUTPUT",
+    "QUICK_OUTPUT",
+    "RECORD",
     "HELD_OUT_SCENES",
     "PEERS",
     "PROTOCOL",
@@ -34,6 +37,7 @@ __all__ = [
     "SAMPLES",
     "STANDARD_SCENES",
     "BenchScene",
+    "default_output",
     "format_cell",
     "format_markdown",
     "machine_info",

@@ -10,7 +10,10 @@ run; the wall time per frame is the median over ``repeats`` runs of the reconstr
 
 Outputs: ``BENCHMARKS.md`` (one table per scene, the machine, the commit), ``BENCHMARKS.json``
 beside it (every metric and per-frame curve), and one PNG per scene (accuracy and
-completeness and correspondence error per frame) in ``plots/`` beside it.
+completeness and correspondence error per frame) in ``plots/`` beside it. By default they go
+to the git-ignored ``benchmarks/out/`` (:data:`DEFAULT_OUTPUT`, :data:`QUICK_OUTPUT`), so a
+run never overwrites the tracked record, ``benchmarks/BENCHMARKS.md`` (:data:`RECORD`), which
+only an explicit ``output`` (``fourd bench -o benchmarks/BENCHMARKS.md``) rewrites.
 """
 
 from __future__ import annotations
@@ -44,6 +47,22 @@ from fourd.progress import progress
 log = logging.getLogger("fourd.bench")
 
 
+#: Where a run writes its report unless told otherwise (git-ignored).
+DEFAULT_OUTPUT = Path("benchmarks/out/BENCHMARKS.md")
+
+#: The same for a ``quick`` run.
+QUICK_OUTPUT = Path("benchmarks/out/BENCHMARKS-quick.md")
+
+#: The tracked benchmark record (the README's table is read from its ``.json``).
+RECORD = Path("benchmarks/BENCHMARKS.md")
+
+
+def default_output(quick: bool = False) -> Path:
+    """The report a run writes when no output is named: :data:`QUICK_OUTPUT` for a quick run,
+    else :data:`DEFAULT_OUTPUT`; never the tracked :data:`RECORD`."""
+    return QUICK_OUTPUT if quick else DEFAULT_OUTPUT
+
+
 #: Frames shown in each bench contact sheet (evenly spaced, first and last included).
 SHEET_FRAMES = 4
 
@@ -54,7 +73,7 @@ def run_bench(
     scenes=None,
     quick: bool = False,
     repeats: int = 1,
-    output: str | os.PathLike = "benchmarks/BENCHMARKS.md",
+    output: str | os.PathLike | None = None,
     baselines: bool = False,
     seed: int = 0,
     timeout: float | None = None,
@@ -72,9 +91,10 @@ def run_bench(
         A CI-sized run: 4 frames, coarse cameras, fewer metric samples.
     repeats : int
         Reconstructions per case; the wall time is their median.
-    output : path
+    output : path, optional
         The Markdown report; ``.json`` beside it and PNG plots in ``plots/`` beside it
-        (``<stem>-plots/`` when the file is not named ``BENCHMARKS.md``).
+        (``<stem>-plots/`` when the file is not named ``BENCHMARKS.md``). Default:
+        :func:`default_output` (``benchmarks/out/``, git-ignored).
     baselines : bool
         Add the peers of BASELINES.md (:mod:`fourd.bench.peers`; needs ``open3d``).
     seed : int
@@ -96,7 +116,7 @@ def run_bench(
         raise InputError(f"repeats must be at least 1, got {repeats}")
     chosen_scenes = select_scenes(scenes, quick)
     chosen_methods = select_methods(methods, quick)
-    output = Path(output)
+    output = default_output(quick) if output is None else Path(output)
     output.parent.mkdir(parents=True, exist_ok=True)
     samples = QUICK_SAMPLES if quick else SAMPLES
     notes = []

@@ -1,4 +1,4 @@
-"""glTF 2.0 binary (``.glb``) export of animations.
+"""glTF 2.0 binary (``.glb``) export of animations, and :func:`read_glb` to read them back.
 
 An :class:`~fourd.animation.AnimatedMesh` becomes one mesh whose base is frame 0 (POSITION and
 NORMAL) and whose morph targets are the other frames (POSITION and NORMAL deltas from frame
@@ -13,6 +13,11 @@ and an animation of the nodes' ``scale`` (1 while the frame is current, 0 otherw
 Keyframe times are the frame times in seconds (:mod:`fourd.io.timebase`). glTF is Y up by
 specification: Z-up data (``up="z"``) is rotated on writing, ``(x, y, z) -> (x, z, -y)``.
 
+:func:`read_glb` reads both layouts back: one mesh node is an AnimatedMesh (frame ``k`` is the
+base plus the morph targets weighted by the ``k``-th key of the weights animation), several
+are a MeshSequence (one node per frame). Times are the animation's key times (seconds); a
+``.glb`` does not hold ``observed`` (read back as all True) nor the rest pose.
+
 References
 ----------
 Khronos Group, "glTF 2.0 Specification", sections 3.7.2.2 (morph targets) and 3.11 (animations).
@@ -20,7 +25,9 @@ Khronos Group, "glTF 2.0 Specification", sections 3.7.2.2 (morph targets) and 3.
 
 from __future__ import annotations
 
+import dataclasses
 import os
+import warnings
 
 import numpy as np
 
@@ -89,6 +96,9 @@ class _Blob:
         self.gltf.buffers.append(Buffer(byteLength=len(blob)))
         return blob
 
+
+#: The animation's ``extras`` key holding the result's own times (the keys are seconds).
+TIMES_EXTRA = "fourd_times"
 
 def _indices(blob: _Blob, faces: np.ndarray, vertex_count: int) -> int:
     dtype = np.uint16 if vertex_count < 65535 else np.uint32
@@ -175,6 +185,7 @@ def _animated(gltf, blob: _Blob, anim: AnimatedMesh, *, clock: TimeBase, interpo
     gltf.animations.append(
         Animation(
             name="fourd",
+            extras={TIMES_EXTRA: [float(t) for t in anim.times]},
             samplers=[sampler],
             channels=[
                 AnimationChannel(sampler=0, target=AnimationChannelTarget(node=0, path="weights"))
@@ -232,7 +243,8 @@ def _sequence(gltf, blob: _Blob, seq: MeshSequence, *, clock: TimeBase) -> None:
                 )
             )
     if samplers:
-        gltf.animations.append(Animation(name="fourd", samplers=samplers, channels=channels))
+        gltf.animations.append(Animation(name="fourd", samplers=samplers, channels=channels,
+                                         extras={TIMES_EXTRA: [float(t) for t in seq.times]}))
 
 
 def write_glb(
@@ -280,3 +292,157 @@ def write_glb(
     gltf.set_binary_blob(blob.finish())
     with atomic_path(path, suffix=".glb") as tmp:
         gltf.save_binary(str(tmp))
+
+
+# ------------------------------------------------------------------------------------ reading
+
+_COMPONENTS = {
+    5120: np.int8,
+    5121: np.uint8,
+    5122: np.int16,
+    5123: np.uint16,
+    5125: np.uint32,
+    5126: np.float32,
+}
+_WIDTHS = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT4": 16}
+
+
+def _accessor(gltf, blob: bytes, index: int, path) -> np.ndarray:
+    """The values of accessor ``index``: an array [count, width] (``[count]`` for SCALAR)."""
+    accessor = gltf.accessors[index]
+    if accessor.sparse is not None or accessor.bufferView is None:
+        raise InputError(f"accessor {index} is sparse or has no buffer view: not a fourd .glb", path)
+    view = gltf.bufferViews[accessor.bufferView]
+    dtype = np.dtype(_COMPONENTS[accessor.componentType]).newbyteorder("<")
+    width = _WIDTHS[accessor.type]
+    start = (view.byteOffset or 0) + (accessor.byteOffset or 0)
+    stride = view.byteStride or dtype.itemsize * width
+    count = accessor.count
+    end = start + (stride * (count - 1) + dtype.itemsize * width if count else 0)
+    if end > len(blob):
+        raise InputError(f"accessor {index} reaches past the end of the binary chunk", path)
+    rows = np.ndarray(
+        (count, width), dtype=dtype, buffer=blob, offset=start, strides=(stride, dtype.itemsize)
+    )
+    rows = np.array(rows)
+    return rows[:, 0] if accessor.type == "SCALAR" else rows
+
+
+def _primitive(gltf, blob: bytes, mesh_index: int, path):
+    """``(vertices [N, 3], faces [F, 3], targets [K, N, 3])`` of a mesh's first primitive."""
+    primitive = gltf.meshes[mesh_index].primitives[0]
+    if primitive.attributes.POSITION is None:
+        raise InputError(f"mesh {mesh_index} has no POSITION attribute", path)
+    vertices = _accessor(gltf, blob, primitive.attributes.POSITION, path).astype(np.float64)
+    if primitive.indices is not None and primitive.mode in (None, 4):
+        faces = _accessor(gltf, blob, primitive.indices, path).astype(np.int64).reshape(-1, 3)
+    elif primitive.mode in (None, 4):  # non-indexed triangles
+        faces = np.arange(len(vertices), dtype=np.int64).reshape(-1, 3)
+    else:
+        faces = np.zeros((0, 3), dtype=np.int64)
+    targets = [
+        _accessor(gltf, blob, target["POSITION"] if isinstance(target, dict) else target.POSITION, path)
+        for target in (primitive.targets or [])
+    ]
+    targets = np.stack(targets).astype(np.float64) if targets else np.zeros((0, len(vertices), 3))
+    return vertices, faces, targets
+
+
+def _weights_track(gltf, blob: bytes, node: int, path):
+    """``(key times, weights [keys, targets])`` of the animation of ``node``'s morph weights,
+    or None."""
+    for animation in gltf.animations:
+        for channel in animation.channels:
+            if channel.target.node == node and channel.target.path == "weights":
+                sampler = animation.samplers[channel.sampler]
+                return (
+                    _accessor(gltf, blob, sampler.input, path).astype(np.float64),
+                    _accessor(gltf, blob, sampler.output, path).astype(np.float64),
+                )
+    return None
+
+
+def _node_key_times(gltf, blob: bytes, nodes: list[int], path) -> np.ndarray | None:
+    """The key times of the first animation channel that targets one of ``nodes``."""
+    for animation in gltf.animations:
+        for channel in animation.channels:
+            if channel.target.node in nodes:
+                sampler = animation.samplers[channel.sampler]
+                return _accessor(gltf, blob, sampler.input, path).astype(np.float64)
+    return None
+
+
+def read_glb(path: str | os.PathLike) -> AnimatedMesh | MeshSequence:
+    """Read a ``.glb`` written by :func:`write_glb` (see the module docstring).
+
+    Raises
+    ------
+    InputError
+        Not a glTF binary, no mesh, or a layout :func:`write_glb` does not write (several
+        primitives per mesh, sparse accessors, a weights animation that does not match the
+        morph targets).
+    """
+    try:
+        from pygltflib import GLTF2
+    except ImportError:  # pragma: no cover - a core dependency
+        raise InputError("reading .glb needs pygltflib: pip install pygltflib", path) from None
+    try:
+        with open(path, "rb") as stream:
+            if stream.read(4) != b"glTF":
+                raise InputError("not a glTF binary (.glb) file", path)
+        with warnings.catch_warnings():  # pygltflib warns before it fails on a bad header
+            warnings.simplefilter("ignore")
+            gltf = GLTF2().load_binary(os.fspath(path))
+        blob = gltf.binary_blob() or b""
+    except InputError:
+        raise
+    except OSError as error:
+        raise InputError(f"cannot be read ({error.strerror or error})", path) from None
+    except Exception as error:  # a damaged file: one clear line
+        raise InputError(f"is not a readable .glb ({type(error).__name__}: {error})", path) from None
+    scene = gltf.scenes[gltf.scene or 0] if gltf.scenes else None
+    nodes = list(scene.nodes) if scene is not None and scene.nodes else list(range(len(gltf.nodes)))
+    if not any(gltf.nodes[k].mesh is not None for k in nodes):
+        raise InputError("holds no mesh", path)
+    try:
+        result = _read_animated(gltf, blob, nodes[0], path) if len(nodes) == 1 else _read_sequence(gltf, blob, nodes, path)
+        written = next((a.extras.get(TIMES_EXTRA) for a in gltf.animations
+                        if isinstance(a.extras, dict) and TIMES_EXTRA in a.extras), None)
+        if written is not None and len(written) == len(result.times):
+            result = dataclasses.replace(result, times=np.asarray(written, dtype=np.float64))
+        return result
+    except InputError as error:
+        raise InputError(error.problem, error.path or path) from None
+    except (IndexError, KeyError, ValueError, AttributeError, TypeError) as error:
+        raise InputError(f"is not a .glb fourd can read ({type(error).__name__}: {error})", path) from None
+
+
+def _read_animated(gltf, blob: bytes, node: int, path) -> AnimatedMesh:
+    base, faces, targets = _primitive(gltf, blob, gltf.nodes[node].mesh, path)
+    track = _weights_track(gltf, blob, node, path)
+    if track is None or not len(targets):
+        return AnimatedMesh(faces, base[None])
+    times, weights = track
+    weights = weights.reshape(len(times), -1)
+    if weights.shape[1] != len(targets):
+        raise InputError(
+            f"the weights animation drives {weights.shape[1]} morph targets but the mesh has "
+            f"{len(targets)}",
+            path,
+        )
+    vertices = base[None] + np.einsum("kt,tnd->knd", weights, targets)
+    return AnimatedMesh(faces, vertices, times=times)
+
+
+def _read_sequence(gltf, blob: bytes, nodes: list[int], path) -> MeshSequence:
+    meshes = []
+    for node in nodes:
+        if gltf.nodes[node].mesh is None:  # an empty frame
+            meshes.append((np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64)))
+        else:
+            vertices, faces, _ = _primitive(gltf, blob, gltf.nodes[node].mesh, path)
+            meshes.append((vertices, faces))
+    times = _node_key_times(gltf, blob, nodes, path)
+    if times is not None and len(times) != len(meshes):
+        raise InputError(f"{len(meshes)} frame nodes but {len(times)} animation keys", path)
+    return MeshSequence(tuple(meshes), times)

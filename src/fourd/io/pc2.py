@@ -3,7 +3,8 @@
 Layout (little endian): ``b"POINTCACHE2\\0"``, int32 version (1), int32 point count, float32
 start frame, float32 sample rate (frames per sample), int32 sample count, then float32
 ``x, y, z`` for every point of every sample. Blender's Mesh Cache modifier reads it onto the
-mesh imported from the ``.obj`` (import with "keep vertex order").
+mesh imported from the ``.obj`` (import with "keep vertex order"). :func:`read_pc2_result`
+reads both back as an AnimatedMesh.
 """
 
 from __future__ import annotations
@@ -18,7 +19,7 @@ import numpy as np
 from fourd.animation import AnimatedMesh, MeshSequence
 from fourd.errors import InputError
 from fourd.io.atomic import atomic_path
-from fourd.io.meshfiles import write_obj
+from fourd.io.meshfiles import read_obj, write_obj
 from fourd.io.timebase import time_base
 
 log = logging.getLogger("fourd.io.pc2")
@@ -147,3 +148,35 @@ def read_pc2(path: str | os.PathLike) -> PointCache:
         samples, points, 3
     )
     return PointCache(vertices, float(header["start"]), float(header["rate"]))
+
+
+def read_pc2_result(path: str | os.PathLike) -> AnimatedMesh:
+    """Read a ``.pc2`` and the ``.obj`` beside it (what :func:`write_pc2` writes) as an
+    AnimatedMesh: times ``start + rate * k``; ``observed`` all True (the cache does not hold
+    it). Per-frame meshes written through :func:`one_connectivity` come back as that one
+    connectivity.
+
+    Raises
+    ------
+    InputError
+        A bad cache (:func:`read_pc2`), a missing ``.obj``, or an ``.obj`` whose vertex count
+        is not the cache's.
+    """
+    path = Path(path)
+    cache = read_pc2(path)
+    topology = path.with_suffix(".obj")
+    if not topology.exists():
+        raise InputError(f"the topology {topology.name} is missing beside it", path)
+    mesh = read_obj(topology)
+    points = cache.vertices.shape[1]
+    if len(mesh.vertices) != points:
+        raise InputError(
+            f"the point cache has {points} points but {topology.name} has {len(mesh.vertices)} vertices",
+            path,
+        )
+    rate = cache.rate if cache.rate > 0 else 1.0  # a foreign cache may leave it 0
+    times = cache.start + rate * np.arange(len(cache.vertices))
+    try:
+        return AnimatedMesh(mesh.faces, cache.vertices.astype(np.float64), times)
+    except InputError as error:
+        raise InputError(error.problem, error.path or path) from None

@@ -1,5 +1,6 @@
 """Reconstruction results on disk: :func:`save` picks the format from the output path,
-:func:`load_result` reads ``.npz``, ``.abc`` and folders back.
+:func:`load_result` reads every one of them back (:data:`READERS`, the one place that maps a
+format to its reader: ``fourd evaluate``, ``fourd view`` and ``fourd info`` go through it).
 
 ==========================  ===================================================================
 ``.npz``                    (:mod:`fourd.io.npz`) ``vertices`` float32 [T, N, 3], ``faces`` int32 [F, 3], ``times``
@@ -23,6 +24,9 @@ so an interrupted run never leaves a partial file under the requested name.
 Times are converted for each format through one time base (:mod:`fourd.io.timebase`: frame
 numbers or seconds, and a frame rate); ``scale`` and ``up`` (:mod:`fourd.io.axes`) change the
 written positions and the declared up axis, never the reconstruction.
+
+Read back, ``.glb``, USD and ``.pc2`` give ``observed`` all True (they do not hold it,
+:data:`OBSERVED_KINDS` do) and no rest pose; ``.glb`` times are its key times in seconds.
 """
 
 from __future__ import annotations
@@ -36,12 +40,12 @@ from fourd.animation import AnimatedMesh, MeshSequence
 from fourd.errors import InputError
 from fourd.io.abc import read_abc, write_abc
 from fourd.io.axes import check_up, scaled
-from fourd.io.glb import write_glb
+from fourd.io.glb import read_glb, write_glb
 from fourd.io.meshfolder import read_mesh_folder, write_mesh_folder
 from fourd.io.npz import read_npz, write_npz
-from fourd.io.pc2 import write_pc2
+from fourd.io.pc2 import read_pc2_result, write_pc2
 from fourd.io.timebase import time_base
-from fourd.io.usd import USD_SUFFIXES, write_usd
+from fourd.io.usd import USD_SUFFIXES, read_usd, write_usd
 
 log = logging.getLogger("fourd.io.results")
 
@@ -54,12 +58,28 @@ RESULT_SUFFIXES: tuple[str, ...] = (".npz", ".glb", *USD_SUFFIXES, ".abc", ".pc2
 #: quadratic in the frames. The other kinds keep each frame's own mesh.
 ONE_CONNECTIVITY_KINDS: tuple[str, ...] = ("pc2",)
 
+#: Output kind -> the function that reads it back (path -> AnimatedMesh | MeshSequence).
+READERS = {
+    "npz": read_npz,
+    "glb": read_glb,
+    "usd": read_usd,
+    "pc2": read_pc2_result,
+    "abc": read_abc,
+    "folder": read_mesh_folder,
+}
+
+#: Output kinds that hold the ``observed`` flags (the others read back as all observed).
+OBSERVED_KINDS: tuple[str, ...] = ("npz", "abc", "folder")
+
 __all__ = [
     "ONE_CONNECTIVITY_KINDS",
+    "OBSERVED_KINDS",
+    "READERS",
     "RESULT_SUFFIXES",
     "check_output",
     "load_result",
     "output_kind",
+    "result_kind",
     "save",
 ]
 
@@ -232,24 +252,36 @@ def save(
     return target
 
 
-def load_result(path: str | os.PathLike) -> AnimatedMesh | MeshSequence:
-    """Read a result written by :func:`save`: an ``.npz``, an ``.abc`` (:func:`fourd.io.abc.read_abc`,
-    any Alembic archive's first polygon mesh; needs alembic3d) or a folder of per-frame meshes.
-
-    A folder whose meshes all share the same faces (and vertex count) is an AnimatedMesh
-    (``observed`` from ``observed.npy``, all True without it); otherwise a MeshSequence.
-    Times come from ``times.txt`` when present.
-    """
+def result_kind(path: str | os.PathLike) -> str:
+    """The format of the existing result ``path`` (a key of :data:`READERS`); InputError when
+    it does not exist or is no result format."""
     path = Path(path)
     if not path.exists():
         raise InputError("does not exist", path)
     if path.is_dir():
-        return read_mesh_folder(path)
-    if path.suffix.lower() == ".npz":
-        return read_npz(path)
-    if path.suffix.lower() == ".abc":
-        return read_abc(path)
-    raise InputError("can read back results in .npz, .abc or a folder of .obj/.ply meshes", path)
+        return "folder"
+    suffix = path.suffix.lower()
+    if suffix in USD_SUFFIXES:
+        return "usd"
+    if suffix in RESULT_SUFFIXES and suffix[1:] in READERS:
+        return suffix[1:]
+    known = ", ".join(s for s in RESULT_SUFFIXES)
+    raise InputError(
+        f"not a result format fourd reads ({suffix or 'no suffix'}): {known} or a folder of "
+        ".obj/.ply meshes",
+        path,
+    )
+
+
+def load_result(path: str | os.PathLike) -> AnimatedMesh | MeshSequence:
+    """Read a result written by :func:`save`, in any of its formats (:data:`READERS`).
+
+    A folder whose meshes all share the same faces (and vertex count) is an AnimatedMesh
+    (``observed`` from ``observed.npy``, all True without it); otherwise a MeshSequence.
+    Times come from ``times.txt`` when present. See the module docstring for what ``.glb``,
+    USD and ``.pc2`` do not hold.
+    """
+    return READERS[result_kind(path)](Path(path))
 
 
 def as_result(result) -> AnimatedMesh | MeshSequence:

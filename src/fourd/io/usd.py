@@ -1,4 +1,5 @@
-"""USD export (``.usd``, ``.usda``, ``.usdc``) through usd-core's ``pxr`` (an optional extra).
+"""USD export (``.usd``, ``.usda``, ``.usdc``) through usd-core's ``pxr`` (an optional extra),
+and :func:`read_usd` to read it back.
 
 An :class:`~fourd.animation.AnimatedMesh` becomes one ``UsdGeom.Mesh`` at ``/Root/Mesh`` with
 fixed ``faceVertexCounts``/``faceVertexIndices`` and time-sampled ``points``, ``normals``
@@ -36,12 +37,15 @@ USD_SUFFIXES = (".usd", ".usda", ".usdc")
 METERS_PER_UNIT = 1.0
 
 
-def _pxr(path):
+#: Attribute of the root prim holding the result's times (time codes are frame numbers).
+TIMES_ATTRIBUTE = "fourd:times"
+
+def _pxr(path, verb: str = "writing"):
     try:
         from pxr import Sdf, Usd, UsdGeom, Vt
     except ImportError:
         raise InputError(
-            'writing USD needs usd-core, which is not installed: pip install "fourd[usd]"', path
+            f'{verb} USD needs usd-core, which is not installed: pip install "fourd[usd]"', path
         ) from None
     return Sdf, Usd, UsdGeom, Vt
 
@@ -98,6 +102,10 @@ def write_usd(
         UsdGeom.SetStageMetersPerUnit(stage, METERS_PER_UNIT)
         root = UsdGeom.Xform.Define(stage, "/Root")
         stage.SetDefaultPrim(root.GetPrim())
+        # the result's own times, so that reading back gives them exactly (time codes are frames)
+        root.GetPrim().CreateAttribute(TIMES_ATTRIBUTE, Sdf.ValueTypeNames.DoubleArray).Set(
+            Vt.DoubleArray([float(t) for t in result.times])
+        )
         stage.SetStartTimeCode(float(codes[0]))
         stage.SetEndTimeCode(float(codes[-1]))
         stage.SetTimeCodesPerSecond(rate)
@@ -135,3 +143,78 @@ def write_usd(
                 indices_attr.Set(Vt.IntArray.FromNumpy(faces.astype(np.int32).ravel()), code)
         stage.GetRootLayer().Save()
         del stage
+
+
+def read_usd(path: str | os.PathLike) -> AnimatedMesh | MeshSequence:
+    """Read a USD stage written by :func:`write_usd`: its first ``UsdGeom.Mesh`` (or
+    ``UsdGeom.Points``), one frame per time sample of ``points`` (times are the time codes).
+    The same faces and vertex count in every frame make an AnimatedMesh (``observed`` all
+    True: USD does not hold it), else a MeshSequence. Polygons are fan-triangulated.
+
+    Raises
+    ------
+    InputError
+        Without ``pxr`` (saying ``pip install "fourd[usd]"``), an unreadable stage, or one
+        without a mesh or points.
+    """
+    _, Usd, UsdGeom, _ = _pxr(path, "reading")
+    try:
+        stage = Usd.Stage.Open(os.fspath(path))
+    except Exception:  # pxr.Tf.ErrorException, whose text is pxr's source location
+        raise InputError("is not a readable USD stage (usd-core could not open it)", path) from None
+    if stage is None:
+        raise InputError("is not a readable USD stage", path)
+    geom = None
+    for prim in stage.Traverse():
+        if prim.IsA(UsdGeom.Mesh) or prim.IsA(UsdGeom.Points):
+            geom = prim
+            break
+    if geom is None:
+        raise InputError("holds no UsdGeom.Mesh or UsdGeom.Points", path)
+    points_attr = UsdGeom.PointBased(geom).GetPointsAttr()
+    codes = list(points_attr.GetTimeSamples()) or [Usd.TimeCode.Default()]
+    is_mesh = geom.IsA(UsdGeom.Mesh)
+    mesh = UsdGeom.Mesh(geom) if is_mesh else None
+
+    def faces_at(code) -> np.ndarray:
+        if mesh is None:
+            return np.zeros((0, 3), dtype=np.int64)
+        counts = np.asarray(mesh.GetFaceVertexCountsAttr().Get(code) or [], dtype=np.int64)
+        indices = np.asarray(mesh.GetFaceVertexIndicesAttr().Get(code) or [], dtype=np.int64)
+        return _triangulate(counts, indices, path)
+
+    frames = []
+    for code in codes:
+        points = np.asarray(points_attr.Get(code) or [], dtype=np.float64).reshape(-1, 3)
+        frames.append((points, faces_at(code)))
+    times = None if len(codes) == 1 and not points_attr.GetTimeSamples() else [float(c) for c in codes]
+    written = stage.GetDefaultPrim().GetAttribute(TIMES_ATTRIBUTE) if stage.GetDefaultPrim() else None
+    if written and written.Get() is not None and len(written.Get()) == len(frames):
+        times = [float(t) for t in written.Get()]
+    same = all(len(v) == len(frames[0][0]) and np.array_equal(f, frames[0][1]) for v, f in frames)
+    try:
+        if same and len(frames[0][0]):
+            return AnimatedMesh(frames[0][1], np.stack([v for v, _ in frames]), times)
+        return MeshSequence(tuple(frames), times)
+    except InputError as error:
+        raise InputError(error.problem, error.path or path) from None
+
+
+def _triangulate(counts: np.ndarray, indices: np.ndarray, path) -> np.ndarray:
+    """Triangles [F, 3] of polygons given as USD ``faceVertexCounts`` and ``faceVertexIndices``
+    (each polygon fanned from its first corner)."""
+    if counts.sum() != len(indices):
+        raise InputError(
+            f"faceVertexCounts add up to {int(counts.sum())} but there are {len(indices)} "
+            "faceVertexIndices",
+            path,
+        )
+    if len(counts) and (counts == 3).all():
+        return indices.reshape(-1, 3)
+    starts = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64)
+    triangles = [
+        (indices[s], indices[s + k], indices[s + k + 1])
+        for s, n in zip(starts.tolist(), counts.tolist(), strict=True)
+        for k in range(1, n - 1)
+    ]
+    return np.array(triangles, dtype=np.int64).reshape(-1, 3)

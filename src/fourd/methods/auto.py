@@ -54,10 +54,13 @@ log = logging.getLogger("fourd.methods.auto")
 MIN_FRAMES = 2
 #: An AnimatedMesh, or the flow's MeshSequence where the shape splits or merges (warned).
 RESULT = (AnimatedMesh, MeshSequence)
+#: The options users change first (``fourd options auto``; the others under ``--all``).
+COMMON_OPTIONS = ("surface", "resolution", "fit_frames")
 #: The option :func:`estimate_peak_bytes` grows with (the flow's grid).
 MEMORY_OPTIONS = ("resolution",)
 
 __all__ = [
+    "COMMON_OPTIONS",
     "MIN_FRAMES",
     "AutoDiagnostics",
     "MEMORY_OPTIONS",

@@ -19,7 +19,10 @@ A method module (or package) exposes
   allocating what it estimates, on the high side (``flow``: :mod:`fourd.methods.flow.memory`).
   :func:`fourd.preflight.check_memory` refuses a run whose estimate exceeds the available
   memory, naming the first of ``MEMORY_OPTIONS`` (a tuple of option names the estimate grows
-  with, the one to lower first), which goes with the hook.
+  with, the one to lower first), which goes with the hook;
+- optionally ``COMMON_OPTIONS``: a tuple naming the few options users change first, in the
+  order ``fourd options METHOD`` shows them (the others are listed by name and described under
+  ``--all``); without it every option is shown as common.
 
 :func:`check_method_module` checks a module against this contract; a test runs it on every
 registry entry.
@@ -119,4 +122,16 @@ def check_method_module(module: ModuleType) -> list[str]:
         fields = {f.name for f in dataclasses.fields(options)} if dataclasses.is_dataclass(options) else set()
         if not isinstance(names, tuple) or not names or not set(names) <= fields:
             problems.append(f"MEMORY_OPTIONS must name options of the method, got {names!r}")
+    common = getattr(module, "COMMON_OPTIONS", None)
+    if common is not None:
+        fields = {f.name for f in dataclasses.fields(options)} if dataclasses.is_dataclass(options) else set()
+        if (
+            not isinstance(common, tuple)
+            or not common
+            or not set(common) <= fields
+            or len(set(common)) != len(common)
+        ):
+            problems.append(
+                f"COMMON_OPTIONS must name options of the method, each once, got {common!r}"
+            )
     return problems

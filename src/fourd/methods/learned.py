@@ -31,8 +31,10 @@ log = logging.getLogger("fourd.methods.learned")
 
 MIN_FRAMES = kinematic.MIN_FRAMES
 RESULT = AnimatedMesh
+#: The options ``fourd options learned`` shows first.
+COMMON_OPTIONS = ("stiffness_floor", *kinematic.COMMON_OPTIONS)
 
-__all__ = ["MIN_FRAMES", "Options", "RESULT", "reconstruct"]
+__all__ = ["COMMON_OPTIONS", "MIN_FRAMES", "Options", "RESULT", "reconstruct"]
 
 
 @dataclasses.dataclass(frozen=True)

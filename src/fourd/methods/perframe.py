@@ -46,6 +46,8 @@ log = logging.getLogger("fourd.methods.perframe")
 #: A per-frame method needs a single frame.
 MIN_FRAMES = 1
 RESULT = MeshSequence
+#: The options users change first (``fourd options perframe``; the others under ``--all``).
+COMMON_OPTIONS = ("grid_scale", "bandwidth", "clip_distance", "smoothing_iterations", "outlier_z")
 
 
 @dataclass(frozen=True)

@@ -36,6 +36,8 @@ MIN_FRAMES = flow.MIN_FRAMES
 RESULT = AnimatedMesh
 #: The options :func:`estimate_peak_bytes` grows with (the flow's).
 MEMORY_OPTIONS = flow.MEMORY_OPTIONS
+#: The options users change first: the flow's (``fourd options watertight``).
+COMMON_OPTIONS = flow.COMMON_OPTIONS
 
 #: A template vertex farther than this many cells of the sliding field's grid from both the
 #: flow's surface and its frame's points is off the surface, and a frame with more than
@@ -59,6 +61,7 @@ LOST_WARNING = 0.02
 BIND_EDGES = 1.5
 
 __all__ = [
+    "COMMON_OPTIONS",
     "MEMORY_OPTIONS",
     "MIN_FRAMES",
     "OFF_SURFACE_CELLS",

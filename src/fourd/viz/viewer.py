@@ -154,6 +154,7 @@ def viewer_data(
         truth = as_result(truth)
         errors = tex.vertex_errors(result, truth)
         data["errorScale"] = tex.error_scale(errors)
+        data["truthDiagonal"] = float(truth.diagonal())
         data["hasErrors"] = True
         if animated:
             data["errors"] = _b64(np.stack(errors), "<f4")

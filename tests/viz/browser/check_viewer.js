@@ -69,6 +69,25 @@ async function openPage(browser, url, report, tag) {
       const ext = gl.getExtension("WEBGL_debug_renderer_info");
       return ext ? gl.getParameter(ext.UNMASKED_RENDERER_WEBGL) : gl.getParameter(gl.RENDERER);
     });
+    // the side panel: the error legend, the metrics table and how its key names wrap
+    report.panel = await page.evaluate(() => {
+      const legend = document.getElementById("fourd-error-legend");
+      const keys = Array.from(document.querySelectorAll("#fourd-metrics td.fourd-key"));
+      const lines = (el) => {  // lines of the cell's own text (the row may be taller)
+        const range = document.createRange();
+        range.selectNodeContents(el);
+        return new Set(Array.from(range.getClientRects()).filter((r) => r.width > 0).map((r) => Math.round(r.top))).size;
+      };
+      return {
+        legendShown: !!legend && !legend.hidden && legend.getBoundingClientRect().height > 0,
+        legendTicks: legend ? Array.from(legend.querySelectorAll("#fourd-colorbar-ticks span")).map((s) => s.textContent) : [],
+        legendText: legend ? legend.textContent : "",
+        metricRows: keys.length,
+        metricKeys: keys.map((k) => k.textContent),
+        keyLines: keys.map(lines),
+        keyWidths: keys.map((k) => k.getBoundingClientRect().width),
+      };
+    });
     if (report.ready) {
       for (const i of frames) {
         const set = await page.evaluate((k) => window.fourdSetFrame(k), i);

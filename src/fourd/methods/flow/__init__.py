@@ -29,7 +29,7 @@ using incompressible flow. ACM Transactions on Graphics 27(5), SIGGRAPH Asia 200
 """
 
 from fourd.methods.flow.memory import MEMORY_OPTIONS, estimate_peak_bytes
-from fourd.methods.flow.options import MIN_FRAMES, RESULT, Options
+from fourd.methods.flow.options import COMMON_OPTIONS, MIN_FRAMES, RESULT, Options
 from fourd.methods.flow.pipeline import (
     FlowDiagnostics,
     FlowResult,
@@ -43,6 +43,7 @@ from fourd.methods.flow.post import FlowField
 from fourd.methods.flow.saddle import SaddleSolution, solve_saddle
 
 __all__ = [
+    "COMMON_OPTIONS",
     "MEMORY_OPTIONS",
     "MIN_FRAMES",
     "FlowDiagnostics",

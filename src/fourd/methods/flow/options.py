@@ -9,6 +9,15 @@ from fourd.animation import MeshSequence
 
 MIN_FRAMES = 2
 RESULT = MeshSequence
+#: The options users change first (``fourd options flow``; the others under ``--all``).
+COMMON_OPTIONS = (
+    "resolution",
+    "time_substeps",
+    "missing_frames",
+    "mass_levels",
+    "regularize_towards",
+    "cavities",
+)
 #: From this ``resolution`` on a thick object is many cells thick: the automatic
 #: ``fit_offset``, ``deep_inside`` and ``still_interior`` switch to their fine-grid values
 #: (see :class:`Options`).

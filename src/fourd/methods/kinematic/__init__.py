@@ -55,7 +55,7 @@ from fourd.methods.kinematic.field import SpaceTimeField, space_time_points
 from fourd.methods.kinematic.frames import prepare_frames
 from fourd.methods.kinematic.framesurface import FrameSurface
 from fourd.methods.kinematic.mpu4d import MPU4D, MPUOptions, fit_mpu4d
-from fourd.methods.kinematic.options import MIN_FRAMES, RESULT, Options
+from fourd.methods.kinematic.options import COMMON_OPTIONS, MIN_FRAMES, RESULT, Options
 from fourd.methods.kinematic.pipeline import reconstruct
 from fourd.methods.kinematic.projection import project_to_surface
 from fourd.methods.kinematic.sliding import SlideOptions, slide
@@ -63,6 +63,7 @@ from fourd.methods.kinematic.trajectories import smooth_trajectories
 from fourd.methods.kinematic.urshape import extract_template, template_cell_size
 
 __all__ = [
+    "COMMON_OPTIONS",
     "MIN_FRAMES",
     "RESULT",
     "Options",

@@ -10,6 +10,16 @@ from fourd.animation import AnimatedMesh
 MIN_FRAMES = 2
 #: One connectivity: the urshape slid through every frame.
 RESULT = AnimatedMesh
+#: The options users change first (``fourd options kinematic``; the others under ``--all``).
+COMMON_OPTIONS = (
+    "template_vertices",
+    "large_motion",
+    "shape_memory",
+    "slide_memory",
+    "window",
+    "temporal_smoothing",
+    "times",
+)
 #: Neighbours of the per-frame outlier test (mean distance to them).
 OUTLIER_NEIGHBOURS = 8
 #: After a kept large-motion registration, the projection of 5.1 may move a vertex at most

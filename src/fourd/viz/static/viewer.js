@@ -307,27 +307,64 @@
     else if (e.key === "ArrowLeft") setFrame(state.frame - 1);
   });
 
+  function formatNumber(value) {
+    return Number.isInteger(value) ? String(value) : Number(value).toPrecision(4);
+  }
+
   (function metricsPanel() {
     var box = document.getElementById("fourd-metrics");
     var rows = [];
     function walk(prefix, value) {
       if (value !== null && typeof value === "object" && !Array.isArray(value)) {
         Object.keys(value).forEach(function (k) { walk(prefix ? prefix + "." + k : k, value[k]); });
-      } else {
-        var text = typeof value === "number" ? (Number.isInteger(value) ? String(value) : value.toPrecision(4)) : JSON.stringify(value);
+      } else if (Array.isArray(value)) {
+        // a per-frame curve: its range, not every value
+        var numbers = value.filter(function (v) { return typeof v === "number" && isFinite(v); });
+        var text = value.length + " values";
+        if (numbers.length) {
+          var lo = Math.min.apply(null, numbers), hi = Math.max.apply(null, numbers);
+          text = lo === hi ? formatNumber(lo) + " (" + text + ")" : formatNumber(lo) + " .. " + formatNumber(hi);
+        }
         rows.push([prefix, text]);
+      } else {
+        var shown = typeof value === "number" ? formatNumber(value)
+          : value === null ? "-" : typeof value === "string" ? value : JSON.stringify(value);
+        rows.push([prefix, shown]);
       }
     }
     walk("", D.metrics || {});
-    if (!rows.length) { box.textContent = "no metrics"; return; }
+    if (!rows.length) { box.textContent = "no metrics (fourd view --truth TRUTH computes them)"; return; }
     var table = document.createElement("table");
     rows.forEach(function (r) {
       var tr = document.createElement("tr");
-      var a = document.createElement("td"); a.textContent = r[0];
-      var b = document.createElement("td"); b.textContent = r[1];
+      var a = document.createElement("td"); a.className = "fourd-key";
+      // a line may break after "." or "_" only
+      r[0].replace(/([._])/g, "$1\n").split("\n").forEach(function (part, i) {
+        if (i) a.appendChild(document.createElement("wbr"));
+        a.appendChild(document.createTextNode(part));
+      });
+      var b = document.createElement("td"); b.className = "fourd-value"; b.textContent = r[1];
       tr.appendChild(a); tr.appendChild(b); table.appendChild(tr);
     });
     box.appendChild(table);
+  })();
+
+  (function errorLegend() {
+    // what the error colours mean: the colour map from 0 to the scale, in input units
+    if (!D.hasErrors) return;
+    var scale = D.errorScale || 1;
+    var stops = lut.map(function (c, i) {
+      return "rgb(" + c.map(function (x) { return Math.round(255 * x); }).join(",") + ") " + (100 * i / (lut.length - 1)).toFixed(1) + "%";
+    });
+    document.getElementById("fourd-colorbar").style.background = "linear-gradient(to right, " + stops.join(", ") + ")";
+    document.getElementById("fourd-colorbar-mid").textContent = formatNumber(scale / 2);
+    document.getElementById("fourd-colorbar-hi").textContent = "\u2265 " + formatNumber(scale);
+    var share = D.truthDiagonal ? " (" + (100 * scale / D.truthDiagonal).toPrecision(2) + "% of the truth's diagonal)" : "";
+    document.getElementById("fourd-colorbar-text").textContent =
+      "Distance from each vertex to the truth's surface, in input units: pale is on the truth, dark is far. " +
+      "The scale ends at the 98th percentile over all vertices and frames, " + formatNumber(scale) + share +
+      "; farther vertices take the darkest colour.";
+    document.getElementById("fourd-error-legend").hidden = false;
   })();
   document.getElementById("fourd-caption").textContent = D.caption || "";
 
@@ -436,7 +473,13 @@
       return r.arrayBuffer();
     }).then(loadGlb).catch(function (err) { fail("could not load " + D.glbUrl + ": " + err.message); finish(); });
   } else {
-    if (D.glbUrl) document.getElementById("fourd-glb").title = "open the page over HTTP (python -m http.server) to play " + D.glbUrl;
+    if (D.glbUrl) {
+      var hint = "The .glb is too big to inline and a page opened from a file cannot load it: serve this folder " +
+        "(python -m http.server -d FOLDER) and open http://localhost:8000/ to play " + D.glbUrl + ".";
+      document.getElementById("fourd-glb").title = hint;
+      var note = document.getElementById("fourd-glb-note");
+      if (note) { note.textContent = hint; note.hidden = false; }
+    }
     finish();
   }
 })();
