@@ -238,7 +238,8 @@ def cmd_view(args) -> int:
                             force=args.force)
         # the page's metrics panel: what `fourd evaluate RESULT TRUTH` reports
         metrics = evaluate(result, truth)
-    page = write_viewer(result, outdir, truth=truth, scans=args.input, metrics=metrics)
+    page = write_viewer(result, outdir, truth=truth, scans=args.input, metrics=metrics,
+                        material=args.material)
     print(page)
     glb = page.parent / "result.glb"
     if glb.exists() and glb.stat().st_size > EMBED_GLB_LIMIT:
@@ -448,6 +449,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--open", action="store_true", help="open the page in a browser")
     p.add_argument("--force", action="store_true",
                    help="use a truth whose frame count or bounding box differs from the result's")
+    p.add_argument("--material", help="a material from fourd learn-material: colours each vertex "
+                                      "by how much the learned material lets it bend")
 
     p = add("options", "a method's options to change first, with their defaults and what they do "
                        "(--all: the expert ones too)", cmd_options)

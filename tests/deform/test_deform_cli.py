@@ -48,3 +48,18 @@ def test_a_bad_anchors_file_is_named_with_its_problem(tmp_path, capsys, content,
     error = capsys.readouterr().err
     assert "a.json" in error and message in error
     assert not (tmp_path / "out.obj").exists()
+
+
+def test_the_viewer_colours_a_result_by_its_learned_stiffness(tmp_path):
+    from fourd.viz.viewer import read_viewer_data
+
+    vertices, faces, start, end = tube(rings=21)
+    deformer = Deformer(vertices, faces, anchors=np.r_[start, end])
+    poses = np.stack([deformer.pose(np.stack([np.eye(3)] * 12 + [rotation_about([0, 0, 1], a)] * 12))
+                      for a in (0.0, 0.5)])
+    save(AnimatedMesh(faces=faces, vertices=poses, rest=vertices), tmp_path / "r.npz")
+    assert main(["learn-material", str(tmp_path / "r.npz"), "-o", str(tmp_path / "m.npz")]) == 0
+    assert main(["view", str(tmp_path / "r.npz"), "--material", str(tmp_path / "m.npz"),
+                 "-o", str(tmp_path / "v")]) == 0
+    data = read_viewer_data(tmp_path / "v" / "index.html")
+    assert data["hasErrors"] and data["errorLabel"].startswith("stiffness")

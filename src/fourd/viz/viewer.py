@@ -97,6 +97,24 @@ def _write_glb(result, outdir: Path) -> Path | None:
     return path if path.exists() else None
 
 
+def vertex_flexibility(faces: np.ndarray, material, vertex_count: int) -> np.ndarray:
+    """Per vertex [N] in [0, 1]: 1 minus the smallest bending stiffness of its edges, scaled
+    over the mesh (0: the stiffest vertex, 1: the most flexible)."""
+    from fourd.deform import load_material
+    from fourd.geometry.meshes import face_adjacency
+
+    material = load_material(material) if isinstance(material, (str, os.PathLike)) else material
+    material.check(faces)
+    _, edges = face_adjacency(faces)
+    bending = material.bending if material.bending.ndim == 1 else material.bending.min(axis=1)
+    stiffness = np.full(vertex_count, np.inf)
+    np.minimum.at(stiffness, edges[:, 0], bending)
+    np.minimum.at(stiffness, edges[:, 1], bending)
+    stiffness[~np.isfinite(stiffness)] = bending.max() if len(bending) else 1.0
+    span = float(np.ptp(stiffness))
+    return (stiffness.max() - stiffness) / span if span > 0 else np.zeros(vertex_count)
+
+
 def viewer_data(
     result,
     *,
@@ -107,6 +125,7 @@ def viewer_data(
     glb: bytes | None = None,
     cells: float = 10.0,
     fps: float | None = None,
+    material=None,
 ) -> dict:
     """The page's data (``window.FOURD_DATA``) as a JSON-ready dict; arrays are base64 of
     little-endian float32 / uint32 / uint8."""
@@ -163,6 +182,20 @@ def viewer_data(
                 entry["errors"] = _b64(err, "<f4")
         bounds = np.stack(
             [np.minimum(bounds[0], truth.bounds()[0]), np.maximum(bounds[1], truth.bounds()[1])]
+        )
+    if material is not None:
+        if truth is not None:
+            raise InputError("colour by the truth or by a material, not both")
+        if not animated:
+            raise InputError("a material colours an animated mesh (one connectivity), not per-frame meshes")
+        flexible = vertex_flexibility(result.faces, material, result.vertex_count)
+        data["errors"] = _b64(np.tile(flexible, (result.frame_count, 1)), "<f4")
+        data["errorScale"] = 1.0
+        data["hasErrors"] = True
+        data["errorLabel"] = "stiffness colouring (learned material)"
+        data["errorLegend"] = (
+            "Flexibility of the learned material at each vertex (1 minus the smallest bending "
+            "stiffness of its edges, scaled to the mesh's range): pale is stiff, dark bends."
         )
     if scans is not None:
         scans = _load_scans(scans)
@@ -226,6 +259,7 @@ def write_viewer(
     metrics=None,
     title: str | None = None,
     fps: float | None = None,
+    material=None,
 ) -> Path:
     """Write the viewer folder and return the path of its ``index.html``.
 
@@ -245,6 +279,9 @@ def write_viewer(
     title : str, optional
     fps : float, optional
         Playback rate at speed 1 (default 10 frames per second).
+    material : Material or path, optional
+        A learned material (:func:`fourd.deform.learn_material`) of the result's mesh: the
+        colouring shows where it bends (:func:`vertex_flexibility`) instead of the error.
 
     Returns
     -------
@@ -273,7 +310,8 @@ def write_viewer(
                 EMBED_GLB_LIMIT,
             )
     data = viewer_data(
-        result, truth=truth, scans=scans, metrics=metrics, title=title, glb=glb, fps=fps
+        result, truth=truth, scans=scans, metrics=metrics, title=title, glb=glb, fps=fps,
+        material=material,
     )
     if glb_path is not None and glb is None:
         data["glbUrl"] = glb_path.name

@@ -360,10 +360,11 @@
     document.getElementById("fourd-colorbar-mid").textContent = formatNumber(scale / 2);
     document.getElementById("fourd-colorbar-hi").textContent = "\u2265 " + formatNumber(scale);
     var share = D.truthDiagonal ? " (" + (100 * scale / D.truthDiagonal).toPrecision(2) + "% of the truth's diagonal)" : "";
-    document.getElementById("fourd-colorbar-text").textContent =
-      "Distance from each vertex to the truth's surface, in input units: pale is on the truth, dark is far. " +
+    document.getElementById("fourd-colorbar-text").textContent = D.errorLegend ||
+      ("Distance from each vertex to the truth's surface, in input units: pale is on the truth, dark is far. " +
       "The scale ends at the 98th percentile over all vertices and frames, " + formatNumber(scale) + share +
-      "; farther vertices take the darkest colour.";
+      "; farther vertices take the darkest colour.");
+    if (D.errorLabel) document.getElementById("fourd-errors").parentNode.lastChild.textContent = " " + D.errorLabel;
     document.getElementById("fourd-error-legend").hidden = false;
   })();
   document.getElementById("fourd-caption").textContent = D.caption || "";
