@@ -268,7 +268,7 @@ def test_every_subcommand_has_help(capsys):
         assert "usage: fourd " + command in capsys.readouterr().out
 
 
-def test_an_interrupted_run_resumes_from_its_cache(tmp_path, monkeypatch):
+def test_an_interrupted_run_resumes_from_its_cache(tmp_path, monkeypatch, capsys):
     from fourd.methods import perframe
 
     folder = _folder(tmp_path, frames=3)
@@ -291,6 +291,8 @@ def test_an_interrupted_run_resumes_from_its_cache(tmp_path, monkeypatch):
     monkeypatch.setattr(perframe, "reconstruct_frame", lambda frame, options: (calls.append(frame.time), original(frame, options))[1])
     assert main(argv) == 0
     assert calls == [2.0] and out.exists()
+    assert main(argv[:-1]) == 0  # not quiet: the resumed frames are named
+    assert "resumed: 3 of 3 frames' meshes from the cache" in capsys.readouterr().err
 
 
 def test_every_method_takes_a_cache_folder(tmp_path, capsys):
