@@ -149,6 +149,7 @@ def animate(
         still_normals=options.still_normals,
         previous_shape=options.slide_memory,
     )
+
     def chain(stage, slide_times, data_frames, surface_frames):
         """The cache entries of one sliding run: each step keyed by the step before it, its
         time, its data and its surface."""
