@@ -3,6 +3,7 @@
 import dataclasses
 import json
 import os
+import signal
 import time
 from pathlib import Path
 
@@ -268,7 +269,7 @@ def test_every_subcommand_has_help(capsys):
         assert "usage: fourd " + command in capsys.readouterr().out
 
 
-def test_an_interrupted_run_resumes_from_its_cache(tmp_path, monkeypatch):
+def test_an_interrupted_run_resumes_from_its_cache(tmp_path, monkeypatch, capsys):
     from fourd.methods import perframe
 
     folder = _folder(tmp_path, frames=3)
@@ -291,6 +292,136 @@ def test_an_interrupted_run_resumes_from_its_cache(tmp_path, monkeypatch):
     monkeypatch.setattr(perframe, "reconstruct_frame", lambda frame, options: (calls.append(frame.time), original(frame, options))[1])
     assert main(argv) == 0
     assert calls == [2.0] and out.exists()
+    assert main(argv[:-1]) == 0  # not quiet: the resumed frames are named
+    assert "resumed: 3 of 3 frames' meshes from the cache" in capsys.readouterr().err
+
+
+def test_every_method_takes_a_cache_folder(tmp_path, capsys):
+    for name in METHODS:
+        fields = {f.name: f.default for f in dataclasses.fields(method_module(name).Options)}
+        assert fields.get("cache_dir", "missing") is None, name
+    assert main(["options", "kinematic", "--all"]) == 0
+    assert "\n  cache_dir = None  (str or None)" in capsys.readouterr().out
+    # a file where the cache folder should be is named before the work
+    blocked = tmp_path / "blocked"
+    blocked.write_text("")
+    folder = _folder(tmp_path, frames=2)
+    _run_bad(capsys, ["reconstruct", str(folder), "-o", str(tmp_path / "o.npz"), "--method",
+                      "kinematic", "--cache", str(blocked)], "--cache", "blocked")
+
+
+class _SlideSteps:
+    """Counts the kinematic sliding's steps; with ``signum`` set, the second one sends that
+    signal to this process (as a user or a scheduler would) and goes on."""
+
+    def __init__(self, monkeypatch, signum=None):
+        from fourd.methods.kinematic import sliding
+
+        self.calls, self.signum, original = 0, signum, sliding.slide_step
+
+        def step(*args, **kwargs):
+            self.calls += 1
+            if self.calls == 2 and self.signum is not None:
+                os.kill(os.getpid(), self.signum)
+            return original(*args, **kwargs)
+
+        monkeypatch.setattr(sliding, "slide_step", step)
+
+
+@pytest.mark.parametrize("signum, status, word", [(signal.SIGTERM, 143, "terminated"),
+                                                   (signal.SIGINT, 130, "interrupted")])
+def test_a_signal_stops_the_run_with_one_line_and_the_next_run_resumes(
+    tmp_path, monkeypatch, capsys, signum, status, word
+):
+    folder = _folder(tmp_path, frames=4)
+    out, cache = tmp_path / "o.npz", tmp_path / "cache"
+    argv = ["reconstruct", str(folder), "-o", str(out), "--method", "kinematic", "--cache",
+            str(cache), "--set", "template_vertices=400"]
+    before = signal.getsignal(signal.SIGTERM)
+    interrupt = signal.signal(signal.SIGINT, signal.default_int_handler)
+    steps = _SlideSteps(monkeypatch, signum)
+    try:
+        assert main(argv) == status
+    finally:
+        signal.signal(signal.SIGINT, interrupt)
+    assert signal.getsignal(signal.SIGTERM) == before  # main puts the handler back
+    err = capsys.readouterr().err
+    assert "Traceback" not in err
+    assert err.splitlines()[-1].split("\r")[-1] == (
+        f"fourd: {word}; the cache in {cache} keeps the finished stages (run the same command "
+        "to resume)"
+    )
+    assert not out.exists() and not list(tmp_path.glob(".o*"))
+    assert len(list(cache.glob("kinematic-prepare-*.npz"))) == 4
+    assert len(list(cache.glob("kinematic-slide-*.npz"))) == 1
+
+    steps.calls, steps.signum = 0, None
+    assert main(argv) == 0 and out.exists()
+    err = capsys.readouterr().err
+    assert "resumed: 4 of 4 frames' preparation from the cache" in err
+    assert "resumed: 1 of 3 slid frames from the cache" in err
+    assert "resumed from the cache: the time counts only the work done now" in err
+    assert steps.calls == 2
+
+
+def _launch(argv):
+    """``fourd`` in a child process with Ctrl-C's default handling (a child of a shell
+    without job control starts with SIGINT ignored)."""
+    import subprocess
+    import sys
+
+    import fourd
+
+    src = str(Path(fourd.__file__).resolve().parents[1])
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([src, os.environ.get("PYTHONPATH", "")]))
+    code = ("import signal, sys; signal.signal(signal.SIGINT, signal.default_int_handler); "
+            "from fourd.cli import main; sys.exit(main(sys.argv[1:]))")
+    return subprocess.Popen([sys.executable, "-c", code, *argv], stderr=subprocess.PIPE,
+                            stdout=subprocess.DEVNULL, text=True, env=env)
+
+
+def _wait_for(process, needle, seconds):
+    """The child's stderr lines up to the first holding ``needle`` (read on a thread, so a
+    silent child fails the test after ``seconds`` instead of hanging it)."""
+    import queue
+    import threading
+
+    lines = queue.Queue()
+    threading.Thread(target=lambda: [lines.put(line) for line in process.stderr] + [lines.put(None)],
+                     daemon=True).start()
+    seen = []
+    deadline = time.monotonic() + seconds
+    while True:
+        line = lines.get(timeout=max(deadline - time.monotonic(), 0.01))
+        if line is None:
+            raise AssertionError(f"the run ended before {needle!r}: {''.join(seen)}")
+        seen.append(line)
+        if needle in line:
+            return lines, seen
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("signum, status", [(signal.SIGTERM, 143), (signal.SIGINT, 130)])
+def test_a_killed_process_exits_with_the_signal_status_and_keeps_its_cache(tmp_path, signum, status):
+    folder = _folder(tmp_path, frames=3)
+    out, cache = tmp_path / "o.npz", tmp_path / "cache"
+    process = _launch(["reconstruct", str(folder), "-o", str(out), "--method", "flow", "--cache",
+                       str(cache), "--set", "resolution=12"])
+    try:
+        # the labels are kept before the solve starts; stop it in its second iteration
+        lines, seen = _wait_for(process, "flow iteration 0", 240)
+        process.send_signal(signum)
+        assert process.wait(timeout=120) == status
+    finally:
+        process.kill()
+    while (line := lines.get(timeout=10)) is not None:
+        seen.append(line)
+    err = "".join(seen)
+    assert "Traceback" not in err
+    last = err.splitlines()[-1].split("\r")[-1]
+    assert last.startswith("fourd: ") and f"the cache in {cache} keeps the finished stages" in last
+    assert not out.exists() and not list(tmp_path.glob(".o*")) and not list(cache.glob(".*"))
+    assert len(list(cache.glob("flow-labels-*.npz"))) == 1
 
 
 def _described(out: str) -> tuple[list[str], list[str]]:

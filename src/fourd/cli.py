@@ -7,17 +7,34 @@ import json
 import logging
 import math
 import os
+import signal
 import sys
+import threading
 import time
 import tomllib
 from pathlib import Path
 
+from fourd.cache import counting_resumes
 from fourd.errors import InputError
 from fourd.jsonable import jsonable
 
 log = logging.getLogger("fourd.cli")
 
 EXIT_BAD_INPUT = 2
+#: Exit status after Ctrl-C (SIGINT) and after SIGTERM: 128 + the signal's number.
+EXIT_INTERRUPTED = 128 + signal.SIGINT
+EXIT_TERMINATED = 128 + signal.SIGTERM
+
+
+class Terminated(BaseException):
+    """Raised in the main thread by SIGTERM (:func:`_terminate`), so that a run stops as it
+    does on Ctrl-C: ``finally`` blocks run, a half-written output or cache entry is removed,
+    and :func:`main` exits with :data:`EXIT_TERMINATED`. Not an ``Exception``: no
+    ``except Exception`` swallows it."""
+
+
+def _terminate(signum, frame):
+    raise Terminated
 
 
 def _frames_slice(text: str | None) -> slice:
@@ -147,6 +164,7 @@ def cmd_reconstruct(args) -> int:
 
         if "cache_dir" not in {f.name for f in dataclasses.fields(module.Options)}:
             raise InputError(f"--cache: method {method!r} cannot resume from a cache yet")
+        _check_cache(args.cache)
         values["cache_dir"] = args.cache
     options = method_options(method, values)
     # What can be told without the data is checked before it is loaded: the output can be
@@ -161,7 +179,8 @@ def cmd_reconstruct(args) -> int:
              min(len(f) for f in seq), max(len(f) for f in seq))
     start = time.perf_counter()
     # (fourd.preflight.check_input runs here first: frame sizes, --times, memory)
-    result = reconstruct(seq, method, options, check_memory=not args.force)
+    with counting_resumes() as resumed:
+        result = reconstruct(seq, method, options, check_memory=not args.force)
     elapsed = time.perf_counter() - start
     if not output.parent.exists():  # check_output made sure it can be created
         try:
@@ -171,9 +190,24 @@ def cmd_reconstruct(args) -> int:
                              args.output) from None
         log.info("created the folder %s", output.parent)
     save(result, args.output, fps=base.fps, time_unit=base.unit, up=args.up, scale=scale)
-    log.info("wrote %s (%d frames, %.2f s, %.2f s/frame%s)", output, result.frame_count, elapsed,
-             elapsed / max(len(seq), 1), _time_note(base, kind))
+    log.info("wrote %s (%d frames, %.2f s, %.2f s/frame%s%s)", output, result.frame_count, elapsed,
+             elapsed / max(len(seq), 1), _time_note(base, kind),
+             "; resumed from the cache: the time counts only the work done now" if resumed else "")
     return 0
+
+
+def _check_cache(folder: str) -> None:
+    """``--cache DIR`` can be used: DIR is a folder (made if missing) that can be written."""
+    path = Path(folder)
+    if path.exists() and not path.is_dir():
+        raise InputError("--cache: exists and is not a folder", folder)
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except OSError as error:
+        raise InputError(f"--cache: cannot create the folder ({error.strerror or error})",
+                         folder) from None
+    if not os.access(path, os.W_OK | os.X_OK):
+        raise InputError("--cache: the folder is not writable", folder)
 
 
 def cmd_synth(args) -> int:
@@ -486,12 +520,28 @@ def _version() -> str:
     return __version__
 
 
+def _interrupted(args, error: BaseException) -> int:
+    """The one line and the exit status of a run stopped by Ctrl-C or SIGTERM."""
+    terminated = isinstance(error, Terminated)
+    line = "fourd: terminated" if terminated else "fourd: interrupted"
+    cache = getattr(args, "cache", None)
+    if cache:
+        line += f"; the cache in {cache} keeps the finished stages (run the same command to resume)"
+    print(line, file=sys.stderr)
+    return EXIT_TERMINATED if terminated else EXIT_INTERRUPTED
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     _configure_logging(args.quiet, args.verbose)
+    # SIGTERM stops the run as Ctrl-C does (handlers can only be set in the main thread)
+    in_main_thread = threading.current_thread() is threading.main_thread()
+    previous = signal.signal(signal.SIGTERM, _terminate) if in_main_thread else None
     try:
         return args.func(args)
+    except (KeyboardInterrupt, Terminated) as error:
+        return _interrupted(args, error)
     except InputError as error:
         print(f"fourd: error: {error}", file=sys.stderr)
         return EXIT_BAD_INPUT
@@ -499,14 +549,14 @@ def main(argv: list[str] | None = None) -> int:
         name = error.filename or ""
         print(f"fourd: error: {name}: {error.strerror}", file=sys.stderr)
         return EXIT_BAD_INPUT
-    except KeyboardInterrupt:
-        print("fourd: interrupted", file=sys.stderr)
-        return 130
     except BrokenPipeError:
         # The reader of our output went away (`fourd evaluate ... | head`): not an error.
         devnull = os.open(os.devnull, os.O_WRONLY)
         os.dup2(devnull, sys.stdout.fileno())
         return 0
+    finally:
+        if in_main_thread:
+            signal.signal(signal.SIGTERM, signal.SIG_DFL if previous is None else previous)
 
 
 if __name__ == "__main__":

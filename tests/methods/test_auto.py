@@ -128,3 +128,33 @@ def test_a_shape_that_splits_gives_the_flow_meshes_and_a_warning(caplog):
     assert "splits or merges" in caplog.text
     counts = part_counts(result, 0.05)
     assert counts[0] == 1 and counts[-1] == 2
+
+
+def test_the_cache_folder_goes_to_the_methods_it_runs(monkeypatch, tmp_path):
+    """``cache_dir`` reaches the kinematic and the flow runs, each in a folder of its own."""
+    from fourd.methods import auto, flow, kinematic
+
+    seen = {}
+
+    class Stop(Exception):
+        pass
+
+    def opened(seq, options):
+        seen["kinematic"] = options.cache_dir
+        anim = AnimatedMesh(faces=np.array([[0, 1, 2]]), vertices=np.zeros((2, 3, 3)),
+                            times=np.arange(2.0), rest=np.eye(3))
+        return anim
+
+    def flowed(seq, options):
+        seen["flow"] = options.cache_dir
+        raise Stop
+
+    monkeypatch.setattr(kinematic, "reconstruct", opened)
+    monkeypatch.setattr(flow, "run", flowed)
+    seq = synth.scan(synth.scene("squash-ball", frames=2), resolution=32, seed=0)
+    with pytest.raises(Stop):
+        auto.reconstruct(seq, Options(surface="closed", cache_dir=str(tmp_path)))
+    assert seen == {"kinematic": str(tmp_path / "kinematic"), "flow": str(tmp_path / "flow")}
+    with pytest.raises(Stop):
+        auto.reconstruct(seq, Options(surface="closed"))
+    assert seen == {"kinematic": None, "flow": None}

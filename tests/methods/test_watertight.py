@@ -153,3 +153,23 @@ def test_off_surface_fractions_count_vertices_far_from_the_surface_and_the_point
     )
 
 
+
+
+@pytest.mark.slow
+def test_a_cached_run_keeps_both_methods_stages_and_a_rerun_computes_none(tmp_path, monkeypatch):
+    from fourd.methods.flow import irls
+    from fourd.methods.kinematic import frames, sliding
+
+    scans = synth.scan(synth.scene("squash-ball", frames=3), resolution=64, seed=0)
+    options = Options(resolution=10, max_outer=8, cache_dir=str(tmp_path))
+    first = reconstruct(scans, options)
+    assert list((tmp_path / "kinematic").glob("kinematic-slide-*.npz"))
+    assert list((tmp_path / "flow").glob("flow-post-*.npz"))
+    assert not list(tmp_path.glob("*.npz"))
+
+    calls = []
+    for module, name in ((frames, "_prepare_frame"), (sliding, "slide_step"), (irls, "solve_saddle")):
+        monkeypatch.setattr(module, name, lambda *a, _name=name, **k: calls.append(_name))
+    again = reconstruct(scans, options)
+    assert calls == []
+    assert np.array_equal(first.vertices, again.vertices) and np.array_equal(first.faces, again.faces)

@@ -41,6 +41,7 @@ from typing import Literal
 import numpy as np
 
 from fourd.animation import AnimatedMesh, MeshSequence
+from fourd.cache import subfolder
 from fourd.geometry.meshes import vertex_components
 from fourd.geometry.neighbors import point_spacing
 from fourd.geometry.outliers import distance_ratio_inliers
@@ -112,6 +113,11 @@ class Options:
         vertex farther, in point spacings (4).
     seed : int
         Seed of the kinematic method's sampling (0).
+    cache_dir : str or None
+        Folder where the finished stages are kept: the ``kinematic`` run's in its subfolder
+        ``kinematic``, the ``flow`` run's in ``flow`` (see those methods' ``cache_dir``); a
+        rerun after an interruption resumes after the last one (``fourd reconstruct
+        --cache``). None: nothing is kept.
     """
 
     surface: Literal["auto", "open", "closed"] = "auto"
@@ -123,6 +129,7 @@ class Options:
     fit_radius: float = 2.0
     fit_reach: float = 4.0
     seed: int = 0
+    cache_dir: str | None = None
 
     def __post_init__(self):
         if self.surface not in ("auto", "open", "closed"):
@@ -257,7 +264,12 @@ def reconstruct_with_diagnostics(
 ) -> Reconstruction:
     """:func:`reconstruct` and :class:`AutoDiagnostics`."""
     options = Options() if options is None else options
-    opened = kinematic.reconstruct(seq, kinematic.Options(seed=options.seed))
+    opened = kinematic.reconstruct(
+        seq,
+        kinematic.Options(
+            seed=options.seed, cache_dir=subfolder(options.cache_dir, "kinematic")
+        ),
+    )
     openness = vector_area_fraction(opened.rest, opened.faces)
     is_open = options.surface == "open" or (
         options.surface == "auto" and openness > options.open_area
@@ -268,7 +280,12 @@ def reconstruct_with_diagnostics(
             "%.2f): the kinematic result", openness, options.open_area,
         )
         return Reconstruction(fit_to_frames(seq, opened, options), AutoDiagnostics(1.0, openness, 0.0))
-    flowed = flow.run(seq, flow.Options(resolution=options.resolution))
+    flowed = flow.run(
+        seq,
+        flow.Options(
+            resolution=options.resolution, cache_dir=subfolder(options.cache_dir, "flow")
+        ),
+    )
     parts = part_counts(flowed.meshes, options.split_part)
     if splits(parts):
         log.warning(

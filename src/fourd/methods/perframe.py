@@ -30,7 +30,7 @@ import scipy.sparse as sp
 from scipy.spatial import cKDTree
 
 from fourd.animation import MeshSequence
-from fourd.cache import StageCache, stage_key
+from fourd.cache import StageCache, report_resumed, stage_key
 from fourd.geometry.grid import fit_grid
 from fourd.geometry.implicit import imls_grid
 from fourd.geometry.marching import compact, marching_cubes
@@ -43,6 +43,8 @@ from fourd.sequence import Frame, PointCloudSequence
 
 log = logging.getLogger("fourd.methods.perframe")
 
+#: The cache entries of the frames' meshes.
+STAGE = "perframe"
 #: A per-frame method needs a single frame.
 MIN_FRAMES = 1
 RESULT = MeshSequence
@@ -372,14 +374,17 @@ def reconstruct(seq: PointCloudSequence, options: Options | None = None) -> Mesh
     options = Options() if options is None else options
     log.info("per-frame meshing of %d frames", len(seq.frames))
     cache = StageCache(options.cache_dir)
-    meshes = []
+    meshes, found = [], 0
     for frame in progress(seq.frames, desc="perframe", total=len(seq.frames)):
-        key = stage_key(frame.points, frame.normals, frame.sensors, options)
-        stored = cache.load("perframe", key)
+        key = stage_key(STAGE, frame.points, frame.normals, frame.sensors, options)
+        stored = cache.load(STAGE, key)
         if stored is None:
             vertices, faces = reconstruct_frame(frame, options)
-            cache.save("perframe", key, {"vertices": vertices, "faces": faces})
+            cache.save(STAGE, key, {"vertices": vertices, "faces": faces})
         else:
             vertices, faces = stored["vertices"], stored["faces"]
+            found += 1
         meshes.append((vertices, faces))
+    if found:
+        report_resumed(log, f"{found} of {len(seq.frames)} frames' meshes")
     return MeshSequence(tuple(meshes), seq.times)

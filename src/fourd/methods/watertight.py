@@ -24,6 +24,7 @@ import trimesh
 from scipy.spatial import cKDTree
 
 from fourd.animation import AnimatedMesh
+from fourd.cache import subfolder
 from fourd.geometry.meshes import median_edge_length
 from fourd.geometry.neighbors import point_spacing
 from fourd.methods import flow, kinematic
@@ -89,7 +90,13 @@ class Options(flow.Options):
 Options.__doc__ = (
     "Options of the watertight method: those of the ``flow`` method, whose surfaces close\n"
     "    the kinematic result (run with its defaults).\n"
-    + flow.Options.__doc__.split("\n", 1)[1]
+    + flow.Options.__doc__.split("\n", 1)[1].split("    cache_dir : ")[0]
+    + """    cache_dir : str or None
+        Folder where the finished stages are kept: the ``kinematic`` run's in its subfolder
+        ``kinematic``, the ``flow`` run's in ``flow`` (see those methods' ``cache_dir``); a
+        rerun after an interruption resumes after the last one (``fourd reconstruct
+        --cache``). None: nothing is kept.
+    """
 )
 
 
@@ -339,8 +346,15 @@ def reconstruct_with_diagnostics(
 ) -> Reconstruction:
     """:func:`reconstruct` and :class:`WatertightDiagnostics`."""
     options = Options() if options is None else options
-    opened = kinematic.reconstruct(seq, kinematic.Options())
-    flowed = flow.run(seq, flow_options(options))
+    opened = kinematic.reconstruct(
+        seq, kinematic.Options(cache_dir=subfolder(options.cache_dir, "kinematic"))
+    )
+    flowed = flow.run(
+        seq,
+        dataclasses.replace(
+            flow_options(options), cache_dir=subfolder(options.cache_dir, "flow")
+        ),
+    )
     closing = close_on_flow(seq, opened, flowed)
     return Reconstruction(
         closing.animation,

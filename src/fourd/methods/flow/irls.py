@@ -18,11 +18,14 @@ the paper does not need to mention: it guarantees the loop ends).
 
 from __future__ import annotations
 
+import json
 import logging
 from typing import NamedTuple
 
 import numpy as np
+import scipy.sparse as sp
 
+from fourd.cache import Chain, report_resumed
 from fourd.methods.flow.amg import restrict_interpolations
 from fourd.methods.flow.grid import speed_prune
 from fourd.methods.flow.saddle import release_free_heap, solve_saddle
@@ -113,6 +116,96 @@ def unknown_slices(system, shape4: tuple) -> np.ndarray:
     return out
 
 
+def _plain(value):
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, np.generic):
+        return value.item()
+    raise TypeError(f"cannot store a {type(value).__name__} in the IRLS history")
+
+
+def history_arrays(history: list) -> dict[str, np.ndarray]:
+    """The IRLS history as a cache entry's array (JSON text, NaN kept)."""
+    return {"history": np.array(json.dumps(history, default=_plain))}
+
+
+def history_from_arrays(arrays) -> list:
+    """The history :func:`history_arrays` stored (``mass`` back as arrays)."""
+    history = json.loads(str(arrays["history"]))
+    for record in history:
+        record["mass"] = np.asarray(record["mass"], dtype=float)
+    return history
+
+
+def _matrix_arrays(name: str, matrices) -> dict[str, np.ndarray]:
+    if matrices is None:
+        return {}
+    out = {f"{name}_count": np.array(len(matrices))}
+    for i, matrix in enumerate(matrices):
+        matrix = matrix.tocsr()
+        out[f"{name}_{i}_data"] = matrix.data
+        out[f"{name}_{i}_indices"] = matrix.indices
+        out[f"{name}_{i}_indptr"] = matrix.indptr
+        out[f"{name}_{i}_shape"] = np.array(matrix.shape)
+    return out
+
+
+def _matrices(arrays, name: str) -> list | None:
+    if f"{name}_count" not in arrays:
+        return None
+    return [
+        sp.csr_matrix(
+            (arrays[f"{name}_{i}_data"], arrays[f"{name}_{i}_indices"], arrays[f"{name}_{i}_indptr"]),
+            shape=tuple(int(n) for n in arrays[f"{name}_{i}_shape"]),
+        )
+        for i in range(int(arrays[f"{name}_count"]))
+    ]
+
+
+class _State(NamedTuple):
+    """What an IRLS iteration leaves to the next: a checkpoint's content."""
+
+    value: np.ndarray
+    x: np.ndarray
+    band: float
+    iterations: int
+    history: list
+    free: np.ndarray | None
+    flows: Flows | None
+    v: np.ndarray | None
+    interpolations: list | None
+    coarse: list | None
+
+
+def _state_arrays(state: _State) -> dict[str, np.ndarray]:
+    arrays = {
+        "value": state.value,
+        "x": state.x,
+        "band": np.array(state.band),
+        "iterations": np.array(state.iterations),
+        **history_arrays(state.history),
+        **_matrix_arrays("interpolation", state.interpolations),
+        **_matrix_arrays("coarse", state.coarse),
+    }
+    if state.flows is not None:
+        arrays.update(
+            free=state.free, source=state.flows.source, target=state.flows.target,
+            offset=state.flows.offset, v=state.v,
+        )
+    return arrays
+
+
+def _state(arrays) -> _State:
+    flows = None
+    if "source" in arrays:
+        flows = Flows(arrays["source"], arrays["target"], arrays["offset"])
+    return _State(
+        arrays["value"], arrays["x"], float(arrays["band"]), int(arrays["iterations"]),
+        history_from_arrays(arrays), arrays.get("free"), flows, arrays.get("v"),
+        _matrices(arrays, "interpolation"), _matrices(arrays, "coarse"),
+    )
+
+
 def run_irls(
     value: np.ndarray,
     weights: np.ndarray,
@@ -136,6 +229,7 @@ def run_irls(
     parallel: bool = True,
     still_depth: int = 0,
     progress=None,
+    checkpoints: Chain | None = None,
 ) -> IRLSResult:
     """Run the IRLS loop from the initial labels.
 
@@ -174,6 +268,13 @@ def run_irls(
     still_depth : int
         Material stays in the cells fixed inside at least this many cells deep (see
         :func:`.system.still_interior`); 0: flows everywhere.
+    checkpoints : Chain, optional
+        Cache entries of the iterations (:class:`fourd.cache.Chain`, one key per possible
+        iteration, keyed by the caller from all of the above but ``max_iterations`` and
+        ``stop_fraction``): after each iteration but the last, everything the next one starts
+        from (the labels, the iterate, the flows, the AMG hierarchy it reuses) replaces the
+        previous iteration's entry, and a run finding one continues after it, with the same
+        result as without the interruption.
     """
     if regularize_towards not in ("zero", "previous"):
         raise ValueError(f"regularize_towards must be zero or previous, got {regularize_towards!r}")
@@ -186,7 +287,22 @@ def run_irls(
     previous_free, previous_interpolations, previous_coarse = None, None, None
     band = clamp
     iterations = 0
-    for iteration in range(max_iterations):
+    first = 0
+    if checkpoints is not None:
+        step, entry = checkpoints.latest()
+        if entry is not None and step + 1 < max_iterations:
+            state = _state(entry)
+            value, x, band, iterations, history = (
+                state.value, state.x, state.band, state.iterations, state.history
+            )
+            previous_free, previous_flows, previous_v = state.free, state.flows, state.v
+            previous_interpolations, previous_coarse = state.interpolations, state.coarse
+            weights = irls_weights(x, exponent=exponent, floor=floor, scale=scale, out=weights)
+            first = step + 1
+            report_resumed(log, f"{first} flow iterations")
+            if progress is not None:
+                progress.update(first)
+    for iteration in range(first, max_iterations):
         alive = speed_prune(value != 0, full=full, keep=value == 1)
         value[~alive] = 0.0
         x[~alive] = 0.0
@@ -288,6 +404,13 @@ def run_irls(
             break
         if decided_now - decided_before < 0.005 * total:
             band = min(1.5 * band, 0.45)
+        if checkpoints is not None and iteration + 1 < max_iterations:
+            state = _State(
+                value, x, band, iterations, history, previous_free, previous_flows, previous_v,
+                previous_interpolations, previous_coarse,
+            )
+            checkpoints.save(iteration, _state_arrays(state), keep_earlier=False)
+            del state
     alive = speed_prune(value != 0, full=full, keep=value == 1)
     x[~alive] = 0.0
     return IRLSResult(x, ~np.isnan(value), iterations, history)

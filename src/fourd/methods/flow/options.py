@@ -190,6 +190,12 @@ class Options:
         offset (default 100). Steps are per mesh edge, so the smoothed distance shrinks with
         finer meshes (higher ``resolution``); each frame's steps are scaled by how far its
         volume is off, its first offset in flow cells, at most 1 (:func:`mass_meshes`).
+    cache_dir : str or None
+        Folder where the finished stages are kept: the grid, visual hull and initial labels,
+        each IRLS iteration while the solve runs (with the AMG hierarchy the next one reuses,
+        so a resumed solve gives the same result), the solve's result and the meshes, keyed
+        by the input data and the options that act on them; a rerun after an interruption
+        resumes after the last one (``fourd reconstruct --cache``). None: nothing is kept.
     """
 
     resolution: int = 32
@@ -236,6 +242,7 @@ class Options:
     observed_distance: float = 0.5
     level_limit: float = 4.0
     unobserved_smoothing: int = 100
+    cache_dir: str | None = None
 
     def __post_init__(self):
         if self.resolution < 4:

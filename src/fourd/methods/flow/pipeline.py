@@ -12,6 +12,16 @@ from typing import NamedTuple
 import numpy as np
 
 from fourd.animation import MeshSequence
+from fourd.cache import (
+    Chain,
+    StageCache,
+    cached,
+    option_values,
+    pack_list,
+    report_resumed,
+    stage_key,
+    unpack_list,
+)
 from fourd.errors import InputError
 from fourd.geometry.neighbors import point_spacing
 from fourd.geometry.normals import estimate_normals, pca_normals
@@ -29,7 +39,12 @@ from fourd.methods.flow.grid import (
     substeps_for_motion,
     unsigned_distance,
 )
-from fourd.methods.flow.irls import IRLSResult, run_irls
+from fourd.methods.flow.irls import (
+    IRLSResult,
+    history_arrays,
+    history_from_arrays,
+    run_irls,
+)
 from fourd.methods.flow.mass_levels import mass_meshes
 from fourd.methods.flow.options import FINE_RESOLUTION, OBSERVED_RESOLUTION, Options
 from fourd.methods.flow.post import (
@@ -156,12 +171,44 @@ def _outward_weights(grid: SpaceTimeGrid, slice_points, slice_normals, cosine: f
     return weights
 
 
-def run(seq: PointCloudSequence, options: Options | None = None) -> FlowResult:
-    """Reconstruct ``seq`` and return every intermediate result (see :class:`FlowResult`)."""
-    options = Options() if options is None else options
-    seconds = {}
+#: The cache entries of the flow: the grid, visual hull and initial labels; each IRLS
+#: iteration while the solve runs (removed when it ends); the solve's result; the implicit
+#: function and the meshes.
+LABELS_STAGE = "flow-labels"
+STEP_STAGE = "flow-iteration"
+IRLS_STAGE = "flow-irls"
+POST_STAGE = "flow-post"
+#: Options that act only in the IRLS (left out of the labels' cache key).
+IRLS_OPTIONS = (
+    "neighbourhood", "alpha", "regularization", "regularize_towards", "exponent",
+    "weight_floor", "weight_scale", "clamp", "stop_fraction", "max_iterations", "gamma",
+    "softness", "outer_rtol", "inner_rtol", "inner", "max_outer", "later_outer",
+    "reuse_interpolation", "reuse_coarse", "interpolation_entries", "coarse_drop",
+    "parallel_sweeps", "outward_cosine", "still_interior",
+)
+#: Options that act only after the IRLS (left out of its cache keys).
+POST_OPTIONS = (
+    "refine", "band", "smoothness", "time_smoothness", "min_component", "cavities",
+    "mass_levels", "observed_distance", "level_limit", "unobserved_smoothing",
+)
+
+
+class _Labels(NamedTuple):
+    """What the preprocessing gives the IRLS (:func:`_labels`)."""
+
+    frame_points: list  # T arrays [P, 3] or None
+    grid: SpaceTimeGrid
+    outside: np.ndarray  # bool [S, X, Y, Z], carved by the hull
+    value: np.ndarray  # float64 [S, X, Y, Z], initial labels (nan free, 0 outside, 1 inside)
+    trim: np.ndarray  # bool [S, X, Y, Z]
+    guess: np.ndarray  # bool [S, X, Y, Z], inside the implicit fit
+    slice_normals: list  # S arrays [P, 3] or None
+
+
+def _labels(seq: PointCloudSequence, options: Options, seconds: dict) -> _Labels:
+    """Frames, grid, visual hull, the low-resolution implicit fit and the initial labels
+    (steps 1 and 2 of the package docstring)."""
     clock = time.perf_counter()
-    offsets = neighbourhood(options.neighbourhood)
     frame_points = _frame_points(seq, options)
     present = [p for p in frame_points if p is not None and len(p)]
     bounds = np.stack(
@@ -179,12 +226,7 @@ def run(seq: PointCloudSequence, options: Options | None = None) -> FlowResult:
         log.info("flow: %d time slices per frame interval (automatic)", substeps)
     grid = build_grid(bounds, seq.times, resolution=options.resolution, substeps=substeps)
     S = grid.slices
-    slice_points: list[np.ndarray | None] = [None] * S
-    slice_sensors: list[np.ndarray | None] = [None] * S
-    for i, pts in enumerate(frame_points):
-        if pts is not None and len(pts) >= 4:
-            slice_points[grid.frame_slice[i]] = pts
-            slice_sensors[grid.frame_slice[i]] = seq.frames[i].sensors
+    slice_points, slice_sensors = _slice_data(seq, grid, frame_points)
 
     # (1) preprocessing: hull, data cells, seeds
     outside = np.zeros(grid.shape4, dtype=bool)
@@ -250,7 +292,6 @@ def run(seq: PointCloudSequence, options: Options | None = None) -> FlowResult:
     value = np.full(grid.shape4, np.nan)
     value[outside | fit_outside] = 0.0
     value[data | seeds | fit_inside] = 1.0
-    region = ~outside
     log.info(
         "flow grid %s x %d slices, cell %.4g; %.1f%% of cells labelled outside, %d data cells, "
         "%d inside seeds",
@@ -261,54 +302,46 @@ def run(seq: PointCloudSequence, options: Options | None = None) -> FlowResult:
         int(data.sum()),
         int((seeds | fit_inside).sum()),
     )
+    return _Labels(frame_points, grid, outside, value, trim, fit.values < 0, slice_normals)
 
-    # (3)+(4) IRLS with the saddle-point solver
-    clock = time.perf_counter()
-    solver_options = {
-        "gamma": options.gamma,
-        "softness": options.softness,
-        "rtol": options.outer_rtol,
-        "inner": options.inner,
-        "inner_rtol": options.inner_rtol,
-        "maxiter": options.max_outer,
-        "interpolation_entries": options.interpolation_entries or None,
-        "coarse_drop": options.coarse_drop,
+
+def _slice_data(seq: PointCloudSequence, grid: SpaceTimeGrid, frame_points: list):
+    """Per time slice, the points (the frame's with at least 4, else None) and sensors."""
+    slice_points: list[np.ndarray | None] = [None] * grid.slices
+    slice_sensors: list[np.ndarray | None] = [None] * grid.slices
+    for i, pts in enumerate(frame_points):
+        if pts is not None and len(pts) >= 4:
+            slice_points[grid.frame_slice[i]] = pts
+            slice_sensors[grid.frame_slice[i]] = seq.frames[i].sensors
+    return slice_points, slice_sensors
+
+
+def _labels_arrays(labels: _Labels) -> dict[str, np.ndarray]:
+    grid = labels.grid
+    return {
+        **pack_list("frame_points", labels.frame_points),
+        **pack_list("slice_normals", labels.slice_normals),
+        "origin": grid.origin, "h": np.array(grid.h), "shape": np.array(grid.shape),
+        "times": grid.times, "frame_slice": grid.frame_slice, "outside": labels.outside,
+        "value": labels.value, "trim": labels.trim, "guess": labels.guess,
     }
-    still_depth = options.still_interior
-    if still_depth is None:
-        still_depth = 1 if options.resolution >= FINE_RESOLUTION else 0
-    bar = progress(total=options.max_iterations, desc="flow: IRLS", unit="iteration")
-    try:
-        irls: IRLSResult = run_irls(
-            value,
-            # the IRLS writes its later weights into this array
-            _outward_weights(grid, slice_points, slice_normals, options.outward_cosine),
-            offsets,
-            region,
-            alpha=options.alpha,
-            reg=options.regularization,
-            exponent=options.exponent,
-            floor=options.weight_floor,
-            scale=options.weight_scale,
-            clamp=options.clamp,
-            stop_fraction=options.stop_fraction,
-            max_iterations=options.max_iterations,
-            solver_options=solver_options,
-            guess=(fit.values < 0).astype(float),
-            regularize_towards=options.regularize_towards,
-            reuse_interpolation=options.reuse_interpolation,
-            reuse_coarse=options.reuse_coarse,
-            later_maxiter=options.later_outer or None,
-            parallel=options.parallel_sweeps and options.inner == "amg",
-            still_depth=still_depth,
-            progress=bar,
-        )
-    finally:
-        bar.close()
-    seconds["flow"] = time.perf_counter() - clock
 
-    # (5) postprocessing
-    clock = time.perf_counter()
+
+def _labels_from_arrays(arrays) -> _Labels:
+    grid = SpaceTimeGrid(
+        arrays["origin"], float(arrays["h"]), tuple(int(n) for n in arrays["shape"]),
+        arrays["times"], arrays["frame_slice"],
+    )
+    return _Labels(
+        unpack_list(arrays, "frame_points"), grid, arrays["outside"], arrays["value"],
+        arrays["trim"], arrays["guess"], unpack_list(arrays, "slice_normals"),
+    )
+
+
+def _post(options: Options, grid, irls, trim, frame_points, slice_points, slice_normals):
+    """Step 5: the implicit function, its meshes at the input times and their masses;
+    ``(field, meshes, mass, frames with cavities)``."""
+    h = grid.h
     field = implicit_function(
         grid,
         np.where(trim, 0.0, irls.x),
@@ -319,7 +352,7 @@ def run(seq: PointCloudSequence, options: Options | None = None) -> FlowResult:
         smoothness=options.smoothness,
         time_weight=options.time_smoothness,
     )
-    mass = irls.x[grid.frame_slice].reshape(len(seq), -1).sum(axis=1) * h**3
+    mass = irls.x[grid.frame_slice].reshape(len(frame_points), -1).sum(axis=1) * h**3
     meshes = [
         extract_mesh(field, int(s), min_component=options.min_component) for s in grid.frame_slice
     ]
@@ -339,6 +372,92 @@ def run(seq: PointCloudSequence, options: Options | None = None) -> FlowResult:
             smoothing=options.unobserved_smoothing,
             all_or_nothing=options.mass_levels == "auto",
         )
+    return field, meshes, mass, cavity_frames
+
+
+def run(seq: PointCloudSequence, options: Options | None = None) -> FlowResult:
+    """Reconstruct ``seq`` and return every intermediate result (see :class:`FlowResult`).
+
+    With ``options.cache_dir``, the labels (grid, hull, fit), each IRLS iteration, the
+    solve's result and the meshes are kept there as they finish, and a rerun resumes after
+    the last one (:mod:`fourd.cache`) with the same result.
+    """
+    options = Options() if options is None else options
+    cache = StageCache(options.cache_dir)
+    seconds = {}
+    offsets = neighbourhood(options.neighbourhood)
+    labels_key = irls_base = irls_key = ""
+    if cache.enabled:
+        frames = [(frame.points, frame.sensors) for frame in seq.frames]
+        labels_key = stage_key(
+            LABELS_STAGE, frames, seq.times,
+            option_values(options, without=IRLS_OPTIONS + POST_OPTIONS),
+        )
+        irls_base = stage_key(
+            STEP_STAGE, labels_key,
+            option_values(options, without=POST_OPTIONS + ("max_iterations", "stop_fraction")),
+        )
+        irls_key = stage_key(IRLS_STAGE, irls_base, options.max_iterations, options.stop_fraction)
+
+    stored, resumed = cached(
+        cache, LABELS_STAGE, labels_key, lambda: _labels_arrays(_labels(seq, options, seconds))
+    )
+    labels = _labels_from_arrays(stored)
+    if resumed:
+        report_resumed(log, "the flow's grid, visual hull and initial labels")
+    frame_points, grid, trim, slice_normals = (
+        labels.frame_points, labels.grid, labels.trim, labels.slice_normals
+    )
+    slice_points, _ = _slice_data(seq, grid, frame_points)
+    value = labels.value
+
+    # (3)+(4) IRLS with the saddle-point solver
+    clock = time.perf_counter()
+
+    solved = []  # the result as computed (its history as it is, not read back)
+
+    def solve():
+        solved.append(
+            _solve(options, value, labels, slice_points, slice_normals, offsets, cache, irls_base)
+        )
+        return {
+            "x": solved[0].x, "decided": solved[0].decided,
+            "iterations": np.array(solved[0].iterations), **history_arrays(solved[0].history),
+        }
+
+    stored, resumed = cached(cache, IRLS_STAGE, irls_key, solve)
+    irls = solved[0] if solved else IRLSResult(
+        stored["x"], stored["decided"], int(stored["iterations"]), history_from_arrays(stored)
+    )
+    if resumed:
+        report_resumed(log, "the flow solve")
+    elif cache.enabled:
+        # the iterations' entries (with the AMG hierarchies) are no longer needed
+        _steps(cache, irls_base, options).discard()
+    seconds["flow"] = time.perf_counter() - clock
+
+    # (5) postprocessing
+    clock = time.perf_counter()
+    post_key = stage_key(POST_STAGE, irls_key, option_values(options)) if cache.enabled else ""
+
+    def post():
+        field, meshes, mass, cavity_frames = _post(
+            options, grid, irls, trim, frame_points, slice_points, slice_normals
+        )
+        return {
+            "values": field.values, "origin": field.origin, "spacing": np.array(field.spacing),
+            "times": field.times, "mass": mass,
+            "cavity_frames": np.array(cavity_frames, dtype=np.int64),
+            **pack_list("vertices", [v for v, _ in meshes]),
+            **pack_list("faces", [f for _, f in meshes]),
+        }
+
+    stored, resumed = cached(cache, POST_STAGE, post_key, post)
+    field = FlowField(stored["values"], stored["origin"], float(stored["spacing"]), stored["times"])
+    meshes = list(zip(unpack_list(stored, "vertices"), unpack_list(stored, "faces"), strict=True))
+    mass, cavity_frames = stored["mass"], [int(i) for i in stored["cavity_frames"]]
+    if resumed:
+        report_resumed(log, "the flow's meshes")
     if cavity_frames:
         log.warning(
             "flow: closed cavities inside the solid in %d of %d frames (%s): the motion is "
@@ -368,6 +487,58 @@ def run(seq: PointCloudSequence, options: Options | None = None) -> FlowResult:
         result_meshes, field, grid, irls.x, mass, error, irls.history, seconds, frame_points,
         frame_normals,
     )
+
+
+def _steps(cache: StageCache, base: str, options: Options) -> Chain:
+    """The cache entries of the IRLS iterations."""
+    return Chain.of(cache, STEP_STAGE, base, [()] * options.max_iterations)
+
+
+def _solve(options, value, labels, slice_points, slice_normals, offsets, cache, base):
+    """Steps 3 and 4: the IRLS over the saddle-point systems from the initial labels."""
+    grid = labels.grid
+    solver_options = {
+        "gamma": options.gamma,
+        "softness": options.softness,
+        "rtol": options.outer_rtol,
+        "inner": options.inner,
+        "inner_rtol": options.inner_rtol,
+        "maxiter": options.max_outer,
+        "interpolation_entries": options.interpolation_entries or None,
+        "coarse_drop": options.coarse_drop,
+    }
+    still_depth = options.still_interior
+    if still_depth is None:
+        still_depth = 1 if options.resolution >= FINE_RESOLUTION else 0
+    bar = progress(total=options.max_iterations, desc="flow: IRLS", unit="iteration")
+    try:
+        return run_irls(
+            value,
+            # the IRLS writes its later weights into this array
+            _outward_weights(grid, slice_points, slice_normals, options.outward_cosine),
+            offsets,
+            ~labels.outside,
+            alpha=options.alpha,
+            reg=options.regularization,
+            exponent=options.exponent,
+            floor=options.weight_floor,
+            scale=options.weight_scale,
+            clamp=options.clamp,
+            stop_fraction=options.stop_fraction,
+            max_iterations=options.max_iterations,
+            solver_options=solver_options,
+            guess=labels.guess.astype(float),
+            regularize_towards=options.regularize_towards,
+            reuse_interpolation=options.reuse_interpolation,
+            reuse_coarse=options.reuse_coarse,
+            later_maxiter=options.later_outer or None,
+            parallel=options.parallel_sweeps and options.inner == "amg",
+            still_depth=still_depth,
+            progress=bar,
+            checkpoints=_steps(cache, base, options) if cache.enabled else None,
+        )
+    finally:
+        bar.close()
 
 
 def surface_distance(result: FlowResult) -> FlowField:

@@ -12,6 +12,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from fourd.animation import AnimatedMesh
+from fourd.cache import NO_CACHE, Chain, StageCache, cached, report_resumed, stage_key
 from fourd.errors import InputError
 from fourd.geometry.meshes import median_edge_length
 from fourd.methods.kinematic.framesurface import FrameSurface
@@ -27,6 +28,11 @@ log = logging.getLogger("fourd.methods.kinematic")
 #: An automatic template cell is at least the longest side of the box over this many cells
 #: (marching cubes over 600^3 grid points is the most the urshape extraction allows).
 MAX_TEMPLATE_CELLS = 600
+#: The cache entries of the urshape, of the frames slid forwards in time and of those slid
+#: backwards (output times before the first input time).
+URSHAPE_STAGE = "kinematic-urshape"
+SLIDE_STAGE = "kinematic-slide"
+SLIDE_BACK_STAGE = "kinematic-slide-back"
 
 
 def animate(
@@ -41,6 +47,8 @@ def animate(
     bounds: np.ndarray | None = None,
     project_smoothed: bool = False,
     edge_stiffness: tuple | None = None,
+    cache: StageCache = NO_CACHE,
+    field_key: str = "",
 ) -> AnimatedMesh:
     """Urshape at ``times[0]`` and its sliding along ``field`` (sections 4 and 5 with this
     method's data term): everything of :func:`reconstruct` after the 4D fit, for any
@@ -75,9 +83,20 @@ def animate(
     edge_stiffness : tuple, optional
         ``(edges [E, 2], values [E])``: factors on the sliding's ARAP weights of those urshape
         edges (:attr:`SlideOptions.edge_stiffness`).
+    cache : StageCache
+        Where the urshape and every slid frame are kept as they finish (a rerun resumes
+        after the last slid frame); needs ``field_key``.
+    field_key : str
+        The cache key of ``field`` (:func:`~.field.fit_key`): what identifies it.
     """
+    if cache.enabled and not field_key:
+        raise ValueError("animate: a cache needs the field's key (field_key)")
     started = _time.perf_counter()
     times = np.asarray(times, dtype=float)
+    # the cache keys of the frames: what the urshape and each sliding step read of them
+    frame_keys = None
+    if cache.enabled:
+        frame_keys = [stage_key(p, n) for p, n in zip(points, normals, strict=True)]
     box = np.array([points[0].min(axis=0), points[0].max(axis=0)]) if bounds is None else bounds
     cell = options.cell_size or max(
         template_cell_size(points[0], spacing, options.template_vertices),
@@ -85,31 +104,23 @@ def animate(
         float(np.max(np.ptp(np.asarray(box, dtype=float), axis=0))) / MAX_TEMPLATE_CELLS,
     )
 
-    # the area estimate of template_cell_size is rough on curved or thin shapes
-    # (dfaust-hopping: 1.7x the target), so an automatic cell size is corrected once from the
-    # marching-cubes vertex count: sliding costs grow with the vertex count
-    vertices, faces = extract_template(
-        field,
-        times[0],
-        bounds=np.asarray(box, dtype=float),
-        cell_size=cell,
-        data_points=None if closed else points[0],
-        smoothing_iterations=options.smoothing_iterations,
-        min_component_faces=20,
-        target_vertices=0 if options.cell_size else options.template_vertices,
-    )
-    if len(faces) == 0:
-        raise InputError("the 4D implicit has no surface at the first frame (too few points?)")
     bandwidth = options.data_bandwidth or 2.0 * spacing
-    if options.data_term:
-        # the urshape on the first frame's own points: f(., t0) is posed a little off them
-        vertices = project_to_surface(
-            field,
-            vertices,
-            times[0],
-            surface=FrameSurface(points[0], normals[0], bandwidth),
-            max_step=2.0 * median_edge_length(vertices, faces),
+    urshape_key = ""
+    if cache.enabled:
+        urshape_key = stage_key(
+            URSHAPE_STAGE, field_key, frame_keys[0], float(times[0]), np.asarray(box, float),
+            cell, options.cell_size, options.template_vertices, options.smoothing_iterations,
+            options.data_term, bandwidth, closed,
         )
+
+    def urshape():
+        vertices, faces = _urshape(field, points, normals, times, box, cell, bandwidth, options, closed)
+        return {"vertices": vertices, "faces": faces}
+
+    template, resumed = cached(cache, URSHAPE_STAGE, urshape_key, urshape)
+    vertices, faces = template["vertices"], template["faces"]
+    if resumed:
+        report_resumed(log, "the urshape")
     urshape = _time.perf_counter()
     log.info("urshape: %d vertices in %.2f s", len(vertices), urshape - started)
 
@@ -117,7 +128,6 @@ def animate(
     out_times = np.array(options.times, dtype=float) if options.times else times.copy()
     out_times = np.unique(out_times)
     nearest = np.abs(out_times[:, None] - times[None, :]).argmin(axis=1)
-    data = [points[k] for k in nearest]
     # per output time, the input frame whose surface is the data term there (-1: none)
     exact = np.abs(out_times - times[nearest]) <= 1e-9 * time_unit
     has_points = np.array([len(points[k]) > 0 for k in nearest])
@@ -144,33 +154,56 @@ def animate(
         previous_shape=options.slide_memory,
         edge_stiffness=edge_stiffness,
     )
+
+    def chain(stage, slide_times, data_frames, surface_frames):
+        """The cache entries of one sliding run: each step keyed by the step before it, its
+        time, its data and its surface."""
+        if not cache.enabled:
+            return None
+        base = stage_key(stage, urshape_key, slide_options, bandwidth, float(slide_times[0]))
+        steps = [
+            (float(t), frame_keys[d], None if f < 0 else frame_keys[f])
+            for t, d, f in zip(slide_times[1:], data_frames[1:], surface_frames[1:], strict=True)
+        ]
+        return Chain.of(cache, stage, base, steps)
+
     t0 = float(times[0])
     forward = out_times >= t0
     parts_v, parts_o = [], []
     if (~forward).any():
         back_times = np.r_[t0, out_times[~forward][::-1]]
         count = int((~forward).sum())
+        back_frames = [0] + [int(k) for k in nearest[:count][::-1]]
+        back_surfaces = [-1] + surface_frames[:count][::-1]
         back = _slide_monotone(
             vertices,
             faces,
             field,
             back_times,
             slide_options,
-            [points[0]] + data[:count][::-1],
-            surfaces([-1] + surface_frames[:count][::-1]),
+            [points[k] for k in back_frames],
+            surfaces(back_surfaces),
+            chain(SLIDE_BACK_STAGE, back_times, back_frames, back_surfaces),
         )
         parts_v.append(back[0][1:][::-1])
         parts_o.append(back[1][1:][::-1])
     fwd_times = out_times[forward]
-    fwd_data = [data[i] for i in np.flatnonzero(forward)]
+    fwd_frames = [int(nearest[i]) for i in np.flatnonzero(forward)]
     fwd_surfaces = [surface_frames[i] for i in np.flatnonzero(forward)]
     prepend = len(fwd_times) == 0 or fwd_times[0] > t0
     if prepend:
         fwd_times = np.r_[t0, fwd_times]
-        fwd_data = [points[0]] + fwd_data
+        fwd_frames = [0] + fwd_frames
         fwd_surfaces = [-1] + fwd_surfaces
     fv, fo = _slide_monotone(
-        vertices, faces, field, fwd_times, slide_options, fwd_data, surfaces(fwd_surfaces)
+        vertices,
+        faces,
+        field,
+        fwd_times,
+        slide_options,
+        [points[k] for k in fwd_frames],
+        surfaces(fwd_surfaces),
+        chain(SLIDE_STAGE, fwd_times, fwd_frames, fwd_surfaces),
     )
     if prepend:
         fv, fo = fv[1:], fo[1:]
@@ -202,6 +235,35 @@ def animate(
     )
 
 
+def _urshape(field, points, normals, times, box, cell, bandwidth, options, closed):
+    """The urshape at ``times[0]``: ``(vertices [N, 3], faces [F, 3])``."""
+    # the area estimate of template_cell_size is rough on curved or thin shapes
+    # (dfaust-hopping: 1.7x the target), so an automatic cell size is corrected once from the
+    # marching-cubes vertex count: sliding costs grow with the vertex count
+    vertices, faces = extract_template(
+        field,
+        times[0],
+        bounds=np.asarray(box, dtype=float),
+        cell_size=cell,
+        data_points=None if closed else points[0],
+        smoothing_iterations=options.smoothing_iterations,
+        min_component_faces=20,
+        target_vertices=0 if options.cell_size else options.template_vertices,
+    )
+    if len(faces) == 0:
+        raise InputError("the 4D implicit has no surface at the first frame (too few points?)")
+    if options.data_term:
+        # the urshape on the first frame's own points: f(., t0) is posed a little off them
+        vertices = project_to_surface(
+            field,
+            vertices,
+            times[0],
+            surface=FrameSurface(points[0], normals[0], bandwidth),
+            max_step=2.0 * median_edge_length(vertices, faces),
+        )
+    return vertices, faces
+
+
 class _FrameSurfaces(Sequence):
     """Per sliding time, the :class:`FrameSurface` of input frame ``frames[i]`` (None where
     it is -1), built when the sliding asks for it: one frame's grid in memory at a time."""
@@ -217,8 +279,9 @@ class _FrameSurfaces(Sequence):
         return None if k < 0 else FrameSurface(self.points[k], self.normals[k], self.bandwidth)
 
 
-def _slide_monotone(vertices, faces, field, times, options, data, surfaces):
-    """Slide through monotone ``times`` (decreasing allowed); returns (frames, observed)."""
+def _slide_monotone(vertices, faces, field, times, options, data, surfaces, checkpoints=None):
+    """Slide through monotone ``times`` (decreasing allowed); returns (frames, observed).
+    ``checkpoints``: the cache entries of the steps (:func:`slide`), or None."""
     if len(times) == 1:
         from scipy.spatial import cKDTree
 
@@ -227,7 +290,10 @@ def _slide_monotone(vertices, faces, field, times, options, data, surfaces):
     sign = 1.0 if times[-1] >= times[0] else -1.0
     # slide() wants increasing times: run it on a reflected time axis when going backwards
     if sign > 0:
-        anim = slide(vertices, faces, field, times, options=options, data=data, surfaces=surfaces)
+        anim = slide(
+            vertices, faces, field, times, options=options, data=data, surfaces=surfaces,
+            checkpoints=checkpoints,
+        )
     else:
         anim = slide(
             vertices,
@@ -237,6 +303,7 @@ def _slide_monotone(vertices, faces, field, times, options, data, surfaces):
             options=options,
             data=data,
             surfaces=surfaces,
+            checkpoints=checkpoints,
         )
     return anim.vertices, anim.observed
 

@@ -11,7 +11,14 @@ from typing import NamedTuple
 
 import numpy as np
 
-from fourd.methods.kinematic.mpu4d import MPU4D, MPUOptions, fit_mpu4d
+from fourd.cache import NO_CACHE, StageCache, report_resumed, stage_key
+from fourd.methods.kinematic.mpu4d import (
+    MPU4D,
+    MPUOptions,
+    fit_mpu4d,
+    mpu_arrays,
+    mpu_from_arrays,
+)
 
 log = logging.getLogger("fourd.methods.kinematic.field")
 
@@ -138,6 +145,27 @@ class SpaceTimeField:
         return self._evaluate(points, times, True)[1]
 
 
+#: The cache entries of 4D fits (one per window).
+STAGE = "kinematic-fit"
+
+
+def fit_key(
+    stp: SpaceTimePoints,
+    times: np.ndarray,
+    *,
+    mpu_options: MPUOptions,
+    window: int,
+    overlap: int,
+    time_origin: float,
+    time_scale: float,
+) -> str:
+    """The cache key of :func:`fit_windows`' fits: everything they depend on."""
+    return stage_key(
+        STAGE, stp.points, stp.normals, stp.frame, np.asarray(times, float), mpu_options,
+        window, overlap, time_origin, time_scale,
+    )
+
+
 def fit_windows(
     stp: SpaceTimePoints,
     times: np.ndarray,
@@ -147,13 +175,32 @@ def fit_windows(
     overlap: int,
     time_origin: float,
     time_scale: float,
+    cache: StageCache = NO_CACHE,
+    key: str = "",
 ) -> SpaceTimeField:
     """A :class:`SpaceTimeField` over all frames (``window = 0``) or over windows of
     ``window`` frames, each fitted with ``overlap`` extra frames on both sides so that the
-    function is continuous enough across the window boundary."""
+    function is continuous enough across the window boundary.
+
+    With a ``cache``, each fit is stored under ``key`` (:func:`fit_key` of the same
+    arguments) and the window's index, and a fit found there is loaded instead."""
     count = len(times)
+
+    def fitted(index: int, points, normals, what: str) -> MPU4D:
+        window_key = stage_key(key, index)
+        stored = cache.load(STAGE, window_key)
+        if stored is not None:
+            if index not in reported:
+                report_resumed(log, what)
+                reported.add(index)
+            return mpu_from_arrays(stored)
+        mpu = fit_mpu4d(points, normals, options=mpu_options)
+        cache.save(STAGE, window_key, mpu_arrays(mpu))
+        return mpu
+
+    reported: set[int] = set()
     if window <= 0 or window >= count:
-        mpu = fit_mpu4d(stp.points, stp.normals, options=mpu_options)
+        mpu = fitted(0, stp.points, stp.normals, "the 4D fit")
         return SpaceTimeField.single(mpu, time_origin=time_origin, time_scale=time_scale)
     starts = list(range(0, count, window))
     windows = []
@@ -171,6 +218,9 @@ def fit_windows(
         lo, hi = max(0, a - overlap), min(count - 1, b + overlap)
         sel = (stp.frame >= lo) & (stp.frame <= hi)
         log.debug("fitting window %d: frames %d-%d (%d points)", index, lo, hi, int(sel.sum()))
-        return fit_mpu4d(stp.points[sel], stp.normals[sel], options=mpu_options)
+        return fitted(
+            index, stp.points[sel], stp.normals[sel],
+            f"the 4D fit of window {index + 1} of {len(starts)}",
+        )
 
     return SpaceTimeField(windows, build, time_origin=time_origin, time_scale=time_scale)

@@ -1,37 +1,77 @@
 """Per-frame preparation of the input: outlier removal and oriented normals (a pure
-function of one frame and the options).
+function of one frame and the options), each frame kept in the cache when there is one.
 """
 
 from __future__ import annotations
 
+import logging
 from concurrent.futures import ThreadPoolExecutor
 
 import numba
 
+from fourd.cache import NO_CACHE, StageCache, report_resumed, stage_key
 from fourd.geometry.neighbors import knn, neighbours_among
 from fourd.geometry.normals import estimate_normals
 from fourd.geometry.outliers import distance_ratio_inliers
 from fourd.methods.kinematic.options import OUTLIER_NEIGHBOURS, PREPARE_THREADS, Options
 from fourd.sequence import PointCloudSequence
 
+log = logging.getLogger("fourd.methods.kinematic")
 
-def prepare_frames(seq: PointCloudSequence, options: Options):
+#: The cache entries of prepared frames.
+STAGE = "kinematic-prepare"
+
+
+def prepare_frames(seq: PointCloudSequence, options: Options, cache: StageCache = NO_CACHE):
     """Per-frame cleaning and normals: returns ``(points, normals)`` lists (pure per frame).
 
     Frames are prepared two at a time on two threads (their compiled kernels release the GIL)
     when numba's threading layer allows concurrent parallel kernels; the result is the same
-    as one after the other."""
+    as one after the other. With a ``cache``, each prepared frame is stored as soon as it is
+    done (keyed by the frame's points, normals and sensors and the two options that act on
+    it), and frames found there are not prepared again."""
     frames = list(seq.frames)
     if not frames:
         return [], []
-    first = _prepare_frame(frames[0], options)
-    if len(frames) == 1 or not _concurrent_kernels_safe():
-        rest = [_prepare_frame(frame, options) for frame in frames[1:]]
+    prepared: list = [None] * len(frames)
+    keys = [frame_key(frame, options) for frame in frames] if cache.enabled else None
+    if keys is not None:
+        for i, key in enumerate(keys):
+            entry = cache.load(STAGE, key)
+            if entry is not None:
+                prepared[i] = (entry["points"], entry["normals"])
+        found = sum(p is not None for p in prepared)
+        if found:
+            report_resumed(log, f"{found} of {len(frames)} frames' preparation")
+    todo = [i for i, p in enumerate(prepared) if p is None]
+
+    def keep(i, result):
+        prepared[i] = result
+        if keys is not None:
+            cache.save(STAGE, keys[i], {"points": result[0], "normals": result[1]})
+
+    if todo:
+        # the first alone: numba picks its threading layer at the first parallel kernel
+        keep(todo[0], _prepare_frame(frames[todo[0]], options))
+    rest = todo[1:]
+    if len(rest) <= 1 or not _concurrent_kernels_safe():
+        for i in rest:
+            keep(i, _prepare_frame(frames[i], options))
     else:
         with ThreadPoolExecutor(max_workers=PREPARE_THREADS) as pool:
-            rest = list(pool.map(lambda frame: _prepare_frame(frame, options), frames[1:]))
-    prepared = [first] + rest
+            done = pool.map(lambda i: _prepare_frame(frames[i], options), rest)
+            for i, result in zip(rest, done, strict=True):
+                keep(i, result)
     return [p for p, _ in prepared], [n for _, n in prepared]
+
+
+def frame_key(frame, options: Options) -> str:
+    """The cache key of one prepared frame: its data and the options
+    :func:`_prepare_frame` reads."""
+    return stage_key(
+        STAGE, frame.points, frame.normals, frame.sensors, options.outlier_factor,
+        options.normals_k, OUTLIER_NEIGHBOURS,
+    )
 
 
 def _concurrent_kernels_safe() -> bool:

@@ -252,6 +252,34 @@ class MPU4D:
         )
 
 
+def mpu_arrays(mpu: MPU4D) -> dict[str, np.ndarray]:
+    """A fitted :class:`MPU4D` as plain arrays (a cache entry; :func:`mpu_from_arrays` reads
+    it back exactly)."""
+    arrays = {
+        name: getattr(mpu, name)
+        for name in mpu.__dataclass_fields__
+        if isinstance(getattr(mpu, name), np.ndarray)
+    }
+    arrays["outside"] = np.array(mpu.outside)
+    arrays["stats"] = np.array(mpu.stats, dtype=np.float64)
+    return arrays
+
+
+def mpu_from_arrays(arrays) -> MPU4D:
+    """The :class:`MPU4D` whose :func:`mpu_arrays` are ``arrays``."""
+    stats = [float(v) for v in arrays["stats"]]
+    fields = {
+        name: np.asarray(arrays[name])
+        for name in MPU4D.__dataclass_fields__
+        if name not in ("outside", "stats", "_slices")
+    }
+    return MPU4D(
+        **fields,
+        outside=float(arrays["outside"]),
+        stats=MPUStats(*(int(v) for v in stats[:-1]), stats[-1]),
+    )
+
+
 def fit_mpu4d(points: np.ndarray, normals: np.ndarray, *, options: MPUOptions) -> MPU4D:
     """Fit a 4D MPU implicit to oriented 4D points.
 

@@ -132,6 +132,11 @@ class Options:
         Output times (default: the input times). They may lie between or beyond input times.
     seed : int
         Seed for the subsampling of the spacing estimate.
+    cache_dir : str or None
+        Folder where the finished stages are kept: each prepared frame, the 4D fit (each
+        window), the urshape and each slid frame, keyed by the input data and the options
+        that act on them; a rerun after an interruption resumes after the last one
+        (``fourd reconstruct --cache``). None: nothing is kept.
     """
 
     mpu_error: float = 0.0
@@ -161,6 +166,7 @@ class Options:
     smoothing_motion: float = 1.0
     times: tuple[float, ...] = ()
     seed: int = 0
+    cache_dir: str | None = None
 
     def __post_init__(self):
         for name in (

@@ -10,10 +10,11 @@ import time as _time
 import numpy as np
 
 from fourd.animation import AnimatedMesh
+from fourd.cache import StageCache
 from fourd.errors import InputError
 from fourd.geometry.neighbors import point_spacing
 from fourd.methods.kinematic.animate import animate
-from fourd.methods.kinematic.field import fit_windows, space_time_points
+from fourd.methods.kinematic.field import fit_key, fit_windows, space_time_points
 from fourd.methods.kinematic.frames import prepare_frames
 from fourd.methods.kinematic.mpu4d import MPUOptions
 from fourd.methods.kinematic.options import MIN_FRAMES, Options
@@ -31,6 +32,10 @@ def reconstruct(
     (default: per input frame). Raises :class:`InputError` when the sequence is too short or
     the implicit has no surface at the first time.
 
+    With ``options.cache_dir``, the prepared frames, the 4D fit (each window), the urshape
+    and every slid frame are kept there as they finish, and a rerun resumes after the last
+    one (:mod:`fourd.cache`).
+
     References
     ----------
     Süßmuth, Winter, Greiner: Reconstructing animated meshes from time-varying point clouds,
@@ -40,8 +45,9 @@ def reconstruct(
     if len(seq) < MIN_FRAMES:
         raise InputError(f"kinematic needs at least {MIN_FRAMES} frames, got {len(seq)}")
     started = _time.perf_counter()
+    cache = StageCache(options.cache_dir)
     times = seq.times
-    points, normals = prepare_frames(seq, options)
+    points, normals = prepare_frames(seq, options, cache)
     spacing = point_spacing(points[0], seed=options.seed)
     steps = np.diff(times)
     time_unit = float(np.median(steps))
@@ -61,21 +67,21 @@ def reconstruct(
         min_points=options.min_points,
         error_quantile=options.error_quantile,
     )
-    field = fit_windows(
-        stp,
-        times,
+    fit = dict(
         mpu_options=mpu_options,
         window=options.window,
         overlap=options.window_overlap,
         time_origin=times[0],
         time_scale=time_scale,
     )
+    key = fit_key(stp, times, **fit) if cache.enabled else ""
+    field = fit_windows(stp, times, **fit, cache=cache, key=key)
     fitted = _time.perf_counter()
     log.info("4D fit: %.2f s", fitted - started)
 
     result = animate(
-        field, points, normals, times, spacing=spacing, options=options,
-        edge_stiffness=edge_stiffness,
+        field, points, normals, times, spacing=spacing, options=options, cache=cache,
+        field_key=key, edge_stiffness=edge_stiffness,
     )
     finished = _time.perf_counter()
     log.info(

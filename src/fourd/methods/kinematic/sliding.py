@@ -61,6 +61,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from fourd.animation import AnimatedMesh
+from fourd.cache import Chain, report_resumed
 from fourd.geometry.field import Field4D
 from fourd.methods.kinematic.arap import arap_energy, blended_arap_rhs, with_rest_shape
 from fourd.methods.kinematic.arap_solve import ConstrainedSolver, SlidePrecompute, slide_precompute
@@ -454,6 +455,7 @@ def slide(
     data: Sequence[np.ndarray] | None = None,
     return_steps: bool = False,
     surfaces: Sequence | None = None,
+    checkpoints: Chain | None = None,
 ):
     """Slide a template along ``field = 0`` through ``times``, as rigidly as possible.
 
@@ -478,6 +480,12 @@ def slide(
         The data term: per output time, the surface of the input frame at exactly that time
         (None where there is none); the last sub-step into that time registers, projects and
         constrains observed vertices against it (see :func:`slide_step`).
+    checkpoints : Chain, optional
+        The cache entries of the ``T - 1`` steps (:class:`fourd.cache.Chain`, keyed by the
+        caller from everything above): each step's frame and the state the next step starts
+        from (the motion, the last registration's outcome) are stored as it finishes, and
+        the steps already stored are loaded instead of slid again. The result is the same;
+        ``return_steps`` then lists the steps slid now.
 
     Returns
     -------
@@ -500,6 +508,10 @@ def slide(
     if surfaces is not None and len(surfaces) != len(times):
         raise ValueError(
             f"surfaces must hold one entry per time ({len(times)}), got {len(surfaces)}"
+        )
+    if checkpoints is not None and len(checkpoints) != len(times) - 1:
+        raise ValueError(
+            f"checkpoints must hold one key per step ({len(times) - 1}), got {len(checkpoints)}"
         )
     pre = slide_precompute(rest, faces, options.edge_stiffness)
     epsilon = options.epsilon or 2.0 * pre.edge_length
@@ -534,7 +546,21 @@ def slide(
         else None
     )
     last_registration = None  # (kept, unexplained fraction) of the previous data step
-    for k in progress(range(1, len(times)), desc="sliding", total=len(times) - 1):
+    first = 1
+    if checkpoints is not None:
+        done = checkpoints.prefix()
+        for k, entry in enumerate(done, start=1):
+            frames[k] = entry["vertices"]
+            observed[k] = entry["observed"]
+        if done:
+            current = frames[len(done)].copy()
+            motion = done[-1].get("motion")
+            if "registration" in done[-1]:
+                kept, unexplained = done[-1]["registration"]
+                last_registration = (bool(kept), float(unexplained))
+            first = len(done) + 1
+            report_resumed(log, f"{len(done)} of {len(times) - 1} slid frames")
+    for k in progress(range(first, len(times)), desc="sliding", total=len(times) - first):
         sub = np.linspace(times[k - 1], times[k], options.substeps + 1)
         for s in range(options.substeps):
             nearest = k if (sub[s + 1] - times[k - 1]) > 0.5 * (times[k] - times[k - 1]) else k - 1
@@ -568,6 +594,13 @@ def slide(
             steps.append(info)
         frames[k] = current
         observed[k] = observed_at(k, current)
+        if checkpoints is not None:
+            state = {"vertices": current, "observed": observed[k]}
+            if motion is not None:
+                state["motion"] = motion
+            if last_registration is not None:
+                state["registration"] = np.array(last_registration, dtype=np.float64)
+            checkpoints.save(k - 1, state)
     animation = AnimatedMesh(
         faces=faces, vertices=frames, times=times, observed=observed, rest=rest
     )
