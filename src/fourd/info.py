@@ -43,7 +43,9 @@ def describe_result(result) -> str:
             f"animated mesh: {result.frame_count} frames, {result.vertex_count} vertices, "
             f"{len(result.faces)} faces (one connectivity)",
             f"times {result.times[0]:g} .. {result.times[-1]:g}; filled-in vertex-frames {filled:.1%}; "
-            f"rest pose {'yes' if result.rest is not None else 'no'}",
+            f"rest pose {'yes' if result.rest is not None else 'no'}; "
+            f"UVs {'yes' if result.uv is not None else 'no'}; "
+            f"vertex colours {'yes' if result.colors is not None else 'no'}",
             f"bounds diagonal {result.diagonal():.4g}",
         ])
     if isinstance(result, MeshSequence):
