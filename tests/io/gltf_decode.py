@@ -66,3 +66,62 @@ def decode_animation(gltf, blob: bytes) -> Decoded:
     if primitive.indices is not None:
         faces = accessor(gltf, blob, primitive.indices).reshape(-1, 3).astype(np.int64)
     return Decoded(positions, normals, faces, attributes, node)
+
+
+# what KHR_mesh_quantization allows (component type, normalized) per attribute; core glTF
+# allows only the float rows of POSITION and NORMAL
+FLOAT = (5126, False)
+ALLOWED = {
+    "POSITION": {FLOAT, (5120, True), (5120, False), (5121, True), (5121, False),
+                 (5122, True), (5122, False), (5123, True), (5123, False)},
+    "NORMAL": {FLOAT, (5120, True), (5122, True)},
+    "TEXCOORD_0": {FLOAT, (5120, True), (5120, False), (5121, True), (5121, False),
+                   (5122, True), (5122, False), (5123, True), (5123, False)},
+    "COLOR_0": {FLOAT, (5121, True), (5123, True)},
+    "target POSITION": {FLOAT, (5120, True), (5120, False), (5122, True), (5122, False)},
+    "target NORMAL": {FLOAT, (5120, True), (5122, True)},
+}
+
+
+def check_structure(gltf, blob: bytes) -> None:
+    """The rules of glTF 2.0 (sections 3.6.2.4 data alignment, 3.6.2.5 bounds, 3.7.2.1
+    POSITION bounds) and of KHR_mesh_quantization that fourd's writer could break: accessors
+    inside their views and views inside the buffer, every vertex attribute element 4-byte
+    aligned, POSITION bounds equal to the stored values, component types the attribute
+    allows, the extension declared (used and required) whenever it is needed."""
+    assert gltf.buffers[0].byteLength == len(blob)
+    for view in gltf.bufferViews:
+        assert (view.byteOffset or 0) + view.byteLength <= len(blob)
+        assert view.byteStride is None or (4 <= view.byteStride <= 252 and view.byteStride % 4 == 0)
+    needs_extension = False
+    for mesh in gltf.meshes:
+        for primitive in mesh.primitives:
+            used = [(name, index) for name, index in vars(primitive.attributes).items()
+                    if index is not None]
+            for target in primitive.targets or []:
+                used += [(f"target {name}", index) for name, index in target.items()]
+            for name, index in used:
+                acc = gltf.accessors[index]
+                view = gltf.bufferViews[acc.bufferView]
+                size = np.dtype(DTYPES[acc.componentType]).itemsize * WIDTHS[acc.type]
+                stride = view.byteStride or size
+                assert ((view.byteOffset or 0) + (acc.byteOffset or 0)) % 4 == 0, name
+                assert stride % 4 == 0 and stride >= size, name
+                assert (acc.byteOffset or 0) + stride * (acc.count - 1) + size <= view.byteLength
+                kind = (acc.componentType, bool(acc.normalized))
+                if not name.startswith("_"):
+                    assert kind in ALLOWED[name], (name, kind)
+                    needs_extension |= kind != FLOAT and name != "COLOR_0" and (
+                        name != "TEXCOORD_0" or kind not in {(5121, True), (5123, True)})
+                if name.endswith("POSITION"):
+                    acc_normalized, acc.normalized = acc.normalized, False
+                    try:
+                        raw = accessor(gltf, blob, index)
+                    finally:
+                        acc.normalized = acc_normalized
+                    assert np.allclose(acc.min, raw.min(axis=0)) and np.allclose(acc.max, raw.max(axis=0))
+    extension = "KHR_mesh_quantization"
+    if needs_extension:
+        assert extension in (gltf.extensionsUsed or []) and extension in (gltf.extensionsRequired or [])
+    else:
+        assert extension not in (gltf.extensionsRequired or [])

@@ -8,7 +8,7 @@ import struct
 import numpy as np
 import pytest
 import trimesh
-from gltf_decode import accessor, decode_animation
+from gltf_decode import accessor, check_structure, decode_animation
 
 from fourd.animation import AnimatedMesh, MeshSequence
 from fourd.errors import InputError
@@ -110,6 +110,7 @@ def test_glb_morph_targets_and_animation(tmp_path, encoding):
     for target in primitive.targets:  # loaded targets are plain dicts
         assert gltf.accessors[target["POSITION"]].count == count
         assert gltf.accessors[target["NORMAL"]].count == count
+    check_structure(gltf, blob)
     decoded = decode_animation(gltf, blob)
     assert np.array_equal(decoded.faces, anim.faces)
     # quantized: int16 over the animation's extent, a step of about diagonal / 65,000
@@ -173,6 +174,7 @@ def test_glb_mesh_sequence_one_node_per_frame(tmp_path):
     save(seq, tmp_path / "seq.glb")
     gltf = pygltflib.GLTF2.load(tmp_path / "seq.glb")
     blob = gltf.binary_blob()
+    check_structure(gltf, blob)
     assert len(gltf.nodes) == 3 and len(gltf.meshes) == 3
     animation = gltf.animations[0]
     assert {c.target.path for c in animation.channels} == {"scale"}
@@ -193,6 +195,7 @@ def test_glb_point_animation_without_faces(tmp_path):
     anim = AnimatedMesh(np.zeros((0, 3), int), rng.normal(size=(3, 50, 3)))
     save(anim, tmp_path / "points.glb")
     gltf = pygltflib.GLTF2.load(tmp_path / "points.glb")
+    check_structure(gltf, gltf.binary_blob())
     primitive = gltf.meshes[0].primitives[0]
     assert primitive.mode == 0 and primitive.indices is None
     assert len(primitive.targets) == 2

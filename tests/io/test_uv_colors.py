@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import trimesh
-from gltf_decode import decode_animation
+from gltf_decode import check_structure, decode_animation
 
 from fourd.animation import AnimatedMesh
 from fourd.io.colorspace import srgb_to_linear
@@ -53,6 +53,7 @@ def test_glb_texcoords_colors_and_observed(tmp_path, encoding):
     anim = _textured()
     save(anim, tmp_path / "t.glb", glb_encoding=encoding)
     gltf = pygltflib.GLTF2.load(tmp_path / "t.glb")
+    check_structure(gltf, gltf.binary_blob())
     decoded = decode_animation(gltf, gltf.binary_blob())
     n = anim.vertex_count
     positions, faces = decoded.positions, decoded.faces
