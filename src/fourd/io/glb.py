@@ -218,7 +218,8 @@ def _normal_delta(base: np.ndarray, normal: np.ndarray):
         morphed = base + delta / np.iinfo(dtype).max
         length = np.linalg.norm(morphed, axis=1)
         agree = np.einsum("ij,ij->i", morphed, normal) >= cosine * np.maximum(length, 1e-30)
-        if np.all(agree & (length > 0)):
+        # (a zero normal, from a degenerate neighbourhood, is as wrong in any encoding)
+        if np.all((agree & (length > 0)) | ~normal.any(axis=1)):
             return _padded(delta, dtype), True
     return (normal - base).astype(np.float32), False
 
@@ -237,40 +238,41 @@ def _animated(
         Primitive,
     )
 
-    vertices = anim.vertices
-    count = len(vertices)
+    count = anim.frame_count
     points_only = len(anim.faces) == 0
-    normals = None if points_only else vertex_normals(vertices, anim.faces)
-    faces = anim.faces
+    faces, index, seams = anim.faces, slice(None), None
     if anim.uv is not None and not points_only:
         seams = split_seams(anim.faces, anim.uv, anim.vertex_count)
-        vertices = vertices[:, seams.vertex]
-        normals = normals[:, seams.vertex]
-        faces = seams.faces
+        faces, index = seams.faces, seams.vertex
+
+    def normals(k: int) -> np.ndarray:  # one frame at a time: memory bounded by a frame
+        return vertex_normals(anim.vertices[k], anim.faces)[index]
+
     quantized = encoding == "quantized" and count > 1
-    centre, size = _dequantization(vertices) if quantized else (np.zeros(3), 1.0)
-    base = vertices[0]
+    centre, size = _dequantization(anim.vertices) if quantized else (np.zeros(3), 1.0)
+    base = anim.vertices[0][index]
     attributes = Attributes(
         POSITION=blob.add(((base - centre) / size).astype(np.float32), "VEC3",
                           target=ARRAY_BUFFER, bounds=True)
     )
-    if normals is not None:
-        attributes.NORMAL = blob.add(normals[0].astype(np.float32), "VEC3", target=ARRAY_BUFFER)
-    if anim.uv is not None and not points_only:
+    base_normals = None
+    if not points_only:
+        base_normals = normals(0)
+        attributes.NORMAL = blob.add(base_normals.astype(np.float32), "VEC3",
+                                     target=ARRAY_BUFFER)
+    if seams is not None:
         flipped = np.stack([seams.uv[:, 0], 1.0 - seams.uv[:, 1]], axis=1)  # glTF: v down
         attributes.TEXCOORD_0 = blob.add(flipped.astype(np.float32), "VEC2", target=ARRAY_BUFFER)
     if anim.colors is not None:
-        colors = _mean_observed_colors(anim)
-        if anim.uv is not None and not points_only:
-            colors = colors[seams.vertex]
+        colors = _mean_observed_colors(anim)[index]
         rgba = np.concatenate([colors, np.ones((len(colors), 1))], axis=1)
         attributes.COLOR_0 = blob.add(_unorm16(rgba), "VEC4", target=ARRAY_BUFFER,
                                       normalized=True)
-    observed = anim.observed[0] if anim.uv is None or points_only else anim.observed[0][seams.vertex]
-    attributes._OBSERVED = blob.add(observed.astype(np.float32), "SCALAR", target=ARRAY_BUFFER)
+    observed = anim.observed[0][index].astype(np.float32)
+    attributes._OBSERVED = blob.add(observed, "SCALAR", target=ARRAY_BUFFER)
     targets = []
     for k in range(1, count):
-        delta = vertices[k] - base
+        delta = anim.vertices[k][index] - base
         if quantized:
             position = blob.add(_padded(_snorm(delta / size, np.int16), np.int16), "VEC3",
                                 target=ARRAY_BUFFER, bounds=True, normalized=True)
@@ -278,18 +280,18 @@ def _animated(
             position = blob.add(delta.astype(np.float32), "VEC3", target=ARRAY_BUFFER,
                                 bounds=True)
         target = Attributes(POSITION=position)
-        if normals is not None:
+        if base_normals is not None:
             if quantized:
-                values, normalized = _normal_delta(normals[0], normals[k])
+                values, normalized = _normal_delta(base_normals, normals(k))
             else:
-                values, normalized = (normals[k] - normals[0]).astype(np.float32), False
+                values, normalized = (normals(k) - base_normals).astype(np.float32), False
             target.NORMAL = blob.add(values, "VEC3", target=ARRAY_BUFFER, normalized=normalized)
         targets.append(target)
     primitive = Primitive(
         attributes=attributes, mode=0 if points_only else 4, material=0, targets=targets or None
     )
     if not points_only:
-        primitive.indices = _indices(blob, faces, vertices.shape[1])
+        primitive.indices = _indices(blob, faces, len(base))
     mesh = Mesh(name="fourd", primitives=[primitive])
     if targets:
         mesh.weights = [0.0] * len(targets)
