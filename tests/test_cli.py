@@ -470,10 +470,11 @@ def _coloured_folder(tmp_path: Path, frames=2) -> Path:
 
 def test_reconstruct_carries_colours_and_uvs_into_the_result(tmp_path, monkeypatch):
     import fourd
+    from fourd.geometry.parameterization import uv_available
 
     _fake_reconstruct(monkeypatch)
     folder = _coloured_folder(tmp_path)
-    uv = _importable("xatlas")
+    uv = uv_available()
     assert main(["reconstruct", str(folder), "-o", str(tmp_path / "o.npz"), "-q"]) == 0
     result = fourd.io.results.load_result(tmp_path / "o.npz")
     assert result.colors is not None and (result.uv is not None) == uv

@@ -42,13 +42,16 @@ def test_uv_atlas_of_a_sphere_is_an_injective_packing_in_the_unit_square():
     assert (_signed_areas_2d(seams.uv, seams.faces) > 0).all()
 
 
-def test_uv_atlas_refuses_what_it_cannot_flatten(monkeypatch):
-    with pytest.raises(InputError, match="needs faces"):
-        pytest.importorskip("xatlas")
-        uv_atlas(np.eye(3), np.zeros((0, 3), int))
-    monkeypatch.setitem(__import__("sys").modules, "xatlas", None)
+def test_uv_atlas_without_xatlas_says_what_to_install(monkeypatch):
+    monkeypatch.setitem(__import__("sys").modules, "xatlas", None)  # as if not installed
     with pytest.raises(InputError, match=r"pip install 'fourd\[uv\]'"):
         uv_atlas(np.eye(3), np.array([[0, 1, 2]]))
+
+
+def test_uv_atlas_refuses_a_mesh_without_faces():
+    pytest.importorskip("xatlas", reason="xatlas (the fourd[uv] extra) is not installed")
+    with pytest.raises(InputError, match="needs faces"):
+        uv_atlas(np.eye(3), np.zeros((0, 3), int))
 
 
 def test_split_seams_keeps_every_vertex_and_duplicates_only_seams():
