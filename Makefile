@@ -9,7 +9,7 @@ STAMP := $(VENV)/.installed-stamp
 $(STAMP): pyproject.toml
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install -q --upgrade pip
-	$(PY) -m pip install -q -e ".[dev,usd,abc,fast]"
+	$(PY) -m pip install -q -e ".[dev,usd,abc,fast,uv]"
 	touch $(STAMP)
 
 demo: $(STAMP)

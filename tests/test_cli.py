@@ -491,7 +491,9 @@ def _fake_reconstruct(monkeypatch, calls=None):
     return fake
 
 
-def _glb_keys(path):
+def _glb_keys(path, vertex_count=42):
+    """Key times and frame 0's positions (the base, float32, through the node's quantization
+    transform; the first ``vertex_count`` vertices, the copies on UV seams left out)."""
     import pygltflib
 
     gltf = pygltflib.GLTF2.load(path)
@@ -500,11 +502,14 @@ def _glb_keys(path):
     def values(index, width):
         accessor = gltf.accessors[index]
         view = gltf.bufferViews[accessor.bufferView]
+        assert accessor.componentType == 5126
         start = (view.byteOffset or 0) + (accessor.byteOffset or 0)
         return np.frombuffer(blob, np.float32, accessor.count * width, start).reshape(accessor.count, width)
 
     times = values(gltf.animations[0].samplers[0].input, 1)[:, 0]
-    return times, values(gltf.meshes[0].primitives[0].attributes.POSITION, 3)
+    node = gltf.nodes[0]
+    base = values(gltf.meshes[0].primitives[0].attributes.POSITION, 3)[:vertex_count]
+    return times, base * (node.scale or 1.0) + (node.translation or 0.0)
 
 
 def test_fps_up_and_scale_reach_the_written_files(tmp_path, monkeypatch):
@@ -684,3 +689,71 @@ def test_help_lists_the_scenes_and_the_methods(capsys):
     out = " ".join(capsys.readouterr().out.split())
     assert f"(default: {DEFAULT_METHOD};" in out
     assert all(name in out.split("--method METHOD", 2)[2] for name in METHODS)
+
+
+# ------------------------------------------------------ UVs, vertex colours, .glb size
+
+
+def _coloured_folder(tmp_path: Path, frames=2) -> Path:
+    """Scans whose points are red on the +x side and blue elsewhere."""
+    from fourd.io.ply import write_ply
+
+    folder = tmp_path / "coloured"
+    folder.mkdir()
+    for i in range(frames):
+        points = _sphere_points(seed=i) + [0.1 * i, 0, 0]  # follows the fake result's sphere
+        colors = np.where(points[:, :1] - 0.1 * i > 0, [1.0, 0, 0], [0, 0, 1.0])
+        write_ply(folder / f"frame_{i}.ply", points, colors=colors)
+    return folder
+
+
+def test_reconstruct_carries_colours_and_uvs_into_the_result(tmp_path, monkeypatch):
+    import fourd
+    from fourd.geometry.parameterization import uv_available
+
+    _fake_reconstruct(monkeypatch)
+    folder = _coloured_folder(tmp_path)
+    uv = uv_available()
+    assert main(["reconstruct", str(folder), "-o", str(tmp_path / "o.npz"), "-q"]) == 0
+    result = fourd.io.results.load_result(tmp_path / "o.npz")
+    assert result.colors is not None and (result.uv is not None) == uv
+    x = result.vertices[:, :, 0] - 0.1 * np.arange(2)[:, None]  # across the moving sphere
+    assert (result.colors[x > 0.2] == [1.0, 0, 0]).all()
+    assert (result.colors[x < -0.2] == [0, 0, 1.0]).all()
+    if uv:
+        assert result.uv.shape == (len(result.faces), 3, 2)
+        assert 0 <= result.uv.min() and result.uv.max() <= 1
+    assert main(["reconstruct", str(folder), "-o", str(tmp_path / "plain.npz"), "-q",
+                 "--no-uv", "--no-colors"]) == 0
+    plain = fourd.io.results.load_result(tmp_path / "plain.npz")
+    assert plain.uv is None and plain.colors is None
+
+
+def test_glb_is_quantized_unless_asked_for_float(tmp_path, monkeypatch):
+    import pygltflib
+
+    _fake_reconstruct(monkeypatch)
+    folder = _folder(tmp_path, frames=3)
+    assert main(["reconstruct", str(folder), "-o", str(tmp_path / "q.glb"), "-q"]) == 0
+    assert main(["reconstruct", str(folder), "-o", str(tmp_path / "f.glb"), "-q",
+                 "--glb-encoding", "float"]) == 0
+    quantized, plain = (pygltflib.GLTF2.load(tmp_path / name) for name in ("q.glb", "f.glb"))
+    assert quantized.extensionsRequired == ["KHR_mesh_quantization"]
+    assert not plain.extensionsRequired
+    assert (tmp_path / "q.glb").stat().st_size < (tmp_path / "f.glb").stat().st_size
+    assert np.allclose(_glb_keys(tmp_path / "q.glb")[1], _glb_keys(tmp_path / "f.glb")[1], atol=1e-5)
+
+
+def test_uv_and_colors_flags_that_cannot_be_met_stop_before_the_work(tmp_path, monkeypatch, capsys):
+    import sys
+
+    calls = []
+    _fake_reconstruct(monkeypatch, calls)
+    folder = _folder(tmp_path, frames=2)  # no colours
+    out = str(tmp_path / "o.glb")
+    _run_bad(capsys, ["reconstruct", str(folder), "-o", out, "--colors"], "--colors", "no colours")
+    monkeypatch.setitem(sys.modules, "xatlas", None)  # not installed
+    _run_bad(capsys, ["reconstruct", str(folder), "-o", out, "--uv"], "xatlas", "fourd[uv]")
+    assert calls == [] and not (tmp_path / "o.glb").exists()
+    assert main(["reconstruct", str(folder), "-o", out]) == 0  # the default does without
+    assert "no UV atlas: the xatlas package is not installed" in capsys.readouterr().err

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -56,6 +56,17 @@ class AnimatedMesh:
         Defaults to all True.
     rest : ndarray, float64 [N, 3] or None
         The template / urshape the animation was built from.
+    uv : ndarray, float64 [F, 3, 2] or None
+        Texture coordinates per face corner (``uv[f, c]`` belongs to vertex ``faces[f, c]``),
+        in [0, 1], ``v`` up (glTF and OBJ flip or keep it as their convention wants when
+        written). Per corner, not per vertex, so that a UV seam needs no extra vertices and
+        vertex ``i`` stays vertex ``i`` in every frame; writers that want per-vertex UVs split
+        the seams (:func:`fourd.geometry.parameterization.split_seams`). Made by
+        :func:`fourd.geometry.parameterization.uv_atlas`.
+    colors : ndarray, float64 [T, N, 3] or None
+        Vertex colours per frame in [0, 1], in the input's colour space (scanners and PLY
+        files give sRGB-encoded colours; writers of formats that want linear colour convert).
+        Made by :func:`fourd.appearance.vertex_colors`.
     """
 
     faces: np.ndarray
@@ -63,6 +74,8 @@ class AnimatedMesh:
     times: np.ndarray | None = None
     observed: np.ndarray | None = None
     rest: np.ndarray | None = None
+    uv: np.ndarray | None = None
+    colors: np.ndarray | None = None
 
     def __post_init__(self):
         vertices = np.ascontiguousarray(self.vertices, dtype=np.float64)
@@ -90,6 +103,21 @@ class AnimatedMesh:
             if rest.shape != (count, 3) or not np.isfinite(rest).all():
                 raise InputError(f"rest must be finite with shape [{count}, 3], got {list(rest.shape)}")
             object.__setattr__(self, "rest", rest)
+        if self.uv is not None:
+            uv = np.ascontiguousarray(self.uv, dtype=np.float64)
+            if uv.shape != (len(self.faces), 3, 2) or not np.isfinite(uv).all():
+                raise InputError(
+                    f"uv must be finite with shape [{len(self.faces)}, 3, 2] (one per face "
+                    f"corner), got {list(uv.shape)}"
+                )
+            object.__setattr__(self, "uv", uv)
+        if self.colors is not None:
+            colors = np.ascontiguousarray(self.colors, dtype=np.float64)
+            if colors.shape != (frames, count, 3) or not np.isfinite(colors).all():
+                raise InputError(
+                    f"colors must be finite with shape [{frames}, {count}, 3], got {list(colors.shape)}"
+                )
+            object.__setattr__(self, "colors", np.clip(colors, 0.0, 1.0))
 
     def __len__(self) -> int:
         return len(self.vertices)
@@ -107,9 +135,12 @@ class AnimatedMesh:
         return self.vertices[index], self.faces
 
     def select(self, start: int | None = None, stop: int | None = None, step: int | None = None):
-        """A new AnimatedMesh with frames ``start:stop:step``."""
+        """A new AnimatedMesh with frames ``start:stop:step`` (UVs, rest pose and the frames'
+        colours kept)."""
         s = slice(start, stop, step)
-        return AnimatedMesh(self.faces, self.vertices[s], self.times[s], self.observed[s], self.rest)
+        colors = None if self.colors is None else self.colors[s]
+        return replace(self, vertices=self.vertices[s], times=self.times[s],
+                       observed=self.observed[s], colors=colors)
 
     def bounds(self) -> np.ndarray:
         """Axis-aligned bounds over all frames, ``[2, 3]``."""

@@ -131,6 +131,49 @@ def _time_note(base, kind: str) -> str:
     return f"; times are seconds, {base.fps:.6g} fps"
 
 
+def _want_uv(flag: bool | None) -> bool:
+    """``--uv`` / ``--no-uv`` / neither (on when xatlas is installed); InputError for ``--uv``
+    without xatlas, before any work."""
+    from fourd.geometry.parameterization import uv_available
+
+    if flag is False:
+        return False
+    if uv_available():
+        return True
+    if flag:
+        raise InputError("--uv needs the xatlas package, which is not installed: "
+                         "pip install 'fourd[uv]'")
+    log.info("no UV atlas: the xatlas package is not installed (pip install 'fourd[uv]')")
+    return False
+
+
+def _with_uv_and_colors(result, seq, *, uv: bool, colors: bool):
+    """``result`` with a UV atlas of its template (``rest``, else frame 0) and the input's
+    colours carried to its vertices, as asked; a MeshSequence is returned as it is."""
+    import dataclasses
+
+    from fourd.animation import AnimatedMesh
+
+    if not isinstance(result, AnimatedMesh) or len(result.faces) == 0:
+        if uv or colors:
+            log.info("the result has no single connectivity with faces: no UVs or vertex colours")
+        return result
+    changes = {}
+    if uv:
+        from fourd.geometry.parameterization import uv_atlas
+
+        start = time.perf_counter()
+        template = result.rest if result.rest is not None else result.vertices[0]
+        changes["uv"] = uv_atlas(template, result.faces)
+        log.info("UV atlas of %d vertices in %.1f s", result.vertex_count,
+                 time.perf_counter() - start)
+    if colors:
+        from fourd.appearance import vertex_colors
+
+        changes["colors"] = vertex_colors(result, seq)
+    return dataclasses.replace(result, **changes) if changes else result
+
+
 def cmd_reconstruct(args) -> int:
     from fourd.io.frames import load_sequence
     from fourd.io.results import save
@@ -170,8 +213,14 @@ def cmd_reconstruct(args) -> int:
     # What can be told without the data is checked before it is loaded: the output can be
     # written (a missing folder can be made) and its format holds the method's result.
     kind = check_output(args.output, method, module, create_parents=True)
+    uv = _want_uv(args.uv)
     seq = load_sequence(args.input)
     seq = _select_frames(seq, args.frames, args.input)
+    coloured = any(frame.colors is not None for frame in seq)
+    if args.colors and not coloured:
+        raise InputError("--colors: the input's frames have no colours", args.input)
+    # (a .pc2 holds positions only; its .obj gets the UVs)
+    colors = coloured and args.colors is not False and kind != "pc2"
     # The input's times say what the result's count (also at --times between them): whole
     # numbers are frame numbers at --fps (default 30), anything else seconds.
     base = time_base(seq.times, fps=fps, unit=time_unit_of(seq.times))
@@ -182,6 +231,7 @@ def cmd_reconstruct(args) -> int:
     with counting_resumes() as resumed:
         result = reconstruct(seq, method, options, check_memory=not args.force)
     elapsed = time.perf_counter() - start
+    result = _with_uv_and_colors(result, seq, uv=uv, colors=colors)
     if not output.parent.exists():  # check_output made sure it can be created
         try:
             output.parent.mkdir(parents=True, exist_ok=True)
@@ -189,7 +239,8 @@ def cmd_reconstruct(args) -> int:
             raise InputError(f"cannot create the output folder ({error.strerror or error})",
                              args.output) from None
         log.info("created the folder %s", output.parent)
-    save(result, args.output, fps=base.fps, time_unit=base.unit, up=args.up, scale=scale)
+    save(result, args.output, fps=base.fps, time_unit=base.unit, up=args.up, scale=scale,
+         glb_encoding=args.glb_encoding)
     log.info("wrote %s (%d frames, %.2f s, %.2f s/frame%s%s)", output, result.frame_count, elapsed,
              elapsed / max(len(seq), 1), _time_note(base, kind),
              "; resumed from the cache: the time counts only the work done now" if resumed else "")
@@ -421,6 +472,19 @@ def build_parser() -> argparse.ArgumentParser:
                    help="multiply every written position by S (all formats), e.g. 0.001 for "
                         "millimetre scans: glTF and fourd's USD (metersPerUnit 1) take "
                         "positions as metres")
+    p.add_argument("--uv", action=argparse.BooleanOptionalAction, default=None,
+                   help="a UV atlas of the animated mesh's template, shared by every frame "
+                        "(.glb TEXCOORD_0, USD primvars:st, .abc uv, OBJ vt): texture it once. "
+                        "Default: on when the xatlas package is installed (fourd[uv]); "
+                        "--no-uv skips it (a few seconds per 10,000 vertices)")
+    p.add_argument("--colors", action=argparse.BooleanOptionalAction, default=None,
+                   help="vertex colours per frame from the nearest input point (.glb COLOR_0 "
+                        "as the mean over observed frames, USD displayColor, .abc Cd, OBJ/PLY "
+                        "per frame). Default: on when the input has colours")
+    p.add_argument("--glb-encoding", choices=("quantized", "float"), default="quantized",
+                   help=".glb morph targets: quantized (KHR_mesh_quantization, about half the "
+                        "size; three.js, Babylon.js, Blender) or plain float32 (default "
+                        "quantized)")
 
     p = add("synth", "synthesize a ground-truth scene and scan it with virtual depth cameras", cmd_synth,
             epilog=_scenes_epilog, formatter_class=argparse.RawDescriptionHelpFormatter)

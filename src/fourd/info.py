@@ -102,6 +102,8 @@ def describe_result(result, *, observed_stored: bool = True) -> str:
             f"faces: {len(result.faces)}",
             f"filled in (not observed): {filled}",
             f"rest pose: {'yes' if result.rest is not None else 'no'}",
+            f"UVs: {'yes' if result.uv is not None else 'no'}",
+            f"vertex colours: {'yes' if result.colors is not None else 'no'}",
         ]
     elif isinstance(result, MeshSequence):
         vertices = [len(v) for v, _ in result.meshes]

@@ -8,9 +8,11 @@ import struct
 import numpy as np
 import pytest
 import trimesh
+from gltf_decode import accessor, check_structure, decode_animation
 
 from fourd.animation import AnimatedMesh, MeshSequence
 from fourd.errors import InputError
+from fourd.geometry.normals import vertex_normals
 from fourd.io import meshfolder
 from fourd.io.atomic import atomic_path
 from fourd.io.pc2 import read_pc2
@@ -87,20 +89,15 @@ def test_npz_mesh_sequence(tmp_path):
 
 
 def _accessor(gltf, blob, index):
-    accessor = gltf.accessors[index]
-    view = gltf.bufferViews[accessor.bufferView]
-    dtype = {5126: np.float32, 5125: np.uint32, 5123: np.uint16}[accessor.componentType]
-    width = {"SCALAR": 1, "VEC3": 3}[accessor.type]
-    start = (view.byteOffset or 0) + (accessor.byteOffset or 0)
-    values = np.frombuffer(blob, dtype, accessor.count * width, start)
-    return values.reshape(accessor.count, width) if width > 1 else values
+    return accessor(gltf, blob, index)
 
 
-def test_glb_morph_targets_and_animation(tmp_path):
+@pytest.mark.parametrize("encoding", ["quantized", "float"])
+def test_glb_morph_targets_and_animation(tmp_path, encoding):
     import pygltflib
 
     anim = _animation(frames=6)
-    save(anim, tmp_path / "walk.glb")
+    save(anim, tmp_path / "walk.glb", glb_encoding=encoding)
     gltf = pygltflib.GLTF2.load(tmp_path / "walk.glb")
     blob = gltf.binary_blob()
     assert gltf.asset.version == "2.0"
@@ -108,25 +105,32 @@ def test_glb_morph_targets_and_animation(tmp_path):
     assert len(primitive.targets) == anim.frame_count - 1
     assert len(gltf.meshes[0].weights) == anim.frame_count - 1
     count = anim.vertex_count
-    position = _accessor(gltf, blob, primitive.attributes.POSITION)
     assert gltf.accessors[primitive.attributes.POSITION].count == count
     assert gltf.accessors[primitive.attributes.NORMAL].count == count
-    indices = _accessor(gltf, blob, primitive.indices).reshape(-1, 3)
-    assert np.array_equal(indices, anim.faces)
-    for k in range(anim.frame_count):
-        decoded = position.astype(np.float64)
-        if k:
-            target = primitive.targets[k - 1]
-            delta = _accessor(gltf, blob, target["POSITION"])  # loaded targets are plain dicts
-            assert gltf.accessors[target["POSITION"]].count == count
-            assert gltf.accessors[target["NORMAL"]].count == count
-            decoded = decoded + delta
-        assert np.abs(decoded - anim.vertices[k]).max() <= 1e-5
+    for target in primitive.targets:  # loaded targets are plain dicts
+        assert gltf.accessors[target["POSITION"]].count == count
+        assert gltf.accessors[target["NORMAL"]].count == count
+    check_structure(gltf, blob)
+    decoded = decode_animation(gltf, blob)
+    assert np.array_equal(decoded.faces, anim.faces)
+    # quantized: int16 over the animation's extent, a step of about diagonal / 65,000
+    tolerance = 1e-5 if encoding == "float" else 2e-5 * anim.diagonal()
+    assert np.abs(decoded.positions - anim.vertices).max() <= tolerance
+    normals = vertex_normals(anim.vertices, anim.faces)
+    cosine = np.einsum("tij,tij->ti", decoded.normals, normals)
+    assert cosine.min() >= np.cos(np.radians(1.0))
+    if encoding == "quantized":
+        assert gltf.extensionsRequired == ["KHR_mesh_quantization"]
+        target = gltf.accessors[primitive.targets[0]["POSITION"]]
+        assert target.componentType == 5122 and target.normalized
+        assert gltf.bufferViews[target.bufferView].byteStride == 8  # 4-byte aligned rows
+    else:
+        assert not gltf.extensionsRequired and not gltf.nodes[0].scale
     for index in [primitive.attributes.POSITION] + [t["POSITION"] for t in primitive.targets]:
-        values = _accessor(gltf, blob, index)
-        accessor = gltf.accessors[index]
-        assert np.allclose(accessor.min, values.min(axis=0)) and np.allclose(
-            accessor.max, values.max(axis=0)
+        accessor_ = gltf.accessors[index]
+        raw = _raw(gltf, blob, index)  # bounds are of the stored values, normalized or not
+        assert np.allclose(accessor_.min, raw.min(axis=0)) and np.allclose(
+            accessor_.max, raw.max(axis=0)
         )
     sampler = gltf.animations[0].samplers[0]
     channel = gltf.animations[0].channels[0]
@@ -141,6 +145,18 @@ def test_glb_morph_targets_and_animation(tmp_path):
     assert np.array_equal(weights[1:], np.eye(anim.frame_count - 1))
     normals = _accessor(gltf, blob, primitive.attributes.NORMAL)
     assert np.allclose(np.linalg.norm(normals, axis=1), 1.0, atol=1e-5)
+    observed = decoded.attributes["_OBSERVED"]
+    assert np.array_equal(observed, anim.observed[0].astype(float))
+
+
+def _raw(gltf, blob, index):
+    """The stored values of an accessor, integers as integers."""
+    accessor_ = gltf.accessors[index]
+    normalized, accessor_.normalized = accessor_.normalized, False
+    try:
+        return _accessor(gltf, blob, index)
+    finally:
+        accessor_.normalized = normalized
 
 
 def test_glb_loads_in_trimesh(tmp_path):
@@ -158,6 +174,7 @@ def test_glb_mesh_sequence_one_node_per_frame(tmp_path):
     save(seq, tmp_path / "seq.glb")
     gltf = pygltflib.GLTF2.load(tmp_path / "seq.glb")
     blob = gltf.binary_blob()
+    check_structure(gltf, blob)
     assert len(gltf.nodes) == 3 and len(gltf.meshes) == 3
     animation = gltf.animations[0]
     assert {c.target.path for c in animation.channels} == {"scale"}
@@ -178,6 +195,7 @@ def test_glb_point_animation_without_faces(tmp_path):
     anim = AnimatedMesh(np.zeros((0, 3), int), rng.normal(size=(3, 50, 3)))
     save(anim, tmp_path / "points.glb")
     gltf = pygltflib.GLTF2.load(tmp_path / "points.glb")
+    check_structure(gltf, gltf.binary_blob())
     primitive = gltf.meshes[0].primitives[0]
     assert primitive.mode == 0 and primitive.indices is None
     assert len(primitive.targets) == 2
@@ -328,7 +346,9 @@ def test_every_format_reads_back_as_written(tmp_path, suffix, keeps_observed, ke
     back = load_result(target)
     assert isinstance(back, AnimatedMesh)
     assert np.array_equal(back.faces, anim.faces)
-    assert np.abs(back.vertices - anim.vertices).max() <= 1e-5
+    # float32 rounding; .glb quantizes to 16 bits of the box by default (KHR_mesh_quantization)
+    tolerance = 2.0 * anim.diagonal() / 32767 if suffix == ".glb" else 1e-5
+    assert np.abs(back.vertices - anim.vertices).max() <= tolerance
     if suffix == ".pc2":  # a point cache counts frames: the times come back as frame numbers
         rate = 1.0 / float(np.median(np.diff(anim.times)))
         assert np.allclose(back.times, anim.times * rate, atol=1e-4)
@@ -359,7 +379,9 @@ def test_glb_points_and_a_single_frame_read_back(tmp_path):
     points = AnimatedMesh(np.zeros((0, 3), int), rng.normal(size=(3, 50, 3)))
     save(points, tmp_path / "points.glb")
     back = load_result(tmp_path / "points.glb")
-    assert back.faces.shape == (0, 3) and np.abs(back.vertices - points.vertices).max() <= 1e-6
+    # 16-bit quantized positions (the default .glb encoding)
+    assert back.faces.shape == (0, 3)
+    assert np.abs(back.vertices - points.vertices).max() <= 2.0 * points.diagonal() / 32767
     first = _animation(frames=2)
     one = AnimatedMesh(first.faces, first.vertices[:1])
     save(one, tmp_path / "one.glb")
@@ -560,11 +582,9 @@ def _glb_times_and_base(path):
 
     gltf = pygltflib.GLTF2.load(path)
     blob = gltf.binary_blob()
-    primitive = gltf.meshes[0].primitives[0]
     times = _accessor(gltf, blob, gltf.animations[0].samplers[0].input)
-    return times, _accessor(gltf, blob, primitive.attributes.POSITION), _accessor(
-        gltf, blob, primitive.attributes.NORMAL
-    )
+    decoded = decode_animation(gltf, blob)
+    return times, decoded.positions[0], decoded.normals[0]
 
 
 def test_glb_keyframes_are_seconds_from_the_time_base(tmp_path):

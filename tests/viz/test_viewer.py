@@ -98,6 +98,20 @@ def test_write_viewer_embeds_the_glb_when_the_writer_exists(tmp_path):
     assert glb[:4] == b"glTF" and glb == (tmp_path / "v" / "result.glb").read_bytes()
 
 
+def test_the_viewers_glb_keeps_the_results_vertices_when_it_has_uvs(tmp_path):
+    import dataclasses
+
+    import pygltflib
+
+    anim = deforming_sphere(frames=3)
+    uv = np.random.default_rng(0).random((len(anim.faces), 3, 2))  # every corner its own UV
+    viewer.write_viewer(dataclasses.replace(anim, uv=uv), tmp_path / "v")
+    gltf = pygltflib.GLTF2.load(tmp_path / "v" / "result.glb")
+    attributes = gltf.meshes[0].primitives[0].attributes
+    assert gltf.accessors[attributes.POSITION].count == anim.vertex_count  # the page paints them
+    assert attributes.TEXCOORD_0 is None
+
+
 def test_write_viewer_mesh_sequence_and_rewrite(tmp_path):
     anim = deforming_sphere(frames=3)
     seq = MeshSequence(tuple(anim.frame(i) for i in range(3)))

@@ -8,8 +8,12 @@ Layout of a written archive (Ogawa)::
                         P        positions, float32 [N, 3] (Y up: Z-up data is rotated)
                         N        vertex normals, float32 [N, 3] (kVertexScope), per frame
                         faceIndices / faceCounts (3 per face), clockwise as Alembic wants
+                        uv       per-corner texture coordinates (kFacevaryingScope, indexed),
+                                 when the AnimatedMesh has ``uv``
                         .arbGeomParams/observed   float [N] per frame: 1 where the vertex had
                                                   data (AnimatedMesh only)
+                        .arbGeomParams/Cd         colour [N] per frame (C3f, kVertexScope,
+                                                  linear), when the AnimatedMesh has ``colors``
                         .userProperties/fourdTimes  the result's own times (frame numbers or
                                                   seconds, as in the input)
 
@@ -37,8 +41,10 @@ import numpy as np
 from fourd.animation import AnimatedMesh, MeshSequence
 from fourd.errors import InputError
 from fourd.geometry.normals import vertex_normals
+from fourd.geometry.parameterization import indexed_corners
 from fourd.io.atomic import atomic_path
 from fourd.io.axes import check_up, z_up_to_y_up
+from fourd.io.colorspace import linear_to_srgb, srgb_to_linear
 from fourd.io.timebase import time_base
 
 #: Names of the transform and the mesh in a written archive.
@@ -134,12 +140,25 @@ def write_abc(
         schema = mesh.getSchema()
         times = Abc.ODoubleArrayProperty(schema.getUserProperties(), TIMES_PROPERTY)
         times.setValue(imath.DoubleArrayFromBuffer(np.ascontiguousarray(result.times, np.float64)))
-        observed = None
+        observed = colors = uvs = None
         if isinstance(result, AnimatedMesh):
             observed = AbcGeom.OFloatGeomParam(
                 schema.getArbGeomParams(), "observed", False,
                 AbcGeom.GeometryScope.kVertexScope, 1, index,
             )
+            if result.colors is not None:
+                colors = AbcGeom.OC3fGeomParam(
+                    schema.getArbGeomParams(), "Cd", False,
+                    AbcGeom.GeometryScope.kVertexScope, 1, index,
+                )
+            if result.uv is not None and len(result.faces):
+                values, indices = indexed_corners(result.uv)
+                indices = indices.reshape(-1, 3)[:, ::-1].ravel()  # clockwise, like the faces
+                uvs = AbcGeom.OV2fGeomParamSample(
+                    imath.V2fArrayFromBuffer(np.ascontiguousarray(values, np.float32)),
+                    imath.UnsignedIntArray(imath.DoubleArrayFromBuffer(indices.astype(np.float64))),
+                    AbcGeom.GeometryScope.kFacevaryingScope,
+                )
         vertex = AbcGeom.GeometryScope.kVertexScope
         with_normals = any(len(faces) for _, faces in frames)
         for k, (vertices, faces) in enumerate(frames):
@@ -156,14 +175,21 @@ def write_abc(
                 sample.setNormals(
                     AbcGeom.ON3fGeomParamSample(imath.V3fArrayFromBuffer(normals), vertex)
                 )
+            if uvs is not None:
+                sample.setUVs(uvs)
             schema.set(sample)
+            if colors is not None:
+                linear = np.ascontiguousarray(srgb_to_linear(result.colors[k]), np.float32)
+                colors.set(AbcGeom.OC3fGeomParamSample(
+                    imath.C3fArray(imath.V3fArrayFromBuffer(linear)), vertex
+                ))
             if observed is not None:
                 flags = np.ascontiguousarray(result.observed[k], dtype=np.float32)
                 observed.set(
                     AbcGeom.OFloatGeomParamSample(imath.FloatArrayFromBuffer(flags), vertex)
                 )
         # The archive is written when its last reference goes.
-        del observed, times, schema, mesh, xform, archive
+        del uvs, colors, observed, times, schema, mesh, xform, archive
 
 
 def _find_mesh(Abc, AbcGeom, top, path):
@@ -184,7 +210,9 @@ def read_abc(path: str | os.PathLike) -> AnimatedMesh | MeshSequence:
 
     Returns an AnimatedMesh when every sample has the same faces and vertex count (times from
     the ``fourdTimes`` property when fourd wrote the file, else the sample times in seconds;
-    ``observed`` from the ``observed`` attribute when present), else a MeshSequence. Faces
+    ``observed`` from the ``observed`` attribute, ``uv`` from the face-varying UVs of the first
+    sample of an all-triangle mesh, ``colors`` from a vertex-scope ``Cd`` (linear, returned
+    sRGB-encoded), each when present), else a MeshSequence. Faces
     with more than three corners are fanned into triangles; positions are as stored (a
     transform above the mesh is not applied).
 
@@ -225,7 +253,11 @@ def read_abc(path: str | os.PathLike) -> AnimatedMesh | MeshSequence:
     try:
         if shared:
             observed = _observed(Abc, AbcGeom, schema, selectors, len(first_v))
-            return AnimatedMesh(first_f, np.stack([v for v, _ in meshes]), times, observed)
+            return AnimatedMesh(
+                first_f, np.stack([v for v, _ in meshes]), times, observed,
+                uv=_uvs(schema, selectors[0], first_f, path),
+                colors=_colors(AbcGeom, schema, selectors, len(first_v)),
+            )
         return MeshSequence(tuple(meshes), times)
     except InputError as error:
         raise InputError(error.problem, path) from None
@@ -263,3 +295,35 @@ def _observed(Abc, AbcGeom, schema, selectors, vertex_count: int) -> np.ndarray 
     if any(row.shape != (vertex_count,) for row in rows):
         return None
     return np.stack(rows) > 0.5
+
+
+def _uvs(schema, selector, faces: np.ndarray, path) -> np.ndarray | None:
+    """Per-corner UVs [F, 3, 2] of an all-triangle mesh from face-varying UVs, else None."""
+    param = schema.getUVsParam()
+    if not param.valid() or param.getNumSamples() == 0:
+        return None
+    sample = param.getIndexedValue(selector)
+    values = np.array(sample.getVals(), dtype=np.float64).reshape(-1, 2)
+    if sample.isIndexed() and sample.getIndices() is not None:
+        indices = np.array(sample.getIndices(), dtype=np.int64)
+    else:
+        indices = np.arange(len(values))
+    if len(indices) != 3 * len(faces) or (len(indices) and indices.max() >= len(values)):
+        return None  # per-vertex UVs or polygons fanned on reading: not per triangle corner
+    return values[indices.reshape(-1, 3)[:, ::-1]]
+
+
+def _colors(AbcGeom, schema, selectors, vertex_count: int) -> np.ndarray | None:
+    params = schema.getArbGeomParams()
+    if not params.valid() or params.getPropertyHeader("Cd") is None:
+        return None
+    if not AbcGeom.IC3fGeomParam.matches(params.getPropertyHeader("Cd")):
+        return None
+    param = AbcGeom.IC3fGeomParam(params, "Cd")
+    rows = []
+    for selector in selectors:
+        vals = param.getExpandedValue(selector).getVals()
+        rows.append(np.array(vals, dtype=np.float64).reshape(-1, 3))
+    if any(row.shape != (vertex_count, 3) for row in rows):
+        return None
+    return linear_to_srgb(np.stack(rows))

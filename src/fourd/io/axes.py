@@ -12,6 +12,8 @@ are; the other formats (``.npz``, ``.pc2``, folders) have no up axis and keep th
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from fourd.animation import AnimatedMesh, MeshSequence
@@ -48,15 +50,15 @@ def z_up_to_y_up(points: np.ndarray) -> np.ndarray:
 
 
 def transformed(result: AnimatedMesh | MeshSequence, matrix: np.ndarray) -> AnimatedMesh | MeshSequence:
-    """``result`` with every position (and the rest pose) multiplied by ``matrix`` [3, 3];
-    ``result`` itself when ``matrix`` is the identity."""
+    """``result`` with every position (and the rest pose) multiplied by ``matrix`` [3, 3],
+    everything else (times, observed, UVs, colours) kept; ``result`` itself when ``matrix``
+    is the identity."""
     matrix = np.asarray(matrix, dtype=np.float64)
     if np.array_equal(matrix, np.eye(3)):
         return result
     if isinstance(result, AnimatedMesh):
         rest = None if result.rest is None else result.rest @ matrix.T
-        return AnimatedMesh(result.faces, result.vertices @ matrix.T, result.times,
-                            result.observed, rest)
+        return replace(result, vertices=result.vertices @ matrix.T, rest=rest)
     return MeshSequence(tuple((v @ matrix.T, f) for v, f in result.meshes), result.times)
 
 

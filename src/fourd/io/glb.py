@@ -7,8 +7,29 @@ has weight 1 on target ``k - 1``), so LINEAR interpolation blends consecutive fr
 shows them as they are. Blender's glTF importer turns the targets into shape keys; three.js
 plays the clip with an ``AnimationMixer``.
 
-A :class:`~fourd.animation.MeshSequence` becomes one node per frame, each with its own mesh,
-and an animation of the nodes' ``scale`` (1 while the frame is current, 0 otherwise, STEP).
+Size: by default (``encoding="quantized"``) the morph targets are stored compactly with
+``KHR_mesh_quantization`` (a required extension; three.js, Babylon.js and Blender read it):
+position deltas as normalized int16 over the animation's extent, normal deltas as normalized
+int8 (int16 or float32 for a target where 8 bits would turn a normal by more than
+:data:`NORMAL_TOLERANCE_DEGREES`), and the mesh's node carries the uniform scale and the
+translation that undo the quantization (an importer shows them as the object's transform).
+That halves the file; ``encoding="float"`` writes plain float32 and an identity node.
+
+What else an AnimatedMesh carries, when it has it:
+
+- ``uv`` -> ``TEXCOORD_0`` (``v`` flipped to glTF's downward convention). glTF holds one UV per
+  vertex, so vertices on UV seams are duplicated (:func:`fourd.geometry.parameterization.split_seams`):
+  vertex ``i < N`` is still the result's vertex ``i``, the copies follow, with the same
+  trajectories and normals (shading stays smooth across seams).
+- ``colors`` -> ``COLOR_0`` (linear, unsigned short): glTF has no per-frame vertex colours,
+  so it is each vertex's mean colour over the frames where it was observed.
+- ``observed`` -> ``_OBSERVED`` (float, 1 observed, 0 filled in), of frame 0 only, for the same
+  reason.
+
+A :class:`~fourd.animation.MeshSequence` (per-frame meshes, each with its own connectivity)
+becomes one node per frame, each with its own mesh, and an animation of the nodes' ``scale``
+(1 while the frame is current, 0 otherwise, STEP): a player switches meshes per frame. It is
+not a deforming mesh (no shape keys in Blender, one object per frame) and is written float32.
 
 Keyframe times are the frame times in seconds (:mod:`fourd.io.timebase`). glTF is Y up by
 specification: Z-up data (``up="z"``) is rotated on writing, ``(x, y, z) -> (x, z, -y)``.
@@ -20,7 +41,8 @@ are a MeshSequence (one node per frame). Times are the animation's key times (se
 
 References
 ----------
-Khronos Group, "glTF 2.0 Specification", sections 3.7.2.2 (morph targets) and 3.11 (animations).
+Khronos Group, "glTF 2.0 Specification", sections 3.6.2 (accessors, data alignment), 3.7.2.2
+(morph targets) and 3.11 (animations); "KHR_mesh_quantization" (extension specification).
 """
 
 from __future__ import annotations
@@ -34,15 +56,36 @@ import numpy as np
 from fourd.animation import AnimatedMesh, MeshSequence
 from fourd.errors import InputError
 from fourd.geometry.normals import vertex_normals
+from fourd.geometry.parameterization import split_seams
 from fourd.io.atomic import atomic_path
 from fourd.io.axes import Z_UP_TO_Y_UP, check_up, transformed
+from fourd.io.colorspace import srgb_to_linear
 from fourd.io.timebase import TimeBase, time_base
 
 ARRAY_BUFFER = 34962
 ELEMENT_ARRAY_BUFFER = 34963
-FLOAT = 5126
+BYTE = 5120
+SHORT = 5122
 UNSIGNED_SHORT = 5123
 UNSIGNED_INT = 5125
+FLOAT = 5126
+
+#: Encodings of an AnimatedMesh's morph targets (:func:`write_glb`).
+ENCODINGS = ("quantized", "float")
+#: The glTF extension quantized morph targets need (three.js, Babylon.js, Blender read it).
+QUANTIZATION = "KHR_mesh_quantization"
+#: Worst direction error, in degrees, allowed for a quantized morph target's normals; a target
+#: whose normals cannot be written within it as 8-bit (then 16-bit) deltas keeps float ones.
+NORMAL_TOLERANCE_DEGREES = 1.0
+
+_COMPONENTS = {
+    np.dtype("float32"): FLOAT,
+    np.dtype("int8"): BYTE,
+    np.dtype("int16"): SHORT,
+    np.dtype("uint16"): UNSIGNED_SHORT,
+    np.dtype("uint32"): UNSIGNED_INT,
+}
+_WIDTHS = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4}
 
 
 class _Blob:
@@ -54,19 +97,28 @@ class _Blob:
         self.length = 0
 
     def add(
-        self, array: np.ndarray, kind: str, *, target: int | None = None, bounds: bool = False
+        self,
+        array: np.ndarray,
+        kind: str,
+        *,
+        target: int | None = None,
+        bounds: bool = False,
+        normalized: bool = False,
     ) -> int:
+        """An accessor of ``kind`` over ``array`` ``[count, columns]`` (or flat): columns past
+        the kind's width are padding, written and skipped with a byte stride (glTF wants every
+        vertex attribute element 4-byte aligned: int16 VEC3 is stored as 4 shorts)."""
         from pygltflib import Accessor, BufferView
 
         array = np.ascontiguousarray(array)
-        component = {
-            np.dtype("float32"): FLOAT,
-            np.dtype("uint16"): UNSIGNED_SHORT,
-            np.dtype("uint32"): UNSIGNED_INT,
-        }[array.dtype]
-        data = array.tobytes()
+        component = _COMPONENTS[array.dtype]
+        width = _WIDTHS[kind]
+        rows = array.reshape(len(array), -1) if array.ndim > 1 else array.reshape(-1, width)
+        stride = rows.shape[1] * rows.itemsize if rows.shape[1] != width else None
+        data = rows.tobytes()
         self.gltf.bufferViews.append(
-            BufferView(buffer=0, byteOffset=self.length, byteLength=len(data), target=target)
+            BufferView(buffer=0, byteOffset=self.length, byteLength=len(data), target=target,
+                       byteStride=stride)
         )
         self.parts.append(data)
         self.length += len(data)
@@ -74,18 +126,19 @@ class _Blob:
         if padding:
             self.parts.append(b"\0" * padding)
             self.length += padding
-        width = {"SCALAR": 1, "VEC3": 3}[kind]
-        flat = array.reshape(-1, width)
+        flat = rows[:, :width]
         accessor = Accessor(
             bufferView=len(self.gltf.bufferViews) - 1,
             byteOffset=0,
             componentType=component,
+            normalized=True if normalized else None,
             count=len(flat),
             type=kind,
         )
         if bounds:
-            accessor.min = [float(v) for v in flat.min(axis=0)]
-            accessor.max = [float(v) for v in flat.max(axis=0)]
+            cast = float if component == FLOAT else int
+            accessor.min = [cast(v) for v in flat.min(axis=0)]
+            accessor.max = [cast(v) for v in flat.max(axis=0)]
         self.gltf.accessors.append(accessor)
         return len(self.gltf.accessors) - 1
 
@@ -130,7 +183,60 @@ def _seconds(times: np.ndarray, clock: TimeBase) -> np.ndarray:
     return seconds.astype(np.float32)
 
 
-def _animated(gltf, blob: _Blob, anim: AnimatedMesh, *, clock: TimeBase, interpolation) -> None:
+def _padded(array: np.ndarray, dtype) -> np.ndarray:
+    """``array`` [M, 3] as ``dtype`` [M, 4] (the fourth column zero): 4-byte aligned rows."""
+    out = np.zeros((len(array), 4), dtype=dtype)
+    out[:, :3] = array
+    return out
+
+
+def _dequantization(vertices: np.ndarray) -> tuple[np.ndarray, float]:
+    """``(centre [3], size)`` of the quantized positions: the node's translation and uniform
+    scale. The base frame, ``(v0 - centre) / size``, and every delta, ``(vk - v0) / size``,
+    lie in [-1, 1], so the deltas fit normalized int16 (a step of ``size / 32767``)."""
+    lo, hi = vertices.min(axis=(0, 1)), vertices.max(axis=(0, 1))
+    centre = (lo + hi) / 2
+    size = float(np.abs(vertices[0] - centre).max(initial=0.0))
+    for frame in vertices[1:]:
+        size = max(size, float(np.abs(frame - vertices[0]).max(initial=0.0)))
+    return centre, (size if size > 0 else 1.0)
+
+
+def _snorm(values: np.ndarray, dtype) -> np.ndarray:
+    limit = np.iinfo(dtype).max
+    return np.clip(np.round(values * limit), -limit, limit).astype(dtype)
+
+
+def _normal_delta(base: np.ndarray, normal: np.ndarray):
+    """The smallest encoding of a morph target's normal deltas within
+    :data:`NORMAL_TOLERANCE_DEGREES`: ``(array [M, 4 or 3], normalized)``.
+
+    A normalized delta must lie in [-1, 1] but ``normal - base`` reaches 2 where a normal
+    turns by more than 90 degrees. Renderers normalize the morphed normal (the glTF
+    specification asks them to), so any positive multiple ``c * normal - base`` does as
+    well: ``c`` is the largest one in (0, 1] that keeps every component in range. Where no
+    ``c`` works well (a normal almost reversed along an axis) the target keeps float deltas.
+    """
+    with np.errstate(divide="ignore", invalid="ignore"):
+        up = np.where(normal > 0, (1 + base) / normal, np.inf)
+        down = np.where(normal < 0, (1 - base) / -normal, np.inf)
+    scale = np.minimum(1.0, np.minimum(up, down).min(axis=1))[:, None]
+    wanted = scale * normal - base
+    cosine = np.cos(np.radians(NORMAL_TOLERANCE_DEGREES))
+    for dtype in (np.int8, np.int16):
+        delta = _snorm(wanted, dtype)
+        morphed = base + delta / np.iinfo(dtype).max
+        length = np.linalg.norm(morphed, axis=1)
+        agree = np.einsum("ij,ij->i", morphed, normal) >= cosine * np.maximum(length, 1e-30)
+        # (a zero normal, from a degenerate neighbourhood, is as wrong in any encoding)
+        if np.all((agree & (length > 0)) | ~normal.any(axis=1)):
+            return _padded(delta, dtype), True
+    return (normal - base).astype(np.float32), False
+
+
+def _animated(
+    gltf, blob: _Blob, anim: AnimatedMesh, *, clock: TimeBase, interpolation, encoding
+) -> None:
     from pygltflib import (
         Animation,
         AnimationChannel,
@@ -142,36 +248,74 @@ def _animated(gltf, blob: _Blob, anim: AnimatedMesh, *, clock: TimeBase, interpo
         Primitive,
     )
 
-    vertices = anim.vertices
-    count = len(vertices)
+    count = anim.frame_count
     points_only = len(anim.faces) == 0
-    base = vertices[0].astype(np.float32)
-    attributes = Attributes(POSITION=blob.add(base, "VEC3", target=ARRAY_BUFFER, bounds=True))
-    normals = None
+    faces, index, seams = anim.faces, slice(None), None
+    if anim.uv is not None and not points_only:
+        seams = split_seams(anim.faces, anim.uv, anim.vertex_count)
+        faces, index = seams.faces, seams.vertex
+
+    def normals(k: int) -> np.ndarray:  # one frame at a time: memory bounded by a frame
+        return vertex_normals(anim.vertices[k], anim.faces)[index]
+
+    quantized = encoding == "quantized" and count > 1
+    centre, size = _dequantization(anim.vertices) if quantized else (np.zeros(3), 1.0)
+    base = anim.vertices[0][index]
+    attributes = Attributes(
+        POSITION=blob.add(((base - centre) / size).astype(np.float32), "VEC3",
+                          target=ARRAY_BUFFER, bounds=True)
+    )
+    base_normals = None
     if not points_only:
-        normals = vertex_normals(vertices, anim.faces).astype(np.float32)
-        attributes.NORMAL = blob.add(normals[0], "VEC3", target=ARRAY_BUFFER)
+        base_normals = normals(0)
+        attributes.NORMAL = blob.add(base_normals.astype(np.float32), "VEC3",
+                                     target=ARRAY_BUFFER)
+    if seams is not None:
+        flipped = np.stack([seams.uv[:, 0], 1.0 - seams.uv[:, 1]], axis=1)  # glTF: v down
+        attributes.TEXCOORD_0 = blob.add(flipped.astype(np.float32), "VEC2", target=ARRAY_BUFFER)
+    if anim.colors is not None:
+        colors = _mean_observed_colors(anim)[index]
+        rgba = np.concatenate([colors, np.ones((len(colors), 1))], axis=1)
+        attributes.COLOR_0 = blob.add(_unorm16(rgba), "VEC4", target=ARRAY_BUFFER,
+                                      normalized=True)
+    observed = anim.observed[0][index].astype(np.float32)
+    attributes._OBSERVED = blob.add(observed, "SCALAR", target=ARRAY_BUFFER)
     targets = []
     for k in range(1, count):
-        target = Attributes(
-            POSITION=blob.add(
-                vertices[k].astype(np.float32) - base, "VEC3", target=ARRAY_BUFFER, bounds=True
-            )
-        )
-        if normals is not None:
-            target.NORMAL = blob.add(normals[k] - normals[0], "VEC3", target=ARRAY_BUFFER)
+        delta = anim.vertices[k][index] - base
+        if quantized:
+            position = blob.add(_padded(_snorm(delta / size, np.int16), np.int16), "VEC3",
+                                target=ARRAY_BUFFER, bounds=True, normalized=True)
+        else:
+            position = blob.add(delta.astype(np.float32), "VEC3", target=ARRAY_BUFFER,
+                                bounds=True)
+        target = Attributes(POSITION=position)
+        if base_normals is not None:
+            if quantized:
+                values, normalized = _normal_delta(base_normals, normals(k))
+            else:
+                values, normalized = (normals(k) - base_normals).astype(np.float32), False
+            target.NORMAL = blob.add(values, "VEC3", target=ARRAY_BUFFER, normalized=normalized)
         targets.append(target)
     primitive = Primitive(
         attributes=attributes, mode=0 if points_only else 4, material=0, targets=targets or None
     )
     if not points_only:
-        primitive.indices = _indices(blob, anim.faces, vertices.shape[1])
+        primitive.indices = _indices(blob, faces, len(base))
     mesh = Mesh(name="fourd", primitives=[primitive])
     if targets:
         mesh.weights = [0.0] * len(targets)
         mesh.extras = {"targetNames": [f"frame_{k}" for k in range(1, count)]}
     gltf.meshes.append(mesh)
-    gltf.nodes.append(Node(name="fourd", mesh=0))
+    node = Node(name="fourd", mesh=0)
+    if quantized:  # undo the quantization: positions are size * stored + centre
+        node.translation = [float(v) for v in centre]
+        node.scale = [size] * 3
+        gltf.extensionsUsed.append(QUANTIZATION)
+        gltf.extensionsRequired.append(QUANTIZATION)
+    if anim.colors is not None:  # white, so COLOR_0 shows as it is
+        gltf.materials[0].pbrMetallicRoughness.baseColorFactor = [1.0, 1.0, 1.0, 1.0]
+    gltf.nodes.append(node)
     gltf.scenes[0].nodes.append(0)
     if not targets:
         return
@@ -192,6 +336,21 @@ def _animated(gltf, blob: _Blob, anim: AnimatedMesh, *, clock: TimeBase, interpo
             ],
         )
     )
+
+
+def _unorm16(values: np.ndarray) -> np.ndarray:
+    return np.round(np.clip(values, 0.0, 1.0) * 65535).astype(np.uint16)
+
+
+def _mean_observed_colors(anim: AnimatedMesh) -> np.ndarray:
+    """Linear vertex colours [N, 3] for ``COLOR_0``: each vertex's mean over the frames where
+    it was observed (over all frames for a vertex never observed). glTF has no per-frame
+    vertex colours (morph targets move positions, normals and tangents only)."""
+    weights = anim.observed.astype(np.float64)
+    never = weights.sum(axis=0) == 0
+    weights[:, never] = 1.0
+    linear = srgb_to_linear(anim.colors)
+    return np.einsum("tn,tnc->nc", weights, linear) / weights.sum(axis=0)[:, None]
 
 
 def _sequence(gltf, blob: _Blob, seq: MeshSequence, *, clock: TimeBase) -> None:
@@ -255,6 +414,7 @@ def write_glb(
     time_unit: str | None = None,
     interpolation: str = "LINEAR",
     up: str = "y",
+    encoding: str = "quantized",
 ) -> None:
     """Write ``result`` as a glTF 2.0 binary file, atomically.
 
@@ -270,6 +430,12 @@ def write_glb(
         Between frames of an AnimatedMesh: blend (LINEAR) or hold (STEP).
     up : {"y", "z"}
         The data's up axis; Z-up data is rotated to glTF's Y up.
+    encoding : {"quantized", "float"}
+        An AnimatedMesh's morph targets: ``"quantized"`` (``KHR_mesh_quantization``: int16
+        position deltas, 8-bit normal deltas where they are accurate to
+        :data:`NORMAL_TOLERANCE_DEGREES`, the node's scale and translation undoing the
+        quantization; half the size) or ``"float"`` (float32 everywhere, an identity node:
+        for readers without the extension). A MeshSequence is always float32.
     """
     try:
         import pygltflib  # noqa: F401
@@ -278,6 +444,10 @@ def write_glb(
     interpolation = interpolation.upper()
     if interpolation not in ("LINEAR", "STEP"):
         raise InputError(f"interpolation must be LINEAR or STEP, got {interpolation!r}", path)
+    encoding = str(encoding).lower()
+    if encoding not in ENCODINGS:
+        raise InputError(f"the .glb encoding must be 'quantized' or 'float', got {encoding!r}",
+                         path)
     if not isinstance(result, AnimatedMesh | MeshSequence):
         raise InputError(f"cannot write a {type(result).__name__} as .glb", path)
     clock = time_base(result.times, fps=fps, unit=time_unit)
@@ -286,7 +456,8 @@ def write_glb(
     gltf = _new_gltf()
     blob = _Blob(gltf)
     if isinstance(result, AnimatedMesh):
-        _animated(gltf, blob, result, clock=clock, interpolation=interpolation)
+        _animated(gltf, blob, result, clock=clock, interpolation=interpolation,
+                  encoding=encoding)
     else:
         _sequence(gltf, blob, result, clock=clock)
     gltf.set_binary_blob(blob.finish())
@@ -296,7 +467,7 @@ def write_glb(
 
 # ------------------------------------------------------------------------------------ reading
 
-_COMPONENTS = {
+_READ_TYPES = {
     5120: np.int8,
     5121: np.uint8,
     5122: np.int16,
@@ -304,7 +475,7 @@ _COMPONENTS = {
     5125: np.uint32,
     5126: np.float32,
 }
-_WIDTHS = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT4": 16}
+_READ_WIDTHS = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT4": 16}
 
 
 def _accessor(gltf, blob: bytes, index: int, path) -> np.ndarray:
@@ -313,8 +484,8 @@ def _accessor(gltf, blob: bytes, index: int, path) -> np.ndarray:
     if accessor.sparse is not None or accessor.bufferView is None:
         raise InputError(f"accessor {index} is sparse or has no buffer view: not a fourd .glb", path)
     view = gltf.bufferViews[accessor.bufferView]
-    dtype = np.dtype(_COMPONENTS[accessor.componentType]).newbyteorder("<")
-    width = _WIDTHS[accessor.type]
+    dtype = np.dtype(_READ_TYPES[accessor.componentType]).newbyteorder("<")
+    width = _READ_WIDTHS[accessor.type]
     start = (view.byteOffset or 0) + (accessor.byteOffset or 0)
     stride = view.byteStride or dtype.itemsize * width
     count = accessor.count
@@ -325,7 +496,26 @@ def _accessor(gltf, blob: bytes, index: int, path) -> np.ndarray:
         (count, width), dtype=dtype, buffer=blob, offset=start, strides=(stride, dtype.itemsize)
     )
     rows = np.array(rows)
+    if accessor.normalized and dtype.kind in "iu":  # glTF 2.0 section 3.11: normalized integers
+        top = float(np.iinfo(dtype).max)
+        rows = np.maximum(rows.astype(np.float64) / top, -1.0)
     return rows[:, 0] if accessor.type == "SCALAR" else rows
+
+
+def _node_matrix(node) -> np.ndarray:
+    """The 4x4 local transform of a glTF node (its ``matrix``, or translation, rotation, scale)."""
+    if node.matrix is not None and len(node.matrix) == 16:
+        return np.asarray(node.matrix, dtype=np.float64).reshape(4, 4).T  # column-major
+    matrix = np.eye(4)
+    if node.scale is not None:
+        matrix[:3, :3] = np.diag(np.asarray(node.scale, dtype=np.float64))
+    if node.rotation is not None:
+        from scipy.spatial.transform import Rotation
+
+        matrix[:3, :3] = Rotation.from_quat(np.asarray(node.rotation, dtype=np.float64)).as_matrix() @ matrix[:3, :3]
+    if node.translation is not None:
+        matrix[:3, 3] = np.asarray(node.translation, dtype=np.float64)
+    return matrix
 
 
 def _primitive(gltf, blob: bytes, mesh_index: int, path):
@@ -419,6 +609,10 @@ def read_glb(path: str | os.PathLike) -> AnimatedMesh | MeshSequence:
 
 def _read_animated(gltf, blob: bytes, node: int, path) -> AnimatedMesh:
     base, faces, targets = _primitive(gltf, blob, gltf.nodes[node].mesh, path)
+    # a quantized file (KHR_mesh_quantization) keeps its dequantization in the node's transform
+    transform = _node_matrix(gltf.nodes[node])
+    base = base @ transform[:3, :3].T + transform[:3, 3]
+    targets = targets @ transform[:3, :3].T
     track = _weights_track(gltf, blob, node, path)
     if track is None or not len(targets):
         return AnimatedMesh(faces, base[None])

@@ -12,11 +12,16 @@ from typing import NamedTuple
 import numpy as np
 
 from fourd.errors import InputError
+from fourd.geometry.parameterization import indexed_corners
 from fourd.io.atomic import atomic_path
 
 _VERTEX_LINE = re.compile(r"(?m)^v[ \t]+([^\r\n]*)")
 _FACE_LINE = re.compile(r"(?m)^f[ \t]+([^\r\n]*)")
+_TEXCOORD_LINE = re.compile(r"(?m)^vt[ \t]+([^\r\n]*)")
 _CORNER_TAIL = re.compile(r"/[^\s]*")
+_CORNER_TEXCOORD = re.compile(r"[^\s/]+/([^\s/]+)(?:/[^\s]*)?")
+# a face corner without a texture index ("7", "7//3") or with a relative one ("7/-1")
+_CORNER_WITHOUT_TEXCOORD = re.compile(r"(?:^|\s)(?:[^\s/]+(?=\s|$)|[^\s/]*//|[^\s/]+/-)")
 
 
 def _loadtxt(text: str, dtype=np.float64, comments=None) -> np.ndarray | None:
@@ -65,11 +70,14 @@ def _numbers(
 
 class ObjMesh(NamedTuple):
     """What :func:`read_obj` found: ``vertices`` float64 [N, 3], ``colors`` [N, 3] or None
-    (from ``v x y z r g b`` lines), ``faces`` int64 [F, 3] (polygons fan-triangulated)."""
+    (from ``v x y z r g b`` lines), ``faces`` int64 [F, 3] (polygons fan-triangulated),
+    ``uv`` float64 [F, 3, 2] or None (the ``vt`` of each triangle corner, when every face
+    corner names one with a positive index)."""
 
     vertices: np.ndarray
     colors: np.ndarray | None
     faces: np.ndarray
+    uv: np.ndarray | None = None
 
 
 def read_obj(path: str | os.PathLike, *, faces: bool = True) -> ObjMesh:
@@ -91,7 +99,45 @@ def read_obj(path: str | os.PathLike, *, faces: bool = True) -> ObjMesh:
         colors = np.clip(colors / 255.0 if colors.size and colors.max() > 1.0 else colors, 0.0, 1.0)
     if len(triangles) and (triangles.min() < 0 or triangles.max() >= len(table)):
         raise InputError(f"faces index vertices outside the {len(table)} vertices", path)
-    return ObjMesh(np.ascontiguousarray(table[:, :3]), colors, triangles)
+    uv = _corner_texcoords(text, len(triangles)) if faces and len(triangles) else None
+    return ObjMesh(np.ascontiguousarray(table[:, :3]), colors, triangles, uv)
+
+
+def _corner_texcoords(text: str, triangle_count: int) -> np.ndarray | None:
+    """The ``vt`` of every triangle corner ``[F, 3, 2]`` (fanned as the faces are), or None
+    when the file has no ``vt`` lines or a corner names none (or a relative one)."""
+    lines = _TEXCOORD_LINE.findall(text)
+    if not lines:
+        return None
+    table = _loadtxt("\n".join(lines))
+    if table is None or table.shape[1] < 2:
+        return None
+    joined = "\n".join(_FACE_LINE.findall(text))
+    if _CORNER_WITHOUT_TEXCOORD.search(joined):
+        return None
+    fields = _CORNER_TEXCOORD.sub(r"\1", joined)  # each corner "v/t/n" -> "t"
+    uniform = _loadtxt(fields, dtype=np.int64)
+    if uniform is not None:
+        polygons = [uniform]
+    else:  # mixed polygon sizes: one array per line
+        try:
+            polygons = [np.array(line.split(), dtype=np.int64)[None] for line in fields.splitlines()]
+        except ValueError:
+            return None
+    corners = np.concatenate([_fan(p) for p in polygons])
+    if len(corners) != triangle_count or corners.min() < 1 or corners.max() > len(table):
+        return None
+    return table[:, :2][corners - 1]
+
+
+def _fan(polygons: np.ndarray) -> np.ndarray:
+    """Polygons ``[P, n]`` (corner indices) fanned into triangles ``[P * (n - 2), 3]``, each
+    polygon's triangles together, in order."""
+    fan = [
+        np.stack([polygons[:, 0], polygons[:, i], polygons[:, i + 1]], axis=1)
+        for i in range(1, polygons.shape[1] - 1)
+    ]
+    return np.stack(fan, axis=1).reshape(-1, 3)
 
 
 def _read_obj_fast(text: str, faces: bool):
@@ -110,12 +156,7 @@ def _read_obj_fast(text: str, faces: bool):
         corners = _loadtxt(_CORNER_TAIL.sub("", "\n".join(face_lines)), dtype=np.int64)
         if corners is None or corners.shape[1] < 3 or corners.min() < 1:
             return None  # relative indices, mixed polygon sizes, or malformed: line by line
-        corners = corners - 1
-        fan = [
-            np.stack([corners[:, 0], corners[:, i], corners[:, i + 1]], axis=1)
-            for i in range(1, corners.shape[1] - 1)
-        ]
-        triangles = np.stack(fan, axis=1).reshape(-1, 3)
+        triangles = _fan(corners - 1)
     return table, triangles
 
 
@@ -150,9 +191,26 @@ def _read_obj_lines(text: str, faces: bool, path):
 
 
 def write_obj(
-    path: str | os.PathLike, vertices: np.ndarray, faces: np.ndarray | None = None
+    path: str | os.PathLike,
+    vertices: np.ndarray,
+    faces: np.ndarray | None = None,
+    *,
+    uv: np.ndarray | None = None,
+    colors: np.ndarray | None = None,
 ) -> None:
-    """Write ``v`` and ``f`` lines (1-based, vertex order kept) atomically."""
+    """Write ``v`` and ``f`` lines (1-based, vertex order kept) atomically.
+
+    Parameters
+    ----------
+    vertices : array [N, 3]
+    faces : int array [F, 3], optional
+    uv : array [F, 3, 2], optional
+        Per-corner texture coordinates: ``vt`` lines (one per distinct UV) and ``f v/vt``
+        corners.
+    colors : array [N, 3], optional
+        In [0, 1], written as they are (sRGB-encoded as the input gave them) on the ``v``
+        lines: ``v x y z r g b``, the extension Blender, MeshLab and fourd's reader know.
+    """
     vertices = np.asarray(vertices, dtype=np.float64).reshape(-1, 3)
     faces = (
         np.zeros((0, 3), dtype=np.int64)
@@ -161,8 +219,17 @@ def write_obj(
     )
     with atomic_path(path) as tmp, open(tmp, "w", encoding="ascii") as stream:
         stream.write("# written by fourd\n")
-        stream.write("v %.9g %.9g %.9g\n" * len(vertices) % tuple(vertices.ravel()))
-        if len(faces):
+        if colors is not None:
+            table = np.concatenate([vertices, np.clip(np.asarray(colors, float), 0, 1).reshape(-1, 3)], axis=1)
+            stream.write("v %.9g %.9g %.9g %.6g %.6g %.6g\n" * len(table) % tuple(table.ravel()))
+        else:
+            stream.write("v %.9g %.9g %.9g\n" * len(vertices) % tuple(vertices.ravel()))
+        if uv is not None and len(faces):
+            values, indices = indexed_corners(uv)
+            stream.write("vt %.9g %.9g\n" * len(values) % tuple(values.ravel()))
+            corners = np.stack([faces.ravel() + 1, indices + 1], axis=1).reshape(-1, 6)
+            stream.write("f %d/%d %d/%d %d/%d\n" * len(corners) % tuple(corners.ravel()))
+        elif len(faces):
             stream.write("f %d %d %d\n" * len(faces) % tuple((faces + 1).ravel()))
 
 

@@ -1,5 +1,10 @@
 """A result as a folder of per-frame meshes: ``frame_0000.obj`` ... (or ``.ply``), ``times.txt``
-and, for an :class:`~fourd.animation.AnimatedMesh`, ``observed.npy`` (bool ``[T, N]``)."""
+and, for an :class:`~fourd.animation.AnimatedMesh`, ``observed.npy`` (bool ``[T, N]``).
+
+An AnimatedMesh's ``colors`` go on each frame's vertices (OBJ ``v x y z r g b``, PLY
+``red green blue``), as the input gave them (sRGB); its ``uv`` into every OBJ frame as ``vt``
+lines and ``f v/vt`` corners (PLY has no per-corner texture coordinates: write OBJ for UVs).
+"""
 
 from __future__ import annotations
 
@@ -27,13 +32,16 @@ def write_mesh_folder(path: Path, result: AnimatedMesh | MeshSequence, *, mesh_f
     count = result.frame_count
     width = max(4, len(str(count - 1)))
     with atomic_dir(path) as tmp:
+        animated = isinstance(result, AnimatedMesh)
+        uv = result.uv if animated else None
         for t in range(count):
             vertices, faces = result.frame(t)
+            colors = result.colors[t] if animated and result.colors is not None else None
             target = tmp / f"frame_{t:0{width}d}.{mesh_format}"
             if mesh_format == "obj":
-                write_obj(target, vertices, faces)
+                write_obj(target, vertices, faces, uv=uv, colors=colors)
             else:
-                write_ply(target, vertices, faces=faces)
+                write_ply(target, vertices, faces=faces, colors=colors)
         (tmp / "times.txt").write_text("".join(f"{t!r}\n" for t in result.times.tolist()))
         if isinstance(result, AnimatedMesh):
             with open(tmp / "observed.npy", "wb") as stream:
@@ -47,7 +55,9 @@ def _rewrap(error: InputError, path) -> InputError:
 
 def read_mesh_folder(path: Path) -> AnimatedMesh | MeshSequence:
     """Read a folder of per-frame meshes: an AnimatedMesh when every mesh has the same faces
-    (and vertex count), else a MeshSequence."""
+    (and vertex count), else a MeshSequence. The AnimatedMesh takes its ``uv`` from the first
+    frame's ``vt`` corners and its ``colors`` from the frames' vertex colours when every frame
+    has them."""
     try:
         files = [
             p
@@ -59,20 +69,27 @@ def read_mesh_folder(path: Path) -> AnimatedMesh | MeshSequence:
     if not files:
         raise InputError("the folder holds no .obj or .ply meshes", path)
     files.sort(key=lambda p: natural_key(p.name))
-    meshes = []
+    meshes, colors, uvs = [], [], []
     for file in files:
         if file.suffix.lower() == ".obj":
             mesh = read_obj(file)
+            uvs.append(mesh.uv)
         else:
             mesh = read_ply(file)
+            uvs.append(None)
         meshes.append((mesh.vertices, mesh.faces))
+        colors.append(mesh.colors)
     times = read_times(path / "times.txt", len(meshes)) if (path / "times.txt").exists() else None
     first_v, first_f = meshes[0]
     shared = all(len(v) == len(first_v) and np.array_equal(f, first_f) for v, f in meshes)
     try:
         if shared and len(first_v):
             observed = _read_observed(path / "observed.npy", (len(meshes), len(first_v)))
-            return AnimatedMesh(first_f, np.stack([v for v, _ in meshes]), times, observed=observed)
+            return AnimatedMesh(
+                first_f, np.stack([v for v, _ in meshes]), times, observed=observed,
+                uv=uvs[0] if uvs[0] is not None and len(first_f) else None,
+                colors=None if any(c is None for c in colors) else np.stack(colors),
+            )
         return MeshSequence(tuple(meshes), times)
     except InputError as error:
         raise _rewrap(error, path) from None

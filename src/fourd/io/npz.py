@@ -2,7 +2,8 @@
 
 An :class:`~fourd.animation.AnimatedMesh`: ``kind="animated"``, ``vertices`` float32
 ``[T, N, 3]``, ``faces`` int32 ``[F, 3]``, ``times`` ``[T]``, ``observed`` bool ``[T, N]``,
-optional ``rest`` float32 ``[N, 3]``. A :class:`~fourd.animation.MeshSequence`:
+optional ``rest`` float32 ``[N, 3]``, ``uv`` float32 ``[F, 3, 2]`` (per face corner) and
+``colors`` uint8 ``[T, N, 3]`` (0-255, as the input's colours were encoded). A :class:`~fourd.animation.MeshSequence`:
 ``kind="meshes"``, ``vertices_<t>``, ``faces_<t>``, ``times``.
 """
 
@@ -29,6 +30,10 @@ def write_npz(path: Path, result: AnimatedMesh | MeshSequence) -> None:
         }
         if result.rest is not None:
             arrays["rest"] = result.rest.astype(np.float32)
+        if result.uv is not None:
+            arrays["uv"] = result.uv.astype(np.float32)
+        if result.colors is not None:
+            arrays["colors"] = np.round(result.colors * 255).astype(np.uint8)
     else:
         arrays = {"kind": np.array("meshes"), "times": result.times}
         for t, (vertices, faces) in enumerate(result.meshes):
@@ -72,6 +77,17 @@ def read_npz(path: Path) -> AnimatedMesh | MeshSequence:
             times=arrays.get("times"),
             observed=arrays.get("observed"),
             rest=arrays.get("rest"),
+            uv=arrays.get("uv"),
+            colors=_colors(arrays.get("colors")),
         )
     except InputError as error:
         raise _rewrap(error, path) from None
+
+
+def _colors(stored: np.ndarray | None) -> np.ndarray | None:
+    """Stored colours to 0-1 floats: uint8 as fourd writes them, floats as they are."""
+    if stored is None:
+        return None
+    if np.issubdtype(stored.dtype, np.integer):
+        return stored / 255.0
+    return stored

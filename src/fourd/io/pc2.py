@@ -3,7 +3,8 @@
 Layout (little endian): ``b"POINTCACHE2\\0"``, int32 version (1), int32 point count, float32
 start frame, float32 sample rate (frames per sample), int32 sample count, then float32
 ``x, y, z`` for every point of every sample. Blender's Mesh Cache modifier reads it onto the
-mesh imported from the ``.obj`` (import with "keep vertex order"). :func:`read_pc2_result`
+mesh imported from the ``.obj`` (import with "keep vertex order"); an AnimatedMesh's ``uv``
+goes into that ``.obj`` (``vt`` corners, which split no vertex in Blender). :func:`read_pc2_result`
 reads both back as an AnimatedMesh.
 """
 
@@ -115,7 +116,7 @@ def write_pc2(
     header[0] = (MAGIC, 1, anim.vertex_count, float(times[0]), rate, anim.frame_count)
     topology = path.with_suffix(".obj")
     had_topology = topology.exists()
-    write_obj(topology, anim.vertices[0], anim.faces)
+    write_obj(topology, anim.vertices[0], anim.faces, uv=anim.uv)
     try:
         with atomic_path(path) as tmp, open(tmp, "wb") as stream:
             stream.write(header.tobytes())

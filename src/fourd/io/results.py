@@ -182,6 +182,7 @@ def save(
     interpolation: str = "LINEAR",
     up: str = "y",
     scale: float = 1.0,
+    glb_encoding: str = "quantized",
 ) -> Path:
     """Write a reconstruction; the format follows ``path`` (see the module docstring).
 
@@ -207,6 +208,9 @@ def save(
     scale : float
         Every written position is multiplied by it (all formats), e.g. 0.001 for millimetres
         to metres.
+    glb_encoding : {"quantized", "float"}
+        ``.glb`` morph targets: compact (``KHR_mesh_quantization``, about half the size) or
+        plain float32 (:func:`fourd.io.glb.write_glb`).
 
     Returns
     -------
@@ -234,7 +238,8 @@ def save(
         if kind == "npz":
             write_npz(target, result)
         elif kind == "glb":
-            write_glb(target, result, interpolation=interpolation, up=up, **timing)
+            write_glb(target, result, interpolation=interpolation, up=up,
+                      encoding=glb_encoding, **timing)
         elif kind == "usd":
             write_usd(target, result, up=up, **timing)
         elif kind == "abc":

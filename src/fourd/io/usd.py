@@ -7,6 +7,12 @@ fixed ``faceVertexCounts``/``faceVertexIndices`` and time-sampled ``points``, ``
 faces) becomes a ``UsdGeom.Points``. A :class:`~fourd.animation.MeshSequence` becomes one
 mesh whose topology is time-sampled too.
 
+An AnimatedMesh's other data, when it has it: ``uv`` as ``primvars:st`` (``texCoord2f[]``,
+``faceVarying``, indexed: one value per distinct corner UV), ``colors`` as
+``primvars:displayColor`` (``vertex``, time-sampled, linear as USD renders colour), and
+``observed`` always as ``primvars:observed`` (``float[]``, ``vertex``, time-sampled: 1 where
+the vertex had data, 0 where it was filled in).
+
 The stage's metadata: ``upAxis`` (``Y``, or ``Z`` for Z-up data: the points are not rotated),
 ``metersPerUnit`` 1 (positions are taken to be metres: scale other units with ``scale``, e.g.
 ``--scale 0.001`` for millimetres; USD's own fallback would be centimetres),
@@ -28,8 +34,10 @@ import numpy as np
 from fourd.animation import AnimatedMesh, MeshSequence
 from fourd.errors import InputError
 from fourd.geometry.normals import vertex_normals
+from fourd.geometry.parameterization import indexed_corners
 from fourd.io.atomic import atomic_path
 from fourd.io.axes import check_up
+from fourd.io.colorspace import srgb_to_linear
 from fourd.io.timebase import time_base
 
 USD_SUFFIXES = (".usd", ".usda", ".usdc")
@@ -128,6 +136,21 @@ def write_usd(
         if not points_only:
             normals_attr = geom.CreateNormalsAttr()
             geom.SetNormalsInterpolation(UsdGeom.Tokens.vertex)
+        colors_var = observed_var = None
+        if fixed_topology:
+            primvars = UsdGeom.PrimvarsAPI(geom)
+            if result.uv is not None and not points_only:
+                values, indices = indexed_corners(result.uv)
+                st = primvars.CreatePrimvar(
+                    "st", Sdf.ValueTypeNames.TexCoord2fArray, UsdGeom.Tokens.faceVarying
+                )
+                st.Set(Vt.Vec2fArray.FromNumpy(values.astype(np.float32)))
+                st.SetIndices(Vt.IntArray.FromNumpy(indices.astype(np.int32)))
+            if result.colors is not None:
+                colors_var = geom.CreateDisplayColorPrimvar(UsdGeom.Tokens.vertex)
+            observed_var = primvars.CreatePrimvar(
+                "observed", Sdf.ValueTypeNames.FloatArray, UsdGeom.Tokens.vertex
+            )
         for k, (vertices, faces) in enumerate(frames):
             code = Usd.TimeCode(float(codes[k]))
             points = vertices.astype(np.float32)
@@ -138,6 +161,12 @@ def write_usd(
             if normals_attr is not None:
                 normals = vertex_normals(vertices, faces).astype(np.float32)
                 normals_attr.Set(Vt.Vec3fArray.FromNumpy(normals), code)
+            if colors_var is not None:
+                linear = srgb_to_linear(result.colors[k]).astype(np.float32)
+                colors_var.Set(Vt.Vec3fArray.FromNumpy(linear), code)
+            if observed_var is not None:
+                flags = result.observed[k].astype(np.float32)
+                observed_var.Set(Vt.FloatArray.FromNumpy(flags), code)
             if not points_only and not fixed_topology:
                 counts_attr.Set(Vt.IntArray.FromNumpy(np.full(len(faces), 3, dtype=np.int32)), code)
                 indices_attr.Set(Vt.IntArray.FromNumpy(faces.astype(np.int32).ravel()), code)

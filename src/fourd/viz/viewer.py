@@ -16,6 +16,7 @@ The page sets ``window.fourdReady = true`` once loaded and exposes ``window.four
 from __future__ import annotations
 
 import base64
+import dataclasses
 import json
 import logging
 import os
@@ -89,6 +90,8 @@ def _write_glb(result, outdir: Path) -> Path | None:
         log.info("fourd.io.results is not available: no .glb in the viewer")
         return None
     path = outdir / "result.glb"
+    if result.uv is not None:  # the page paints its own texture on the result's N vertices:
+        result = dataclasses.replace(result, uv=None)  # no vertices split on UV seams
     try:
         save(result, path)
     except (InputError, NotImplementedError, ValueError) as exc:
