@@ -240,8 +240,8 @@ def test_truncated_and_malformed_ply_in_a_folder(tmp_path):
 
 def test_unknown_extension(tmp_path):
     folder = _three_frames(tmp_path / "s")
-    (folder / "notes.md").write_text("hello")
-    _raises(folder, match_name="notes.md", words="unknown file type")
+    (folder / "points.pcd").write_text("hello")
+    _raises(folder, match_name="points.pcd", words="unknown file type")
     with pytest.raises(InputError, match="scan.stl"):
         read_frame(_touch(tmp_path / "scan.stl"))
 
@@ -376,3 +376,18 @@ def test_shared_point_sequence_reads_in_original_units(tmp_path):
     write_frames(subset, tmp_path / "hop")
     back = load_sequence(tmp_path / "hop")
     assert np.abs(back[2].points - truth.vertices[2, ::50]).max() <= 1e-6
+
+
+def test_notes_logs_and_other_files_beside_the_frames_are_skipped_but_unknown_geometry_stops(tmp_path, caplog):
+    rng = np.random.default_rng(0)
+    for k in range(2):
+        np.save(tmp_path / f"frame_{k}.npy", rng.normal(size=(50, 3)))
+    for name in ("notes.md", "rig.json", "capture.log", "table.csv", "photo.png", "readme.txt"):
+        (tmp_path / name).write_text("not a frame")
+    with caplog.at_level(logging.INFO, logger="fourd"):
+        seq = load_sequence(tmp_path)
+    assert len(seq) == 2
+    assert "skipped" in caplog.text and "notes.md" in caplog.text and "rig.json" in caplog.text
+    (tmp_path / "frame_2.stl").write_text("solid x")
+    with pytest.raises(InputError, match=r"frame_2\.stl.*unknown file type '\.stl'"):
+        load_sequence(tmp_path)

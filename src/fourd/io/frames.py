@@ -45,9 +45,17 @@ log = logging.getLogger("fourd.io.frames")
 FRAME_SUFFIXES: tuple[str, ...] = (".ply", ".obj", ".xyz", ".pts", ".npy", ".npz")
 #: Files beside the frames that are not frames.
 SIDECARS: tuple[str, ...] = ("sensors.json", "times.txt")
+#: Files kept beside frames that are plainly not frames (notes, logs, tables, pictures, other
+#: settings): skipped with one log line. Any other unknown type (``.stl``, ``.pcd``, ``.e57``:
+#: geometry fourd cannot read) stops the load.
+NOT_FRAME_SUFFIXES: tuple[str, ...] = (
+    ".json", ".txt", ".md", ".rst", ".csv", ".tsv", ".log", ".html", ".pdf", ".yaml", ".yml",
+    ".toml", ".ini", ".cfg", ".png", ".jpg", ".jpeg", ".tif", ".tiff", ".exr", ".mp4", ".mov",
+)
 
 __all__ = [
     "FRAME_SUFFIXES",
+    "NOT_FRAME_SUFFIXES",
     "PlyMesh",
     "load_sequence",
     "natural_key",
@@ -261,7 +269,7 @@ def _frame_files(folder: Path) -> list[Path]:
         raise InputError(f"cannot be listed ({error.strerror})", folder) from None
     except OSError as error:
         raise InputError(f"cannot be listed ({error})", folder) from None
-    files = []
+    files, skipped = [], []
     for entry in entries:
         name = entry.name
         if (
@@ -274,6 +282,9 @@ def _frame_files(folder: Path) -> list[Path]:
         if entry.is_dir():
             log.debug("%s: ignoring sub-folder", entry)
             continue
+        if entry.suffix.lower() in NOT_FRAME_SUFFIXES:
+            skipped.append(name)
+            continue
         if entry.suffix.lower() not in FRAME_SUFFIXES:
             raise InputError(
                 f"unknown file type {entry.suffix.lower() or '(no extension)'!r} in the frame folder; "
@@ -281,6 +292,8 @@ def _frame_files(folder: Path) -> list[Path]:
                 entry,
             )
         files.append(entry)
+    if skipped:
+        log.info("%s: not frames, skipped: %s", folder, ", ".join(sorted(skipped, key=natural_key)))
     files.sort(key=lambda p: natural_key(p.name))
     return files
 
