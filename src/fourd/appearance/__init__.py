@@ -1,0 +1,19 @@
+"""Colour and video: calibrated cameras, optical flow, anchors lifted to 3D, photometric terms.
+
+Modules: :mod:`~fourd.appearance.cameras` (the pinhole model and ``cameras.json``),
+:mod:`~fourd.appearance.flow` (dense optical flow between consecutive images, forward-backward
+check), :mod:`~fourd.appearance.depth` (depth maps splatted from a frame's points),
+:mod:`~fourd.appearance.anchor_tracks` (sparse 3D anchor tracks from the flow of every camera).
+OpenCV is imported only when flow is computed.
+"""
+
+from __future__ import annotations
+
+
+def anchors(seq, **options):
+    """3D anchor tracks between consecutive frames from the optical flow of ``seq.video``;
+    see :func:`fourd.appearance.anchor_tracks.anchors` (returns an
+    :class:`~fourd.appearance.anchor_tracks.Anchors`)."""
+    from fourd.appearance.anchor_tracks import anchors as _anchors
+
+    return _anchors(seq, **options)
