@@ -107,7 +107,7 @@ class ScanOptions:
         Standard deviation of the colour noise, fraction of full scale (points and images).
     video : bool
         Also film the scene: the sequence's ``video`` holds one image per camera and frame
-        (needs ``appearance``; :mod:`fourd.synth.filming`).
+        (:mod:`fourd.synth.filming`); without an ``appearance`` the surface is ``"cloth"``.
     video_resolution : int or None
         Image side in pixels (square images of the scanner's view); None: ``resolution``, so
         that each image pixel is one of the depth camera's rays.
@@ -171,8 +171,8 @@ class ScanOptions:
         if not np.isfinite(self.color_noise) or self.color_noise < 0:
             raise InputError(f"color_noise must be finite and >= 0, got {self.color_noise!r}")
         object.__setattr__(self, "video", bool(self.video))
-        if self.video and self.appearance is None:
-            raise InputError("video needs an appearance (skin or cloth): the images show colour")
+        if self.video and self.appearance is None:  # film a textured surface by default
+            object.__setattr__(self, "appearance", "cloth")
         if self.video_resolution is not None:
             if int(self.video_resolution) != self.video_resolution or self.video_resolution < 8:
                 raise InputError(
