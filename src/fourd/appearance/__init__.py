@@ -3,7 +3,9 @@
 Modules: :mod:`~fourd.appearance.cameras` (the pinhole model and ``cameras.json``),
 :mod:`~fourd.appearance.flow` (dense optical flow between consecutive images, forward-backward
 check), :mod:`~fourd.appearance.depth` (depth maps splatted from a frame's points),
-:mod:`~fourd.appearance.anchor_tracks` (sparse 3D anchor tracks from the flow of every camera).
+:mod:`~fourd.appearance.anchor_tracks` (sparse 3D anchor tracks from the flow of every camera),
+:mod:`~fourd.appearance.colored_icp` (rigid registration by geometry and colour, for coloured
+points without video).
 OpenCV is imported only when flow is computed.
 """
 
@@ -17,3 +19,11 @@ def anchors(seq, **options):
     from fourd.appearance.anchor_tracks import anchors as _anchors
 
     return _anchors(seq, **options)
+
+
+def colored_icp(source, source_colors, target, target_colors, **options):
+    """Rigid registration of coloured points by geometry and colour (Park, Zhou, Koltun 2017);
+    see :func:`fourd.appearance.colored_icp.colored_icp`."""
+    from fourd.appearance.colored_icp import colored_icp as _colored_icp
+
+    return _colored_icp(source, source_colors, target, target_colors, **options)
