@@ -757,3 +757,62 @@ def test_uv_and_colors_flags_that_cannot_be_met_stop_before_the_work(tmp_path, m
     assert calls == [] and not (tmp_path / "o.glb").exists()
     assert main(["reconstruct", str(folder), "-o", out]) == 0  # the default does without
     assert "no UV atlas: the xatlas package is not installed" in capsys.readouterr().err
+
+
+# ----------------------------------------------------------------------- appearance and video
+
+
+def test_synth_appearance_and_video_write_what_they_say(tmp_path):
+    import fourd
+    from fourd.io.ply import read_ply
+
+    out = tmp_path / "filmed"
+    argv = ["synth", "squash-ball", str(out), "--frames", "2", "--resolution", "32", "--quiet"]
+    assert main([*argv, "--appearance", "cloth", "--video", "--video-resolution", "40"]) == 0
+    assert (out / "cameras.json").is_file()
+    for k in range(3):
+        assert sorted(p.name for p in (out / "video" / f"cam_{k}").iterdir()) == [
+            "frame_0000.png",
+            "frame_0001.png",
+        ]
+    assert read_ply(out / "frame_0000.ply").colors is not None
+    seq = fourd.load_sequence(out)
+    assert seq.video.names == ("cam_0", "cam_1", "cam_2")
+    assert seq.video.image("cam_1", 1).shape == (40, 40, 3)
+    assert json.loads((out / "cameras.json").read_text())["cameras"][0]["width"] == 40
+
+    plain = tmp_path / "skin"
+    assert main(["synth", "squash-ball", str(plain), "--frames", "2", "--resolution", "32",
+                 "--appearance", "skin", "--quiet"]) == 0
+    assert not (plain / "cameras.json").exists() and not (plain / "video").exists()
+    colours = fourd.load_sequence(plain)[0].colors
+    assert colours is not None and colours.std() < 0.15  # skin: low contrast
+
+    bare = tmp_path / "bare"
+    assert main(["synth", "squash-ball", str(bare), "--frames", "2", "--resolution", "32", "--quiet"]) == 0
+    assert read_ply(bare / "frame_0000.ply").colors is None
+
+
+@pytest.fixture
+def filmed(tmp_path):
+    out = tmp_path / "filmed"
+    assert main(["synth", "squash-ball", str(out), "--frames", "2", "--resolution", "24",
+                 "--video", "--quiet"]) == 0
+    return out
+
+
+def test_bad_cameras_json_is_exit_2_naming_it(filmed, capsys):
+    data = json.loads((filmed / "cameras.json").read_text())
+    data["cameras"][1]["t"] = [0, 1]
+    (filmed / "cameras.json").write_text(json.dumps(data))
+    _run_bad(capsys, ["info", str(filmed)], str(filmed / "cameras.json"), "t must have shape")
+
+
+def test_missing_or_wrong_image_is_exit_2_naming_it(filmed, capsys):
+    missing = filmed / "video" / "cam_2" / "frame_0001.png"
+    missing.unlink()
+    _run_bad(capsys, ["info", str(filmed)], str(filmed / "video" / "cam_2"), "1 images", "2 frames")
+    from PIL import Image
+
+    Image.fromarray(np.zeros((24, 25, 3), np.uint8)).save(missing)
+    _run_bad(capsys, ["reconstruct", str(filmed), "-o", str(filmed.parent / "o.npz")], str(missing), "25x24")

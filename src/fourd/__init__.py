@@ -17,7 +17,7 @@ True
 
 from __future__ import annotations
 
-from fourd import deform, synth
+from fourd import appearance, deform, synth
 from fourd.animation import AnimatedMesh, MeshSequence
 from fourd.errors import InputError
 from fourd.methods import available_methods, reconstruct
@@ -65,6 +65,7 @@ __all__ = [
     "InputError",
     "MeshSequence",
     "PointCloudSequence",
+    "appearance",
     "available_methods",
     "deform",
     "evaluate",

@@ -267,7 +267,8 @@ def cmd_synth(args) -> int:
 
     truth = synth.scene(args.scene, frames=args.frames, seed=args.seed)
     scans = synth.scan(truth, cameras=args.cameras, noise=args.noise, outliers=args.outliers,
-                       resolution=args.resolution, seed=args.seed)
+                       resolution=args.resolution, seed=args.seed, appearance=args.appearance,
+                       video=args.video, video_resolution=args.video_resolution)
     write_synth(truth, scans, args.outdir)
     log.info("wrote %d scanned frames and the truth to %s", len(scans), args.outdir)
     return 0
@@ -295,7 +296,8 @@ def cmd_bench(args) -> int:
         log.info("wrote %s", output)
         return 0
     run_bench(methods=args.methods, scenes=args.scenes, quick=args.quick, repeats=args.repeats,
-              output=output, baselines=args.baselines, seed=args.seed, timeout=args.timeout)
+              output=output, baselines=args.baselines, seed=args.seed, timeout=args.timeout,
+              appearance=args.appearance, video=args.video)
     log.info("wrote %s", output)
     return 0
 
@@ -497,6 +499,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--noise", type=float, default=0.002, help="fraction of the bounding-box diagonal")
     p.add_argument("--outliers", type=float, default=0.02, help="fraction of points")
     p.add_argument("--resolution", type=int, default=256, help="rays per camera side")
+    p.add_argument("--appearance", choices=("skin", "cloth"), default=None,
+                   help="surface colour on the material (smooth low-contrast skin or a "
+                        "high-contrast printed cloth, chosen by --seed): coloured scans")
+    p.add_argument("--video", action="store_true",
+                   help="also film every camera: cameras.json and video/<camera>/<frame>.png "
+                        "(with --appearance cloth unless another is given)")
+    p.add_argument("--video-resolution", type=int, default=None, metavar="N",
+                   help="image side in pixels (default: --resolution, one pixel per depth ray)")
     p.add_argument("--seed", type=int, default=0)
 
     p = add("evaluate", "metrics of a result against ground truth", cmd_evaluate)
@@ -528,6 +538,11 @@ def build_parser() -> argparse.ArgumentParser:
                    help="add the peers of BASELINES.md (needs the `baselines` extra: open3d)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--timeout", type=float, default=None, help="seconds one reconstruction may take")
+    p.add_argument("--appearance", choices=("skin", "cloth"), default=None,
+                   help="scan every scene with this surface colour (coloured points)")
+    p.add_argument("--video", action="store_true",
+                   help="give the methods the rig's video too (--appearance cloth unless "
+                        "another is given)")
     p.add_argument("--merge", nargs="+", metavar="JSON",
                    help="merge the .json reports of separate runs into OUTPUT instead of running")
     p.add_argument("--note", action="append", help="a line for the report's notes (with --merge)")

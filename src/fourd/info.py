@@ -72,8 +72,15 @@ def describe_sequence(seq: PointCloudSequence) -> str:
         f"points per frame: min {counts.min()}, median {int(np.median(counts))}, max {counts.max()}",
         f"bounds: {np.round(lo, 4).tolist()} .. {np.round(hi, 4).tolist()} (diagonal {seq.diagonal():.4g})",
         f"normals: {'yes' if all(f.normals is not None for f in seq) else 'no'}; "
+        f"colours: {'yes' if all(f.colors is not None for f in seq) else 'no'}; "
         f"sensors: {'yes' if seq.has_sensors else 'no'}",
     ]
+    if seq.video is not None:
+        sizes = sorted({f"{c.width}x{c.height}" for c in seq.video.cameras})
+        lines.append(
+            f"video: {len(seq.video.cameras)} cameras ({', '.join(seq.video.names)}), "
+            f"images {', '.join(sizes)}"
+        )
     return "\n".join(lines)
 
 

@@ -4,10 +4,14 @@ from __future__ import annotations
 
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from fourd.errors import InputError
+
+if TYPE_CHECKING:
+    from fourd.io.video import Video
 
 NORMAL_TOLERANCE = 1e-3
 
@@ -96,10 +100,15 @@ class PointCloudSequence:
     frames : tuple of Frame
     names : tuple of str
         Where each frame came from (file names), for messages; defaults to ``frame_<i>``.
+    video : fourd.io.video.Video or None
+        The calibrated multi-view video of the capture (cameras and one image per camera and
+        frame, read lazily), when there is one; methods that use appearance take it from here
+        and work without it.
     """
 
     frames: tuple[Frame, ...]
     names: tuple[str, ...] = field(default=())
+    video: Video | None = None
 
     def __post_init__(self):
         frames = tuple(self.frames)
@@ -120,6 +129,16 @@ class PointCloudSequence:
             )
         object.__setattr__(self, "frames", frames)
         object.__setattr__(self, "names", names)
+        if self.video is not None:
+            from fourd.io.video import Video
+
+            if not isinstance(self.video, Video):
+                raise InputError(f"video must be a fourd.io.video.Video, got {type(self.video).__name__}")
+            if self.video.frame_count != len(frames):
+                raise InputError(
+                    f"the video has {self.video.frame_count} images per camera but there are "
+                    f"{len(frames)} frames"
+                )
 
     @classmethod
     def from_arrays(
@@ -159,7 +178,8 @@ class PointCloudSequence:
 
     def __getitem__(self, index):
         if isinstance(index, slice):
-            return PointCloudSequence(self.frames[index], self.names[index])
+            video = None if self.video is None else self.video.select(index)
+            return PointCloudSequence(self.frames[index], self.names[index], video)
         return self.frames[index]
 
     @property

@@ -122,3 +122,21 @@ def test_a_method_spec_is_its_own_row_with_its_options(tmp_path, monkeypatch):
     assert f"| {spec} |" in (tmp_path / "spec.md").read_text()
     sheet = rows[spec]["sheet"]
     assert sheet and sheet.endswith("squash-ball-perframe-outlier_z-6.png") and Path(sheet).exists()
+
+
+def test_a_scenes_appearance_and_video_reach_the_scanner(monkeypatch):
+    from fourd import synth
+
+    seen = {}
+    real = synth.scan
+
+    def spy(truth, **options):
+        seen.update(options)
+        return real(truth, **{**options, "resolution": 16})
+
+    monkeypatch.setattr(synth, "scan", spy)
+    scene = suite.BenchScene("squash-ball", frames=2, resolution=16, appearance="skin", video=True)
+    entry = runner._run_scene(scene, [], {}, samples=200, seed=0, repeats=1, timeout=None,
+                              isolate=False, bar=runner.progress(total=0))
+    assert seen["appearance"] == "skin" and seen["video"] is True
+    assert entry["settings"]["appearance"] == "skin"

@@ -67,3 +67,12 @@ def test_a_method_spec_with_a_list_value_is_a_valid_bench_row():
     assert suite.select_methods([spec], quick=False) == [spec]
     options = method_options("flow", suite.parse_method_spec(spec)[1])
     assert options.missing_frames == (1, 2) and options.resolution == 64
+
+
+def test_a_scene_may_carry_an_appearance_and_video():
+    assert suite.BenchScene("squash-ball").appearance is None
+    assert suite.BenchScene("squash-ball", appearance="skin").appearance == "skin"
+    filmed = suite.BenchScene("squash-ball", video=True)
+    assert filmed.appearance == "cloth" and filmed.video  # video films a printed surface
+    with pytest.raises(InputError, match="unknown appearance"):
+        suite.BenchScene("squash-ball", appearance="velvet")

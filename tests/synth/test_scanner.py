@@ -231,3 +231,77 @@ def test_crane_default_scan_gives_about_15000_points_on_the_surface():
     pick = np.flatnonzero(surface)[::15]
     _, distance, _ = trimesh.proximity.closest_point(mesh, result.points[pick])
     assert distance.max() < 4.5 * 0.002 * truth.diagonal()
+
+
+# ------------------------------------------------------------------------- appearance and video
+
+
+def test_appearance_colours_points_and_leaves_them_where_they_were():
+    truth = scene_for_colour()
+    plain = scan(truth, resolution=40)
+    coloured = scan(truth, resolution=40, appearance="cloth")
+    for a, b in zip(plain, coloured, strict=True):
+        np.testing.assert_array_equal(a.points, b.points)
+        assert a.colors is None and b.colors.shape == (len(b), 3)
+        assert np.all((b.colors >= 0) & (b.colors <= 1))
+    frame = scan_frame(truth, 1, ScanOptions(resolution=40, appearance="skin", outliers=0.1))
+    stray = frame.label != SURFACE
+    assert frame.colors[stray].std() > 0.2  # outliers get random colours
+
+
+def scene_for_colour():
+    from fourd.synth.scenes import scene
+
+    return scene("rigid-turn", frames=2, angle=20.0, subdivisions=4)
+
+
+def test_colours_move_with_the_material_up_to_shading():
+    """A scanned point's colour is its material point's albedo times the shading of its normal
+    in that frame: the same material point keeps its albedo as the surface turns, and its
+    brightness follows its normal."""
+    from fourd.synth.albedo import albedo
+    from fourd.synth.paint import barycentric, truth_paint
+    from fourd.synth.shading import shading
+
+    truth = scene_for_colour()
+    options = ScanOptions(resolution=48, appearance="cloth", noise=0.0, outliers=0.0, color_noise=0.0)
+    paint = truth_paint(truth, "cloth", seed=0)
+    rest_hits, shades = [], []
+    for t in range(2):
+        frame = scan_frame(truth, t, options)
+        mesh = trimesh.Trimesh(truth.vertices[t], truth.faces, process=False)
+        closest, _, triangle = trimesh.proximity.closest_point(mesh, frame.clean)
+        corners = truth.faces[triangle]
+        weights = barycentric(closest, truth.vertices[t][corners])
+        rest = np.einsum("pk,pkj->pj", weights, truth.rest[corners])
+        normal = np.einsum("pk,pkj->pj", weights, mesh.vertex_normals[corners])
+        normal /= np.linalg.norm(normal, axis=1, keepdims=True)
+        shade = shading(normal, paint.lamps)
+        expected = albedo(rest, "cloth", bounds=paint.bounds, seed=0) * shade[:, None]
+        agree = np.abs(np.clip(expected, 0, 1) - frame.colors).max(axis=1) < 0.02
+        assert agree.mean() > 0.97  # (a few points on pattern edges: albedo is not smooth)
+        rest_hits.append(rest)
+        shades.append((frame.colors, shade))
+    # nearly the same material points in both frames (same printed cell): colour / shading,
+    # the albedo, agrees, though the shading changed with the turn
+    distance, match = cKDTree(rest_hits[1]).query(rest_hits[0])
+    same = np.flatnonzero(distance < 0.01)
+    assert len(same) > 30
+    (c0, s0), (c1, s1) = shades
+    lit = (s0[same] > 0.4) & (s1[match[same]] > 0.4)
+    first = c0[same][lit] / s0[same][lit, None]
+    second = c1[match[same]][lit] / s1[match[same]][lit, None]
+    assert np.median(np.abs(first - second).max(axis=1)) < 0.01
+    assert np.abs(s1[match[same]] / s0[same] - 1).max() > 0.05
+
+
+def test_video_has_one_image_per_camera_and_kept_frame():
+    truth = scene_for_colour()
+    scans = scan(truth, resolution=32, video=True, drop_frames=(0,), video_resolution=40)
+    assert scans.video.frame_count == 1 and scans.video.names == ("cam_0", "cam_1", "cam_2")
+    assert scans.video.image(2, 0).shape == (40, 40, 3)
+    assert scans[0].colors is not None  # video without an appearance films cloth
+    with pytest.raises(InputError, match="video_resolution"):
+        ScanOptions(video_resolution=3)
+    with pytest.raises(InputError, match="color_noise"):
+        ScanOptions(color_noise=-1)

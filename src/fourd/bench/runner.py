@@ -23,7 +23,7 @@ import logging
 import os
 import statistics
 import time
-from dataclasses import asdict
+from dataclasses import asdict, replace
 from pathlib import Path
 
 import numpy as np
@@ -78,6 +78,8 @@ def run_bench(
     seed: int = 0,
     timeout: float | None = None,
     isolate: bool = True,
+    appearance: str | None = None,
+    video: bool = False,
 ) -> dict:
     """Run methods x scenes, score them against the truth, write the report.
 
@@ -103,6 +105,10 @@ def run_bench(
         Seconds one reconstruction case may take (isolated runs only).
     isolate : bool
         Run each reconstruction in a fresh child process (own peak memory, crash-safe).
+    appearance : {None, "skin", "cloth"}
+        Scan every scene with this surface colour (replaces each :class:`BenchScene`'s).
+    video : bool
+        Give the methods the rig's video too (needs an appearance).
 
     Returns
     -------
@@ -115,6 +121,11 @@ def run_bench(
     if repeats < 1:
         raise InputError(f"repeats must be at least 1, got {repeats}")
     chosen_scenes = select_scenes(scenes, quick)
+    if appearance is not None or video:
+        chosen_scenes = [
+            replace(s, appearance=appearance or s.appearance, video=video or s.video)
+            for s in chosen_scenes
+        ]
     chosen_methods = select_methods(methods, quick)
     output = default_output(quick) if output is None else Path(output)
     output.parent.mkdir(parents=True, exist_ok=True)
@@ -170,7 +181,8 @@ def _run_scene(bench_scene: BenchScene, methods, peers, *, samples, seed, repeat
     try:
         truth = synth.scene(bench_scene.name, frames=bench_scene.frames, seed=seed, **bench_scene.options)
         scans = synth.scan(
-            truth, resolution=bench_scene.resolution, seed=seed, **{**PROTOCOL, **bench_scene.scan}
+            truth, resolution=bench_scene.resolution, seed=seed, appearance=bench_scene.appearance,
+            video=bench_scene.video, **{**PROTOCOL, **bench_scene.scan},
         )
     except Exception as error:  # noqa: BLE001 - a missing data file costs one scene
         entry["error"] = f"{type(error).__name__}: {error}"

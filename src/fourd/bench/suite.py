@@ -19,7 +19,10 @@ class BenchScene:
     """One benchmark scene: the truth ``fourd.synth.scene(name, frames=frames, **options)``,
     scanned at ``resolution`` rays per camera side with :data:`PROTOCOL`, whose entries
     ``scan`` replaces (another scanner). ``label`` names it in the report and on the command
-    line when it is not the scene's own name (another stretch of a capture)."""
+    line when it is not the scene's own name (another stretch of a capture). ``appearance``
+    (``"skin"`` or ``"cloth"``) colours the scans with that surface colour; ``video`` also
+    gives the methods the rig's calibrated video, on ``"cloth"`` unless another appearance is
+    named (``fourd.synth.scan``'s options of those names)."""
 
     name: str
     frames: int | None = None
@@ -27,6 +30,14 @@ class BenchScene:
     resolution: int = 256
     label: str = ""
     scan: dict = field(default_factory=dict)
+    appearance: str | None = None
+    video: bool = False
+
+    def __post_init__(self):
+        from fourd.synth.albedo import check_appearance
+
+        appearance = check_appearance(self.appearance)
+        object.__setattr__(self, "appearance", "cloth" if self.video and not appearance else appearance)
 
     @property
     def key(self) -> str:

@@ -37,6 +37,7 @@ from fourd.io.atomic import atomic_dir
 from fourd.io.meshfiles import read_obj, read_xyz, write_xyz
 from fourd.io.ply import PlyMesh, read_ply, write_ply
 from fourd.io.sidecars import read_sensors, read_times, sensor_table
+from fourd.io.video import CAMERAS_FILE, VIDEO_FOLDER, read_video, write_video
 from fourd.sequence import Frame, PointCloudSequence
 
 log = logging.getLogger("fourd.io.frames")
@@ -44,7 +45,7 @@ log = logging.getLogger("fourd.io.frames")
 #: Extensions of frame files, lower case.
 FRAME_SUFFIXES: tuple[str, ...] = (".ply", ".obj", ".xyz", ".pts", ".npy", ".npz")
 #: Files beside the frames that are not frames.
-SIDECARS: tuple[str, ...] = ("sensors.json", "times.txt")
+SIDECARS: tuple[str, ...] = ("sensors.json", "times.txt", "cameras.json")
 #: Files kept beside frames that are plainly not frames (notes, logs, tables, pictures, other
 #: settings): skipped with one log line. Any other unknown type (``.stl``, ``.pcd``, ``.e57``:
 #: geometry fourd cannot read) stops the load.
@@ -380,20 +381,23 @@ def load_sequence(path: str | os.PathLike) -> PointCloudSequence:
         ``points [T, P, 3]`` (optional ``times [T]``, ``normals [T, P, 3]``, ``colors``,
         ``sensors [K, 3]`` or ``[T, K, 3]``, and ``loc``/``scale``: points are then
         ``points * scale + loc``, as in ``../shared/data``), or one frame file (a one-frame
-        sequence).
+        sequence). A folder may hold calibrated video: ``cameras.json`` and
+        ``video/<camera>/<frame>.png`` (:mod:`fourd.io.video`).
 
     Returns
     -------
     PointCloudSequence
         Frame names are the file names; times come from ``times.txt`` (default 0, 1, 2, ...);
-        sensors from ``sensors.json`` when present.
+        sensors from ``sensors.json`` when present; ``video`` from ``cameras.json`` and
+        ``video/`` when present (images read lazily, a frame at a time).
 
     Raises
     ------
     InputError
         Naming the file: missing path, no frame files, unknown extension, any bad frame (see
-        :func:`read_frame`), frames with different table widths, a wrong ``times.txt`` or
-        ``sensors.json``.
+        :func:`read_frame`), frames with different table widths, a wrong ``times.txt``,
+        ``sensors.json`` or ``cameras.json``, a missing or unreadable image, an image whose
+        size disagrees with ``cameras.json``, a camera with more or fewer images than frames.
 
     Examples
     --------
@@ -439,8 +443,12 @@ def load_sequence(path: str | os.PathLike) -> PointCloudSequence:
     with_normals = sum(f.normals is not None for f in frames)
     if 0 < with_normals < len(frames):
         log.warning("%s: %d of %d frames have normals", path, with_normals, len(frames))
-    return PointCloudSequence(tuple(frames), tuple(f.name for f in files))
-
+    video = None
+    if (path / CAMERAS_FILE).exists():
+        video = read_video(path, frame_count=count)
+    elif (path / VIDEO_FOLDER).is_dir():
+        log.warning("%s: a %s/ folder without %s; ignoring the video", path, VIDEO_FOLDER, CAMERAS_FILE)
+    return PointCloudSequence(tuple(frames), tuple(f.name for f in files), video)
 
 
 def write_frames(
@@ -451,8 +459,10 @@ def write_frames(
     One file per frame (``frame_0000.ply`` ...; binary little-endian PLY with normals and
     colours when present, or ``npy`` ``[P, 3|6]``, or ``xyz`` text), ``times.txt`` and, when
     the frames carry sensors, ``sensors.json`` (the fixed form when every frame has the same
-    scanners). The folder is assembled under a temporary name and renamed into place: an
-    existing folder of that name is replaced as a whole.
+    scanners), and, when the sequence has video, ``cameras.json`` and
+    ``video/<camera>/frame_0000.png ...`` (:func:`fourd.io.video.write_video`). The folder is
+    assembled under a temporary name and renamed into place: an existing folder of that name is
+    replaced as a whole.
 
     Parameters
     ----------
@@ -464,9 +474,12 @@ def write_frames(
     if format not in ("ply", "npy", "xyz"):
         raise InputError(f"unknown frame format {format!r} (use ply, npy or xyz)")
     width = max(4, len(str(len(seq) - 1)))
+    stems = [f"frame_{i:0{width}d}" for i in range(len(seq))]
     with atomic_dir(folder) as tmp:
+        if seq.video is not None:
+            write_video(tmp, seq.video, stems)
         for i, frame in enumerate(seq.frames):
-            target = tmp / f"frame_{i:0{width}d}.{format}"
+            target = tmp / f"{stems[i]}.{format}"
             if format == "ply":
                 write_ply(target, frame.points, normals=frame.normals, colors=frame.colors)
             elif format == "xyz":

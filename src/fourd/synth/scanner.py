@@ -19,8 +19,16 @@ camera keeps the ones hidden-point removal (Katz, Tal, Basri 2007) finds visible
 in its image square, and the union over the cameras gets the same noise (along the ray from the
 first camera that sees the point) and outliers.
 
+With ``appearance="skin"`` or ``"cloth"`` every point also gets a colour: the albedo of its
+material point (:mod:`fourd.synth.albedo`, on the rest surface, so it moves with the skin) times
+Lambertian shading by fixed lamps (:mod:`fourd.synth.shading`), plus sensor noise
+``color_noise``; outliers get random colours. With ``video=True`` the sequence also carries the
+rig's calibrated video (:mod:`fourd.synth.filming`): per camera and frame an image of the
+textured, shaded scene (occluder included), on the scanner's pixel grid by default.
+
 Every frame is a pure function of the truth frame, the options and ``(seed, frame index)``
-(:func:`scan_frame`), so frames can be scanned independently and in any order.
+(:func:`scan_frame`), so frames can be scanned independently and in any order. Colours and
+images draw from their own random streams: switching them on leaves the points unchanged.
 
 References
 ----------
@@ -92,8 +100,20 @@ class ScanOptions:
         Standard deviation of a structured-outlier cluster, fraction of the diagonal.
     ray_backend : {"auto", "embree", "numba"}
         Ray caster (see :func:`ray_backend`); both give the same first hits.
+    appearance : {None, "skin", "cloth"}
+        Surface colour of the truth (:mod:`fourd.synth.albedo`); None: points without colour.
+        The pattern is chosen by ``seed``.
+    color_noise : float
+        Standard deviation of the colour noise, fraction of full scale (points and images).
+    video : bool
+        Also film the scene: the sequence's ``video`` holds one image per camera and frame
+        (:mod:`fourd.synth.filming`); without an ``appearance`` the surface is ``"cloth"``.
+    video_resolution : int or None
+        Image side in pixels (square images of the scanner's view); None: ``resolution``, so
+        that each image pixel is one of the depth camera's rays.
     seed : int
-        Frame ``t`` draws from ``numpy.random.default_rng([seed, t])``.
+        Frame ``t`` draws from ``numpy.random.default_rng([seed, t])`` (colours from
+        ``[seed, t, 1]``, images from ``[seed, t, 2]``).
     """
 
     cameras: int = 3
@@ -111,6 +131,10 @@ class ScanOptions:
     field: float = 1.2
     cluster_size: float = 0.01
     ray_backend: str = "auto"
+    appearance: str | None = None
+    color_noise: float = 0.01
+    video: bool = False
+    video_resolution: int | None = None
     seed: int = 0
 
     def __post_init__(self):
@@ -141,6 +165,20 @@ class ScanOptions:
         if any(i < 0 for i in drop):
             raise InputError(f"drop_frames must hold frame indices >= 0, got {drop}")
         object.__setattr__(self, "drop_frames", tuple(sorted(set(drop))))
+        from fourd.synth.albedo import check_appearance
+
+        object.__setattr__(self, "appearance", check_appearance(self.appearance))
+        if not np.isfinite(self.color_noise) or self.color_noise < 0:
+            raise InputError(f"color_noise must be finite and >= 0, got {self.color_noise!r}")
+        object.__setattr__(self, "video", bool(self.video))
+        if self.video and self.appearance is None:  # film a textured surface by default
+            object.__setattr__(self, "appearance", "cloth")
+        if self.video_resolution is not None:
+            if int(self.video_resolution) != self.video_resolution or self.video_resolution < 8:
+                raise InputError(
+                    f"video_resolution must be an integer >= 8, got {self.video_resolution!r}"
+                )
+            object.__setattr__(self, "video_resolution", int(self.video_resolution))
 
 
 class CameraRig(NamedTuple):
@@ -180,6 +218,8 @@ class FrameScan(NamedTuple):
         ``SURFACE`` (0), ``UNIFORM_OUTLIER`` (1) or ``CLUSTER_OUTLIER`` (2).
     clean : ndarray float64 [P, 3]
         The noise-free surface point of each point (outliers: the outlier itself).
+    colors : ndarray float64 [P, 3] or None
+        Recorded colour in [0, 1] (with ``appearance``; outliers: random colours).
     """
 
     index: int
@@ -187,6 +227,7 @@ class FrameScan(NamedTuple):
     camera: np.ndarray
     label: np.ndarray
     clean: np.ndarray
+    colors: np.ndarray | None = None
 
 
 def camera_rig(
@@ -402,7 +443,8 @@ def _truth_frames(truth) -> tuple[int, np.ndarray, bool]:
 
 
 def _cast(vertices, faces, rig, options, diagonal, phase):
-    """First hits of every camera: ``(points [P, 3], camera [P], directions [P, 3])``."""
+    """First hits of every camera: ``(points [P, 3], camera [P], directions [P, 3],
+    triangle [P])``."""
     vertices = np.asarray(vertices, dtype=float)
     faces = np.asarray(faces, dtype=np.int64)
     surface_faces = len(faces)
@@ -414,7 +456,7 @@ def _cast(vertices, faces, rig, options, diagonal, phase):
     backend = ray_backend(options.ray_backend)
     if backend == "embree":
         intersector = _embree_intersector(trimesh.Trimesh(vertices, faces, process=False))
-    points, cameras, directions = [], [], []
+    points, cameras, directions, triangles = [], [], [], []
     for k in range(len(rig.positions)):
         origins, rays = camera_rays(rig, k, options.resolution)
         if backend == "embree":
@@ -437,7 +479,13 @@ def _cast(vertices, faces, rig, options, diagonal, phase):
         points.append(locations[keep])
         directions.append(rays[ray_index[keep]])
         cameras.append(np.full(int(keep.sum()), k))
-    return np.concatenate(points), np.concatenate(cameras), np.concatenate(directions)
+        triangles.append(np.asarray(triangle[keep], dtype=np.int64))
+    return (
+        np.concatenate(points),
+        np.concatenate(cameras),
+        np.concatenate(directions),
+        np.concatenate(triangles),
+    )
 
 
 def _in_view(points: np.ndarray, rig: CameraRig, camera: int) -> np.ndarray:
@@ -453,7 +501,9 @@ def _in_view(points: np.ndarray, rig: CameraRig, camera: int) -> np.ndarray:
 
 
 def _visible_points(points, rig, options, rng):
-    """Point truth: a random subset, hidden-point removal per camera, union."""
+    """Point truth: a random subset, hidden-point removal per camera, union:
+    ``(points [P, 3], camera [P], directions [P, 3], index [P])`` (``index`` into the truth's
+    points)."""
     count = max(1, int(round(options.hpr_fraction * len(points))))
     subset = np.sort(rng.choice(len(points), size=count, replace=False))
     sample = points[subset]
@@ -466,7 +516,7 @@ def _visible_points(points, rig, options, rng):
     sample, camera = sample[seen], camera[seen]
     directions = sample - rig.positions[camera]
     directions /= np.maximum(np.linalg.norm(directions, axis=1, keepdims=True), 1e-300)
-    return sample, camera, directions
+    return sample, camera, directions, subset[seen]
 
 
 def scan_frame(
@@ -505,11 +555,14 @@ def scan_frame(
     vertices, faces = truth.frame(index)
     phase = index / max(frame_count - 1, 1)
     if point_truth:
-        clean, camera, directions = _visible_points(vertices, rig, options, rng)
+        clean, camera, directions, hit = _visible_points(vertices, rig, options, rng)
     else:
-        clean, camera, directions = _cast(vertices, faces, rig, options, diagonal, phase)
+        clean, camera, directions, hit = _cast(vertices, faces, rig, options, diagonal, phase)
     if len(clean) == 0:
         raise InputError(f"frame {index}: no camera ray hits the scene (nothing to scan)")
+    colors = None
+    if options.appearance is not None:
+        colors = _point_colors(truth, index, options, vertices, faces, clean, directions, hit)
     points = clean + rng.normal(scale=options.noise * diagonal, size=(len(clean), 1)) * directions
     label = np.zeros(len(points), dtype=np.int8)
     count = len(points)
@@ -533,7 +586,30 @@ def scan_frame(
     outlier = label != SURFACE
     camera = np.where(outlier, -1, camera)
     clean = np.where(outlier[:, None], points, clean)
-    return FrameScan(index, points, camera, label, clean)
+    if colors is not None and outlier.any():
+        stray = np.random.default_rng([options.seed, index, 3])
+        colors[outlier] = stray.uniform(0.0, 1.0, size=(int(outlier.sum()), 3))
+    return FrameScan(index, points, camera, label, clean, colors)
+
+
+def _point_colors(truth, index, options, vertices, faces, clean, directions, hit):
+    """Recorded colours of the clean hits of one frame (see :mod:`fourd.synth.paint`)."""
+    from fourd.geometry.normals import pca_normals, vertex_normals
+    from fourd.synth.albedo import albedo
+    from fourd.synth.paint import hit_colors, truth_paint
+    from fourd.synth.shading import shaded_colors
+
+    paint = truth_paint(truth, options.appearance, options.seed)
+    rng = np.random.default_rng([options.seed, index, 1])
+    if len(faces):
+        normals = vertex_normals(vertices, faces)
+        return hit_colors(
+            paint, vertices, faces, normals, hit, clean, directions, noise=options.color_noise, rng=rng
+        )
+    base = albedo(paint.rest[hit], paint.kind, bounds=paint.bounds, seed=paint.seed)
+    normals = pca_normals(clean, min(16, len(clean))).normals
+    normals[np.einsum("ij,ij->i", normals, directions) > 0] *= -1.0
+    return shaded_colors(base, normals, noise=options.color_noise, rng=rng, lamps=paint.lamps)
 
 
 def scan_options(options: ScanOptions | None = None, **overrides) -> ScanOptions:
@@ -561,13 +637,16 @@ def scan(truth, options: ScanOptions | None = None, **overrides) -> PointCloudSe
     options : ScanOptions, optional
         All settings; keyword arguments (``cameras=3, resolution=256, noise=0.002,
         outliers=0.02, structured_outliers=0.0, drop_frames=(), occluder=False,
-        hpr_fraction=0.3, seed=0`` and the other :class:`ScanOptions` fields) override it.
+        hpr_fraction=0.3, appearance=None, video=False, seed=0`` and the other
+        :class:`ScanOptions` fields) override it.
 
     Returns
     -------
     PointCloudSequence
         One frame per truth frame not in ``drop_frames``, with ``time = truth.times[t]`` and
         ``sensors`` = the camera positions ``[K, 3]``; named ``frame_<t>`` by truth index.
+        With ``appearance`` the frames have ``colors``; with ``video`` the sequence has
+        ``video`` (the rig's cameras, one image per camera and kept frame).
 
     Examples
     --------
@@ -592,9 +671,24 @@ def scan(truth, options: ScanOptions | None = None, **overrides) -> PointCloudSe
     kept = [t for t in range(frame_count) if t not in set(options.drop_frames)]
     if not kept:
         raise InputError("drop_frames removes every frame")
-    frames, names = [], []
+    frames, names, images = [], [], []
     for t in progress(kept, desc="scanning", total=len(kept)):
         result = scan_frame(truth, t, options, rig=rig)
-        frames.append(Frame(points=result.points, sensors=rig.positions, time=truth.times[t]))
+        frames.append(
+            Frame(
+                points=result.points, colors=result.colors, sensors=rig.positions, time=truth.times[t]
+            )
+        )
         names.append(f"frame_{t:04d}")
-    return PointCloudSequence(tuple(frames), tuple(names))
+        if options.video:
+            from fourd.synth.filming import film_frame
+
+            images.append(film_frame(truth, t, options, rig=rig))
+    video = None
+    if options.video:
+        from fourd.io.video import Video
+        from fourd.synth.filming import rig_cameras
+
+        cameras = rig_cameras(rig, options.video_resolution or options.resolution)
+        video = Video.from_arrays(cameras, np.stack(images, axis=1))
+    return PointCloudSequence(tuple(frames), tuple(names), video)

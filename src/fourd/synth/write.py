@@ -3,9 +3,12 @@
 Layout of ``OUTDIR`` (what ``fourd synth SCENE OUTDIR`` produces)::
 
     OUTDIR/
-      frame_0000.ply ...   binary PLY scans, one per kept frame (fourd.io.frames.write_frames)
+      frame_0000.ply ...   binary PLY scans, one per kept frame (fourd.io.frames.write_frames),
+                           with red green blue when the scan has an appearance
       times.txt            one time per frame
       sensors.json         the fixed camera positions {"sensors": [[x, y, z], ...]}
+      cameras.json         with video: the calibrated cameras (fourd.appearance.cameras)
+      video/cam_<k>/frame_0000.png ...   with video: each camera's image of each frame
       truth.npz            the ground truth (AnimatedMesh: vertices, faces, times, observed[, rest];
                            MeshSequence: kind="meshes", vertices_<t>, faces_<t>, times)
       truth.json           what was generated (scene, frames, seed, scan options), when given
