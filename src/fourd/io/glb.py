@@ -152,6 +152,8 @@ class _Blob:
 
 #: The animation's ``extras`` key holding the result's own times (the keys are seconds).
 TIMES_EXTRA = "fourd_times"
+#: The mesh's ``extras`` key naming the result vertex each UV-seam copy repeats.
+SEAM_EXTRA = "fourd_seams"
 
 def _indices(blob: _Blob, faces: np.ndarray, vertex_count: int) -> int:
     dtype = np.uint16 if vertex_count < 65535 else np.uint32
@@ -306,6 +308,10 @@ def _animated(
     if targets:
         mesh.weights = [0.0] * len(targets)
         mesh.extras = {"targetNames": [f"frame_{k}" for k in range(1, count)]}
+    if seams is not None:  # which result vertex each seam copy repeats, to read it back whole
+        mesh.extras = {**(mesh.extras or {}), SEAM_EXTRA: {
+            "vertex_count": int(anim.vertex_count),
+            "copies_of": [int(v) for v in seams.vertex[anim.vertex_count:]]}}
     gltf.meshes.append(mesh)
     node = Node(name="fourd", mesh=0)
     if quantized:  # undo the quantization: positions are size * stored + centre
@@ -625,7 +631,36 @@ def _read_animated(gltf, blob: bytes, node: int, path) -> AnimatedMesh:
             path,
         )
     vertices = base[None] + np.einsum("kt,tnd->knd", weights, targets)
-    return AnimatedMesh(faces, vertices, times=times)
+    return _merged_seams(gltf, blob, gltf.nodes[node].mesh, AnimatedMesh(faces, vertices, times=times), path)
+
+
+def _merged_seams(gltf, blob: bytes, mesh_index: int, anim: AnimatedMesh, path) -> AnimatedMesh:
+    """``anim`` with the seam copies the writer made (:data:`SEAM_EXTRA`) merged back into
+    their vertices, the UVs per face corner and the colours (sRGB) restored."""
+    mesh = gltf.meshes[mesh_index]
+    seam = (mesh.extras or {}).get(SEAM_EXTRA) if isinstance(mesh.extras, dict) else None
+    attributes = mesh.primitives[0].attributes
+    uv = colors = None
+    corners = anim.faces
+    if attributes.TEXCOORD_0 is not None and len(corners):
+        stored = _accessor(gltf, blob, attributes.TEXCOORD_0, path)
+        uv = np.stack([stored[:, 0], 1.0 - stored[:, 1]], axis=1)[corners]  # glTF's v is down
+    if attributes.COLOR_0 is not None:
+        from fourd.io.colorspace import linear_to_srgb
+
+        colors = linear_to_srgb(np.clip(_accessor(gltf, blob, attributes.COLOR_0, path)[:, :3], 0, 1))
+    count = anim.vertex_count
+    faces = anim.faces
+    if seam is not None:
+        count = int(seam["vertex_count"])
+        original = np.concatenate([np.arange(count), np.asarray(seam["copies_of"], dtype=np.int64)])
+        if len(original) != anim.vertex_count:
+            raise InputError("its seam table does not match the mesh's vertices", path)
+        faces = original[faces]
+    vertices = anim.vertices[:, :count]
+    if colors is not None:
+        colors = np.broadcast_to(colors[:count], (len(vertices), count, 3)).copy()
+    return AnimatedMesh(faces, vertices, times=anim.times, uv=uv, colors=colors)
 
 
 def _read_sequence(gltf, blob: bytes, nodes: list[int], path) -> MeshSequence:
