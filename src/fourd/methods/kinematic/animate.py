@@ -47,6 +47,7 @@ def animate(
     bounds: np.ndarray | None = None,
     project_smoothed: bool = False,
     edge_stiffness: tuple | None = None,
+    anchors=None,
     cache: StageCache = NO_CACHE,
     field_key: str = "",
 ) -> AnimatedMesh:
@@ -83,6 +84,10 @@ def animate(
     edge_stiffness : tuple, optional
         ``(edges [E, 2], values [E])``: factors on the sliding's ARAP weights of those urshape
         edges (:attr:`SlideOptions.edge_stiffness`).
+    anchors : Anchors, optional
+        Anchor tracks between consecutive input frames (:func:`fourd.appearance.anchors`):
+        the forward sliding's steps between two consecutive input frames start where they
+        went (:mod:`.guide`).
     cache : StageCache
         Where the urshape and every slid frame are kept as they finish (a rerun resumes
         after the last slid frame); needs ``field_key``.
@@ -153,6 +158,7 @@ def animate(
         still_normals=options.still_normals,
         previous_shape=options.slide_memory,
         edge_stiffness=edge_stiffness,
+        anchor_pull=options.anchor_pull,
     )
 
     def chain(stage, slide_times, data_frames, surface_frames):
@@ -160,13 +166,17 @@ def animate(
         time, its data and its surface."""
         if not cache.enabled:
             return None
-        base = stage_key(stage, urshape_key, slide_options, bandwidth, float(slide_times[0]))
+        base = stage_key(stage, urshape_key, slide_options, bandwidth, float(slide_times[0]),
+                         anchor_key)
         steps = [
             (float(t), frame_keys[d], None if f < 0 else frame_keys[f])
             for t, d, f in zip(slide_times[1:], data_frames[1:], surface_frames[1:], strict=True)
         ]
         return Chain.of(cache, stage, base, steps)
 
+    anchor_key = None
+    if anchors is not None and cache.enabled:
+        anchor_key = [(p.source, p.target, p.confidence) for p in anchors]
     t0 = float(times[0])
     forward = out_times >= t0
     parts_v, parts_o = [], []
@@ -204,6 +214,7 @@ def animate(
         [points[k] for k in fwd_frames],
         surfaces(fwd_surfaces),
         chain(SLIDE_STAGE, fwd_times, fwd_frames, fwd_surfaces),
+        _step_anchors(anchors, fwd_surfaces),
     )
     if prepend:
         fv, fo = fv[1:], fo[1:]
@@ -279,9 +290,24 @@ class _FrameSurfaces(Sequence):
         return None if k < 0 else FrameSurface(self.points[k], self.normals[k], self.bandwidth)
 
 
-def _slide_monotone(vertices, faces, field, times, options, data, surfaces, checkpoints=None):
+def _step_anchors(anchors, frames):
+    """Per sliding time, the anchor tracks ``(source, target, confidence)`` from the previous
+    time's input frame to this one's when they are consecutive input frames, else None."""
+    if anchors is None:
+        return None
+    steps = [None]
+    for before, after in zip(frames[:-1], frames[1:], strict=True):
+        ok = before >= 0 and after == before + 1 and before < len(anchors)
+        pair = anchors[before] if ok else None
+        steps.append(None if pair is None else (pair.source, pair.target, pair.confidence))
+    return steps
+
+
+def _slide_monotone(vertices, faces, field, times, options, data, surfaces, checkpoints=None,
+                    anchors=None):
     """Slide through monotone ``times`` (decreasing allowed); returns (frames, observed).
-    ``checkpoints``: the cache entries of the steps (:func:`slide`), or None."""
+    ``checkpoints``: the cache entries of the steps (:func:`slide`), or None; ``anchors``:
+    per time, the anchor tracks from the previous one (forward only), or None."""
     if len(times) == 1:
         from scipy.spatial import cKDTree
 
@@ -292,7 +318,7 @@ def _slide_monotone(vertices, faces, field, times, options, data, surfaces, chec
     if sign > 0:
         anim = slide(
             vertices, faces, field, times, options=options, data=data, surfaces=surfaces,
-            checkpoints=checkpoints,
+            checkpoints=checkpoints, anchors=anchors,
         )
     else:
         anim = slide(

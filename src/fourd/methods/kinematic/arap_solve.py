@@ -155,13 +155,16 @@ class ConstrainedSolver:
     constrained : ndarray bool [N]
         False where lambda_i = 0 (5.4).
     regularization : float
+    pull : ndarray [N], optional
+        An extra weight per vertex (times its Laplacian diagonal) towards the ``reference`` of
+        :meth:`solve`: the anchor-guided positions (:mod:`.guide`).
 
     The reduced matrix ``B^T (L (x) I_3) B`` is assembled directly in the template's
     elimination order (:func:`elimination_order`) and factorised without pivoting (it is
     symmetric positive definite).
     """
 
-    def __init__(self, pre, normals, offsets, constrained, regularization):
+    def __init__(self, pre, normals, offsets, constrained, regularization, pull=None):
         n = len(pre.rest)
         norm = np.linalg.norm(normals, axis=1)
         constrained = constrained & (norm > 1e-12)
@@ -177,6 +180,10 @@ class ConstrainedSolver:
         self.dims = np.where(constrained, 2, 3)
         diag = pre.laplacian.diagonal()
         self.mu_vertex = regularization * np.where(diag > 0, diag, max(diag.mean(), 1e-12))
+        if pull is not None:  # extra pull towards the reference, in units of each vertex's stiffness
+            self.mu_vertex = self.mu_vertex + np.asarray(pull, dtype=np.float64) * np.where(
+                diag > 0, diag, max(diag.mean(), 1e-12)
+            )
         self.mu = np.repeat(self.mu_vertex, 3)
         self.laplacian = pre.laplacian
         self.order = pre.order

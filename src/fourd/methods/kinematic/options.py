@@ -132,6 +132,16 @@ class Options:
         Output times (default: the input times). They may lie between or beyond input times.
     seed : int
         Seed for the subsampling of the spacing estimate.
+    video_anchors : bool
+        When the input has calibrated video (``cameras.json`` and ``video/``), track anchors
+        by optical flow between consecutive frames (:func:`fourd.appearance.anchors`) and
+        start each sliding step where they went (:mod:`.guide`); silent without video. Off
+        by default: it halves the drift on printed cloth but on low-contrast skin the flow
+        follows the shading and the anchors mislead (benchmarks/METHODS.md).
+    anchor_pull : float
+        With ``video_anchors``: how strongly each step's as-rigid-as-possible solve pulls the
+        vertices with anchors towards where the anchors went, in units of the vertex's own
+        stiffness (0: the anchors only move the start of the step).
     cache_dir : str or None
         Folder where the finished stages are kept: each prepared frame, the 4D fit (each
         window), the urshape and each slid frame, keyed by the input data and the options
@@ -166,6 +176,8 @@ class Options:
     smoothing_motion: float = 1.0
     times: tuple[float, ...] = ()
     seed: int = 0
+    video_anchors: bool = False
+    anchor_pull: float = 1.0
     cache_dir: str | None = None
 
     def __post_init__(self):

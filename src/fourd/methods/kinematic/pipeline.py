@@ -79,9 +79,15 @@ def reconstruct(
     fitted = _time.perf_counter()
     log.info("4D fit: %.2f s", fitted - started)
 
+    anchors = None
+    if options.video_anchors and getattr(seq, "video", None) is not None:
+        from fourd.appearance import anchors as track_anchors
+
+        anchors = track_anchors(seq)
+        log.info("anchors from the video: %d over %d frame pairs", anchors.total, len(anchors))
     result = animate(
         field, points, normals, times, spacing=spacing, options=options, cache=cache,
-        field_key=key, edge_stiffness=edge_stiffness,
+        field_key=key, edge_stiffness=edge_stiffness, anchors=anchors,
     )
     finished = _time.perf_counter()
     log.info(

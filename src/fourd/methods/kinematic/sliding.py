@@ -65,6 +65,7 @@ from fourd.cache import Chain, report_resumed
 from fourd.geometry.field import Field4D
 from fourd.methods.kinematic.arap import arap_energy, blended_arap_rhs, with_rest_shape
 from fourd.methods.kinematic.arap_solve import ConstrainedSolver, SlidePrecompute, slide_precompute
+from fourd.methods.kinematic.guide import anchor_guide
 from fourd.methods.kinematic.projection import (
     _data_target,
     _field_times,
@@ -182,6 +183,9 @@ class SlideOptions:
         with 4 iterations and 0.0027 / 0.0032 with 1 (``experiments/registration_oracle.py
         --slide-iterations``). See the ``kinematic`` method's ``slide_memory`` for what 0.8
         measured.
+    anchor_pull : float
+        Weight of the anchor-guided positions (:mod:`.guide`) in the as-rigid-as-possible
+        solve of each step, in units of each vertex's stiffness (0: they only move the start).
     edge_stiffness : tuple or None
         ``(edges [E, 2], values [E])``: factors on the ARAP weights of those template edges
         (:func:`~fourd.methods.kinematic.arap_solve.slide_precompute`), e.g. the bending
@@ -211,6 +215,7 @@ class SlideOptions:
     still_normals: float = 0.2
     previous_shape: float = 0.0
     edge_stiffness: tuple | None = field(default=None, compare=False, repr=False)
+    anchor_pull: float = 0.0
 
     def __post_init__(self):
         if not 0.0 <= self.previous_shape < 1.0:
@@ -273,6 +278,7 @@ def slide_step(
     registration: ArapIcp | None = None,
     registration_velocity: np.ndarray | None = None,
     previous_registration: tuple[bool, float] | None = None,
+    guide=None,
 ) -> tuple[np.ndarray, np.ndarray, SlideStep]:
     """One step of section 5: ``vertices`` at ``time`` -> positions at ``next_time``.
 
@@ -293,6 +299,10 @@ def slide_step(
     is kept when it explains more of them. It starts from ``vertices + dt *
     registration_velocity`` when that is given [N, 3] (the previous step's vertex
     velocities), else from the prediction.
+
+    ``guide`` (optional): a :class:`~fourd.methods.kinematic.guide.Guide` of anchor-guided
+    positions, blended into the start after the rigid prediction by its weights (before the
+    registration and the projection).
 
     Returns ``(positions [N, 3], constrained [N] bool, diagnostics)``.
     """
@@ -341,6 +351,10 @@ def slide_step(
                 start = moved
                 if converged:
                     break
+    if guide is not None and len(guide.vertices):
+        start = start.copy()
+        w = guide.weight[:, None]
+        start[guide.vertices] = (1.0 - w) * start[guide.vertices] + w * guide.positions
     registered_step, before = False, float("nan")
     guess = None  # the projection of 5.1, when a rejected registration already made it
     if registration is not None and surface is not None and len(surface.points):
@@ -400,12 +414,20 @@ def slide_step(
         jumped = np.linalg.norm(guess - start, axis=1) > limit
         guess[jumped] = start[jumped]
         constrained &= ~jumped
-    solver = ConstrainedSolver(pre, normals, offsets, constrained, options.regularization)
+    pull = None
+    if guide is not None and len(guide.vertices) and options.anchor_pull > 0:
+        pull = np.zeros(n)
+        pull[guide.vertices] = options.anchor_pull * guide.weight
+    solver = ConstrainedSolver(pre, normals, offsets, constrained, options.regularization, pull)
     remembered = with_rest_shape(pre, vertices) if options.previous_shape > 0 else None
     current = guess
     for iteration in range(options.iterations):
         rhs = blended_arap_rhs(pre, current, remembered, options.previous_shape)
-        solved = solver.solve(rhs, current)
+        reference = current
+        if pull is not None:
+            reference = current.copy()
+            reference[guide.vertices] = guide.positions
+        solved = solver.solve(rhs, reference)
         if iteration < options.iterations - 1:
             current = solved.copy()
             mask = solver.constrained
@@ -456,6 +478,7 @@ def slide(
     return_steps: bool = False,
     surfaces: Sequence | None = None,
     checkpoints: Chain | None = None,
+    anchors: Sequence | None = None,
 ):
     """Slide a template along ``field = 0`` through ``times``, as rigidly as possible.
 
@@ -486,6 +509,10 @@ def slide(
         from (the motion, the last registration's outcome) are stored as it finishes, and
         the steps already stored are loaded instead of slid again. The result is the same;
         ``return_steps`` then lists the steps slid now.
+    anchors : sequence, optional
+        Per time, ``(source [M, 3], target [M, 3], confidence [M])`` of the anchor tracks from
+        the previous time to this one (entry 0 and unknown steps None): the step starts the
+        vertices near them where they went (:func:`~.guide.anchor_guide`).
 
     Returns
     -------
@@ -569,6 +596,10 @@ def slide(
                 tree = cKDTree(np.full((1, 3), np.inf))
             previous = current
             surface = surfaces[k] if surfaces is not None and s == options.substeps - 1 else None
+            guide = None
+            if anchors is not None and anchors[k] is not None and s == options.substeps - 1:
+                source, target, confidence = anchors[k]
+                guide = anchor_guide(frames[k - 1], source, target, confidence, radius=2.0 * pre.edge_length)
             current, _, info = slide_step(
                 pre,
                 field,
@@ -587,6 +618,7 @@ def slide(
                     else None
                 ),
                 previous_registration=last_registration,
+                guide=guide,
             )
             if np.isfinite(info.unexplained):  # nan: no data term or no registration
                 last_registration = (info.registered, info.unexplained)

@@ -1,0 +1,77 @@
+"""Anchor-guided prediction of the sliding: where the video's optical flow says the surface went.
+
+The sliding of section 5 (``000_00387fefe94cc850.txt``) finds each frame's vertices from a guess
+projected onto the surface and relaxed as rigidly as possible; geometry alone does not say
+where along the surface the skin went, which is where the correspondences drift. The anchor
+tracks of the appearance (:func:`fourd.appearance.anchors`: optical flow lifted to 3D and
+pruned, thesis ``004_f87f5acf96d50b57.txt`` section 5.4.1) do: a vertex with anchors near it
+in the previous frame starts the step where they went (:func:`anchor_guide`), and the
+projection and the as-rigid-as-possible solve proceed from there.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+__all__ = ["Guide", "anchor_guide"]
+
+
+class Guide(NamedTuple):
+    """Guided start positions of one sliding step.
+
+    vertices : int64 [G]
+        The vertices with anchors near them.
+    positions : float64 [G, 3]
+        Where the anchors say they went.
+    weight : float64 [G]
+        How much to trust that, in [0, 1] (anchor support and confidence).
+    """
+
+    vertices: np.ndarray
+    positions: np.ndarray
+    weight: np.ndarray
+
+
+def anchor_guide(
+    reference: np.ndarray,
+    source: np.ndarray,
+    target: np.ndarray,
+    confidence: np.ndarray,
+    *,
+    radius: float,
+    support: float = 3.0,
+) -> Guide:
+    """Per vertex of ``reference`` [N, 3] (the tracked positions in the anchors' first frame),
+    the Gaussian-weighted mean displacement ``target - source`` of the anchors [M, 3] within
+    ``2 radius`` (weights ``confidence * exp(-d^2 / radius^2)``); a vertex whose summed weight
+    reaches ``support`` gets weight 1 (less in proportion below it).
+
+    Examples
+    --------
+    >>> grid = np.stack(np.meshgrid(np.linspace(0, 1, 11), np.linspace(0, 1, 11), [0.0]), -1).reshape(-1, 3)
+    >>> guide = anchor_guide(grid, grid, grid + [0.1, 0, 0], np.ones(len(grid)), radius=0.1)
+    >>> bool(np.allclose(guide.positions - grid[guide.vertices], [0.1, 0, 0]))
+    True
+    """
+    reference = np.asarray(reference, dtype=np.float64)
+    if len(source) == 0:
+        empty = np.zeros(0, dtype=np.int64)
+        return Guide(empty, np.zeros((0, 3)), np.zeros(0))
+    tree = cKDTree(np.asarray(source, dtype=np.float64))
+    lists = tree.query_ball_point(reference, 2.0 * radius, workers=-1)
+    counts = np.fromiter((len(item) for item in lists), dtype=np.int64, count=len(reference))
+    rows = np.repeat(np.arange(len(reference)), counts)
+    cols = np.fromiter((j for item in lists for j in item), dtype=np.int64, count=counts.sum())
+    offset = source[cols] - reference[rows]
+    w = np.asarray(confidence, dtype=np.float64)[cols] * np.exp(-np.einsum("ij,ij->i", offset, offset) / radius**2)
+    total = np.bincount(rows, w, minlength=len(reference))
+    displacement = np.stack(
+        [np.bincount(rows, w * (target[cols, c] - source[cols, c]), minlength=len(reference)) for c in range(3)],
+        axis=1,
+    )
+    guided = np.flatnonzero(total > 1e-12)
+    moved = reference[guided] + displacement[guided] / total[guided, None]
+    return Guide(guided, moved, np.minimum(total[guided] / support, 1.0))
