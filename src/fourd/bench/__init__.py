@@ -13,6 +13,7 @@ from fourd.bench.merge import merge_reports
 from fourd.bench.report import COLUMNS, format_cell, format_markdown, write_report
 from fourd.bench.runner import DEFAULT_OUTPUT, QUICK_OUTPUT, RECORD, default_output, run_bench
 from fourd.bench.suite import (
+    APPEARANCE_SCENES,
     HELD_OUT_SCENES,
     PEERS,
     PROTOCOL,
@@ -29,6 +30,7 @@ __all__ = [
     "DEFAULT_OUTPUT",
     "QUICK_OUTPUT",
     "RECORD",
+    "APPEARANCE_SCENES",
     "HELD_OUT_SCENES",
     "PEERS",
     "PROTOCOL",

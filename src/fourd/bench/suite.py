@@ -81,6 +81,18 @@ HELD_OUT_SCENES: tuple[BenchScene, ...] = tuple(
 )
 
 
+#: Appearance variants (issue 52's table), not run by default (``--scenes crane-skin ...``): the
+#: standard scans with a surface colour, and with the rig's calibrated video.
+APPEARANCE_SCENES: tuple[BenchScene, ...] = (
+    BenchScene("crane", frames=20, options={"start": 0, "step": 2}, label="crane-skin", appearance="skin"),
+    BenchScene("crane", frames=20, options={"start": 0, "step": 2}, label="crane-skin-video",
+               appearance="skin", video=True),
+    BenchScene("bending-arm", label="bending-arm-cloth-video", appearance="cloth", video=True),
+    BenchScene("squash-ball", label="squash-ball-cloth-video", appearance="cloth", video=True),
+    BenchScene("waving-sheet", label="waving-sheet-cloth-video", appearance="cloth", video=True),
+)
+
+
 #: ``--quick``: two small procedural scenes, 4 frames, coarse cameras (CI-sized).
 QUICK_SCENES: tuple[BenchScene, ...] = (
     BenchScene("squash-ball", frames=4, resolution=96),
@@ -108,7 +120,7 @@ def select_scenes(scenes, quick: bool) -> list[BenchScene]:
     default = QUICK_SCENES if quick else STANDARD_SCENES
     if scenes is None:
         return list(default)
-    table = {s.key: s for s in (default if quick else STANDARD_SCENES + HELD_OUT_SCENES)}
+    table = {s.key: s for s in (default if quick else STANDARD_SCENES + HELD_OUT_SCENES + APPEARANCE_SCENES)}
     from fourd.synth.scenes import SCENES
 
     chosen = []
@@ -118,7 +130,7 @@ def select_scenes(scenes, quick: bool) -> list[BenchScene]:
         elif name in SCENES:
             chosen.append(BenchScene(name, frames=4, resolution=96) if quick else BenchScene(name))
         else:
-            known = list(SCENES) + [h.key for h in HELD_OUT_SCENES]
+            known = list(SCENES) + [h.key for h in HELD_OUT_SCENES + APPEARANCE_SCENES]
             raise InputError(f"unknown scene {name!r}; known scenes: {', '.join(known)}")
     return chosen
 
