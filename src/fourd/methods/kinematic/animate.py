@@ -159,6 +159,7 @@ def animate(
         previous_shape=options.slide_memory,
         edge_stiffness=edge_stiffness,
         anchor_pull=options.anchor_pull,
+        anchor_gate=options.anchor_gate,
     )
 
     def chain(stage, slide_times, data_frames, surface_frames):

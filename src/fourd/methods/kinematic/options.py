@@ -142,6 +142,10 @@ class Options:
         With ``video_anchors``: how strongly each step's as-rigid-as-possible solve pulls the
         vertices with anchors towards where the anchors went, in units of the vertex's own
         stiffness (0: the anchors only move the start of the step).
+    anchor_gate : float
+        With ``video_anchors``: an anchor whose target lies farther than this many template
+        edges from where the step's prediction puts the vertex counts less (Gaussian weight;
+        0: every anchor counts fully).
     cache_dir : str or None
         Folder where the finished stages are kept: each prepared frame, the 4D fit (each
         window), the urshape and each slid frame, keyed by the input data and the options
@@ -178,6 +182,7 @@ class Options:
     seed: int = 0
     video_anchors: bool = False
     anchor_pull: float = 1.0
+    anchor_gate: float = 0.0
     cache_dir: str | None = None
 
     def __post_init__(self):

@@ -183,6 +183,9 @@ class SlideOptions:
         with 4 iterations and 0.0027 / 0.0032 with 1 (``experiments/registration_oracle.py
         --slide-iterations``). See the ``kinematic`` method's ``slide_memory`` for what 0.8
         measured.
+    anchor_gate : float
+        Anchors farther than this many template edges from the step's prediction count less
+        (Gaussian weight; 0: all count fully).
     anchor_pull : float
         Weight of the anchor-guided positions (:mod:`.guide`) in the as-rigid-as-possible
         solve of each step, in units of each vertex's stiffness (0: they only move the start).
@@ -216,6 +219,7 @@ class SlideOptions:
     previous_shape: float = 0.0
     edge_stiffness: tuple | None = field(default=None, compare=False, repr=False)
     anchor_pull: float = 0.0
+    anchor_gate: float = 0.0
 
     def __post_init__(self):
         if not 0.0 <= self.previous_shape < 1.0:
@@ -351,6 +355,13 @@ def slide_step(
                 start = moved
                 if converged:
                     break
+    if guide is not None and len(guide.vertices) and options.anchor_gate > 0:
+        # an anchor may correct the prediction by about what the tracking drifts in a step;
+        # farther off it is more likely the flow's error than the tracking's (shading, fast
+        # thin parts), and counts less
+        gate = options.anchor_gate * pre.edge_length
+        off = np.linalg.norm(guide.positions - start[guide.vertices], axis=1)
+        guide = guide._replace(weight=guide.weight * np.exp(-((off / gate) ** 2)))
     if guide is not None and len(guide.vertices):
         start = start.copy()
         w = guide.weight[:, None]
