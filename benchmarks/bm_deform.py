@@ -90,19 +90,17 @@ def horse() -> None:
                    for a in np.arange(0.0, 1.0, 0.1)]
         x, z = rest[members, 0].mean(), rest[members, 2].mean()
         print(f"  leg at x={x:+.2f} z={z:+.2f}: " + " ".join(f"{p:.2f}" for p in profile))
-    _picture(rest, faces, edges, material.bending)
+    _picture(rest, faces, material)
 
 
-def _picture(rest, faces, edges, bending) -> None:
+def _picture(rest, faces, material) -> None:
     from PIL import Image
 
     from fourd.viz.camera import fit_camera
     from fourd.viz.raster import render
+    from fourd.viz.viewer import vertex_flexibility
 
-    stiffness = np.full(len(rest), np.inf)
-    np.minimum.at(stiffness, edges[:, 0], bending)
-    np.minimum.at(stiffness, edges[:, 1], bending)
-    flexible = (stiffness.max() - stiffness) / max(np.ptp(stiffness), 1e-12)
+    flexible = vertex_flexibility(faces, material, len(rest))
     flexible = np.sqrt(np.clip(flexible / max(np.quantile(flexible, 0.98), 1e-12), 0, 1))
     colors = np.stack([np.full_like(flexible, 0.9), 0.9 * (1 - flexible), 0.9 * (1 - flexible)], axis=1)
     camera = fit_camera(np.array([rest.min(axis=0), rest.max(axis=0)]), azimuth=90, elevation=10)

@@ -93,6 +93,19 @@ def make_options(options_class, values: Mapping[str, Any] | None = None, *, meth
         raise InputError(f"invalid options{' for ' + method if method else ''}: {error}") from None
 
 
+def with_overrides(options_class, options=None, *, what: str, **overrides):
+    """``options`` (default ``options_class()``) with the fields in ``overrides`` replaced;
+    :class:`InputError` naming the unknown ones (``unknown {what} option(s) ...; valid: ...``)."""
+    valid = {f.name for f in dataclasses.fields(options_class)}
+    unknown = sorted(set(overrides) - valid)
+    if unknown:
+        raise InputError(
+            f"unknown {what} option(s) {', '.join(unknown)}; valid: {', '.join(sorted(valid))}"
+        )
+    base = options_class() if options is None else options
+    return dataclasses.replace(base, **overrides) if overrides else base
+
+
 def parse_assignments(assignments: list[str]) -> dict[str, str]:
     """Parse ``["key=value", ...]`` (the command line's ``--set``) into a dict of strings."""
     result = {}

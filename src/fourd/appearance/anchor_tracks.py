@@ -54,7 +54,7 @@ Examples
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 from typing import NamedTuple
 
 import numpy as np
@@ -214,16 +214,9 @@ class Anchors:
 
 def anchor_options(options: AnchorOptions | None = None, **overrides) -> AnchorOptions:
     """An :class:`AnchorOptions` from an options object and/or keyword overrides."""
-    from dataclasses import replace
+    from fourd.options import with_overrides
 
-    valid = {f.name for f in fields(AnchorOptions)}
-    unknown = sorted(set(overrides) - valid)
-    if unknown:
-        raise InputError(
-            f"unknown anchor option(s) {', '.join(unknown)}; valid: {', '.join(sorted(valid))}"
-        )
-    base = AnchorOptions() if options is None else options
-    return replace(base, **overrides) if overrides else base
+    return with_overrides(AnchorOptions, options, what="anchor", **overrides)
 
 
 def _pixel_spacing(camera, points, spacing: float) -> float:

@@ -24,10 +24,11 @@ from scipy.spatial.transform import Rotation
 
 from fourd.deform.algebra import Similarity, blend, similarity_matrices, split_similarity
 from fourd.deform.extrapolation import blending_weights
-from fourd.deform.material import Material, uniform_material
+from fourd.deform.material import Material
 from fourd.deform.reposition import Repositioning
-from fourd.deform.rotation_search import area_change, binary_search, parabola_search, triangle_areas
+from fourd.deform.rotation_search import area_change, binary_search, parabola_search
 from fourd.errors import InputError
+from fourd.geometry.meshes import face_adjacency, face_areas
 
 __all__ = ["Deformer"]
 
@@ -78,8 +79,11 @@ class Deformer:
         self.faces = np.asarray(faces, dtype=np.int64)
         if self.rest.ndim != 2 or self.rest.shape[1] != 3 or self.faces.ndim != 2 or self.faces.shape[1] != 3:
             raise InputError("rest must be [N, 3] and faces [F, 3]")
-        self.material = uniform_material(self.faces) if material is None else material
-        self.material.check(self.faces)
+        pairs, _ = face_adjacency(self.faces)
+        if material is None:
+            material = Material(np.ones(len(pairs)), np.ones(len(self.faces)))  # uniform
+        self.material = material
+        self.material.check(self.faces, pairs)
         if search not in ("binary", "parabola"):
             raise InputError(f"search must be binary or parabola, got {search!r}")
         self.search = search
@@ -101,13 +105,15 @@ class Deformer:
         self.fixed = np.asarray(fixed, dtype=np.int64).ravel()
         bending = self.material.bending
         if self.material.anisotropic:
-            self.axis_weights = np.stack([blending_weights(self.faces, bending[:, c], self.anchors) for c in range(3)])
+            self.axis_weights = np.stack(
+                [blending_weights(self.faces, bending[:, c], self.anchors, pairs=pairs) for c in range(3)]
+            )
             self.weights = self.axis_weights.mean(axis=0)
         else:
             self.axis_weights = None
-            self.weights = blending_weights(self.faces, bending, self.anchors)
+            self.weights = blending_weights(self.faces, bending, self.anchors, pairs=pairs)
         self.system = Repositioning(self.rest, self.faces, self.material.shearing, fixed=self.fixed, handles=self.handles)
-        self.rest_areas = triangle_areas(self.rest, self.faces)
+        self.rest_areas = face_areas(self.rest, self.faces)
         self.angles = np.zeros(len(self.handles))
 
     def triangle_transforms(self, anchors: Similarity) -> np.ndarray:

@@ -25,7 +25,9 @@ __all__ = ["blending_weights"]
 SCREEN = 1e-12
 
 
-def blending_weights(faces: np.ndarray, bending: np.ndarray, anchors: np.ndarray) -> np.ndarray:
+def blending_weights(
+    faces: np.ndarray, bending: np.ndarray, anchors: np.ndarray, *, pairs: np.ndarray | None = None
+) -> np.ndarray:
     """Weights [F, K] of ``K`` anchor triangles for every triangle (rows sum to 1 where
     connected to an anchor).
 
@@ -37,6 +39,8 @@ def blending_weights(faces: np.ndarray, bending: np.ndarray, anchors: np.ndarray
         :func:`fourd.geometry.meshes.face_adjacency`).
     anchors : int [K]
         The anchor triangles (distinct face indices).
+    pairs : int [E, 2], optional
+        :func:`fourd.geometry.meshes.face_adjacency` of ``faces``, when already computed.
 
     Examples
     --------
@@ -51,7 +55,7 @@ def blending_weights(faces: np.ndarray, bending: np.ndarray, anchors: np.ndarray
         raise InputError("material-aware deformation needs at least one anchor triangle")
     if anchors.min() < 0 or anchors.max() >= count or len(np.unique(anchors)) != len(anchors):
         raise InputError(f"anchor triangles must be distinct face indices below {count}")
-    pairs, _ = face_adjacency(faces)
+    pairs = face_adjacency(faces)[0] if pairs is None else pairs
     bending = np.asarray(bending, dtype=np.float64)
     i, j = pairs[:, 0], pairs[:, 1]
     adjacency = sp.coo_matrix((np.r_[bending, bending], (np.r_[i, j], np.r_[j, i])), shape=(count, count)).tocsr()

@@ -60,9 +60,10 @@ class Material:
         """Whether the bending stiffness has one value per rotation axis."""
         return self.bending.ndim == 2
 
-    def check(self, faces: np.ndarray) -> None:
-        """Raise :class:`~fourd.errors.InputError` unless this material fits ``faces``."""
-        pairs, _ = face_adjacency(faces)
+    def check(self, faces: np.ndarray, pairs: np.ndarray | None = None) -> None:
+        """Raise :class:`~fourd.errors.InputError` unless this material fits ``faces``
+        (``pairs``: their :func:`~fourd.geometry.meshes.face_adjacency`, when known)."""
+        pairs = face_adjacency(faces)[0] if pairs is None else pairs
         if len(self.shearing) != len(faces) or len(self.bending) != len(pairs):
             raise InputError(
                 f"the material has {len(self.shearing)} faces and {len(self.bending)} edges, "

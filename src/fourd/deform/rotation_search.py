@@ -16,18 +16,14 @@ from collections.abc import Callable
 
 import numpy as np
 
-__all__ = ["area_change", "binary_search", "parabola_search", "triangle_areas"]
+from fourd.geometry.meshes import face_areas
 
-
-def triangle_areas(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    """Areas [F] of the triangles."""
-    v1, v2, v3 = (vertices[faces[:, k]] for k in range(3))
-    return 0.5 * np.linalg.norm(np.cross(v2 - v1, v3 - v1), axis=1)
+__all__ = ["area_change", "binary_search", "parabola_search"]
 
 
 def area_change(rest_areas: np.ndarray, vertices: np.ndarray, faces: np.ndarray, shearing: np.ndarray) -> float:
     """The area-preserving functional ``sum_i (psi_i (A_i - A'_i))^2``."""
-    return float(np.sum((shearing * (rest_areas - triangle_areas(vertices, faces))) ** 2))
+    return float(np.sum((shearing * (rest_areas - face_areas(vertices, faces))) ** 2))
 
 
 def binary_search(

@@ -118,14 +118,10 @@ def uniform_laplacian(vertex_count: int, faces: np.ndarray) -> sp.csr_matrix:
 
 def mass_matrix(vertices: np.ndarray, faces: np.ndarray) -> sp.dia_matrix:
     """Lumped (barycentric) mass matrix: a third of the incident triangle areas per vertex."""
+    from fourd.geometry.meshes import face_areas
+
     vertices, faces = _check(vertices, faces)
-    area = 0.5 * np.linalg.norm(
-        np.cross(
-            vertices[faces[:, 1]] - vertices[faces[:, 0]],
-            vertices[faces[:, 2]] - vertices[faces[:, 0]],
-        ),
-        axis=1,
-    )
+    area = face_areas(vertices, faces)
     mass = np.bincount(faces.ravel(), weights=np.repeat(area / 3.0, 3), minlength=len(vertices))
     return sp.diags(mass)
 

@@ -25,6 +25,12 @@ def _triple_products(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     return np.einsum("ij,ij->i", tri[:, 0], np.cross(tri[:, 1], tri[:, 2]))
 
 
+def face_areas(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """Triangle areas ``[F]`` (input units squared)."""
+    a = vertices[faces[:, 0]]
+    return 0.5 * np.linalg.norm(np.cross(vertices[faces[:, 1]] - a, vertices[faces[:, 2]] - a), axis=1)
+
+
 def face_volumes(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     """Each face's signed volume ``a . (b x c) / 6`` against the origin [F]: their sum over a
     closed mesh is the volume it encloses (positive for outward-oriented faces)."""

@@ -48,6 +48,7 @@ from fourd.geometry.outliers import distance_ratio_inliers
 from fourd.geometry.surface_fit import fit_along_normals
 from fourd.methods import flow, kinematic, watertight
 from fourd.methods.base import Reconstruction
+from fourd.methods.kinematic.options import OUTLIER_NEIGHBOURS
 from fourd.sequence import PointCloudSequence
 
 log = logging.getLogger("fourd.methods.auto")
@@ -232,9 +233,11 @@ def fit_to_frames(seq: PointCloudSequence, animation: AnimatedMesh, options: Opt
     as it is."""
     if not options.fit_frames or len(animation.vertices) != len(seq.frames):
         return animation
+    # the outliers kinematic's frame preparation removes (its test and its threshold)
+    factor, k = kinematic.Options().outlier_factor, OUTLIER_NEIGHBOURS
     frames = [
-        frame.points[distance_ratio_inliers(frame.points, k=8, factor=3.0)]
-        if len(frame.points) > 9 else frame.points
+        frame.points[distance_ratio_inliers(frame.points, k=k, factor=factor)]
+        if len(frame.points) > k + 1 else frame.points
         for frame in seq.frames
     ]
     spacing = point_spacing(frames[0])

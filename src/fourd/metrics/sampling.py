@@ -12,6 +12,8 @@ from typing import NamedTuple
 import numpy as np
 from scipy.spatial import cKDTree
 
+from fourd.geometry.meshes import face_areas  # noqa: F401 (re-exported: metrics.sampling.face_areas)
+
 
 class SurfaceSamples(NamedTuple):
     """Points on a triangle mesh with where they came from.
@@ -32,12 +34,6 @@ class SurfaceSamples(NamedTuple):
     faces: np.ndarray
     barycentric: np.ndarray
     vertices: np.ndarray
-
-
-def face_areas(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    """Triangle areas ``[F]`` (input units squared)."""
-    a = vertices[faces[:, 0]]
-    return 0.5 * np.linalg.norm(np.cross(vertices[faces[:, 1]] - a, vertices[faces[:, 2]] - a), axis=1)
 
 
 def sample_surface(

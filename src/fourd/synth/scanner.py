@@ -39,7 +39,7 @@ spherical flipping and the convex hull).
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass, fields, replace
+from dataclasses import dataclass
 from typing import NamedTuple
 
 import numpy as np
@@ -616,14 +616,9 @@ def scan_options(options: ScanOptions | None = None, **overrides) -> ScanOptions
     """A :class:`ScanOptions` from an options object and/or keyword overrides."""
     if options is not None and not isinstance(options, ScanOptions):
         raise InputError(f"options must be a ScanOptions, got {type(options).__name__}")
-    valid = {f.name for f in fields(ScanOptions)}
-    unknown = sorted(set(overrides) - valid)
-    if unknown:
-        raise InputError(
-            f"unknown scan option(s) {', '.join(unknown)}; valid: {', '.join(sorted(valid))}"
-        )
-    base = ScanOptions() if options is None else options
-    return replace(base, **overrides) if overrides else base
+    from fourd.options import with_overrides
+
+    return with_overrides(ScanOptions, options, what="scan", **overrides)
 
 
 def scan(truth, options: ScanOptions | None = None, **overrides) -> PointCloudSequence:

@@ -10,7 +10,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from fourd.geometry.laplacian import laplacian_smooth
-from fourd.geometry.meshes import face_volumes
+from fourd.geometry.meshes import face_areas, face_volumes
 from fourd.geometry.normals import vertex_normals
 
 log = logging.getLogger("fourd.methods.flow")
@@ -23,8 +23,7 @@ def _mesh_volume(vertices: np.ndarray, faces: np.ndarray) -> float:
 
 def _mesh_area(vertices: np.ndarray, faces: np.ndarray) -> float:
     """Surface area of a triangle mesh."""
-    a, b, c = (vertices[faces[:, k]] for k in range(3))
-    return float(0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1).sum())
+    return float(face_areas(vertices, faces).sum())
 
 
 def _volume_gradient(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
