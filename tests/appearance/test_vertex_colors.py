@@ -7,7 +7,7 @@ import pytest
 
 from fourd.animation import AnimatedMesh
 from fourd.appearance import vertex_colors
-from fourd.appearance.vertex_colors import nearest_observed_frame
+from fourd.appearance.vertex_colors import frame_vertex_colors, nearest_observed_frame
 from fourd.errors import InputError
 from fourd.sequence import Frame, PointCloudSequence
 
@@ -57,3 +57,17 @@ def test_nearest_observed_frame_both_ways_and_never():
     observed = np.array([[0, 0], [0, 0], [1, 0], [0, 0], [0, 0], [0, 0], [1, 0]], bool)
     assert nearest_observed_frame(observed)[:, 0].tolist() == [2, 2, 2, 2, 2, 6, 6]
     assert nearest_observed_frame(observed)[:, 1].tolist() == [-1] * 7
+
+
+def test_one_frames_colours_are_that_row_of_all_frames_colours():
+    seq, vertices = _scene()
+    vertices[0, 0] = [5.0, 5, 5]  # filled in at frame 0: takes frame 1's colour
+    observed = np.ones((3, 2), bool)
+    observed[0, 0] = False
+    anim = AnimatedMesh(np.zeros((0, 3), int), vertices, observed=observed)
+    every = vertex_colors(anim, seq)
+    for frame in (0, 2, -1):
+        assert np.array_equal(frame_vertex_colors(anim, seq, frame), every[frame])
+    assert np.allclose(frame_vertex_colors(anim, seq)[0], [0.5, 0, 0])
+    with pytest.raises(InputError, match="outside"):
+        frame_vertex_colors(anim, seq, 3)

@@ -5,6 +5,10 @@ input frame at (or nearest to) that frame's time. A vertex that was filled in at
 (``observed`` False: no input data near it) takes instead the colour it had at the nearest
 frame, in time, where it was observed, so holes do not pick up the colour of whatever
 surface happens to be closest; a vertex never observed keeps its nearest point's colour.
+
+:func:`frame_vertex_colors` gives the colours of one frame only (the viewer's "carried colour":
+frame 0's colours kept on every frame, so that vertices drifting over the surface show as
+colours swimming against the input's).
 """
 
 from __future__ import annotations
@@ -16,7 +20,7 @@ from fourd.animation import AnimatedMesh
 from fourd.errors import InputError
 from fourd.sequence import PointCloudSequence
 
-__all__ = ["nearest_observed_frame", "vertex_colors"]
+__all__ = ["frame_vertex_colors", "nearest_observed_frame", "vertex_colors"]
 
 
 def vertex_colors(anim: AnimatedMesh, seq: PointCloudSequence) -> np.ndarray:
@@ -58,6 +62,42 @@ def vertex_colors(anim: AnimatedMesh, seq: PointCloudSequence) -> np.ndarray:
     source = nearest_observed_frame(anim.observed)
     frames = np.where(source >= 0, source, np.arange(anim.frame_count)[:, None])
     return colors[frames, np.arange(anim.vertex_count)[None, :]]
+
+
+def frame_vertex_colors(anim: AnimatedMesh, seq: PointCloudSequence, frame: int = 0) -> np.ndarray:
+    """Vertex colours ``[N, 3]`` in [0, 1] of one frame of ``anim``: row ``frame`` of
+    :func:`vertex_colors`, computed from the few frames it needs (``frame`` itself and, for the
+    vertices filled in there, the nearest frame where each is observed).
+
+    Parameters
+    ----------
+    anim : AnimatedMesh
+    seq : PointCloudSequence
+        The input, with colours on at least one frame.
+    frame : int
+        Index into ``anim``'s frames (negative counts from the end).
+
+    Raises
+    ------
+    InputError
+        ``frame`` is outside the animation, or no input frame has colours.
+
+    Examples
+    --------
+    >>> from fourd.sequence import Frame
+    >>> seq = PointCloudSequence((Frame(np.eye(3), colors=np.eye(3)),))
+    >>> anim = AnimatedMesh(np.zeros((0, 3), int), [[[0.9, 0, 0], [0, 0, 1.1]]] * 2)
+    >>> frame_vertex_colors(anim, seq).tolist()
+    [[1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]
+    """
+    if not -anim.frame_count <= int(frame) < anim.frame_count:
+        raise InputError(f"frame {frame} outside the animation's {anim.frame_count} frames")
+    frame = int(frame) % anim.frame_count
+    source = nearest_observed_frame(anim.observed)[frame]
+    source = np.where(source >= 0, source, frame)  # never observed: its own nearest point
+    frames, row = np.unique(source, return_inverse=True)
+    needed = AnimatedMesh(anim.faces, anim.vertices[frames], times=anim.times[frames])
+    return vertex_colors(needed, seq)[row, np.arange(anim.vertex_count)]
 
 
 def nearest_observed_frame(observed: np.ndarray) -> np.ndarray:
