@@ -1,4 +1,5 @@
 import base64
+import io
 import json
 import re
 from pathlib import Path
@@ -167,3 +168,104 @@ def test_the_page_has_an_error_legend_and_whole_metric_keys(tmp_path):
     css = (tmp_path / "v" / "viewer.css").read_text()
     assert "break-all" not in css and "td.fourd-key" in css
     assert 'createElement("wbr")' in page
+
+
+# ---------------------------------------------------------------- carried colour and video
+
+
+@pytest.fixture(scope="module")
+def filmed():
+    """A small filmed capture: 3 frames of a deforming sphere, 2 cameras, coloured points,
+    48-pixel images (the sizes of tests/appearance's small video scenes)."""
+    import fourd
+
+    anim = deforming_sphere(frames=3)
+    anim = AnimatedMesh(anim.faces, anim.vertices)  # every vertex observed
+    scans = fourd.synth.scan(
+        anim, resolution=32, cameras=2, appearance="cloth", video=True, video_resolution=48,
+        outliers=0.0,
+    )
+    return anim, scans
+
+
+def test_carried_colours_are_frame_0s_vertex_colours_on_every_frame(filmed):
+    from fourd.appearance import vertex_colors
+
+    anim, scans = filmed
+    data = viewer.viewer_data(anim, scans=scans, carried_colors=True)
+    carried = decode(data["carriedColors"], "u1", (anim.vertex_count, 3))
+    frame0 = vertex_colors(anim, scans)[0]
+    assert np.abs(carried / 255.0 - frame0).max() <= 0.5 / 255 + 1e-9
+    # one array for all frames: the page sets it on every frame, where the error colouring
+    # has one per frame
+    assert "errors" not in data and data["frameCount"] == 3
+    # the points beside them, in their own colours per frame
+    assert len(data["pointColors"]) == len(data["points"]) == 3
+    for t, (points, colours) in enumerate(zip(data["points"], data["pointColors"], strict=True)):
+        count = len(scans[t].points)
+        assert np.allclose(decode(points, "<f4", (count, 3)), scans[t].points, atol=1e-6)
+        assert np.abs(decode(colours, "u1", (count, 3)) / 255.0 - scans[t].colors).max() <= 0.5 / 255 + 1e-9
+    # off unless asked, or asked as None ("when the input has colours")
+    assert "carriedColors" not in viewer.viewer_data(anim, scans=scans)
+    assert "carriedColors" in viewer.viewer_data(anim, scans=scans, carried_colors=None)
+
+
+def test_video_panel_has_one_capped_image_per_frame_and_camera(filmed):
+    from PIL import Image
+
+    anim, scans = filmed
+    data = viewer.viewer_data(anim, scans=scans, video=True, video_size=20)
+    panel = data["video"]
+    assert panel["downscaled"] and panel["size"] == 20
+    assert [c["name"] for c in panel["cameras"]] == list(scans.video.names)
+    for c, camera in enumerate(panel["cameras"]):
+        assert (camera["width"], camera["height"]) == (48, 48)
+        assert (camera["shownWidth"], camera["shownHeight"]) == (20, 20)
+        assert np.allclose(camera["K"], scans.video.cameras[c].K)
+        assert len(camera["images"]) == anim.frame_count
+        for t, url in enumerate(camera["images"]):
+            assert url.startswith("data:image/jpeg;base64,")
+            image = Image.open(io.BytesIO(base64.b64decode(url.split(",", 1)[1])))
+            assert image.size == (20, 20)
+            full = scans.video.image(c, t).mean(axis=(0, 1))
+            assert np.abs(np.asarray(image.convert("RGB")).mean(axis=(0, 1)) - full).max() < 12
+    whole = viewer.viewer_data(anim, scans=scans, video=None)["video"]  # None: when there is one
+    assert not whole["downscaled"] and whole["cameras"][0]["shownWidth"] == 48
+
+
+def test_video_panel_follows_the_input_frame_of_each_result_frame(filmed):
+    anim, scans = filmed
+    every_other = anim.select(0, 3, 2)  # result frames at times 0 and 2
+    panel = viewer.viewer_data(every_other, scans=scans, video=True)["video"]
+    full = viewer.viewer_data(anim, scans=scans, video=True)["video"]
+    assert panel["cameras"][1]["images"] == [full["cameras"][1]["images"][t] for t in (0, 2)]
+
+
+def test_carried_colours_and_video_refuse_what_cannot_give_them(tmp_path, filmed):
+    from fourd.io.frames import write_frames
+
+    anim, scans = filmed
+    plain = PointCloudSequence.from_arrays([v[::3] for v in anim.vertices])
+    plain_folder = tmp_path / "plain"
+    write_frames(plain, plain_folder)
+    with pytest.raises(InputError, match=f"{plain_folder}: has no colours"):
+        viewer.viewer_data(anim, scans=plain_folder, carried_colors=True)
+    with pytest.raises(InputError, match=f"{plain_folder}: has no video"):
+        viewer.viewer_data(anim, scans=plain_folder, video=True)
+    with pytest.raises(InputError, match="need the input scans"):
+        viewer.viewer_data(anim, carried_colors=True)
+    with pytest.raises(InputError, match="needs the input scans"):
+        viewer.viewer_data(anim, video=True)
+    sequence = MeshSequence(  # the last frame with its own connectivity
+        tuple(anim.frame(i) for i in range(2)) + ((anim.vertices[2], anim.faces[1:]),)
+    )
+    results = pytest.importorskip("fourd.io.results")
+    results.save(sequence, tmp_path / "meshes")
+    with pytest.raises(InputError, match=r"meshes: carried colours need an animated mesh"):
+        viewer.write_viewer(tmp_path / "meshes", tmp_path / "v", scans=scans, carried_colors=True)
+    assert not (tmp_path / "v").exists()  # nothing written for a bad request
+    with pytest.raises(InputError, match="video size"):
+        viewer.viewer_data(anim, scans=scans, video=True, video_size=4)
+    # asked as None, neither is an error: a mesh sequence and plain points just go without
+    data = viewer.viewer_data(sequence, scans=plain, carried_colors=None, video=None)
+    assert "carriedColors" not in data and "video" not in data

@@ -9,8 +9,20 @@ alike, and loads nothing from the network. The same pieces are also written besi
 (``viewer.js``, ``viewer.css``, ``three.fourd.min.js``, ``result.glb``,
 ``metrics.json``) for reuse.
 
+With the input scans it can also show whether the texture swims (:func:`write_viewer`'s
+``carried_colors`` and ``video``; ``fourd view --input``):
+
+- the "carried colour" colouring: each vertex keeps the colour the input had under it at frame
+  0 (:func:`carried_vertex_colors`), on every frame, and the input points are drawn in their
+  own colours of each frame; vertices drifting over the surface show as colours sliding
+  against the points';
+- the video panel (:mod:`fourd.viz.video_panel`): the selected camera's image of the frame
+  shown (downscaled to ``video_size`` pixels at most, the page says when), with the mesh's
+  outline projected over it through the camera's calibration, following the frame slider and
+  playback.
+
 The page sets ``window.fourdReady = true`` once loaded and exposes ``window.fourdSetFrame(i)``
-(used by the browser test).
+and ``window.fourdVideo()`` (used by the browser test).
 """
 
 from __future__ import annotations
@@ -32,6 +44,7 @@ from fourd.io.atomic import atomic_path
 from fourd.io.results import as_result
 from fourd.jsonable import jsonable
 from fourd.viz import texture as tex
+from fourd.viz.video_panel import VIDEO_SIZE, video_panel
 
 log = logging.getLogger("fourd.viz.viewer")
 
@@ -72,11 +85,26 @@ def _load_metrics(metrics):
         raise InputError(f"cannot read the metrics JSON ({exc})", path) from exc
 
 
-def _subsample(points: np.ndarray, limit: int, seed: int) -> np.ndarray:
-    if len(points) <= limit:
-        return points
+def _subsample(count: int, limit: int, seed: int) -> np.ndarray:
+    """Indices of at most ``limit`` of ``count`` points, in order (a seeded draw beyond it)."""
+    if count <= limit:
+        return np.arange(count)
     rng = np.random.default_rng(seed)
-    return points[np.sort(rng.choice(len(points), size=limit, replace=False))]
+    return np.sort(rng.choice(count, size=limit, replace=False))
+
+
+def _point_colors(frame) -> np.ndarray:
+    """A frame's recorded colours [P, 3] in [0, 1], mid grey where it has none."""
+    return frame.colors if frame.colors is not None else np.full((len(frame.points), 3), 0.5)
+
+
+def input_frames(scans, result) -> np.ndarray:
+    """For each result frame, the input frame shown beside it: the same index when the counts
+    agree, else the input frame nearest in time; int64 ``[T]``."""
+    if len(scans.frames) == result.frame_count:
+        return np.arange(result.frame_count)
+    times = np.asarray(scans.times)
+    return np.abs(times[None, :] - np.asarray(result.times)[:, None]).argmin(axis=1)
 
 
 def _write_glb(result, outdir: Path) -> Path | None:
@@ -98,6 +126,17 @@ def _write_glb(result, outdir: Path) -> Path | None:
         log.warning("could not write %s (%s): the viewer plays the inlined frames only", path, exc)
         return None
     return path if path.exists() else None
+
+
+def carried_vertex_colors(anim: AnimatedMesh, scans, source=None) -> np.ndarray:
+    """The "carried colour" [N, 3] in [0, 1]: frame 0's vertex colours from the input's
+    colours (:func:`fourd.appearance.vertex_colors.frame_vertex_colors`), kept on every frame;
+    InputError naming ``source`` (the input's path) when the input has no colours."""
+    from fourd.appearance.vertex_colors import frame_vertex_colors
+
+    if not any(frame.colors is not None for frame in scans.frames):
+        raise InputError("has no colours to carry to the vertices (its frames hold none)", source)
+    return frame_vertex_colors(anim, scans, 0)
 
 
 def vertex_flexibility(faces: np.ndarray, material, vertex_count: int) -> np.ndarray:
@@ -129,11 +168,23 @@ def viewer_data(
     cells: float = 10.0,
     fps: float | None = None,
     material=None,
+    carried_colors: bool | None = False,
+    video: bool | None = False,
+    video_size: int = VIDEO_SIZE,
+    source=None,
 ) -> dict:
     """The page's data (``window.FOURD_DATA``) as a JSON-ready dict; arrays are base64 of
-    little-endian float32 / uint32 / uint8."""
+    little-endian float32 / uint32 / uint8 (options: :func:`write_viewer`; ``source``: the
+    result's path, named in error messages, by default ``result`` when it is a path)."""
+    if source is None and isinstance(result, (str, os.PathLike)):
+        source = result
     result = as_result(result)
     animated = isinstance(result, AnimatedMesh)
+    if carried_colors and not animated:
+        raise InputError(
+            "carried colours need an animated mesh (one connectivity), not per-frame meshes",
+            source,
+        )
     frames0 = result.frame(0)[0]
     box = np.stack([frames0.min(axis=0), frames0.max(axis=0)]) if len(frames0) else result.bounds()
     space = tex.texture_space(box, cells=cells)
@@ -200,18 +251,38 @@ def viewer_data(
             "Flexibility of the learned material at each vertex (1 minus the smallest bending "
             "stiffness of its edges, scaled to the mesh's range): pale is stiff, dark bends."
         )
+    if (carried_colors or video) and scans is None:
+        wanted = "carried colours need" if carried_colors else "the video panel needs"
+        raise InputError(f"{wanted} the input scans (fourd view --input FOLDER)")
     if scans is not None:
+        where = None if hasattr(scans, "frames") else scans  # the input's path, for errors
         scans = _load_scans(scans)
-        pts = [_subsample(f.points, MAX_POINTS_PER_FRAME, i) for i, f in enumerate(scans.frames)]
-        if len(pts) != result.frame_count:
-            times = np.asarray(scans.times)
-            pts = [pts[int(np.argmin(np.abs(times - t)))] for t in result.times]
+        if carried_colors is None:  # when the input can give them
+            carried_colors = animated and any(f.colors is not None for f in scans.frames)
+        if video is None:
+            video = scans.video is not None
+        shown = input_frames(scans, result)
+        kept = [_subsample(len(f.points), MAX_POINTS_PER_FRAME, i) for i, f in enumerate(scans.frames)]
+        pts = [scans.frames[k].points[kept[k]] for k in shown]
         data["points"] = [_b64(p, "<f4") for p in pts]
         all_points = np.concatenate(pts)
         if len(all_points):
             from fourd.geometry.neighbors import point_spacing
 
             data["pointSize"] = float(point_spacing(pts[0]) * 0.6) if len(pts[0]) > 3 else None
+        if carried_colors:
+            carried = carried_vertex_colors(result, scans, where)
+            data["carriedColors"] = _b64(np.round(carried * 255.0), "u1")
+            # the points in their own colours (grey where a frame has none)
+            data["pointColors"] = [
+                _b64(np.round(_point_colors(scans.frames[k])[kept[k]] * 255.0), "u1") for k in shown
+            ]
+        if video:
+            if scans.video is None:
+                raise InputError(
+                    "has no video to show (cameras.json and video/<camera>/ images)", where
+                )
+            data["video"] = video_panel(scans.video, shown, size=video_size)
     first_faces = result.frame(0)[1]
     if len(first_faces) == 0 and len(frames0) > 3:
         from fourd.geometry.neighbors import point_spacing
@@ -263,6 +334,9 @@ def write_viewer(
     title: str | None = None,
     fps: float | None = None,
     material=None,
+    carried_colors: bool = False,
+    video: bool = False,
+    video_size: int = VIDEO_SIZE,
 ) -> Path:
     """Write the viewer folder and return the path of its ``index.html``.
 
@@ -285,21 +359,42 @@ def write_viewer(
     material : Material or path, optional
         A learned material (:func:`fourd.deform.learn_material`) of the result's mesh: the
         colouring shows where it bends (:func:`vertex_flexibility`) instead of the error.
+    carried_colors : bool or None
+        Add the "carried colour" colouring: frame 0's vertex colours taken from the input's
+        colours (:func:`carried_vertex_colors`) and kept on every frame, beside the input points
+        in their own colours; vertices that drift over the surface show as colours swimming
+        against the points'. Needs ``scans`` with colours and an animated mesh (one
+        connectivity). None: when those are there.
+    video : bool or None
+        Show the input's video (``scans.video``: ``cameras.json`` and ``video/<camera>/``) in a
+        panel beside the mesh, the selected camera's image of the frame shown, with the mesh's
+        outline projected over it (:mod:`fourd.viz.video_panel`). Needs ``scans`` with video.
+        None: when the input has video.
+    video_size : int
+        Longest side, in pixels, of the inlined video images (default
+        :data:`~fourd.viz.video_panel.VIDEO_SIZE`); larger ones are downscaled, and the page
+        says so.
 
     Returns
     -------
     Path
         ``outdir/index.html``.
     """
+    source = result if isinstance(result, (str, os.PathLike)) else None
     result = as_result(result)
     outdir = Path(outdir)
     if outdir.exists() and not outdir.is_dir():
         raise InputError("exists and is not a folder", outdir)
     if not outdir.parent.exists():
         raise InputError("the output folder's parent does not exist", outdir.parent)
-    outdir.mkdir(exist_ok=True)
     metrics = _load_metrics(metrics)
-
+    # the data first: a bad request fails before anything is written
+    data = viewer_data(
+        result, truth=truth, scans=scans, metrics=metrics, title=title, fps=fps,
+        material=material, carried_colors=carried_colors, video=video, video_size=video_size,
+        source=source,
+    )
+    outdir.mkdir(exist_ok=True)
     glb_path = _write_glb(result, outdir)
     glb = None
     if glb_path is not None:
@@ -312,11 +407,9 @@ def write_viewer(
                 glb_path,
                 EMBED_GLB_LIMIT,
             )
-    data = viewer_data(
-        result, truth=truth, scans=scans, metrics=metrics, title=title, glb=glb, fps=fps,
-        material=material,
-    )
-    if glb_path is not None and glb is None:
+    if glb is not None:
+        data["glb"] = base64.b64encode(glb).decode("ascii")
+    elif glb_path is not None:
         data["glbUrl"] = glb_path.name
     data_js = _DATA_PREFIX + json.dumps(data, separators=(",", ":")) + ";"
 
