@@ -249,3 +249,29 @@ def test_viewer_fetches_a_large_glb_over_http(tmp_path, serve, monkeypatch):
     assert report["info"]["glb"]["keyCount"] == 4
     (mesh,) = report["glb"][0]["meshes"]
     assert np.allclose(mesh["max"], anim.vertices[3].max(axis=0), atol=1e-4 * anim.diagonal())
+
+
+def test_viewer_shows_carried_colours_and_the_input_video_in_chromium(tmp_path, serve):
+    chromium, node = _require_tooling()
+    import fourd
+
+    anim = _moving_sphere(frames=3)
+    anim = AnimatedMesh(anim.faces, anim.vertices)  # every vertex observed
+    scans = fourd.synth.scan(anim, resolution=48, cameras=2, appearance="cloth", video=True,
+                             video_resolution=64, outliers=0.0)
+    outdir = tmp_path / "view"
+    write_viewer(anim, outdir, scans=scans, carried_colors=True, video=True, video_size=40)
+    report = _drive(node, chromium, serve(outdir) + "/index.html", tmp_path, "--frames", "0,2")
+    _assert_clean(report)
+    assert report["info"]["hasCarried"] and report["info"]["hasVideo"]
+    assert [v["frame"] for v in report["video"]] == [0, 2, 2]
+    assert [v["camera"] for v in report["video"]] == ["cam_0", "cam_0", "cam_1"]
+    for video in report["video"]:
+        assert video["src"] and video["complete"], video
+        assert (video["naturalWidth"], video["naturalHeight"]) == (40, 40)
+        assert video["outlineEdges"] > 10  # the sphere's outline, seen by each camera
+        assert "downscaled from 64\u00d764 to 40\u00d740" in video["note"]
+    assert report["afterToggles"] > 0.03  # carried colour on (the last toggle): still drawn
+    stable = _stable_dir()
+    for shot in report["screenshots"]:
+        shutil.copy(shot, stable / ("carried-" + Path(shot).name))

@@ -6,7 +6,8 @@
 // It waits for window.fourdReady, steps frames with window.fourdSetFrame(i), collects console
 // errors and page errors, reads pixel statistics of the canvas per frame (window.fourdPixels),
 // saves a screenshot per frame into OUTDIR, checks the .glb morph animation when present
-// (window.fourdGlbCheck), presses Play and checks that the frame advances, and optionally
+// (window.fourdGlbCheck), looks at the video panel's image and outline per frame when there is
+// one (window.fourdVideo), presses Play and checks that the frame advances, and optionally
 // opens the same page from a file:// URL.
 "use strict";
 const path = require("path");
@@ -97,6 +98,21 @@ async function openPage(browser, url, report, tag) {
         report.screenshots.push(shot);
         report.frames.push({ requested: i, set, pixels });
       }
+      // the video panel (when the page has one): the image of each frame, loaded, and the
+      // mesh's outline drawn over it; then the next camera
+      if (await page.evaluate(() => window.fourdVideo && window.fourdVideo() !== null)) {
+        report.video = [];
+        const look = async () => {
+          await page.waitForFunction(() => { const v = window.fourdVideo(); return v.src && v.complete && v.naturalWidth > 0; },
+                                     null, { timeout: 10000 }).catch(() => {});
+          report.video.push(await page.evaluate(() => window.fourdVideo()));
+        };
+        for (const i of frames) { await page.evaluate((k) => window.fourdSetFrame(k), i); await look(); }
+        if (report.video[0].cameras > 1) { await page.selectOption("#fourd-camera", "1"); await look(); }
+        const shot = path.join(outdir, "viewer-video.png");
+        await page.screenshot({ path: shot });
+        report.screenshots.push(shot);
+      }
       for (const i of glbFrames) {
         report.glb.push(await page.evaluate((k) => window.fourdGlbCheck(k), i));
       }
@@ -112,7 +128,7 @@ async function openPage(browser, url, report, tag) {
         await page.click("#fourd-play");
       }
       // the toggles must not throw; pictures of the options and of the .glb playback
-      for (const id of ["#fourd-points", "#fourd-filled", "#fourd-errors"]) {
+      for (const id of ["#fourd-points", "#fourd-filled", "#fourd-errors", "#fourd-carried"]) {
         if (await page.$eval(id, (el) => !el.disabled)) await page.click(id);
       }
       await page.selectOption("#fourd-texture", "grid");

@@ -4,9 +4,15 @@
  * well as served over HTTP. It expects the global THREE (three.fourd.min.js: three.js plus
  * GLTFLoader and OrbitControls) and window.FOURD_DATA written by fourd.viz.viewer.
  *
+ * Optional parts, present when the data has them: the "carried colour" colouring (frame 0's
+ * vertex colours kept on every frame, the input points in their own colours beside them) and
+ * the video panel (the input's camera images, one per frame, with the mesh's outline projected
+ * over them through the camera's K, R, t).
+ *
  * Test hooks: window.fourdReady (true once the model and the optional .glb are loaded and
  * frame 0 is drawn), window.fourdSetFrame(i), window.fourdInfo, window.fourdPixels(),
- * window.fourdGlbCheck(i), window.fourdErrors (problems caught while loading).
+ * window.fourdGlbCheck(i), window.fourdVideo(), window.fourdErrors (problems caught while
+ * loading).
  */
 (function () {
   "use strict";
@@ -58,6 +64,18 @@
     }
   }
   var points = (D.points || []).map(function (p) { return decode(p, Float32Array); });
+  // sRGB bytes [3 * n] -> linear floats, the space the shader multiplies colours in
+  var toLinear = [];
+  for (var b = 0; b < 256; b++) { var x = b / 255; toLinear.push(x <= 0.04045 ? x / 12.92 : Math.pow((x + 0.055) / 1.055, 2.4)); }
+  function linearColors(bytes) {
+    if (!bytes) return null;
+    var out = new Float32Array(bytes.length);
+    for (var k = 0; k < bytes.length; k++) out[k] = toLinear[bytes[k]];
+    return out;
+  }
+  var carried = linearColors(decode(D.carriedColors, Uint8Array));            // [N*3] or null
+  var pointColors = (D.pointColors || []).map(function (c) { return linearColors(decode(c, Uint8Array)); });
+  var video = D.video || null;
 
   function textureCoords(pos) {
     var out = new Float32Array(pos.length);
@@ -101,7 +119,9 @@
     fourdClay: { value: srgb(D.palette.clay) },
     fourdTint: { value: srgb(D.palette.tint) },
   };
-  var material = new THREE.MeshLambertMaterial({ color: 0xffffff, side: THREE.DoubleSide });
+  // pushed back a little in depth so that input points lying on the surface draw over it
+  var material = new THREE.MeshLambertMaterial({ color: 0xffffff, side: THREE.DoubleSide,
+    polygonOffset: true, polygonOffsetFactor: 1, polygonOffsetUnits: 1 });
   material.onBeforeCompile = function (shader) {
     Object.assign(shader.uniforms, uniforms);
     shader.vertexShader = shader.vertexShader
@@ -126,8 +146,11 @@
   var geometry = new THREE.BufferGeometry();
   var mesh = new THREE.Mesh(geometry, material);
   scene.add(mesh);
-  var pointCloud = new THREE.Points(new THREE.BufferGeometry(),
-    new THREE.PointsMaterial({ color: 0x1f4e9a, size: D.pointSize || radius * 0.01, sizeAttenuation: true }));
+  var bluePoints = new THREE.PointsMaterial({ color: 0x1f4e9a, size: D.pointSize || radius * 0.01, sizeAttenuation: true });
+  // carried colour: the points in their own recorded colours, drawn larger (about half their
+  // spacing on screen) so that their colour reads against the mesh's between them
+  var ownColorPoints = new THREE.PointsMaterial({ vertexColors: true, size: 3 * (D.pointSize || radius * 0.01), sizeAttenuation: true });
+  var pointCloud = new THREE.Points(new THREE.BufferGeometry(), bluePoints);
   pointCloud.visible = false;
   scene.add(pointCloud);
 
@@ -144,7 +167,8 @@
 
   // ------------------------------------------------------------------ state
   var state = { frame: 0, playing: false, speed: 1, clock: 0, texture: "checker", showPoints: false,
-                showFilled: true, showErrors: false, showGlb: false };
+                showFilled: true, showErrors: false, showCarried: false, showGlb: false,
+                camera: 0, showOutline: true };
   var glb = null; // {root, mixer, clip, keyTimes, meshes}
 
   // frames without triangles (a point-sequence result) are drawn as points, checker-coloured
@@ -155,12 +179,15 @@
     var n = f.positions.length / 3;
     var coords = animated ? texcoordFirst : textureCoords(f.positions);
     var colors = new Float32Array(n * 3);
+    if (state.showCarried && carried) colors.set(carried);
+    else {
     // the light check is darkened a little so points stay visible on the white background
     var dark = uniforms.fourdDark.value, light = uniforms.fourdClay.value.clone().multiplyScalar(0.7);
     for (var v = 0; v < n; v++) {
       var odd = (Math.floor(coords[3 * v]) + Math.floor(coords[3 * v + 1]) + Math.floor(coords[3 * v + 2])) & 1;
       var c = odd ? dark : light;
       colors[3 * v] = c.r; colors[3 * v + 1] = c.g; colors[3 * v + 2] = c.b;
+    }
     }
     vertexPoints.geometry.dispose();
     vertexPoints.geometry = new THREE.BufferGeometry();
@@ -193,7 +220,10 @@
       filled.needsUpdate = true;
     }
     var err = animated ? (errors ? errors.subarray(i * n, (i + 1) * n) : null) : f.errors;
-    if (err && state.showErrors) {
+    if (state.showCarried && carried) {
+      geometry.getAttribute("fourdColor").array.set(carried);
+      geometry.getAttribute("fourdColor").needsUpdate = true;
+    } else if (err && state.showErrors) {
       geometry.getAttribute("fourdColor").array.set(errorColors(err));
       geometry.getAttribute("fourdColor").needsUpdate = true;
     }
@@ -203,10 +233,13 @@
 
   function setPoints(i) {
     if (!points.length) return;
-    var p = points[Math.min(i, points.length - 1)];
+    var k = Math.min(i, points.length - 1);
     pointCloud.geometry.dispose();
     pointCloud.geometry = new THREE.BufferGeometry();
-    pointCloud.geometry.setAttribute("position", new THREE.BufferAttribute(p, 3));
+    pointCloud.geometry.setAttribute("position", new THREE.BufferAttribute(points[k], 3));
+    var own = state.showCarried && pointColors.length > 0;
+    if (own) pointCloud.geometry.setAttribute("color", new THREE.BufferAttribute(pointColors[k], 3));
+    pointCloud.material = own ? ownColorPoints : bluePoints;
   }
 
   function setGlbFrame(i) {
@@ -223,7 +256,7 @@
 
   function applyUniforms() {
     uniforms.fourdMode.value = { none: 0, checker: 1, grid: 2 }[state.texture];
-    uniforms.fourdUseColor.value = state.showErrors && D.hasErrors ? 1 : 0;
+    uniforms.fourdUseColor.value = (state.showCarried && carried) || (state.showErrors && D.hasErrors) ? 1 : 0;
     uniforms.fourdShowFilled.value = state.showFilled ? 1 : 0;
     pointCloud.visible = state.showPoints && points.length > 0;
     if (glb) { glb.root.visible = state.showGlb; mesh.visible = !state.showGlb; }
@@ -240,12 +273,108 @@
     setGeometry(i);
     setPoints(i);
     setGlbFrame(i);
+    setVideo(i);
     var slider = document.getElementById("fourd-frame");
     if (slider) slider.value = String(i);
     var label = document.getElementById("fourd-frame-label");
     if (label) label.textContent = "frame " + i + " / " + (T - 1) + "   t = " + Number(times[i]).toPrecision(4);
     draw();
     return { frame: i, time: times[i] };
+  }
+
+  // ------------------------------------------------------------------ video panel
+  var videoImage = document.getElementById("fourd-video-image");
+  var overlay = document.getElementById("fourd-video-overlay");
+  var edgeCache = [];  // [{faces, edges: Uint32Array [E*4]: a, b, face1, face2 (face2 = -1: border)}]
+  var outlineEdges = 0;
+
+  function faceEdges(faces) {
+    for (var c = 0; c < edgeCache.length; c++) if (edgeCache[c].faces === faces) return edgeCache[c].edges;
+    var seen = new Map(), list = [];
+    var big = 4294967296;
+    for (var f = 0; f < faces.length / 3; f++) {
+      for (var k = 0; k < 3; k++) {
+        var a = faces[3 * f + k], b = faces[3 * f + (k + 1) % 3];
+        var key = a < b ? a * big + b : b * big + a;
+        var at = seen.get(key);
+        if (at === undefined) { seen.set(key, list.length); list.push(a, b, f, -1); }
+        else if (list[at + 3] === -1) list[at + 3] = f;
+      }
+    }
+    var edges = new Int32Array(list);
+    edgeCache.push({ faces: faces, edges: edges });
+    if (edgeCache.length > 4) edgeCache.shift();
+    return edges;
+  }
+
+  // the outline of frame i seen from camera c: border edges of front faces and edges between
+  // a front and a back face, projected with K, R, t (OpenCV convention, pixel centres at
+  // integers) onto the overlay canvas
+  function drawOutline(i, c) {
+    var ctx = overlay.getContext("2d");
+    var box = overlay.getBoundingClientRect();
+    var dpr = window.devicePixelRatio || 1;
+    overlay.width = Math.max(1, Math.round(box.width * dpr));
+    overlay.height = Math.max(1, Math.round(box.height * dpr));
+    ctx.clearRect(0, 0, overlay.width, overlay.height);
+    outlineEdges = 0;
+    if (!state.showOutline) return;
+    var f = frames[i], pos = f.positions, faces = f.faces;
+    if (!faces.length) return;
+    var K = c.K, R = c.R, t = c.t;
+    var center = [0, 1, 2].map(function (j) { return -(R[0][j] * t[0] + R[1][j] * t[1] + R[2][j] * t[2]); });
+    var F = faces.length / 3, front = new Uint8Array(F);
+    for (var q = 0; q < F; q++) {
+      var a = 3 * faces[3 * q], b = 3 * faces[3 * q + 1], d = 3 * faces[3 * q + 2];
+      var ux = pos[b] - pos[a], uy = pos[b + 1] - pos[a + 1], uz = pos[b + 2] - pos[a + 2];
+      var vx = pos[d] - pos[a], vy = pos[d + 1] - pos[a + 1], vz = pos[d + 2] - pos[a + 2];
+      var nx = uy * vz - uz * vy, ny = uz * vx - ux * vz, nz = ux * vy - uy * vx;
+      front[q] = nx * (center[0] - pos[a]) + ny * (center[1] - pos[a + 1]) + nz * (center[2] - pos[a + 2]) > 0 ? 1 : 0;
+    }
+    var sx = overlay.width / c.width, sy = overlay.height / c.height;
+    function pixel(v) {
+      var x = pos[3 * v], y = pos[3 * v + 1], z = pos[3 * v + 2];
+      var cx = R[0][0] * x + R[0][1] * y + R[0][2] * z + t[0];
+      var cy = R[1][0] * x + R[1][1] * y + R[1][2] * z + t[1];
+      var cz = R[2][0] * x + R[2][1] * y + R[2][2] * z + t[2];
+      if (!(cz > 0)) return null;
+      var u = K[0][0] * cx / cz + K[0][1] * cy / cz + K[0][2], w = K[1][1] * cy / cz + K[1][2];
+      return [(u + 0.5) * sx, (w + 0.5) * sy];  // canvas units: pixel (0, 0) covers [0, 1)
+    }
+    var edges = faceEdges(faces);
+    ctx.beginPath();
+    for (var e = 0; e < edges.length; e += 4) {
+      var f1 = edges[e + 2], f2 = edges[e + 3];
+      var outline = f2 < 0 ? front[f1] === 1 : front[f1] !== front[f2];
+      if (!outline) continue;
+      var p = pixel(edges[e]), r = pixel(edges[e + 1]);
+      if (!p || !r) continue;
+      ctx.moveTo(p[0], p[1]); ctx.lineTo(r[0], r[1]);
+      outlineEdges++;
+    }
+    ctx.strokeStyle = "rgba(255, 0, 200, 0.9)";
+    ctx.lineWidth = 1.5 * dpr;
+    ctx.stroke();
+  }
+
+  function setVideo(i) {
+    if (!video) return;
+    var c = video.cameras[state.camera];
+    var src = c.images[Math.min(i, c.images.length - 1)];
+    if (videoImage.getAttribute("src") !== src) videoImage.src = src;
+    drawOutline(i, c);
+  }
+
+  function showCamera(index) {
+    state.camera = Math.max(0, Math.min(video.cameras.length - 1, Number(index) || 0));
+    var c = video.cameras[state.camera];
+    videoImage.width = c.shownWidth; videoImage.height = c.shownHeight;
+    var scaled = c.shownWidth !== c.width || c.shownHeight !== c.height;
+    document.getElementById("fourd-video-note").textContent = scaled
+      ? "Images downscaled from " + c.width + "\u00d7" + c.height + " to " + c.shownWidth + "\u00d7" + c.shownHeight +
+        " pixels to keep the page small (fourd view --video-size)."
+      : "Images at their full size, " + c.width + "\u00d7" + c.height + " pixels.";
+    setVideo(state.frame);
   }
 
   function resize() {
@@ -255,6 +384,7 @@
     camera.aspect = w / h;
     camera.updateProjectionMatrix();
     draw();
+    setVideo(state.frame);
   }
 
   // ------------------------------------------------------------------ playback
@@ -295,11 +425,39 @@
   bind("fourd-texture", "change", function (e) { state.texture = e.target.value; draw(); });
   bind("fourd-points", "change", function (e) { state.showPoints = e.target.checked; draw(); });
   bind("fourd-filled", "change", function (e) { state.showFilled = e.target.checked; draw(); });
-  bind("fourd-errors", "change", function (e) { state.showErrors = e.target.checked; setFrame(state.frame); });
+  bind("fourd-errors", "change", function (e) {
+    state.showErrors = e.target.checked;
+    if (state.showErrors && state.showCarried) { state.showCarried = false; document.getElementById("fourd-carried").checked = false; }
+    setFrame(state.frame);
+  });
+  bind("fourd-carried", "change", function (e) {
+    // one colouring at a time; the checker would darken the colours and the points are the
+    // reference they are compared against, so both follow the toggle
+    state.showCarried = e.target.checked;
+    if (state.showCarried && state.showErrors) { state.showErrors = false; document.getElementById("fourd-errors").checked = false; }
+    state.texture = state.showCarried ? "none" : "checker";
+    document.getElementById("fourd-texture").value = state.texture;
+    if (points.length) { state.showPoints = state.showCarried; document.getElementById("fourd-points").checked = state.showPoints; }
+    setFrame(state.frame);
+  });
+  bind("fourd-camera", "change", function (e) { showCamera(e.target.value); });
+  bind("fourd-outline", "change", function (e) { state.showOutline = e.target.checked; setVideo(state.frame); });
   bind("fourd-glb", "change", function (e) { state.showGlb = e.target.checked; draw(); });
   if (!points.length) document.getElementById("fourd-points").disabled = true;
   if (!observed) document.getElementById("fourd-filled").disabled = true;
   if (!D.hasErrors) document.getElementById("fourd-errors").disabled = true;
+  if (!carried) document.getElementById("fourd-carried").disabled = true;
+  else document.getElementById("fourd-carried-note").hidden = false;
+  if (video) {
+    var select = document.getElementById("fourd-camera");
+    video.cameras.forEach(function (c, k) {
+      var option = document.createElement("option");
+      option.value = String(k); option.textContent = c.name;
+      select.appendChild(option);
+    });
+    document.getElementById("fourd-video").hidden = false;
+    showCamera(0);
+  }
   document.addEventListener("keydown", function (e) {
     if (e.target && e.target.tagName === "SELECT") return;
     if (e.key === " ") { e.preventDefault(); document.getElementById("fourd-play").click(); }
@@ -387,6 +545,15 @@
     }
     return { size: size, grey: grey, inkFraction: ink / (size * size), width: renderer.domElement.width, height: renderer.domElement.height };
   };
+  window.fourdVideo = function () {
+    if (!video) return null;
+    var c = video.cameras[state.camera];
+    return { camera: c.name, cameras: video.cameras.length, frame: state.frame, images: c.images.length,
+             src: videoImage.getAttribute("src") === c.images[state.frame], complete: videoImage.complete,
+             naturalWidth: videoImage.naturalWidth, naturalHeight: videoImage.naturalHeight,
+             shownWidth: c.shownWidth, shownHeight: c.shownHeight, outlineEdges: outlineEdges,
+             note: document.getElementById("fourd-video-note").textContent };
+  };
   window.fourdGlbCheck = function (i) {
     if (!glb) return null;
     setFrame(i);
@@ -416,6 +583,7 @@
     setFrame(0);
     window.fourdInfo = { kind: D.kind, frameCount: T, vertexCount: N, hasErrors: !!D.hasErrors,
                          hasPoints: points.length > 0, hasObserved: !!observed,
+                         hasCarried: !!carried, hasVideo: !!video,
                          glb: glb ? { clips: glb.clipNames, duration: glb.clip ? glb.clip.duration : 0,
                                       keyCount: glb.keyTimes ? glb.keyTimes.length : 0, meshes: glb.meshes.length } : null };
     var status = document.getElementById("fourd-status");
