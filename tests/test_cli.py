@@ -645,6 +645,47 @@ def test_evaluate_and_view_read_every_result_format(tmp_path, capsys, suffix):
     assert data["hasErrors"] and data["metrics"]["chamfer"] == pytest.approx(report["chamfer"])
 
 
+def test_view_shows_carried_colours_and_video_of_a_filmed_input(tmp_path, capsys):
+    """On by default when the input has them; asked for without them: exit 2 naming the file."""
+    import trimesh
+
+    import fourd
+    from fourd.animation import AnimatedMesh, MeshSequence
+    from fourd.io.frames import write_frames
+    from fourd.io.results import save
+    from fourd.sequence import PointCloudSequence
+    from fourd.viz.viewer import read_viewer_data
+
+    sphere = trimesh.creation.icosphere(subdivisions=2)
+    anim = AnimatedMesh(sphere.faces, np.stack([sphere.vertices + [0.1 * t, 0, 0] for t in range(2)]))
+    save(anim, tmp_path / "result.npz")
+    scans = fourd.synth.scan(anim, resolution=24, cameras=1, appearance="cloth", video=True,
+                             video_resolution=40, outliers=0.0)
+    write_frames(scans, tmp_path / "filmed")
+    write_frames(PointCloudSequence.from_arrays(list(anim.vertices)), tmp_path / "plain")
+    result, view = str(tmp_path / "result.npz"), str(tmp_path / "v")
+    assert main(["view", result, "--input", str(tmp_path / "filmed"), "-o", view, "--quiet",
+                 "--video-size", "32"]) == 0
+    data = read_viewer_data(tmp_path / "v" / "index.html")
+    assert "carriedColors" in data and data["video"]["cameras"][0]["shownWidth"] == 32
+    assert main(["view", result, "--input", str(tmp_path / "filmed"), "-o", view, "--quiet",
+                 "--no-video", "--no-carried-colors"]) == 0
+    data = read_viewer_data(tmp_path / "v" / "index.html")
+    assert "carriedColors" not in data and "video" not in data
+    assert main(["view", result, "--input", str(tmp_path / "plain"), "-o", view, "--quiet"]) == 0
+    _run_bad(capsys, ["view", result, "--input", str(tmp_path / "plain"), "-o", view, "--carried-colours"],
+             str(tmp_path / "plain"), "no colours")
+    _run_bad(capsys, ["view", result, "--input", str(tmp_path / "plain"), "-o", view, "--video"],
+             str(tmp_path / "plain"), "no video")
+    _run_bad(capsys, ["view", result, "-o", view, "--video"], "--video needs --input")
+    _run_bad(capsys, ["view", result, "--input", str(tmp_path / "filmed"), "-o", view,
+                      "--video-size", "2"], "video size")
+    meshes = MeshSequence((anim.frame(0), (anim.vertices[1], anim.faces[1:])))
+    save(meshes, tmp_path / "meshes")
+    _run_bad(capsys, ["view", str(tmp_path / "meshes"), "--input", str(tmp_path / "filmed"), "-o", view,
+                      "--carried-colors"], str(tmp_path / "meshes"), "animated mesh")
+
+
 def test_view_help_says_it_writes_a_folder_and_how_to_serve_it(capsys):
     from fourd.viz.viewer import EMBED_GLB_LIMIT
 

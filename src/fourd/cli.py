@@ -325,8 +325,12 @@ def cmd_view(args) -> int:
                             force=args.force)
         # the page's metrics panel: what `fourd evaluate RESULT TRUTH` reports
         metrics = evaluate(result, truth)
+    for flag, value in (("--carried-colors", args.carried_colors), ("--video", args.video)):
+        if value and args.input is None:
+            raise InputError(f"{flag} needs --input (the scans the result was made from)")
     page = write_viewer(result, outdir, truth=truth, scans=args.input, metrics=metrics,
-                        material=args.material)
+                        material=args.material, carried_colors=args.carried_colors,
+                        video=args.video, video_size=args.video_size)
     print(page)
     glb = page.parent / "result.glb"
     if glb.exists() and glb.stat().st_size > EMBED_GLB_LIMIT:
@@ -422,6 +426,13 @@ loads nothing from the network. A .glb over 24 MB is not inlined, and browsers b
 opened from file:// from loading it: to play it, serve the folder and open it over http://
 
   python -m http.server -d OUTDIR      # then open http://localhost:8000/
+
+With --input scans that have colours or video (fourd synth --appearance cloth --video, or
+cameras.json + video/<camera>/ beside the frames), the page also shows whether the texture
+swims: the "carried colour" colouring (frame 0's colours kept on the vertices, beside the
+input points in their own colours) and the input video beside the mesh with its outline:
+
+  fourd view walk.npz --input filmed/ --video-size 320
 """
 
 #: What a RESULT argument may be (every format ``fourd reconstruct -o`` writes).
@@ -430,6 +441,8 @@ _RESULT_HELP = ("a result: .npz, .glb, .usd/.usda/.usdc (needs usd-core), .abc (
 
 
 def build_parser() -> argparse.ArgumentParser:
+    from fourd.viz.video_panel import VIDEO_SIZE
+
     parser = _Parser(
         prog="fourd",
         description="Animated meshes from time-varying point clouds (4D scans).",
@@ -557,13 +570,27 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("result", help=_RESULT_HELP)
     p.add_argument("--truth", help="ground truth (as for fourd evaluate): colours each vertex by "
                                    "its distance to it and fills the metrics panel")
-    p.add_argument("--input", help="the scans (folder) to show as points")
+    p.add_argument("--input", help="the scans (folder) to show as points; with colours or video "
+                                   "it also gives the carried colour and the video panel")
     p.add_argument("-o", "--output", help="folder for the page (default: RESULT-view/)")
     p.add_argument("--open", action="store_true", help="open the page in a browser")
     p.add_argument("--force", action="store_true",
                    help="use a truth whose frame count or bounding box differs from the result's")
     p.add_argument("--material", help="a material from fourd learn-material: colours each vertex "
                                       "by how much the learned material lets it bend")
+    p.add_argument("--carried-colors", "--carried-colours", dest="carried_colors",
+                   action=argparse.BooleanOptionalAction, default=None,
+                   help="a 'carried colour' colouring: frame 0's input colours kept on the vertices "
+                        "of every frame, beside the input points in their own colours, so drift "
+                        "shows as swimming colours (default: on when --input has colours and the "
+                        "result is an animated mesh)")
+    p.add_argument("--video", action=argparse.BooleanOptionalAction, default=None,
+                   help="a panel with the input's video beside the mesh (the chosen camera's image "
+                        "of the frame shown, the mesh's outline over it) (default: on when --input "
+                        "has cameras.json and video/)")
+    p.add_argument("--video-size", type=int, default=VIDEO_SIZE, metavar="PIXELS",
+                   help=f"longest side of the video images inlined in the page; larger ones are "
+                        f"downscaled (default {VIDEO_SIZE})")
 
     p = add("options", "a method's options to change first, with their defaults and what they do "
                        "(--all: the expert ones too)", cmd_options)
