@@ -134,7 +134,7 @@ def _edges(faces: np.ndarray, count: int):
 def boundary_loop_vertices(faces: np.ndarray, count: int) -> np.ndarray:
     """Whether each of ``count`` vertices lies on the boundary (an edge of one face), bool
     ``[count]``; raises ``ValueError`` unless the faces form one disk (connected, Euler
-    characteristic 1, manifold edges)."""
+    characteristic 1, manifold edges, a boundary that never touches itself)."""
     faces = np.asarray(faces, dtype=np.int64)
     keys, shared = _edges(faces, count)
     if shared.max() > 2:
@@ -150,11 +150,12 @@ def boundary_loop_vertices(faces: np.ndarray, count: int) -> np.ndarray:
     parts, _ = vertex_components(faces, count)
     if parts != 1:
         raise ValueError(f"the patch has {parts} connected pieces, a disk has 1")
-    boundary = np.zeros(count, dtype=bool)
     sides = shared == 1
-    boundary[faces[sides]] = True
-    boundary[np.roll(faces, -1, axis=1)[sides]] = True
-    return boundary
+    ends = np.concatenate([faces[sides], np.roll(faces, -1, axis=1)[sides]])
+    boundary_edges = np.bincount(ends, minlength=count)
+    if np.any(boundary_edges > 2):
+        raise ValueError("the patch's boundary touches itself at a vertex (not a disk)")
+    return boundary_edges > 0
 
 
 def corner_angles(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
