@@ -97,6 +97,9 @@ def test_fourd_synth_meshes_writes_per_frame_meshes_that_load_as_meshes(tmp_path
         assert _distance_to(*truth.frame(t), frame.points).max() < 1e-6
     assert len(seq[0].points) != len(seq[1].points) or not np.allclose(seq[0].points, seq[1].points)
     assert main([*argv[:-2], "--meshes", "--appearance", "skin", "--quiet"]) == 2
+    from fourd.info import describe_sequence
+
+    assert "per-frame meshes: 2 of 2 frames have faces" in describe_sequence(seq)
 
 
 def test_the_bench_names_remeshed_variants_and_they_reach_the_scanner(monkeypatch):
