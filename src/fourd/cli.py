@@ -268,7 +268,8 @@ def cmd_synth(args) -> int:
     truth = synth.scene(args.scene, frames=args.frames, seed=args.seed)
     scans = synth.scan(truth, cameras=args.cameras, noise=args.noise, outliers=args.outliers,
                        resolution=args.resolution, seed=args.seed, appearance=args.appearance,
-                       video=args.video, video_resolution=args.video_resolution)
+                       video=args.video, video_resolution=args.video_resolution,
+                       mode="remeshed" if args.meshes else "depth")
     write_synth(truth, scans, args.outdir)
     log.info("wrote %d scanned frames and the truth to %s", len(scans), args.outdir)
     return 0
@@ -520,6 +521,11 @@ def build_parser() -> argparse.ArgumentParser:
                         "(with --appearance cloth unless another is given)")
     p.add_argument("--video-resolution", type=int, default=None, metavar="N",
                    help="image side in pixels (default: --resolution, one pixel per depth ray)")
+    p.add_argument("--meshes", action="store_true",
+                   help="per-frame meshes with perfect geometry instead of scans: each frame's "
+                        "true surface remeshed on its own (a different triangulation every "
+                        "frame, vertices on the truth, at the rays' spacing; no noise or "
+                        "outliers)")
     p.add_argument("--seed", type=int, default=0)
 
     p = add("evaluate", "metrics of a result against ground truth", cmd_evaluate)

@@ -75,6 +75,10 @@ def describe_sequence(seq: PointCloudSequence) -> str:
         f"colours: {'yes' if all(f.colors is not None for f in seq) else 'no'}; "
         f"sensors: {'yes' if seq.has_sensors else 'no'}",
     ]
+    meshes = [len(f.faces) for f in seq if f.faces is not None]
+    if meshes:
+        lines.append(f"per-frame meshes: {len(meshes)} of {len(seq)} frames have faces "
+                     f"(median {int(np.median(meshes))} triangles)")
     if seq.video is not None:
         sizes = sorted({f"{c.width}x{c.height}" for c in seq.video.cameras})
         lines.append(

@@ -39,6 +39,23 @@ def as_points(array, name: str, *, width: int = 3, allow_empty: bool = False) ->
     return values
 
 
+def _frame_faces(faces, count: int) -> np.ndarray | None:
+    """``faces`` as int64 ``[F, 3]`` indexing ``count`` points; ``None`` when there are none."""
+    try:
+        values = np.asarray(faces)
+    except (TypeError, ValueError) as error:
+        raise InputError(f"faces are not numeric ({error})") from None
+    if values.size == 0:
+        return None
+    if not np.issubdtype(values.dtype, np.integer):
+        raise InputError(f"faces must hold integer vertex indices, got {values.dtype}")
+    if values.ndim != 2 or values.shape[1] != 3:
+        raise InputError(f"faces must have shape [F, 3], got {list(values.shape)}")
+    if values.min() < 0 or values.max() >= count:
+        raise InputError(f"faces index points outside the frame's {count} points")
+    return np.ascontiguousarray(values, dtype=np.int64)
+
+
 @dataclass(frozen=True, eq=False)
 class Frame:
     """One scan: points at one time.
@@ -55,6 +72,9 @@ class Frame:
         Positions of the scanner(s) that saw this frame.
     time : float
         Time stamp (frame index by default).
+    faces : ndarray, int64 [F, 3] or None
+        Triangles over ``points`` when the frame is a mesh (a per-frame mesh, e.g. a PLY with
+        faces); ``None`` for a point cloud (also for a file with an empty face list).
     """
 
     points: np.ndarray
@@ -62,6 +82,7 @@ class Frame:
     colors: np.ndarray | None = None
     sensors: np.ndarray | None = None
     time: float = 0.0
+    faces: np.ndarray | None = None
 
     def __post_init__(self):
         points = as_points(self.points, "points")
@@ -86,6 +107,8 @@ class Frame:
         if not np.isfinite(time):
             raise InputError(f"time must be finite, got {self.time!r}")
         object.__setattr__(self, "time", time)
+        if self.faces is not None:
+            object.__setattr__(self, "faces", _frame_faces(self.faces, len(points)))
 
     def __len__(self) -> int:
         return len(self.points)

@@ -391,3 +391,26 @@ def test_notes_logs_and_other_files_beside_the_frames_are_skipped_but_unknown_ge
     (tmp_path / "frame_2.stl").write_text("solid x")
     with pytest.raises(InputError, match=r"frame_2\.stl.*unknown file type '\.stl'"):
         load_sequence(tmp_path)
+
+
+def test_frames_with_faces_are_per_frame_meshes(tmp_path):
+    """A PLY or OBJ frame with faces is a per-frame mesh (``Frame.faces``); ``write_frames``
+    writes the faces back, in double precision."""
+    box = trimesh.creation.box()
+    vertices = np.asarray(box.vertices) + 1e-9  # a digit float32 would lose
+    frames = tuple(Frame(vertices + t, faces=box.faces, time=t) for t in range(2))
+    write_frames(PointCloudSequence(frames), tmp_path / "meshes")
+    seq = load_sequence(tmp_path / "meshes")
+    for t, frame in enumerate(seq):
+        np.testing.assert_array_equal(frame.faces, box.faces)
+        np.testing.assert_array_equal(frame.points, vertices + t)
+    with pytest.raises(InputError, match="written as ply"):
+        write_frames(PointCloudSequence(frames), tmp_path / "xyz", format="xyz")
+    write_obj(tmp_path / "mesh.obj", vertices, box.faces)
+    np.testing.assert_array_equal(read_frame(tmp_path / "mesh.obj").faces, box.faces)
+    write_ply(tmp_path / "cloud.ply", vertices)
+    assert read_frame(tmp_path / "cloud.ply").faces is None
+    with pytest.raises(InputError, match="outside the frame's 8 points"):
+        Frame(vertices, faces=box.faces + 1)
+    with pytest.raises(InputError, match=r"shape \[F, 3\]"):
+        Frame(vertices, faces=np.zeros((2, 4), dtype=int))

@@ -155,10 +155,17 @@ def format_markdown(report: dict, plots: dict[str, Path] | None = None, base: Pa
 
 
 def _scanner(scan: dict) -> str:
-    """A scene's scanner overrides, ``{"cameras": 8, "noise": 0.0}`` -> ``"8 cameras, noise 0"``."""
-    return ", ".join(
-        f"{value} cameras" if key == "cameras" else f"{key} {value:g}" for key, value in scan.items()
-    )
+    """A scene's scanner overrides, ``{"cameras": 8, "noise": 0.0}`` -> ``"8 cameras, noise 0"``;
+    ``{"mode": "remeshed"}`` -> ``"per-frame meshes of the true surface, remeshed ..."``."""
+    def one(key, value):
+        if key == "cameras":
+            return f"{value} cameras"
+        if key == "mode" and value == "remeshed":
+            return ("per-frame meshes of the true surface, each frame remeshed on its own at "
+                    "the rays' spacing, without noise or outliers")
+        return f"{key} {value:g}" if isinstance(value, (int, float)) else f"{key} {value}"
+
+    return ", ".join(one(key, value) for key, value in scan.items())
 
 
 def _describe(name: str, options: dict | None = None) -> str:

@@ -10,8 +10,10 @@ Frame formats (by extension, case-insensitive):
 
 ========  ==============================================================================
 ``.ply``  ASCII or binary (either byte order), float or double; ``x y z``, optional
-          ``nx ny nz`` and ``red green blue``; other properties and faces are ignored.
-``.obj``  ``v`` lines (an optional colour ``v x y z r g b`` is kept); faces are ignored.
+          ``nx ny nz`` and ``red green blue``; faces, when present, make the frame a
+          per-frame mesh (``Frame.faces``); other properties are ignored.
+``.obj``  ``v`` lines (an optional colour ``v x y z r g b`` is kept); ``f`` lines, when
+          present, make the frame a per-frame mesh.
 ``.xyz``  text rows ``x y z`` or ``x y z nx ny nz``.
 ``.pts``  like ``.xyz``, optionally with a point-count first line, or Leica-style rows
           ``x y z intensity [r g b]``.
@@ -74,6 +76,7 @@ class _Raw(NamedTuple):
     normals: np.ndarray | None
     colors: np.ndarray | None
     columns: int | None  # raw table width for array/text formats (compared across a folder)
+    faces: np.ndarray | None = None
 
 
 def natural_key(name: str) -> tuple:
@@ -117,11 +120,11 @@ def _table(array, path: Path, name: str) -> np.ndarray:
 def _read_raw(path: Path) -> _Raw:
     suffix = path.suffix.lower()
     if suffix == ".ply":
-        ply = read_ply(path, faces=False)
-        return _Raw(ply.vertices, ply.normals, ply.colors, None)
+        ply = read_ply(path)
+        return _Raw(ply.vertices, ply.normals, ply.colors, None, ply.faces)
     if suffix == ".obj":
-        obj = read_obj(path, faces=False)
-        return _Raw(obj.vertices, None, obj.colors, None)
+        obj = read_obj(path)
+        return _Raw(obj.vertices, None, obj.colors, None, obj.faces)
     if suffix in (".xyz", ".pts"):
         table = read_xyz(path)
         return _Raw(table.points, table.normals, table.colors, table.columns)
@@ -186,7 +189,7 @@ def _unit_normals(normals: np.ndarray | None, path) -> np.ndarray | None:
     return normals / lengths[:, None]
 
 
-def _make_frame(path, points, normals, colors, sensors, time) -> Frame:
+def _make_frame(path, points, normals, colors, sensors, time, faces=None) -> Frame:
     if len(points) == 0:
         raise InputError("the frame has zero points", path)
     if not np.isfinite(points).all():  # (a flat test first: per-row reductions are slow)
@@ -205,6 +208,7 @@ def _make_frame(path, points, normals, colors, sensors, time) -> Frame:
             colors=colors,
             sensors=sensors,
             time=time,
+            faces=faces,
         )
     except InputError as error:
         raise InputError(error.problem, path) from None
@@ -228,8 +232,9 @@ def read_frame(
     Returns
     -------
     Frame
-        Normals (when the file has them) are normalised; normals of zero length make the frame
-        have none (a warning is logged).
+        With ``faces`` when the file has faces (a per-frame mesh). Normals (when the file has
+        them) are normalised; normals of zero length make the frame have none (a warning is
+        logged).
 
     Raises
     ------
@@ -239,7 +244,7 @@ def read_frame(
     """
     path = Path(path)
     raw = _read_guarded(path)
-    return _make_frame(path, raw.points, raw.normals, raw.colors, sensors, time)
+    return _make_frame(path, raw.points, raw.normals, raw.colors, sensors, time, raw.faces)
 
 
 def _read_guarded(path: Path) -> _Raw:
@@ -439,7 +444,9 @@ def load_sequence(path: str | os.PathLike) -> PointCloudSequence:
                     f"{first_columns[1].name} has {first_columns[0]}",
                     file,
                 )
-        frames.append(_make_frame(file, raw.points, raw.normals, raw.colors, sensors[i], times[i]))
+        frames.append(
+            _make_frame(file, raw.points, raw.normals, raw.colors, sensors[i], times[i], raw.faces)
+        )
     with_normals = sum(f.normals is not None for f in frames)
     if 0 < with_normals < len(frames):
         log.warning("%s: %d of %d frames have normals", path, with_normals, len(frames))
@@ -456,8 +463,8 @@ def write_frames(
 ) -> None:
     """Write ``seq`` as a scan folder that :func:`load_sequence` reads back.
 
-    One file per frame (``frame_0000.ply`` ...; binary little-endian PLY with normals and
-    colours when present, or ``npy`` ``[P, 3|6]``, or ``xyz`` text), ``times.txt`` and, when
+    One file per frame (``frame_0000.ply`` ...; binary little-endian PLY with normals,
+    colours and faces when present (a per-frame mesh in double precision), or ``npy`` ``[P, 3|6]``, or ``xyz`` text), ``times.txt`` and, when
     the frames carry sensors, ``sensors.json`` (the fixed form when every frame has the same
     scanners), and, when the sequence has video, ``cameras.json`` and
     ``video/<camera>/frame_0000.png ...`` (:func:`fourd.io.video.write_video`). The folder is
@@ -473,6 +480,8 @@ def write_frames(
     format = format.lower().lstrip(".")
     if format not in ("ply", "npy", "xyz"):
         raise InputError(f"unknown frame format {format!r} (use ply, npy or xyz)")
+    if format != "ply" and any(f.faces is not None for f in seq.frames):
+        raise InputError(f"per-frame meshes are written as ply, not {format}")
     width = max(4, len(str(len(seq) - 1)))
     stems = [f"frame_{i:0{width}d}" for i in range(len(seq))]
     with atomic_dir(folder) as tmp:
@@ -481,7 +490,9 @@ def write_frames(
         for i, frame in enumerate(seq.frames):
             target = tmp / f"{stems[i]}.{format}"
             if format == "ply":
-                write_ply(target, frame.points, normals=frame.normals, colors=frame.colors)
+                # a mesh keeps double coordinates: its vertices are exact surface points
+                write_ply(target, frame.points, normals=frame.normals, colors=frame.colors,
+                          faces=frame.faces, double=frame.faces is not None)
             elif format == "xyz":
                 write_xyz(target, frame.points, frame.normals)
             else:

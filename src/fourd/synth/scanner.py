@@ -26,6 +26,14 @@ Lambertian shading by fixed lamps (:mod:`fourd.synth.shading`), plus sensor nois
 rig's calibrated video (:mod:`fourd.synth.filming`): per camera and frame an image of the
 textured, shaded scene (occluder included), on the scanner's pixel grid by default.
 
+With ``mode="remeshed"`` the frames are per-frame meshes with perfect geometry instead
+(:mod:`fourd.synth.remesh`): each frame's truth surface remeshed on its own by marching cubes
+of its signed distance at the scan's ray spacing at the centre (``field * D / resolution``),
+on a grid shifted by a random fraction of a cell every frame (so every frame has a
+triangulation of its own), each vertex projected onto the truth triangles. No noise, no
+outliers, no occlusion: a method's correspondence error on them is its cross-parameterisation
+alone (issue 51).
+
 Every frame is a pure function of the truth frame, the options and ``(seed, frame index)``
 (:func:`scan_frame`), so frames can be scanned independently and in any order. Colours and
 images draw from their own random streams: switching them on leaves the points unchanged.
@@ -53,6 +61,10 @@ from fourd.progress import progress
 from fourd.sequence import Frame, PointCloudSequence
 
 logger = logging.getLogger("fourd.synth.scanner")
+
+#: What a scan gives per frame (:attr:`ScanOptions.mode`): depth-camera points, or the truth
+#: surface remeshed on its own.
+SCAN_MODES = ("depth", "remeshed")
 
 #: Outlier label of a point (see :class:`FrameScan`).
 SURFACE, UNIFORM_OUTLIER, CLUSTER_OUTLIER = 0, 1, 2
@@ -111,6 +123,11 @@ class ScanOptions:
     video_resolution : int or None
         Image side in pixels (square images of the scanner's view); None: ``resolution``, so
         that each image pixel is one of the depth camera's rays.
+    mode : {"depth", "remeshed"}
+        ``"depth"``: the depth cameras above. ``"remeshed"``: per-frame meshes of the truth
+        surface itself (module docstring), ``field * D / resolution`` apart; ``noise``,
+        ``outliers``, ``structured_outliers`` and ``occluder`` are set to none (perfect
+        geometry), and colours and video are not available (yet).
     seed : int
         Frame ``t`` draws from ``numpy.random.default_rng([seed, t])`` (colours from
         ``[seed, t, 1]``, images from ``[seed, t, 2]``).
@@ -135,6 +152,7 @@ class ScanOptions:
     color_noise: float = 0.01
     video: bool = False
     video_resolution: int | None = None
+    mode: str = "depth"
     seed: int = 0
 
     def __post_init__(self):
@@ -179,6 +197,14 @@ class ScanOptions:
                     f"video_resolution must be an integer >= 8, got {self.video_resolution!r}"
                 )
             object.__setattr__(self, "video_resolution", int(self.video_resolution))
+        if self.mode not in SCAN_MODES:
+            raise InputError(f"mode must be one of {', '.join(SCAN_MODES)}, got {self.mode!r}")
+        if self.mode == "remeshed":
+            if self.appearance is not None or self.video:
+                raise InputError("the remeshed scan mode has no colours or video yet")
+            for name in ("noise", "outliers", "structured_outliers"):
+                object.__setattr__(self, name, 0.0)
+            object.__setattr__(self, "occluder", False)
 
 
 class CameraRig(NamedTuple):
@@ -538,6 +564,9 @@ def scan_frame(
     FrameScan
     """
     options = ScanOptions() if options is None else options
+    if options.mode != "depth":
+        raise InputError(f"scan_frame scans with depth cameras; mode {options.mode!r} frames come "
+                         "from remeshed_frame")
     frame_count, bounds, point_truth = _truth_frames(truth)
     if not 0 <= index < frame_count:
         raise InputError(f"frame index {index} is outside the truth's {frame_count} frames")
@@ -592,6 +621,37 @@ def scan_frame(
     return FrameScan(index, points, camera, label, clean, colors)
 
 
+def remeshed_frame(truth, index: int, options: ScanOptions | None = None):
+    """Truth frame ``index`` remeshed on its own (``mode="remeshed"``): a pure function of the
+    frame, the options and the seed.
+
+    The grid's cell edge is ``options.field * D / options.resolution`` (the rays' spacing at
+    the rig's centre, ``D`` the truth's diagonal over all frames); its origin moves by a
+    fraction of a cell drawn from ``default_rng([seed, index, 4])``, so two frames of the same
+    pose are triangulated differently.
+
+    Returns
+    -------
+    fourd.synth.remesh.Remeshed
+        The mesh, with each vertex's truth triangle and barycentric coordinates.
+    """
+    from fourd.synth.remesh import remesh_surface
+
+    options = ScanOptions() if options is None else options
+    frame_count, bounds, point_truth = _truth_frames(truth)
+    if point_truth:
+        raise InputError("the remeshed scan mode needs a truth with faces (this one is points)")
+    if not 0 <= index < frame_count:
+        raise InputError(f"frame index {index} is outside the truth's {frame_count} frames")
+    diagonal = float(np.linalg.norm(bounds[1] - bounds[0]))
+    offset = np.random.default_rng([options.seed, index, 4]).random(3)
+    vertices, faces = truth.frame(index)
+    return remesh_surface(
+        vertices, faces, spacing=options.field * diagonal / options.resolution, offset=offset,
+        seed=options.seed,
+    )
+
+
 def _point_colors(truth, index, options, vertices, faces, clean, directions, hit):
     """Recorded colours of the clean hits of one frame (see :mod:`fourd.synth.paint`)."""
     from fourd.geometry.normals import pca_normals, vertex_normals
@@ -640,6 +700,7 @@ def scan(truth, options: ScanOptions | None = None, **overrides) -> PointCloudSe
     PointCloudSequence
         One frame per truth frame not in ``drop_frames``, with ``time = truth.times[t]`` and
         ``sensors`` = the camera positions ``[K, 3]``; named ``frame_<t>`` by truth index.
+        With ``mode="remeshed"`` every frame is a mesh (``faces``; :func:`remeshed_frame`).
         With ``appearance`` the frames have ``colors``; with ``video`` the sequence has
         ``video`` (the rig's cameras, one image per camera and kept frame).
 
@@ -667,6 +728,14 @@ def scan(truth, options: ScanOptions | None = None, **overrides) -> PointCloudSe
     if not kept:
         raise InputError("drop_frames removes every frame")
     frames, names, images = [], [], []
+    if options.mode == "remeshed":
+        for t in progress(kept, desc="remeshing", total=len(kept)):
+            mesh = remeshed_frame(truth, t, options)
+            frames.append(
+                Frame(points=mesh.vertices, faces=mesh.faces, sensors=rig.positions, time=truth.times[t])
+            )
+            names.append(f"frame_{t:04d}")
+        return PointCloudSequence(tuple(frames), tuple(names))
     for t in progress(kept, desc="scanning", total=len(kept)):
         result = scan_frame(truth, t, options, rig=rig)
         frames.append(

@@ -1,0 +1,41 @@
+"""The assembly method (issue 51; Popa's thesis, chapter 5): a consistent animated mesh
+assembled from per-frame meshes by pairwise cross-parameterisation in a binary hierarchy.
+
+**Under construction**: the method is not registered yet (``fourd reconstruct --method
+assembly`` does not exist). What is here is its core, each part tested on its own:
+
+- :mod:`.anchors`: sparse source-to-target correspondences (section 5.4.1);
+- :mod:`.patches`: matching disk-shaped patches grown around anchors (5.4.2);
+- :mod:`.crossparam`: the local patch cross-parameterisation, each patch pair flattened
+  (ABF++ or LSCM, :mod:`fourd.geometry.flattening`), aligned by its anchors and the most
+  central patch chosen per vertex (5.4.2).
+
+Still to come: local relaxation of the map (5.4.3), anchor set refinement (5.4.4), analysis
+and correction (5.5), geometry completion and connectivity combination (5.6), the
+hierarchical assembly (5.3), and the method module itself. Bench input for it: the remeshed
+scan mode (``fourd synth --meshes``, the ``*-remeshed`` bench scenes).
+"""
+
+from fourd.methods.assembly.anchors import Anchors, anchors_at_vertices
+from fourd.methods.assembly.crossparam import (
+    CrossParameterization,
+    PatchMap,
+    cross_parameterize,
+    map_patch,
+)
+from fourd.methods.assembly.options import CrossParamOptions
+from fourd.methods.assembly.patches import GrownPatches, Patch, PatchPair, grow_patches
+
+__all__ = [
+    "Anchors",
+    "CrossParamOptions",
+    "CrossParameterization",
+    "GrownPatches",
+    "Patch",
+    "PatchMap",
+    "PatchPair",
+    "anchors_at_vertices",
+    "cross_parameterize",
+    "grow_patches",
+    "map_patch",
+]

@@ -1,0 +1,283 @@
+"""Matching disk-shaped patches on a source and a target mesh, grown around anchors (thesis
+section 5.4.2, "Patch Growth").
+
+A patch is a geodesic ball (Dijkstra distances along the edges) made a disk: the faces with
+every corner within the radius, the piece holding the centre, small holes filled. The source
+patch and the target patch of a pair grow together, with the same radius, until both hold
+``patch_anchors`` matching anchors (an anchor matches when its source vertex lies in the
+source patch and its target triangle in the target patch); a pair that reaches the largest
+radius with fewer than ``min_anchors`` is discarded. The radius then grows by the ignored
+boundary band, so the anchors lie where the map is kept.
+
+The first pass grows a pair around every anchor. A second pass grows pairs around the source
+vertices no kept patch covers yet (outside its boundary band). Such a vertex has no known
+image, so the thesis grows the target patch around the nearest anchor's image instead; here
+the target patch is centred on the vertex's estimated image, the target vertex whose geodesic
+distances from the nearest anchors' images best match the vertex's own distances from those
+anchors (a geodesic multilateration), so both patches cover the same piece of surface (for a
+rigidly moved copy, exactly the same) and grow as before. Vertices that stay uncovered have no
+counterpart on the target.
+"""
+
+from __future__ import annotations
+
+import logging
+from typing import NamedTuple
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import connected_components, dijkstra
+
+from fourd.geometry.flattening import boundary_loop_vertices
+from fourd.geometry.meshes import face_adjacency
+from fourd.methods.assembly.anchors import Anchors
+from fourd.methods.assembly.options import CrossParamOptions
+
+log = logging.getLogger("fourd.methods.assembly.patches")
+
+#: Holes of a patch are the pieces of the rest of the mesh lying within this multiple of the
+#: radius (a piece reaching farther is the outside).
+HOLE_REACH = 1.5
+
+
+class Patch(NamedTuple):
+    """A disk-shaped piece of a mesh.
+
+    faces : int64 [K]
+        The mesh's faces in the patch (sorted).
+    vertices : int64 [M]
+        Their vertices (sorted).
+    distance : float64 [M]
+        Geodesic distance of each from the patch's centre (along edges; input units).
+    radius : float
+        The patch's radius (input units).
+    """
+
+    faces: np.ndarray
+    vertices: np.ndarray
+    distance: np.ndarray
+    radius: float
+
+
+class PatchPair(NamedTuple):
+    """Matching patches on the source and the target.
+
+    source, target : Patch
+    anchors : int64 [K]
+        The matching anchors (indices into :class:`Anchors`), at least ``min_anchors``.
+    centre : int
+        The source vertex at the source patch's centre.
+    """
+
+    source: Patch
+    target: Patch
+    anchors: np.ndarray
+    centre: int
+
+
+class GrownPatches(NamedTuple):
+    """What :func:`grow_patches` found.
+
+    pairs : list of PatchPair
+    discarded : int
+        Pairs given up (too few anchors within the largest radius, or not a disk).
+    covered : bool [N]
+        Source vertices inside some kept source patch, outside its boundary band.
+    """
+
+    pairs: list
+    discarded: int
+    covered: np.ndarray
+
+
+class _Mesh(NamedTuple):
+    vertices: np.ndarray
+    faces: np.ndarray
+    graph: sp.csr_matrix  # edge lengths
+    adjacency: np.ndarray  # face pairs sharing an edge [E, 2]
+
+
+def _mesh(vertices, faces) -> _Mesh:
+    vertices = np.asarray(vertices, dtype=np.float64)
+    faces = np.asarray(faces, dtype=np.int64)
+    return _Mesh(vertices, faces, _edge_lengths(vertices, faces), face_adjacency(faces)[0])
+
+
+def _edge_lengths(vertices: np.ndarray, faces: np.ndarray) -> sp.csr_matrix:
+    """Symmetric ``[N, N]`` graph of the edges' lengths (an edge of two faces counted once)."""
+    i, j = faces.ravel(), np.roll(faces, -1, axis=1).ravel()
+    a, b = np.minimum(i, j), np.maximum(i, j)
+    _, first = np.unique(a * np.int64(len(vertices)) + b, return_index=True)
+    a, b = a[first], b[first]
+    length = np.linalg.norm(vertices[a] - vertices[b], axis=1)
+    count = len(vertices)
+    return sp.csr_matrix((np.r_[length, length], (np.r_[a, b], np.r_[b, a])), shape=(count, count))
+
+
+def _distances(mesh: _Mesh, seeds: np.ndarray, offsets: np.ndarray, limit: float) -> np.ndarray:
+    """Geodesic distance ``[N]`` from the nearest seed plus its offset (inf beyond ``limit``)."""
+    rows = dijkstra(mesh.graph, directed=False, indices=np.asarray(seeds), limit=limit)
+    return np.min(np.atleast_2d(rows) + np.asarray(offsets, dtype=np.float64)[:, None], axis=0)
+
+
+def _disk(mesh: _Mesh, distance: np.ndarray, radius: float, seed_face: int) -> Patch | None:
+    """The geodesic ball of ``radius`` as a disk holding ``seed_face``, or None when it is
+    not one."""
+    face_in = (distance[mesh.faces] <= radius).all(axis=1)
+    if not face_in[seed_face]:
+        return None
+    face_in = _piece(mesh, face_in, seed_face)
+    # pieces of the rest that stay near the centre are holes
+    rest = ~face_in
+    pairs = mesh.adjacency[rest[mesh.adjacency].all(axis=1)]
+    count = len(mesh.faces)
+    graph = sp.coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(count, count))
+    _, label = connected_components(graph, directed=False)
+    reach = np.full(label.max() + 1, 0.0)
+    np.maximum.at(reach, label[rest], distance[mesh.faces[rest]].max(axis=1))
+    touches_border = np.zeros(label.max() + 1, dtype=bool)
+    touches_border[label[rest & _border_faces(mesh)]] = True
+    hole = rest & (reach[label] <= HOLE_REACH * radius) & ~touches_border[label]
+    face_in |= hole
+    faces = np.flatnonzero(face_in)
+    vertices = np.unique(mesh.faces[faces])
+    local = np.searchsorted(vertices, mesh.faces[faces])
+    try:
+        boundary_loop_vertices(local, len(vertices))
+    except ValueError:
+        return None
+    return Patch(faces, vertices, distance[vertices], float(radius))
+
+
+def _border_faces(mesh: _Mesh) -> np.ndarray:
+    """Faces with an edge on the mesh's own boundary, bool [F]."""
+    sides = np.bincount(mesh.adjacency.ravel(), minlength=len(mesh.faces))
+    return sides < 3
+
+
+def _piece(mesh: _Mesh, face_in: np.ndarray, seed_face: int) -> np.ndarray:
+    """The faces of ``face_in`` edge-connected to ``seed_face``."""
+    pairs = mesh.adjacency[face_in[mesh.adjacency].all(axis=1)]
+    count = len(mesh.faces)
+    graph = sp.coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(count, count))
+    _, label = connected_components(graph, directed=False)
+    return face_in & (label == label[seed_face])
+
+
+def _pair(source: _Mesh, target: _Mesh, anchors: Anchors, centre: int, ds: np.ndarray,
+          dt: np.ndarray, target_face: int, options: CrossParamOptions,
+          largest: float) -> PatchPair | None:
+    """Grow the pair around ``centre`` (source) and the target point of ``dt``'s origin (in
+    ``target_face``) with one radius until it holds ``patch_anchors`` matching anchors."""
+    support = anchors.target_corners(target.faces)
+    reach = np.where(support >= 0, dt[np.maximum(support, 0)], -np.inf).max(axis=1)
+    entry = np.maximum(ds[anchors.source], reach)
+    entry = np.sort(entry[entry <= largest])
+    if len(entry) < options.min_anchors:
+        return None
+    radius = entry[min(options.patch_anchors, len(entry)) - 1] / (1.0 - options.boundary_band)
+    radius = min(radius, largest)
+    src = _disk(source, ds, radius, _face_at(source.faces, centre))
+    tgt = _disk(target, dt, radius, target_face)
+    if src is None or tgt is None:
+        return None
+    in_source = np.isin(anchors.source, src.vertices)
+    in_target = (np.isin(support, tgt.vertices) | (support < 0)).all(axis=1)
+    matching = np.flatnonzero(in_source & in_target)
+    if len(matching) < options.min_anchors:
+        return None
+    return PatchPair(src, tgt, matching, int(centre))
+
+
+def _image(target: _Mesh, corners: np.ndarray, offsets: np.ndarray, reach: np.ndarray,
+           limit: float) -> int:
+    """The target vertex whose geodesic distances from the given anchors' target points best
+    match the source vertex's distances ``reach [K]`` from those anchors (least squares over
+    the vertices all of them reach); -1 when none does."""
+    cost = np.zeros(len(target.vertices))
+    for k in range(len(reach)):
+        cost += (_distances(target, corners[k], offsets[k], limit) - reach[k]) ** 2
+    if not np.isfinite(cost).any():
+        return -1
+    return int(np.argmin(cost))
+
+
+def _face_at(faces: np.ndarray, vertex: int) -> int:
+    return int(np.flatnonzero((faces == vertex).any(axis=1))[0])
+
+
+def grow_patches(
+    source_vertices: np.ndarray,
+    source_faces: np.ndarray,
+    target_vertices: np.ndarray,
+    target_faces: np.ndarray,
+    anchors: Anchors,
+    options: CrossParamOptions | None = None,
+) -> GrownPatches:
+    """Grow matching patch pairs around the anchors, then around the uncovered source vertices
+    (module docstring).
+
+    Parameters
+    ----------
+    source_vertices : array [N, 3]
+    source_faces : int array [F, 3]
+    target_vertices : array [M, 3]
+    target_faces : int array [G, 3]
+    anchors : Anchors
+    options : CrossParamOptions, optional
+
+    Returns
+    -------
+    GrownPatches
+    """
+    options = CrossParamOptions() if options is None else options
+    source = _mesh(source_vertices, source_faces)
+    target = _mesh(target_vertices, target_faces)
+    diagonal = float(np.linalg.norm(np.ptp(source.vertices[source.faces.ravel()], axis=0)))
+    largest = options.max_radius * diagonal
+    anchor_points = anchors.target_points(target.vertices, target.faces)
+    corners = target.faces[anchors.target_faces]  # [A, 3]
+    offsets = np.linalg.norm(target.vertices[corners] - anchor_points[:, None], axis=2)
+    covered = np.zeros(len(source.vertices), dtype=bool)
+    used = np.zeros(len(source.vertices), dtype=bool)
+    used[np.setdiff1d(np.arange(len(source.vertices)), source.faces.ravel())] = True
+    pairs, discarded = [], 0
+
+    def keep(pair: PatchPair | None) -> None:
+        nonlocal discarded
+        if pair is None:
+            discarded += 1
+            return
+        pairs.append(pair)
+        inner = pair.source.distance <= (1.0 - options.boundary_band) * pair.source.radius
+        covered[pair.source.vertices[inner]] = True
+
+    for a in range(len(anchors.source)):
+        ds = _distances(source, [anchors.source[a]], [0.0], largest)
+        dt = _distances(target, corners[a], offsets[a], largest)
+        keep(_pair(source, target, anchors, anchors.source[a], ds, dt,
+                   int(anchors.target_faces[a]), options, largest))
+        used[anchors.source[a]] = True
+    while True:
+        left = np.flatnonzero(~covered & ~used)
+        if len(left) == 0:
+            break
+        centre = int(left[0])
+        used[centre] = True
+        ds = _distances(source, [centre], [0.0], largest)
+        reach = ds[anchors.source]
+        near = np.argsort(reach)[: options.patch_anchors]
+        near = near[np.isfinite(reach[near])]
+        if len(near) < options.min_anchors:
+            discarded += 1
+            continue
+        image = _image(target, corners[near], offsets[near], reach[near], 2.0 * largest)
+        if image < 0:
+            discarded += 1
+            continue
+        dt = _distances(target, [image], [0.0], largest)
+        keep(_pair(source, target, anchors, centre, ds, dt, _face_at(target.faces, image),
+                   options, largest))
+    log.debug("patches: %d kept, %d discarded, %.1f%% of the source covered",
+              len(pairs), discarded, 100.0 * covered.mean())
+    return GrownPatches(pairs, discarded, covered)
