@@ -50,7 +50,7 @@ class GaussNewtonOptions:
     tolerance: float = 1e-6
     damping: float = 1e-4
     preconditioner: str = "block"
-    cg_tolerance: float = 1e-8
+    cg_tolerance: float = 1e-6
     cg_iterations: int = 500
     halvings: int = 12
 
