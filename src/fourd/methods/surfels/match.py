@@ -2,10 +2,13 @@
 by the squared distance to the surface, truncated for outliers.
 
 The squared distance to the surface near a surfel ``s`` with normal ``n`` is approximated as
-Pottmann and Hofer do near the surface: mostly the distance to the tangent plane, plus a
-small share ``beta`` of the distance to ``s`` itself,
-``rho^2 = (1 - beta) <d - s, n>^2 + beta |d - s|^2`` (the second part keeps surfels where
-their data is). Points with ``rho`` beyond the cutoff ``tau`` contribute the constant
+Pottmann and Hofer do near the surface: the distance to the tangent plane, plus an optional
+share ``beta`` of the distance to ``s`` itself,
+``rho^2 = (1 - beta) <d - s, n>^2 + beta |d - s|^2``. The share defaults to 0 (the tangential
+curvature of the squared distance vanishes at the surface): it holds each surfel at the
+centroid of its own data in every frame, which fights the correspondences (a rigid motion
+recovered 2.6 degrees off of 4 with ``beta = 0.1``, 0.15 off with 0); with the priors off it
+is what keeps surfels from sliding. Points with ``rho`` beyond the cutoff ``tau`` contribute the constant
 ``omega tau^2`` and no gradient (a Gaussian mixed with a uniform outlier density).
 
 Two regimes (:class:`MatchOptions`): ``"global"`` for already aligned surfaces cuts off at
@@ -80,7 +83,8 @@ class MatchOptions:
         ``"global"`` (cut off at ``eps_top``) or ``"alignment"`` (percentile cutoff, angle
         and doublet tests).
     tangential : float
-        ``beta``, the share of the point-to-surfel distance in the squared distance.
+        ``beta``, the share of the point-to-surfel distance in the squared distance (0: the
+        tangent plane only).
     percentile : float
         The alignment cutoff: this percentile of the distances (paper: 85).
     max_angle : float
