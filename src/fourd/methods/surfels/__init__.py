@@ -1,0 +1,94 @@
+"""Method ``surfels`` (under construction, not registered): a graph of oriented particles
+that move over time, fitted to the data by a statistical model and assembled frame range by
+frame range.
+
+Built so far (modules of this package):
+
+1. :mod:`.state` -- surfel positions, normals and local rotations over time; the tangent-plane
+   and rotation-vector parameterisation of a step (eq. 11, 12);
+2. :mod:`.topology` -- the sampling distance ``eps_sampl``, an initial surfel sample and the
+   topology graph ``T_S`` (edges within ``eps_top = 2 eps_sampl``);
+3. :mod:`.match` (eq. 5), :mod:`.smoothness` (eq. 6-8), :mod:`.motion` (eq. 9, 10) -- the
+   energy terms with gradients and Gauss-Newton Hessians (:mod:`.term`), summed by
+   :mod:`.energy` (eq. 3);
+4. :mod:`.optimizer` -- the optimiser (sparse Gauss-Newton, preconditioned CG).
+
+Seed regions come from :func:`fourd.geometry.tensor_voting.tensor_voting`. Still to come: the
+iterative model assembly (alignment, stitching, hole filling, resampling, urshape), meshing,
+``Options`` with defaults and ``reconstruct``.
+
+References
+----------
+Wand, Jenke, Huang, Bokeloh, Guibas, Schilling: Reconstruction of deforming geometry from
+time-varying point clouds, SGP 2007 (``001_3fedd1c3a0ac4198.txt``).
+"""
+
+from fourd.methods.surfels.energy import Energy, Weights, total_energy
+from fourd.methods.surfels.match import (
+    Data,
+    Matches,
+    MatchOptions,
+    associate,
+    frame_data,
+    match_term,
+)
+from fourd.methods.surfels.motion import accel_term, fit_rotations, rigid_term
+from fourd.methods.surfels.optimizer import (
+    GaussNewtonOptions,
+    Optimization,
+    gauss_newton,
+    solve_step,
+)
+from fourd.methods.surfels.smoothness import laplace_term, smooth_normal_term, smooth_position_term
+from fourd.methods.surfels.state import (
+    Layout,
+    SurfelState,
+    layout,
+    move,
+    retract,
+    skew,
+    surfel_state,
+    tangent_basis,
+)
+from fourd.methods.surfels.term import Term
+from fourd.methods.surfels.topology import (
+    Topology,
+    build_topology,
+    sample_surfels,
+    sampling_distance,
+)
+
+__all__ = [
+    "Data",
+    "Energy",
+    "GaussNewtonOptions",
+    "Layout",
+    "MatchOptions",
+    "Matches",
+    "Optimization",
+    "SurfelState",
+    "Term",
+    "Topology",
+    "Weights",
+    "accel_term",
+    "build_topology",
+    "associate",
+    "fit_rotations",
+    "frame_data",
+    "gauss_newton",
+    "laplace_term",
+    "layout",
+    "match_term",
+    "move",
+    "retract",
+    "rigid_term",
+    "sample_surfels",
+    "sampling_distance",
+    "skew",
+    "smooth_normal_term",
+    "smooth_position_term",
+    "solve_step",
+    "surfel_state",
+    "tangent_basis",
+    "total_energy",
+]

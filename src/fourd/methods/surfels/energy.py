@@ -1,0 +1,111 @@
+"""The negative log-posterior of eq. (3): the weighted sum of the likelihood and the priors,
+with its gradient and Gauss-Newton Hessian over the unknowns of :class:`~.state.Layout`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+
+import numpy as np
+import scipy.sparse as sp
+
+from fourd.methods.surfels.match import Data, Matches, MatchOptions, match_term
+from fourd.methods.surfels.motion import accel_term, rigid_term
+from fourd.methods.surfels.smoothness import laplace_term, smooth_normal_term, smooth_position_term
+from fourd.methods.surfels.state import SurfelState, layout
+from fourd.methods.surfels.topology import Topology
+
+
+@dataclass(frozen=True)
+class Weights:
+    """Weights of the terms of eq. (3); 0 leaves a term out. Terms on positions are lengths
+    squared, terms on normals dimensionless: a normal weight of ``w eps_sampl^2`` balances
+    a position weight ``w``. The defaults keep the data term only (the method's defaults are
+    not chosen yet).
+
+    match : float
+        Multiplies the data weights ``omega`` (eq. 5).
+    smooth_position, smooth_normal : float
+        ``w_smooth^(1)``, ``w_smooth^(2)`` (eq. 6, 7).
+    laplace : float
+        ``w_Laplace`` (eq. 8; the paper: 10% of the position weight).
+    rigid, rigid_normal : float
+        ``w_rigid`` on neighbour offsets and on normals (eq. 9).
+    accel, accel_normal : float
+        ``w_accel`` on positions and on normals (eq. 10).
+    """
+
+    match: float = 1.0
+    smooth_position: float = 0.0
+    smooth_normal: float = 0.0
+    laplace: float = 0.0
+    rigid: float = 0.0
+    rigid_normal: float = 0.0
+    accel: float = 0.0
+    accel_normal: float = 0.0
+
+    def __post_init__(self):
+        for field in fields(self):
+            if not getattr(self, field.name) >= 0:
+                raise ValueError(f"weight {field.name} must not be negative")
+
+
+@dataclass(frozen=True)
+class Energy:
+    """Eq. (3) at a state.
+
+    value : float
+    terms : dict[str, float]
+        Value of each term included (``match``, ``smooth_position``, ..., ``accel``).
+    gradient : float64 [n] or None
+    hessian : csr_matrix [n, n] or None
+        Gauss-Newton approximation (sum of ``2 J^T J``).
+    """
+
+    value: float
+    terms: dict
+    gradient: np.ndarray | None
+    hessian: sp.csr_matrix | None
+
+
+def total_energy(
+    state: SurfelState,
+    topology: Topology,
+    data: Data,
+    matches: Matches,
+    weights: Weights | None = None,
+    match: MatchOptions | None = None,
+    *,
+    derivatives: bool = True,
+) -> Energy:
+    """Eq. (3) with the association ``matches`` held fixed (default weights and options:
+    :class:`Weights`, :class:`~.match.MatchOptions`)."""
+    w = weights or Weights()
+    match = match or MatchOptions()
+    d = derivatives
+    parts = {}
+    if w.match > 0:
+        parts["match"] = match_term(state, data, matches, w.match, match, derivatives=d)
+    if w.smooth_position > 0:
+        parts["smooth_position"] = smooth_position_term(
+            state, topology, w.smooth_position, derivatives=d
+        )
+    if w.smooth_normal > 0:
+        parts["smooth_normal"] = smooth_normal_term(state, topology, w.smooth_normal, derivatives=d)
+    if w.laplace > 0:
+        parts["laplace"] = laplace_term(state, topology, w.laplace, derivatives=d)
+    if (w.rigid > 0 or w.rigid_normal > 0) and state.frames > 1:
+        parts["rigid"] = rigid_term(state, topology, w.rigid, w.rigid_normal, derivatives=d)
+    if (w.accel > 0 or w.accel_normal > 0) and state.frames > 2:
+        parts["accel"] = accel_term(state, w.accel, w.accel_normal, derivatives=d)
+    values = {name: part.value for name, part in parts.items()}
+    total = float(sum(values.values()))
+    if not derivatives:
+        return Energy(total, values, None, None)
+    size = layout(state).size
+    gradient = np.zeros(size)
+    hessian = sp.csr_matrix((size, size))
+    for part in parts.values():
+        gradient += part.gradient
+        hessian = hessian + part.hessian
+    return Energy(total, values, gradient, hessian.tocsr())

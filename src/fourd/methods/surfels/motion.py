@@ -1,0 +1,113 @@
+"""The 4D priors: local rigidity between consecutive frames (eq. 9, on the neighbour offsets
+and on the normals) and little acceleration along the trajectories (eq. 10, positions and
+normals); and the initial local rotations (a least-squares fit per neighbourhood).
+
+Each term returns a :class:`~.term.Term` over the unknowns of :class:`~.state.Layout`.
+
+References
+----------
+Wand et al.: Reconstruction of deforming geometry from time-varying point clouds, SGP 2007,
+section 3.1 "Spatio-temporal smoothness", "Temporal smoothness" (``001_3fedd1c3a0ac4198.txt``).
+Horn: Closed-form solution of absolute orientation using unit quaternions, JOSA A 4(4), 1987
+(the initial rotations; here by the polar decomposition, :mod:`fourd.geometry.rotations`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from fourd.geometry.rotations import best_rotations
+from fourd.methods.surfels.state import SurfelState, layout, skew, tangent_basis
+from fourd.methods.surfels.term import Blocks, Term, term
+from fourd.methods.surfels.topology import Topology
+
+
+def rigid_term(
+    state: SurfelState,
+    topology: Topology,
+    weight: float,
+    normal_weight: float = 0.0,
+    *,
+    derivatives: bool = True,
+) -> Term:
+    """Eq. (9): ``w sum_{t < T-1} sum_i sum_{j in N(i)} |A_i^t (s_i^t - s_j^t) - (s_i^{t+1} -
+    s_j^{t+1})|^2`` plus the same potential on the normals, ``w_n sum |A_i^t n_i^t -
+    n_i^{t+1}|^2`` (each surfel's own normal). Residuals ``[T-1, 2E, 3]`` then
+    ``[T-1, S, 3]``; the rotations enter as ``(I + C) A`` (eq. 12)."""
+    lay = layout(state)
+    steps = state.frames - 1
+    i, j = topology.directed.T
+    root, root_n = np.sqrt(weight), np.sqrt(normal_weight)
+    rotations = state.rotations[:, i]
+    before = state.positions[:-1, i] - state.positions[:-1, j]
+    after = state.positions[1:, i] - state.positions[1:, j]
+    predicted = np.einsum("teab,teb->tea", rotations, before)
+    edge_residuals = root * (predicted - after)
+    turned = np.einsum("tsab,tsb->tsa", state.rotations, state.normals[:-1])
+    normal_residuals = root_n * (turned - state.normals[1:])
+    residuals = np.concatenate([edge_residuals.ravel(), normal_residuals.ravel()])
+    if not derivatives:
+        return term(residuals, None)
+    blocks = Blocks(residuals.size, lay.size)
+    t = np.arange(steps)[:, None]
+    rows = 3 * np.arange(steps * len(i)).reshape(steps, len(i))
+    eye = np.eye(3)
+    blocks.add(rows, lay.rotation(t, i), -root * skew(predicted))
+    blocks.add(rows, lay.position(t, i), root * rotations)
+    blocks.add(rows, lay.position(t, j), -root * rotations)
+    blocks.add(rows, lay.position(t + 1, i), -root * eye)
+    blocks.add(rows, lay.position(t + 1, j), root * eye)
+    if normal_weight > 0 and steps > 0:
+        surfels = np.arange(state.count)
+        rows = edge_residuals.size + 3 * (t * state.count + surfels)
+        basis = tangent_basis(state.normals)
+        blocks.add(rows, lay.rotation(t, surfels), -root_n * skew(turned))
+        blocks.add(rows, lay.normal(t, surfels), root_n * state.rotations @ basis[:-1])
+        blocks.add(rows, lay.normal(t + 1, surfels), -root_n * basis[1:])
+    return term(residuals, blocks)
+
+
+def accel_term(
+    state: SurfelState, weight: float, normal_weight: float = 0.0, *, derivatives: bool = True
+) -> Term:
+    """Eq. (10): ``w sum_{0 < t < T-1} sum_i |s_i^{t-1} - 2 s_i^t + s_i^{t+1}|^2`` plus the
+    same on the normals with ``normal_weight``; residuals ``[T-2, S, 3]`` twice."""
+    lay = layout(state)
+    root, root_n = np.sqrt(weight), np.sqrt(normal_weight)
+    p, n = state.positions, state.normals
+    inner = max(state.frames - 2, 0)
+    position_residuals = root * (p[:-2] - 2 * p[1:-1] + p[2:])
+    normal_residuals = root_n * (n[:-2] - 2 * n[1:-1] + n[2:])
+    residuals = np.concatenate([position_residuals.ravel(), normal_residuals.ravel()])
+    if not derivatives:
+        return term(residuals, None)
+    blocks = Blocks(residuals.size, lay.size)
+    t = np.arange(1, inner + 1)[:, None]
+    surfels = np.arange(state.count)
+    rows = 3 * ((t - 1) * state.count + surfels)
+    eye = np.eye(3)
+    for shift, factor in ((-1, 1.0), (0, -2.0), (1, 1.0)):
+        blocks.add(rows, lay.position(t + shift, surfels), root * factor * eye)
+    if normal_weight > 0 and inner > 0:
+        basis = tangent_basis(n)
+        rows = rows + position_residuals.size
+        for shift, factor in ((-1, 1.0), (0, -2.0), (1, 1.0)):
+            blocks.add(
+                rows, lay.normal(t + shift, surfels), root_n * factor * basis[t[:, 0] + shift]
+            )
+    return term(residuals, blocks)
+
+
+def fit_rotations(positions: np.ndarray, topology: Topology) -> np.ndarray:
+    """The rotations [T-1, S, 3, 3] best mapping each surfel's neighbour offsets from frame
+    ``t`` to ``t + 1`` (eq. 9 minimised over ``A`` alone); identity without neighbours."""
+    positions = np.asarray(positions, dtype=np.float64)
+    i, j = topology.directed.T
+    before = positions[:-1, i] - positions[:-1, j]
+    after = positions[1:, i] - positions[1:, j]
+    covariances = np.zeros((len(positions) - 1, topology.count, 3, 3))
+    np.add.at(covariances, (slice(None), i), before[..., :, None] * after[..., None, :])
+    rotations = best_rotations(covariances.reshape(-1, 3, 3)).reshape(covariances.shape)
+    lonely = topology.degrees == 0
+    rotations[:, lonely] = np.eye(3)
+    return rotations

@@ -1,0 +1,90 @@
+"""The 3D priors of one frame at a time: surfel positions near their neighbours' tangent
+planes (eq. 6), neighbouring normals alike (eq. 7), surfels at their neighbours' centroid
+(eq. 8), summed over all frames.
+
+Each returns a :class:`~.term.Term` over the unknowns of :class:`~.state.Layout`.
+
+References
+----------
+Wand et al.: Reconstruction of deforming geometry from time-varying point clouds, SGP 2007,
+section 3.1 "Spatial smoothness" (``001_3fedd1c3a0ac4198.txt``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from fourd.methods.surfels.state import SurfelState, layout, tangent_basis
+from fourd.methods.surfels.term import Blocks, Term, term
+from fourd.methods.surfels.topology import Topology
+
+
+def smooth_position_term(
+    state: SurfelState, topology: Topology, weight: float, *, derivatives: bool = True
+) -> Term:
+    """Eq. (6): ``w sum_t sum_i sum_{j in N(i)} <s_i - s_j, n_i>^2``; one residual per frame
+    and directed edge, ``[T, 2E]``. ``weight`` in 1 / length^2 for a dimensionless energy."""
+    i, j = topology.directed.T
+    root = np.sqrt(weight)
+    difference = state.positions[:, i] - state.positions[:, j]
+    normals = state.normals[:, i]
+    residuals = root * np.einsum("tea,tea->te", difference, normals)
+    if not derivatives:
+        return term(residuals, None)
+    lay = layout(state)
+    t = np.arange(state.frames)[:, None]
+    rows = np.arange(residuals.size).reshape(residuals.shape)
+    blocks = Blocks(residuals.size, lay.size)
+    blocks.add(rows, lay.position(t, i), root * normals[..., None, :])
+    blocks.add(rows, lay.position(t, j), -root * normals[..., None, :])
+    basis = tangent_basis(state.normals)[:, i]
+    blocks.add(
+        rows, lay.normal(t, i), root * np.einsum("tea,teab->teb", difference, basis)[..., None, :]
+    )
+    return term(residuals, blocks)
+
+
+def smooth_normal_term(
+    state: SurfelState, topology: Topology, weight: float, *, derivatives: bool = True
+) -> Term:
+    """Eq. (7): ``w sum_t sum_i sum_{j in N(i)} |n_i - n_j|^2``; three residuals per frame and
+    directed edge, ``[T, 2E, 3]`` (dimensionless normals: ``weight`` carries the units)."""
+    i, j = topology.directed.T
+    root = np.sqrt(weight)
+    residuals = root * (state.normals[:, i] - state.normals[:, j])
+    if not derivatives:
+        return term(residuals, None)
+    lay = layout(state)
+    t = np.arange(state.frames)[:, None]
+    rows = 3 * np.arange(residuals.shape[0] * residuals.shape[1]).reshape(residuals.shape[:2])
+    basis = tangent_basis(state.normals)
+    blocks = Blocks(residuals.size, lay.size)
+    blocks.add(rows, lay.normal(t, i), root * basis[:, i])
+    blocks.add(rows, lay.normal(t, j), -root * basis[:, j])
+    return term(residuals, blocks)
+
+
+def laplace_term(
+    state: SurfelState, topology: Topology, weight: float, *, derivatives: bool = True
+) -> Term:
+    """Eq. (8): ``w sum_t sum_i |s_i - mean_{j in N(i)} s_j|^2`` over surfels with neighbours;
+    three residuals per frame and surfel, ``[T, S, 3]`` (zero for surfels without)."""
+    i, j = topology.directed.T
+    degrees = topology.degrees
+    root = np.sqrt(weight)
+    share = 1.0 / np.maximum(degrees, 1)
+    means = np.zeros_like(state.positions)
+    np.add.at(means, (slice(None), i), share[i][:, None] * state.positions[:, j])
+    linked = (degrees > 0)[:, None]
+    residuals = root * np.where(linked, state.positions - means, 0.0)
+    if not derivatives:
+        return term(residuals, None)
+    lay = layout(state)
+    frames, count = state.frames, state.count
+    t = np.arange(frames)[:, None]
+    rows = 3 * (t * count + np.arange(count))
+    eye = np.eye(3)
+    blocks = Blocks(residuals.size, lay.size)
+    blocks.add(rows, lay.position(t, np.arange(count)), root * linked[..., None] * eye)
+    blocks.add(rows[:, i], lay.position(t, j), -root * share[i][:, None, None] * eye)
+    return term(residuals, blocks)
