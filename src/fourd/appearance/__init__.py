@@ -6,15 +6,20 @@ check), :mod:`~fourd.appearance.depth` (depth maps splatted from a frame's point
 :mod:`~fourd.appearance.anchor_tracks` (sparse 3D anchor tracks from the flow of every camera),
 :mod:`~fourd.appearance.colored_icp` (rigid registration by geometry and colour, for coloured
 points without video), :mod:`~fourd.appearance.vertex_colors` (input colours carried to a
-result's vertices).
+result's vertices), :mod:`~fourd.appearance.surface_color` (a frame's colours as a field on its
+surface), :mod:`~fourd.appearance.photometric` (per-vertex shifts from the colours: the colour
+guide of ``kinematic``), :mod:`~fourd.appearance.lighting` (the fixed lamps' shading).
 OpenCV is imported only when flow is computed.
 """
 
 from __future__ import annotations
 
+from fourd.appearance.lighting import fit_lighting
+from fourd.appearance.photometric import photometric_shift
+from fourd.appearance.surface_color import ColorField
 from fourd.appearance.vertex_colors import vertex_colors
 
-__all__ = ["anchors", "colored_icp", "vertex_colors"]
+__all__ = ["ColorField", "anchors", "colored_icp", "fit_lighting", "photometric_shift", "vertex_colors"]
 
 
 def anchors(seq, **options):
