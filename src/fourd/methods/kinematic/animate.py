@@ -17,6 +17,7 @@ from fourd.errors import InputError
 from fourd.geometry.meshes import median_edge_length
 from fourd.methods.kinematic.framesurface import FrameSurface
 from fourd.methods.kinematic.options import PROJECTION_LIMIT, SMOOTHED_PROJECTION_MIN, Options
+from fourd.methods.kinematic.photometric_guide import PhotometricGuides
 from fourd.methods.kinematic.projection import project_to_surface
 from fourd.methods.kinematic.register import RegisterOptions
 from fourd.methods.kinematic.sliding import SlideOptions, slide
@@ -48,6 +49,7 @@ def animate(
     project_smoothed: bool = False,
     edge_stiffness: tuple | None = None,
     anchors=None,
+    colors: list | None = None,
     cache: StageCache = NO_CACHE,
     field_key: str = "",
 ) -> AnimatedMesh:
@@ -88,6 +90,10 @@ def animate(
         Anchor tracks between consecutive input frames (:func:`fourd.appearance.anchors`):
         the forward sliding's steps between two consecutive input frames start where they
         went (:mod:`.guide`).
+    colors : list of T arrays [P_k, 3] or None, optional
+        Colours of ``points`` (None for a frame without): with ``options.color_guide`` and no
+        ``anchors``, the forward sliding's steps at input frames start and pull where the
+        template's colours say the vertices went (:mod:`.photometric_guide`).
     cache : StageCache
         Where the urshape and every slid frame are kept as they finish (a rerun resumes
         after the last slid frame); needs ``field_key``.
@@ -178,6 +184,13 @@ def animate(
     anchor_key = None
     if anchors is not None and cache.enabled:
         anchor_key = [(p.source, p.target, p.confidence) for p in anchors]
+    color_guided = (
+        anchors is None and options.color_guide and colors is not None and colors[0] is not None
+    )
+    if color_guided and cache.enabled:
+        anchor_key = ["colour", options.color_radius, options.color_scale] + [
+            np.zeros(0) if c is None else c for c in colors
+        ]
     t0 = float(times[0])
     forward = out_times >= t0
     parts_v, parts_o = [], []
@@ -215,7 +228,14 @@ def animate(
         [points[k] for k in fwd_frames],
         surfaces(fwd_surfaces),
         chain(SLIDE_STAGE, fwd_times, fwd_frames, fwd_surfaces),
-        _step_anchors(anchors, fwd_surfaces),
+        (
+            PhotometricGuides(
+                vertices, faces, fwd_surfaces, points, normals, colors,
+                radius=options.color_radius * median_edge_length(vertices, faces),
+                scale=options.color_scale * median_edge_length(vertices, faces),
+            )
+            if color_guided else _step_anchors(anchors, fwd_surfaces)
+        ),
     )
     if prepend:
         fv, fo = fv[1:], fo[1:]

@@ -142,6 +142,19 @@ class Options:
         With ``video_anchors``: how strongly each step's as-rigid-as-possible solve pulls the
         vertices with anchors towards where the anchors went, in units of the vertex's own
         stiffness (0: the anchors only move the start of the step).
+    color_guide : bool
+        When the input points have colours (and no video anchors are used): at every input
+        frame, after the step, pull each vertex where the colours the template took from the
+        first frame say it went (per-vertex Lucas-Kanade on the frame's coloured points,
+        :mod:`.photometric_guide`) with ``anchor_pull``, and relax again. Off by default:
+        printed cloth drifts a third to two thirds as much, but a uniform colour makes crane
+        10% worse, because the shifts' uncertainty does not yet see the gradients of the
+        colour noise (benchmarks/METHODS.md).
+    color_radius : float
+        Patch radius of that Lucas-Kanade, in template edges.
+    color_scale : float
+        A vertex whose colour shift has this uncertainty (template edges) counts exp(-1); the
+        weight falls as ``exp(-(uncertainty / scale)^2)``.
     anchor_gate : float
         With ``video_anchors``: an anchor whose target lies farther than this many template
         edges from where the step's prediction puts the vertex counts less (Gaussian weight;
@@ -183,6 +196,9 @@ class Options:
     video_anchors: bool = False
     anchor_pull: float = 1.0
     anchor_gate: float = 0.0
+    color_guide: bool = False
+    color_radius: float = 3.0
+    color_scale: float = 0.5
     cache_dir: str | None = None
 
     def __post_init__(self):

@@ -18,6 +18,7 @@ from fourd.methods.kinematic.field import fit_key, fit_windows, space_time_point
 from fourd.methods.kinematic.frames import prepare_frames
 from fourd.methods.kinematic.mpu4d import MPUOptions
 from fourd.methods.kinematic.options import MIN_FRAMES, Options
+from fourd.methods.kinematic.photometric_guide import colors_of_cleaned
 from fourd.sequence import PointCloudSequence
 
 log = logging.getLogger("fourd.methods.kinematic")
@@ -85,9 +86,14 @@ def reconstruct(
 
         anchors = track_anchors(seq)
         log.info("anchors from the video: %d over %d frame pairs", anchors.total, len(anchors))
+    colors = None
+    if options.color_guide and anchors is None and any(f.colors is not None for f in seq.frames):
+        colors = [
+            colors_of_cleaned(f.points, f.colors, p) for f, p in zip(seq.frames, points, strict=True)
+        ]
     result = animate(
         field, points, normals, times, spacing=spacing, options=options, cache=cache,
-        field_key=key, edge_stiffness=edge_stiffness, anchors=anchors,
+        field_key=key, edge_stiffness=edge_stiffness, anchors=anchors, colors=colors,
     )
     finished = _time.perf_counter()
     log.info(

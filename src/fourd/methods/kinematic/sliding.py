@@ -306,7 +306,9 @@ def slide_step(
 
     ``guide`` (optional): a :class:`~fourd.methods.kinematic.guide.Guide` of anchor-guided
     positions, blended into the start after the rigid prediction by its weights (before the
-    registration and the projection).
+    registration and the projection); or a function of positions [N, 3] that returns one (the
+    colour guide, :mod:`.photometric_guide`), called on the step's result, after which the
+    iterations run again from there, pulled towards the guide.
 
     Returns ``(positions [N, 3], constrained [N] bool, diagnostics)``.
     """
@@ -355,6 +357,9 @@ def slide_step(
                 start = moved
                 if converged:
                     break
+    late_guide = None
+    if callable(guide):
+        late_guide, guide = guide, None
     if guide is not None and len(guide.vertices) and options.anchor_gate > 0:
         # an anchor may correct the prediction by about what the tracking drifts in a step;
         # farther off it is more likely the flow's error than the tracking's (shading, fast
@@ -425,32 +430,41 @@ def slide_step(
         jumped = np.linalg.norm(guess - start, axis=1) > limit
         guess[jumped] = start[jumped]
         constrained &= ~jumped
-    pull = None
-    if guide is not None and len(guide.vertices) and options.anchor_pull > 0:
-        pull = np.zeros(n)
-        pull[guide.vertices] = options.anchor_pull * guide.weight
-    solver = ConstrainedSolver(pre, normals, offsets, constrained, options.regularization, pull)
     remembered = with_rest_shape(pre, vertices) if options.previous_shape > 0 else None
-    current = guess
-    for iteration in range(options.iterations):
-        rhs = blended_arap_rhs(pre, current, remembered, options.previous_shape)
-        reference = current
-        if pull is not None:
-            reference = current.copy()
-            reference[guide.vertices] = guide.positions
-        solved = solver.solve(rhs, reference)
-        if iteration < options.iterations - 1:
-            current = solved.copy()
-            mask = solver.constrained
-            current[mask] = _project(
-                target,
-                solved[mask],
-                options.reprojection_iterations,
-                max_step=max_step,
-                tolerance=tolerance,
-            )
-        else:
-            current = solved
+
+    def relax(current, guide):
+        """The rotation / position iterations from ``current``, pulled towards ``guide``."""
+        pull = None
+        if guide is not None and len(guide.vertices) and options.anchor_pull > 0:
+            pull = np.zeros(n)
+            pull[guide.vertices] = options.anchor_pull * guide.weight
+        solver = ConstrainedSolver(pre, normals, offsets, constrained, options.regularization, pull)
+        for iteration in range(options.iterations):
+            rhs = blended_arap_rhs(pre, current, remembered, options.previous_shape)
+            reference = current
+            if pull is not None:
+                reference = current.copy()
+                reference[guide.vertices] = guide.positions
+            solved = solver.solve(rhs, reference)
+            if iteration < options.iterations - 1:
+                current = solved.copy()
+                mask = solver.constrained
+                current[mask] = _project(
+                    target,
+                    solved[mask],
+                    options.reprojection_iterations,
+                    max_step=max_step,
+                    tolerance=tolerance,
+                )
+            else:
+                current = solved
+        return current, solver
+
+    current, solver = relax(guess, guide)
+    if late_guide is not None:
+        # the colour guide reads the frame's colours where the geometry put the vertices, then
+        # the iterations run again from there, pulled towards where the colours say
+        current, solver = relax(current, late_guide(current))
     residual = np.abs(np.einsum("ij,ij->i", normals, current) - offsets)[solver.constrained]
     if options.project_output:
         mask = solver.constrained
@@ -523,7 +537,9 @@ def slide(
     anchors : sequence, optional
         Per time, ``(source [M, 3], target [M, 3], confidence [M])`` of the anchor tracks from
         the previous time to this one (entry 0 and unknown steps None): the step starts the
-        vertices near them where they went (:func:`~.guide.anchor_guide`).
+        vertices near them where they went (:func:`~.guide.anchor_guide`); or per time a
+        function of the step's result that returns a :class:`~.guide.Guide` (the
+        colour guide, :class:`~.photometric_guide.PhotometricGuides`).
 
     Returns
     -------
@@ -609,8 +625,13 @@ def slide(
             surface = surfaces[k] if surfaces is not None and s == options.substeps - 1 else None
             guide = None
             if anchors is not None and anchors[k] is not None and s == options.substeps - 1:
-                source, target, confidence = anchors[k]
-                guide = anchor_guide(frames[k - 1], source, target, confidence, radius=2.0 * pre.edge_length)
+                if callable(anchors[k]):
+                    guide = anchors[k]
+                else:
+                    source, target, confidence = anchors[k]
+                    guide = anchor_guide(
+                        frames[k - 1], source, target, confidence, radius=2.0 * pre.edge_length
+                    )
             current, _, info = slide_step(
                 pre,
                 field,
