@@ -513,9 +513,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--noise", type=float, default=0.002, help="fraction of the bounding-box diagonal")
     p.add_argument("--outliers", type=float, default=0.02, help="fraction of points")
     p.add_argument("--resolution", type=int, default=256, help="rays per camera side")
-    p.add_argument("--appearance", choices=("skin", "cloth"), default=None,
-                   help="surface colour on the material (smooth low-contrast skin or a "
-                        "high-contrast printed cloth, chosen by --seed): coloured scans")
+    p.add_argument("--appearance", choices=("skin", "cloth", "uniform"), default=None,
+                   help="surface colour on the material (smooth low-contrast skin, a "
+                        "high-contrast printed cloth or one uniform colour, chosen by --seed): "
+                        "coloured scans")
     p.add_argument("--video", action="store_true",
                    help="also film every camera: cameras.json and video/<camera>/<frame>.png "
                         "(with --appearance cloth unless another is given)")
@@ -557,7 +558,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="add the peers of BASELINES.md (needs the `baselines` extra: open3d)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--timeout", type=float, default=None, help="seconds one reconstruction may take")
-    p.add_argument("--appearance", choices=("skin", "cloth"), default=None,
+    p.add_argument("--appearance", choices=("skin", "cloth", "uniform"), default=None,
                    help="scan every scene with this surface colour (coloured points)")
     p.add_argument("--video", action="store_true",
                    help="give the methods the rig's video too (--appearance cloth unless "

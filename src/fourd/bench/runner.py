@@ -105,7 +105,7 @@ def run_bench(
         Seconds one reconstruction case may take (isolated runs only).
     isolate : bool
         Run each reconstruction in a fresh child process (own peak memory, crash-safe).
-    appearance : {None, "skin", "cloth"}
+    appearance : {None, "skin", "cloth", "uniform"}
         Scan every scene with this surface colour (replaces each :class:`BenchScene`'s).
     video : bool
         Give the methods the rig's video too (needs an appearance).

@@ -85,6 +85,9 @@ HELD_OUT_SCENES: tuple[BenchScene, ...] = tuple(
 #: standard scans with a surface colour, and with the rig's calibrated video.
 APPEARANCE_SCENES: tuple[BenchScene, ...] = (
     BenchScene("crane", frames=20, options={"start": 0, "step": 2}, label="crane-skin", appearance="skin"),
+    BenchScene("crane", frames=20, options={"start": 0, "step": 2}, label="crane-cloth", appearance="cloth"),
+    BenchScene("crane", frames=20, options={"start": 0, "step": 2}, label="crane-uniform",
+               appearance="uniform"),
     BenchScene("crane", frames=20, options={"start": 0, "step": 2}, label="crane-skin-video",
                appearance="skin", video=True),
     BenchScene("bending-arm", label="bending-arm-cloth-video", appearance="cloth", video=True),

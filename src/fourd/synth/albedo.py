@@ -16,7 +16,11 @@ Kinds (:data:`APPEARANCES`):
     lattice) in random colours from a seeded palette, each cell with a ball-shaped dot (a disc
     where the surface cuts it) of a contrasting palette colour.
 
-Both are deterministic functions of the point, the rest bounds and the seed, so any subset of
+``uniform``
+    One colour everywhere (a seeded mid-tone): the shading is all there is to see, the case
+    in which colour must not change what geometry alone gives.
+
+All are deterministic functions of the point, the rest bounds and the seed, so any subset of
 points can be coloured independently (per hit, per pixel) with the same result.
 
 Examples
@@ -39,7 +43,7 @@ import numpy as np
 from fourd.errors import InputError
 
 #: The albedo kinds.
-APPEARANCES: tuple[str, ...] = ("skin", "cloth")
+APPEARANCES: tuple[str, ...] = ("skin", "cloth", "uniform")
 
 #: Skin tones (linear RGB albedo in [0, 1]) the skin kind picks from.
 SKIN_TONES = np.array(
@@ -66,7 +70,7 @@ def albedo(points, kind: str, *, bounds, seed: int = 0) -> np.ndarray:
     ----------
     points : array [P, 3]
         Positions on the rest surface (input units).
-    kind : {"skin", "cloth"}
+    kind : {"skin", "cloth", "uniform"}
     bounds : array [2, 3]
         Bounding box of the whole rest surface: sets the pattern's scale (its diagonal ``D``)
         and origin, so that all points of a scene share one pattern.
@@ -80,7 +84,7 @@ def albedo(points, kind: str, *, bounds, seed: int = 0) -> np.ndarray:
     """
     kind = check_appearance(kind)
     if kind is None:
-        raise InputError("albedo needs a kind: skin or cloth")
+        raise InputError(f"albedo needs a kind: {', '.join(APPEARANCES)}")
     points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     bounds = np.asarray(bounds, dtype=np.float64)
     if bounds.shape != (2, 3) or not np.isfinite(bounds).all():
@@ -91,6 +95,9 @@ def albedo(points, kind: str, *, bounds, seed: int = 0) -> np.ndarray:
     local = (points - bounds.mean(axis=0)) / diagonal
     if kind == "skin":
         return _skin(local, seed)
+    if kind == "uniform":
+        tone = np.random.default_rng([seed, 13]).uniform(0.35, 0.75, size=3)
+        return np.tile(tone, (len(points), 1))
     return _cloth(local, seed)
 
 

@@ -31,7 +31,7 @@ class Paint:
 
     Attributes
     ----------
-    kind : {"skin", "cloth"}
+    kind : {"skin", "cloth", "uniform"}
     seed : int
     rest : ndarray [N, 3] or None
         Rest-surface vertex positions (None: a MeshSequence, coloured where it is).

@@ -112,7 +112,7 @@ class ScanOptions:
         Standard deviation of a structured-outlier cluster, fraction of the diagonal.
     ray_backend : {"auto", "embree", "numba"}
         Ray caster (see :func:`ray_backend`); both give the same first hits.
-    appearance : {None, "skin", "cloth"}
+    appearance : {None, "skin", "cloth", "uniform"}
         Surface colour of the truth (:mod:`fourd.synth.albedo`); None: points without colour.
         The pattern is chosen by ``seed``.
     color_noise : float
