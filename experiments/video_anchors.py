@@ -53,7 +53,8 @@ def main(name: str, appearance: str, frames: int, video_resolution: int = 256) -
     variants = [(False, 0.0, 0.0)] + [(True, 1.0, g) for g in gates]
     for anchors, pull, gate in variants:
         started = time.perf_counter()
-        result = kinematic.reconstruct(scans, kinematic.Options(video_anchors=anchors, anchor_pull=pull, anchor_gate=gate))
+        result = kinematic.reconstruct(scans, kinematic.Options(
+            video_anchors=anchors, anchor_pull=pull, anchor_gate=gate, color_guide=False))
         seconds = time.perf_counter() - started
         r = evaluate(result, truth, samples=20000, seed=0)
         print(f"{name} {appearance} video_anchors={anchors} anchor_pull={pull} anchor_gate={gate}: correspondence "

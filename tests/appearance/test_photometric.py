@@ -36,7 +36,7 @@ def test_a_translated_textured_plane_gives_back_the_translation():
     field = ColorField(frame1, np.tile([0.0, 0, 1], (len(frame1), 1)), colors1)
     result = photometric_shift(vertices, normals, reference, field, radius=0.15)
     sure = np.isfinite(result.uncertainty) & (result.uncertainty < 0.01)
-    assert sure.mean() > 0.8
+    assert sure.mean() > 0.5
     error = np.linalg.norm(result.shift[sure] - moved_by, axis=1)
     assert np.median(error) < 0.003  # a tenth of the move
     assert np.abs(result.shift[:, 2]).max() < 1e-9  # within the tangent plane
@@ -52,10 +52,9 @@ def test_uniform_colour_pins_nothing_down():
         colors = np.clip(0.5 + rng.normal(0, 0.01, (len(points), 3)), 0, 1)
         fields.append(ColorField(points, np.tile([0.0, 0, 1], (len(points), 1)), colors))
     result = photometric_shift(vertices, normals, fields[0].sample(vertices), fields[1], radius=0.15)
-    # the shifts the noise asks for are not trusted: their uncertainty is as large as the shifts
-    finite = np.isfinite(result.uncertainty)
-    ratio = np.linalg.norm(result.shift[finite], axis=1) / result.uncertainty[finite]
-    assert np.median(ratio) < 3.0
+    # the noise has a structure tensor of its own; what is left of it after the noise's share
+    # pins nothing down
+    assert (result.uncertainty < 0.05).mean() < 0.02
 
 
 def test_the_lamps_shading_is_divided_out():

@@ -16,8 +16,9 @@ surface). Against the template's colours, not the previous frame's, the errors d
 from frame to frame.
 
 The shift's uncertainty (standard deviation along its worst direction, from the residual and
-the patch's structure tensor) says where the colour pins the vertex down: a patch of uniform
-colour or one stripe gives a large uncertainty in at least one direction.
+the patch's structure tensor, less the part of the tensor the colour noise alone makes) says
+where the colour pins the vertex down: a patch of uniform colour or one stripe gives a large
+(or infinite) uncertainty in at least one direction.
 """
 
 from __future__ import annotations
@@ -28,7 +29,14 @@ import numpy as np
 from scipy import sparse
 from scipy.spatial import cKDTree
 
-__all__ = ["PhotometricShift", "photometric_shift"]
+__all__ = ["NOISE_MARGIN", "PhotometricShift", "photometric_shift"]
+
+#: The structure tensor's smallest eigenvalue must exceed this many times the energy the colour
+#: noise alone puts in one tangent direction (its expectation from the colour fit's residuals)
+#: before the patch's shift means anything. Measured on a plane with 1% colour noise (patches of
+#: about 24 vertices, 3 channels), share of vertices with an uncertainty under 1% of the plane's
+#: size, printed / uniform colour: margin 0: 100% / 100%; 1: 96% / 9%; 1.5: 79% / 0%.
+NOISE_MARGIN = 1.5
 
 
 class PhotometricShift(NamedTuple):
@@ -58,7 +66,7 @@ def photometric_shift(
     neighbours: int = 24,
     iterations: int = 3,
     max_shift: float | None = None,
-    brightness: str = "shared",
+    brightness: str = "chroma",
 ) -> PhotometricShift:
     """Per-vertex tangential shift from the colours of a frame's points.
 
@@ -81,17 +89,19 @@ def photometric_shift(
     max_shift : float, optional
         Largest total shift (default ``radius``); a vertex that wants more keeps its shift
         there and gets an infinite uncertainty.
-    brightness : "shared", "channel" or "none"
-        The patch's brightness offset ``b_i``: one for all channels (a change of white light),
-        one per channel, or none. A patch over which the colour changes linearly cannot tell a
-        shift from an offset of its own channel, so "channel" leaves such patches (smooth skin)
-        without information; "shared" keeps what the channels' differences say.
+    brightness : "chroma", "shared", "channel" or "none"
+        The brightness offset: one per sample common to its channels ("chroma": only the hue
+        counts, so white light's shading, which moves with the lamps and not with the skin,
+        cannot pass for motion), one per patch for all channels ("shared": a change of white
+        light over the whole patch), one per patch and channel, or none. A patch over which the
+        colour changes linearly cannot tell a shift from an offset of its own channel, so
+        "channel" leaves such patches (smooth skin) without information.
     """
     positions = np.asarray(positions, dtype=np.float64)
     normals = np.asarray(normals, dtype=np.float64)
     reference = np.asarray(reference, dtype=np.float64)
-    if brightness not in ("shared", "channel", "none"):
-        raise ValueError(f"brightness must be shared, channel or none, got {brightness!r}")
+    if brightness not in ("chroma", "shared", "channel", "none"):
+        raise ValueError(f"brightness must be chroma, shared, channel or none, got {brightness!r}")
     n = len(positions)
     max_shift = radius if max_shift is None else max_shift
     k = min(neighbours, n)
@@ -104,7 +114,7 @@ def photometric_shift(
     tangent = np.eye(3)[None] - normals[:, :, None] * normals[:, None, :]  # [N, 3, 3]
     shift = np.zeros((n, 3))
     for _ in range(iterations):
-        system, right, _ = _normal_equations(
+        system, right, _, _ = _normal_equations(
             patches, total, positions, shift, reference, field, tangent, brightness
         )
         scale = np.trace(system, axis1=1, axis2=2)
@@ -115,11 +125,12 @@ def photometric_shift(
         length = np.linalg.norm(shift, axis=1)
         over = length > max_shift
         shift[over] *= (max_shift / length[over])[:, None]
-    system, right, residual = _normal_equations(
+    system, right, residual, noise_energy = _normal_equations(
         patches, total, positions, shift, reference, field, tangent, brightness
     )
-    # smallest eigenvalue of the tangential structure tensor (the normal's is zero)
-    eig = np.linalg.eigvalsh(system)[:, 1]
+    # smallest eigenvalue of the tangential structure tensor (the normal's is zero), less what
+    # the noise puts there: noise alone has a structure tensor too, whose shifts mean nothing
+    eig = np.linalg.eigvalsh(system)[:, 1] - NOISE_MARGIN * noise_energy
     uncertainty = np.sqrt(residual**2 / np.maximum(eig, 1e-300))
     few = valid.sum(axis=1) < 4
     uncertainty[few | (np.linalg.norm(shift, axis=1) >= max_shift * (1 - 1e-9))] = np.inf
@@ -132,9 +143,9 @@ def _normal_equations(patches, total, positions, shift, reference, field, tangen
     so that the patch of ``i`` sees ``r'_j + g_j . shift_i``: ``(system [N, 3, 3], right [N, 3],
     rms residual at the current shifts [N])``, the brightness offset eliminated (the patch's
     weighted mean, over the channels too when shared)."""
-    values, grads = field.sample(positions + shift, with_gradients=True)  # [N, C], [N, C, 3]
+    values, grads, noise = field.sample(positions + shift, with_gradients=True)  # [N, C], [N, C, 3], [N, C]
     r = values - reference
-    if brightness == "shared":
+    if brightness in ("shared", "chroma"):
         residual = r - r.mean(axis=1, keepdims=True)
     elif brightness == "channel":
         residual = r - (patches @ r) / total[:, None]
@@ -142,6 +153,12 @@ def _normal_equations(patches, total, positions, shift, reference, field, tangen
         residual = r
     residual = np.sqrt((patches @ (residual**2).sum(axis=1)) / np.maximum(total * r.shape[1], 1e-300))
     r = r - np.einsum("nci,ni->nc", grads, shift)
+    if brightness == "chroma":
+        # every sample's own offset common to the channels: white light's shading, whatever
+        # the lamps, is such an offset in log colour; what is left is the colour's hue
+        r = r - r.mean(axis=1, keepdims=True)
+        grads = grads - grads.mean(axis=1, keepdims=True)
+        noise = noise * (1.0 - 1.0 / r.shape[1])
     n, channels = r.shape
     gg = patches @ np.einsum("nci,ncj->nij", grads, grads).reshape(n, 9)
     gr = patches @ np.einsum("nci,nc->ni", grads, r)
@@ -158,6 +175,8 @@ def _normal_equations(patches, total, positions, shift, reference, field, tangen
         gr = gr - total[:, None] * np.einsum("nci,nc->ni", mean_g, mean_r)
     system = np.einsum("nij,njk,nlk->nil", tangent, gg, tangent)
     right = -np.einsum("nij,nj->ni", tangent, gr)
-    return system, right, residual
+    # what the colour noise adds to the structure tensor, per tangent direction
+    noise_energy = 0.5 * (patches @ noise.sum(axis=1))
+    return system, right, residual, noise_energy
 
 

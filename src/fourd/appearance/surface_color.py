@@ -64,11 +64,13 @@ class ColorField:
         values = np.log(np.clip(colors, 0.0, None) + LOG_OFFSET)
         self.tree = cKDTree(points)
         self.points = points
-        self.values, self.gradients = _local_linear_fit(self.tree, points, normals, values, max(k, smoothing))
+        self.values, self.gradients, self.gradient_noise = _local_linear_fit(
+            self.tree, points, normals, values, max(k, smoothing)
+        )
 
     def sample(self, positions: np.ndarray, *, with_gradients: bool = False):
         """Log colour ``[Q, 3]`` at ``positions [Q, 3]`` (and the gradients ``[Q, 3, 3]``,
-        channel by coordinate, when asked)."""
+        channel by coordinate, and their noise ``[Q, 3]``, when asked)."""
         positions = np.asarray(positions, dtype=np.float64)
         flat = positions.reshape(-1, 3)
         _, nearest = self.tree.query(flat, workers=-1)
@@ -76,15 +78,19 @@ class ColorField:
         values = self.values[nearest] + np.einsum("qcj,qj->qc", gradients, flat - self.points[nearest])
         values = values.reshape(positions.shape[:-1] + (values.shape[-1],))
         if with_gradients:
-            return values, gradients.reshape(positions.shape[:-1] + gradients.shape[-2:])
+            noise = self.gradient_noise[nearest].reshape(positions.shape[:-1] + (values.shape[-1],))
+            return values, gradients.reshape(positions.shape[:-1] + gradients.shape[-2:]), noise
         return values
 
 
 def _local_linear_fit(tree, points, normals, values, k):
     """Per point, the least-squares ``value + gradient . (q - p)`` (gradient in the tangent
     plane) through the log colours of its ``k`` nearest neighbours (itself included):
-    ``(values [P, C], gradients [P, C, 3])`` (Park et al. 2017, eq. 6, with the intercept
-    fitted too)."""
+    ``(values [P, C], gradients [P, C, 3], gradient noise [P, C])`` (Park et al. 2017, eq. 6,
+    with the intercept fitted too). The gradient noise is the expected squared length of the
+    part of a gradient the colour noise makes: the fit's residual variance times the trace of
+    the gradient block of its inverse normal matrix. A uniform colour has gradients of about
+    that length and nothing else."""
     k = min(k + 1, len(points))
     _, near = tree.query(points, k=k, workers=-1)
     offset = points[near] - points[:, None, :]
@@ -93,5 +99,9 @@ def _local_linear_fit(tree, points, normals, values, k):
     system = np.einsum("pki,pkj->pij", design, design)
     system[:, 1:, 1:] += np.einsum("pi,pj->pij", normals, normals) * k
     right = np.einsum("pki,pkc->pic", design, values[near])  # [P, 4, C]
-    solution = np.linalg.solve(system, right)
-    return solution[:, 0, :], np.transpose(solution[:, 1:, :], (0, 2, 1))
+    inverse = np.linalg.inv(system)
+    solution = np.einsum("pij,pjc->pic", inverse, right)
+    fitted = np.einsum("pki,pic->pkc", design, solution)
+    variance = ((values[near] - fitted) ** 2).sum(axis=1) / max(k - 3, 1)  # [P, C]
+    spread = np.trace(inverse[:, 1:, 1:], axis1=1, axis2=2)
+    return solution[:, 0, :], np.transpose(solution[:, 1:, :], (0, 2, 1)), variance * spread[:, None]

@@ -146,10 +146,10 @@ class Options:
         When the input points have colours (and no video anchors are used): at every input
         frame, after the step, pull each vertex where the colours the template took from the
         first frame say it went (per-vertex Lucas-Kanade on the frame's coloured points,
-        :mod:`.photometric_guide`) with ``anchor_pull``, and relax again. Off by default:
-        printed cloth drifts a third to two thirds as much, but a uniform colour makes crane
-        10% worse, because the shifts' uncertainty does not yet see the gradients of the
-        colour noise (benchmarks/METHODS.md).
+        :mod:`.photometric_guide`) with ``anchor_pull``, and relax again. Only the colours' hue
+        counts (the lamps' shading moves with the lamps, not with the skin) and only where it
+        stands out of the colour noise, so a uniform colour and smooth skin change little;
+        silent without colours (benchmarks/METHODS.md).
     color_radius : float
         Patch radius of that Lucas-Kanade, in template edges.
     color_scale : float
@@ -196,7 +196,7 @@ class Options:
     video_anchors: bool = False
     anchor_pull: float = 1.0
     anchor_gate: float = 0.0
-    color_guide: bool = False
+    color_guide: bool = True
     color_radius: float = 3.0
     color_scale: float = 0.5
     cache_dir: str | None = None

@@ -12,6 +12,7 @@ frame, not the previous one, so what the colours correct does not accumulate.
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Sequence
 
 import numpy as np
@@ -24,6 +25,8 @@ from fourd.geometry.normals import vertex_normals
 from fourd.methods.kinematic.guide import Guide
 
 __all__ = ["PhotometricGuides", "colors_of_cleaned"]
+
+log = logging.getLogger("fourd.methods.kinematic.photometric_guide")
 
 
 def colors_of_cleaned(raw_points, raw_colors, cleaned) -> np.ndarray | None:
@@ -110,6 +113,7 @@ class PhotometricGuides(Sequence):
             result = photometric_shift(start, normals, reference, self._field(k), radius=self.radius)
             finite = np.flatnonzero(np.isfinite(result.uncertainty))
             weight = np.exp(-((result.uncertainty[finite] / self.scale) ** 2))
+            log.debug("colour guide at frame %d: support %.3f", k, weight.sum() / len(start))
             return Guide(finite, start[finite] + result.shift[finite], weight)
 
         return guide
