@@ -81,3 +81,15 @@ def test_plane_barycentric_is_nan_on_a_degenerate_triangle():
     bary = plane_barycentric(corners, np.array([[0.25, 0.25, 3.0], [0.5, 0.0, 0.0]]))
     np.testing.assert_allclose(bary[0], [0.5, 0.25, 0.25])
     assert np.isnan(bary[1]).all()
+
+
+def test_a_displacement_at_the_rounding_level_leaves_a_point_at_a_vertex_where_it_is():
+    sphere = trimesh.creation.icosphere(subdivisions=3)
+    vertices, faces = np.asarray(sphere.vertices), np.asarray(sphere.faces)
+    rng = np.random.default_rng(2)
+    face = rng.integers(len(faces), size=300)
+    bary = np.eye(3)[rng.integers(3, size=300)]  # at a corner: noise would spin it round
+    walked = walk_on_surface(vertices, faces, face, bary, rng.normal(scale=1e-15, size=(300, 3)))
+    assert not walked.stopped.any()
+    np.testing.assert_array_equal(walked.faces, face)
+    np.testing.assert_array_equal(walked.barycentric, bary)

@@ -21,8 +21,8 @@ import numpy as np
 
 from fourd.geometry.meshes import face_adjacency
 
-#: A barycentric coordinate this far below 0 still counts as inside (rounding).
-INSIDE = -1e-12
+#: A displacement shorter than this fraction of its face's first edge does not move.
+TINY_STEP = 1e-10
 
 
 class Walked(NamedTuple):
@@ -144,6 +144,11 @@ def walk_on_surface(
             break
         f = face[active]
         corners = vertices[faces[f]]
+        # what is left of a step at the rounding level of the face's size is no step (its
+        # barycentric change is all noise, which would spin the point round a vertex)
+        size = np.einsum("kd,kd->k", corners[:, 1] - corners[:, 0], corners[:, 1] - corners[:, 0])
+        going = np.einsum("kd,kd->k", step[active], step[active]) > (TINY_STEP**2) * size
+        active, f, corners = active[going], f[going], corners[going]
         here = bary[active]
         there = plane_barycentric(corners, np.einsum("kc,kcd->kd", here, corners) + step[active])
         bad = ~np.isfinite(there).all(axis=1)
