@@ -74,3 +74,24 @@ def remeshed_frames(name: str = "bending-arm", frame: int = 3, resolution: int =
     anchors = Anchors(ids, triangle.astype(np.int64), bary)
     return Pair(source.vertices, source.faces, target.vertices, target.faces, anchors, true,
                 _median_edge(source.vertices, source.faces))
+
+
+def true_map(pair: Pair) -> tuple[np.ndarray, np.ndarray]:
+    """The true map as target triangles ``[N]`` and barycentric coordinates ``[N, 3]``: the
+    target points closest to the true images (which lie on the truth, not on the target's
+    triangles)."""
+    mesh = trimesh.Trimesh(pair.target_vertices, pair.target_faces, process=False)
+    closest, _, triangle = trimesh.proximity.closest_point(mesh, pair.truth)
+    bary = trimesh.triangles.points_to_barycentric(mesh.triangles[triangle], closest)
+    return triangle.astype(np.int64), np.clip(bary, 0.0, None) / np.clip(bary, 0.0, None).sum(axis=1, keepdims=True)
+
+
+def slid_map(pair: Pair, noise: float, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """The true map with every point slid along the target by a random tangent step (normal,
+    ``noise`` source edges per axis)."""
+    from fourd.geometry.surface_walk import walk_on_surface
+
+    faces, bary = true_map(pair)
+    step = np.random.default_rng(seed).normal(scale=noise * pair.edge, size=(len(faces), 3))
+    walked = walk_on_surface(pair.target_vertices, pair.target_faces, faces, bary, step)
+    return walked.faces, walked.barycentric

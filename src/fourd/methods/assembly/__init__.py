@@ -8,9 +8,11 @@ assembly`` does not exist). What is here is its core, each part tested on its ow
 - :mod:`.patches`: matching disk-shaped patches grown around anchors (5.4.2);
 - :mod:`.crossparam`: the local patch cross-parameterisation, each patch pair flattened
   (ABF++ or LSCM, :mod:`fourd.geometry.flattening`), aligned by its anchors and the most
-  central patch chosen per vertex (5.4.2).
+  central patch chosen per vertex (5.4.2);
+- :mod:`.relax`: the local relaxation of that map, its Laplacian coordinates kept by walks
+  over the target, flipped triangles fixed (5.4.3).
 
-Still to come: local relaxation of the map (5.4.3), anchor set refinement (5.4.4), analysis
+Still to come: anchor set refinement (5.4.4), analysis
 and correction (5.5), geometry completion and connectivity combination (5.6), the
 hierarchical assembly (5.3), and the method module itself. Bench input for it: the remeshed
 scan mode (``fourd synth --meshes``, the ``*-remeshed`` bench scenes).
@@ -23,8 +25,9 @@ from fourd.methods.assembly.crossparam import (
     cross_parameterize,
     map_patch,
 )
-from fourd.methods.assembly.options import CrossParamOptions
+from fourd.methods.assembly.options import CrossParamOptions, RelaxOptions
 from fourd.methods.assembly.patches import GrownPatches, Patch, PatchPair, grow_patches
+from fourd.methods.assembly.relax import RelaxedMap, flipped_triangles, mapped_points, relax_map
 
 __all__ = [
     "Anchors",
@@ -34,8 +37,13 @@ __all__ = [
     "Patch",
     "PatchMap",
     "PatchPair",
+    "RelaxOptions",
+    "RelaxedMap",
     "anchors_at_vertices",
     "cross_parameterize",
+    "flipped_triangles",
     "grow_patches",
     "map_patch",
+    "mapped_points",
+    "relax_map",
 ]

@@ -56,3 +56,44 @@ class CrossParamOptions:
             raise ValueError(f"max_residual must be > 0, got {self.max_residual!r}")
         if self.flattening not in ("abf", "lscm"):
             raise ValueError(f"flattening must be 'abf' or 'lscm', got {self.flattening!r}")
+
+
+@dataclass(frozen=True)
+class RelaxOptions:
+    """Settings of :func:`~fourd.methods.assembly.relax.relax_map` (thesis section 5.4.3).
+
+    Attributes
+    ----------
+    sweeps : int
+        Global sweeps over all vertices (the thesis: five to six).
+    walks : int
+        Random directions tried per vertex and step (the thesis: about a hundred random walks
+        per vertex). Half are line searches: walked over the target to the point along them
+        nearest the vertex's Laplacian optimum; half walk a random length, log-uniform from a
+        hundredth of a source edge to one edge, which is what frees a flipped sliver (on
+        bending-arm frames 0 and 3 remeshed apart, from a map slid by 0.4 edges: 12 flipped
+        triangles left after 6 sweeps with line searches only, none with both). The steepest
+        direction is always tried beside them.
+    steps : int
+        Moves per vertex in a sweep (each the best of its walks).
+    laplacian : {"uniform", "cotangent"}
+        The source Laplacian ``L``. Uniform by default: per-frame meshes from marching cubes
+        have slivers whose cotangent weights run into the hundreds (bending-arm remeshed:
+        up to 438, down to -13).
+    seed : int
+        Seed of the random directions.
+    """
+
+    sweeps: int = 6
+    walks: int = 16
+    steps: int = 2
+    laplacian: str = "uniform"
+    seed: int = 0
+
+    def __post_init__(self):
+        for name in ("sweeps", "walks", "steps"):
+            value = getattr(self, name)
+            if int(value) != value or value < (1 if name == "steps" else 0):
+                raise ValueError(f"{name} must be a non-negative integer (steps >= 1), got {value!r}")
+        if self.laplacian not in ("uniform", "cotangent"):
+            raise ValueError(f"laplacian must be 'uniform' or 'cotangent', got {self.laplacian!r}")
