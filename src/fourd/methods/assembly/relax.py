@@ -55,7 +55,7 @@ import scipy.sparse as sp
 
 from fourd.geometry.laplacian import cotangent_laplacian, uniform_laplacian
 from fourd.geometry.meshes import median_edge_length, vertex_adjacency
-from fourd.geometry.rotations import best_rotations
+from fourd.geometry.rotations import one_ring_rotations
 from fourd.geometry.surface_walk import face_neighbours, face_unit_normals, walk_on_surface
 from fourd.methods.assembly.options import RelaxOptions
 
@@ -133,7 +133,7 @@ class _Problem(NamedTuple):
     weight: np.ndarray  # [N] c_i
     delta: np.ndarray  # [N, 3] source Laplacian vectors
     complete: np.ndarray  # [N] rows in the energy
-    edges: tuple  # (i, j, w) directed one-ring edges for the rotations
+    edges: sp.csr_matrix  # one-ring weights for the rotations
     near: sp.csr_matrix  # vertices within two edges (no diagonal)
     incident: np.ndarray  # [N, D] source faces at each vertex, -1 padded
     face_ok: np.ndarray  # [F] source faces with every corner mapped
@@ -164,14 +164,13 @@ def _problem(source_vertices, source_faces, target_vertices, target_faces, mappe
     complete = mapped & (unmapped_near == 0)
     rows = sp.diags(complete.astype(np.float64)) @ laplacian
     weight = np.asarray(rows.multiply(rows).sum(axis=0)).ravel()
-    off = sp.triu(laplacian, k=1).tocoo()
-    i, j, w = np.r_[off.row, off.col], np.r_[off.col, off.row], np.abs(np.r_[off.data, off.data])
+    edges = abs(laplacian - sp.diags(laplacian.diagonal())).tocsr()
     ring = adjacency + sp.identity(count, format="csr")
     near = (ring @ ring).tocsr()
     near.setdiag(0.0)
     near.eliminate_zeros()
     return _Problem(
-        laplacian, rows.tocsc(), weight, laplacian @ source_vertices, complete, (i, j, w), near,
+        laplacian, rows.tocsc(), weight, laplacian @ source_vertices, complete, edges, near,
         _incident_faces(source_faces, count), mapped[source_faces].all(axis=1), source_faces,
         target_vertices, target_faces, face_unit_normals(target_vertices, target_faces),
         face_neighbours(target_faces), median_edge_length(source_vertices, source_faces),
@@ -181,14 +180,7 @@ def _problem(source_vertices, source_faces, target_vertices, target_faces, mappe
 def _goals(problem: _Problem, source_vertices: np.ndarray, points: np.ndarray) -> np.ndarray:
     """``R_i (L v)_i`` ``[N, 3]``, ``R_i`` the rotation best aligning vertex ``i``'s source
     one-ring edges with the mapped ones."""
-    i, j, w = problem.edges
-    before = source_vertices[j] - source_vertices[i]
-    after = points[j] - points[i]
-    covariance = np.empty((len(points), 3, 3))
-    for a in range(3):
-        for b in range(3):
-            covariance[:, a, b] = np.bincount(i, weights=w * before[:, a] * after[:, b], minlength=len(points))
-    return np.einsum("nab,nb->na", best_rotations(covariance), problem.delta)
+    return np.einsum("nab,nb->na", one_ring_rotations(problem.edges, source_vertices, points), problem.delta)
 
 
 def _residual(problem: _Problem, points: np.ndarray, goals: np.ndarray) -> np.ndarray:
