@@ -18,7 +18,13 @@ hierarchical assembly (5.3), and the method module itself. Bench input for it: t
 scan mode (``fourd synth --meshes``, the ``*-remeshed`` bench scenes).
 """
 
-from fourd.methods.assembly.anchors import Anchors, anchors_at_vertices
+from fourd.methods.assembly.anchors import (
+    Anchors,
+    anchors_at_vertices,
+    consistent_anchors,
+    returned_points,
+    spread_anchors,
+)
 from fourd.methods.assembly.crossparam import (
     CrossParameterization,
     PatchMap,
@@ -40,10 +46,13 @@ __all__ = [
     "RelaxOptions",
     "RelaxedMap",
     "anchors_at_vertices",
+    "consistent_anchors",
     "cross_parameterize",
     "flipped_triangles",
     "grow_patches",
     "map_patch",
     "mapped_points",
     "relax_map",
+    "returned_points",
+    "spread_anchors",
 ]
