@@ -83,10 +83,11 @@ def test_spreading_keeps_the_kept_and_prefers_the_higher_priority():
     ids = np.arange(len(faces))
     anchors = _anchors_of(pair, faces, bary, ids)
     keep = np.zeros(len(ids), dtype=bool)
-    keep[[0, 1]] = True  # neighbours on the mesh: both stay
+    nearest = int(np.argsort(np.linalg.norm(pair.source_vertices - pair.source_vertices[0], axis=1))[1])
+    keep[[0, nearest]] = True  # an edge apart: both stay
     spacing = 3.0 * pair.edge
     kept = spread_anchors(anchors, pair.source_vertices, spacing, keep=keep)
-    assert kept[[0, 1]].all()
+    assert kept[[0, nearest]].all()
     near = np.linalg.norm(pair.source_vertices - pair.source_vertices[0], axis=1) < spacing
     assert kept[near].sum() == 2  # nothing else near the kept ones
     priority = -np.linalg.norm(pair.source_vertices - pair.source_vertices[7], axis=1)
