@@ -97,3 +97,39 @@ class RelaxOptions:
                 raise ValueError(f"{name} must be a non-negative integer (steps >= 1), got {value!r}")
         if self.laplacian not in ("uniform", "cotangent"):
             raise ValueError(f"laplacian must be 'uniform' or 'cotangent', got {self.laplacian!r}")
+
+
+@dataclass(frozen=True)
+class RefineOptions:
+    """Settings of :func:`~fourd.methods.assembly.refine.refine_anchors` (thesis section
+    5.4.4). Lengths are in source edges (the source's median edge length).
+
+    Attributes
+    ----------
+    touch : float
+        An unmapped vertex, registered in the target's frame, becomes an anchor when it lies
+        this close to the target ("a nearly zero distance"; the registration places the
+        vertices of a hole 6 edges wide about 0.03 edges from the truth, at most 0.1).
+    spacing : float
+        Anchors added no closer than this to each other or to the anchors there were
+        (anchors this far apart are about 3% of the vertices, the thesis' density).
+    iterations : int
+        Rotation fits of the registration
+        (:func:`~fourd.methods.assembly.registration.register_by_laplacian`).
+    laplacian : {"uniform", "cotangent"}
+        The Laplacian of the registration.
+    """
+
+    touch: float = 0.1
+    spacing: float = 4.0
+    iterations: int = 16
+    laplacian: str = "uniform"
+
+    def __post_init__(self):
+        for name in ("touch", "spacing"):
+            if not getattr(self, name) > 0:
+                raise ValueError(f"{name} must be > 0, got {getattr(self, name)!r}")
+        if int(self.iterations) != self.iterations or self.iterations < 0:
+            raise ValueError(f"iterations must be a non-negative integer, got {self.iterations!r}")
+        if self.laplacian not in ("uniform", "cotangent"):
+            raise ValueError(f"laplacian must be 'uniform' or 'cotangent', got {self.laplacian!r}")
