@@ -13,7 +13,8 @@ assembly`` does not exist). What is here is its core, each part tested on its ow
 - :mod:`.relax`: the local relaxation of that map, its Laplacian coordinates kept by walks
   over the target, flipped triangles fixed (5.4.3);
 - :mod:`.registration` and :mod:`.refine`: the source registered in the target's frame by its
-  Laplacian coordinates, and anchors added where it lands on the target (5.4.4).
+  Laplacian coordinates, and anchors added where it lands on the target (5.4.4);
+- :mod:`.pair`: those steps chained, one source mesh mapped onto one target mesh.
 
 Still to come: analysis
 and correction (5.5), geometry completion and connectivity combination (5.6), the
@@ -34,7 +35,13 @@ from fourd.methods.assembly.crossparam import (
     cross_parameterize,
     map_patch,
 )
-from fourd.methods.assembly.options import CrossParamOptions, RefineOptions, RelaxOptions
+from fourd.methods.assembly.options import (
+    CrossParamOptions,
+    PairOptions,
+    RefineOptions,
+    RelaxOptions,
+)
+from fourd.methods.assembly.pair import PairMap, cross_parameterize_pair
 from fourd.methods.assembly.patches import GrownPatches, Patch, PatchPair, grow_patches
 from fourd.methods.assembly.refine import Refinement, refine_anchors
 from fourd.methods.assembly.registration import register_by_laplacian
@@ -47,6 +54,8 @@ __all__ = [
     "GrownPatches",
     "Patch",
     "PatchMap",
+    "PairMap",
+    "PairOptions",
     "PatchPair",
     "RefineOptions",
     "Refinement",
@@ -55,6 +64,7 @@ __all__ = [
     "anchors_at_vertices",
     "consistent_anchors",
     "cross_parameterize",
+    "cross_parameterize_pair",
     "flipped_triangles",
     "grow_patches",
     "map_patch",
