@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from fourd.geometry.rotations import best_rotations, procrustes
+from fourd.geometry.rotations import best_rotations, one_ring_rotations, procrustes
 
 
 def test_best_rotations_recovers_known_rotations_batched():
@@ -62,3 +62,27 @@ def test_single_matrix_and_procrustes():
     assert best_rotations(np.eye(3)).shape == (3, 3)
     with pytest.raises(ValueError):
         procrustes(X[:2], Y[:2])
+
+
+def test_one_ring_rotations_recover_a_rigid_motion_and_a_bend():
+    import scipy.sparse as sp
+    import trimesh
+
+    from fourd.geometry.meshes import vertex_adjacency
+
+    sphere = trimesh.creation.icosphere(subdivisions=2)
+    rest = np.asarray(sphere.vertices)
+    weights = vertex_adjacency(np.asarray(sphere.faces), len(rest))
+    R = Rotation.from_rotvec([0.4, -0.2, 0.9]).as_matrix()
+    found = one_ring_rotations(weights, rest, rest @ R.T + [3.0, 1.0, 2.0])
+    assert np.abs(found - R).max() < 1e-9
+    # each half turned its own way: vertices away from the cut get their half's rotation
+    other = Rotation.from_rotvec([0.0, 0.0, -0.7]).as_matrix()
+    upper = rest[:, 2] > 0
+    bent = np.where(upper[:, None], rest @ R.T, rest @ other.T)
+    found = one_ring_rotations(weights, rest, bent)
+    far = np.abs(rest[:, 2]) > 0.5
+    assert np.abs(found[far & upper] - R).max() < 1e-9
+    assert np.abs(found[far & ~upper] - other).max() < 1e-9
+    lonely = one_ring_rotations(sp.csr_matrix((len(rest), len(rest))), rest, rest)
+    assert np.abs(lonely - np.eye(3)).max() == 0

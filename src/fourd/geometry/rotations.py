@@ -14,6 +14,7 @@ from typing import NamedTuple
 
 import numba
 import numpy as np
+import scipy.sparse as sp
 
 from fourd.geometry.eigen3 import FOUND, smallest_eigenpair
 
@@ -223,6 +224,39 @@ class RigidTransform(NamedTuple):
     translation: np.ndarray
     scale: float
     rms: float
+
+
+def one_ring_rotations(weights: sp.spmatrix, rest: np.ndarray, deformed: np.ndarray) -> np.ndarray:
+    """Each vertex's rotation best aligning its one-ring's edges at rest with the deformed ones,
+    the local step of as-rigid-as-possible modelling (Sorkine and Alexa 2007, eq. 5-6):
+    ``R_i`` maximises ``sum_j w_ij (d_j - d_i) . R_i (r_j - r_i)``.
+
+    Parameters
+    ----------
+    weights : sparse [N, N]
+        Non-negative edge weights ``w_ij`` (the one-rings: the non-zeros of row ``i``).
+    rest, deformed : array [N, 3]
+
+    Returns
+    -------
+    ndarray float [N, 3, 3]
+        Proper rotations with ``R_i (r_j - r_i) ~ d_j - d_i``; the identity where a vertex
+        has no weighted edge.
+    """
+    rest = np.asarray(rest, dtype=np.float64)
+    deformed = np.asarray(deformed, dtype=np.float64)
+    edges = sp.coo_matrix(weights)
+    i, j, w = edges.row, edges.col, edges.data
+    before = rest[j] - rest[i]
+    after = deformed[j] - deformed[i]
+    count = len(rest)
+    covariance = np.empty((count, 3, 3))
+    for a in range(3):
+        for b in range(3):
+            covariance[:, a, b] = np.bincount(i, weights=w * before[:, a] * after[:, b], minlength=count)
+    rotations = best_rotations(covariance)
+    rotations[np.bincount(i, minlength=count) == 0] = np.eye(3)
+    return rotations
 
 
 def procrustes(

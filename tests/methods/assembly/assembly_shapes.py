@@ -21,6 +21,7 @@ class Pair(NamedTuple):
     anchors: Anchors
     truth: np.ndarray  # [N, 3] the true image of every source vertex on the target
     edge: float  # the source's median edge length
+    back: np.ndarray  # [M, 3] the true image of every target vertex on the source
 
 
 def _median_edge(vertices, faces) -> float:
@@ -49,7 +50,7 @@ def rigid_copy(subdivisions: int = 3, fraction: float = 0.12) -> Pair:
     moved = vertices @ Rotation.from_rotvec([0.3, -0.5, 0.2]).as_matrix().T + [1.0, 2.0, 3.0]
     ids = spread(vertices, int(fraction * len(vertices)))
     return Pair(vertices, faces, moved, faces, anchors_at_vertices(ids, ids, faces), moved,
-                _median_edge(vertices, faces))
+                _median_edge(vertices, faces), vertices)
 
 
 @cache
@@ -67,10 +68,32 @@ def remeshed_frames(name: str = "bending-arm", frame: int = 3, resolution: int =
     source = remesh_surface(v0, f0, spacing=spacing, offset=[0.1, 0.5, 0.3])
     target = remesh_surface(v1, f1, spacing=spacing, offset=[0.7, 0.2, 0.9])
     true = np.einsum("nk,nkd->nd", source.barycentric, v1[f1[source.truth_faces]])
+    back = np.einsum("nk,nkd->nd", target.barycentric, v0[f0[target.truth_faces]])
     ids = spread(source.vertices, int(0.03 * len(source.vertices)))
     mesh = trimesh.Trimesh(target.vertices, target.faces, process=False)
     closest, _, triangle = trimesh.proximity.closest_point(mesh, true[ids])
     bary = trimesh.triangles.points_to_barycentric(mesh.triangles[triangle], closest)
     anchors = Anchors(ids, triangle.astype(np.int64), bary)
     return Pair(source.vertices, source.faces, target.vertices, target.faces, anchors, true,
-                _median_edge(source.vertices, source.faces))
+                _median_edge(source.vertices, source.faces), back)
+
+
+def true_map(pair: Pair) -> tuple[np.ndarray, np.ndarray]:
+    """The true map as target triangles ``[N]`` and barycentric coordinates ``[N, 3]``: the
+    target points closest to the true images (which lie on the truth, not on the target's
+    triangles)."""
+    mesh = trimesh.Trimesh(pair.target_vertices, pair.target_faces, process=False)
+    closest, _, triangle = trimesh.proximity.closest_point(mesh, pair.truth)
+    bary = trimesh.triangles.points_to_barycentric(mesh.triangles[triangle], closest)
+    return triangle.astype(np.int64), np.clip(bary, 0.0, None) / np.clip(bary, 0.0, None).sum(axis=1, keepdims=True)
+
+
+def slid_map(pair: Pair, noise: float, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """The true map with every point slid along the target by a random tangent step (normal,
+    ``noise`` source edges per axis)."""
+    from fourd.geometry.surface_walk import walk_on_surface
+
+    faces, bary = true_map(pair)
+    step = np.random.default_rng(seed).normal(scale=noise * pair.edge, size=(len(faces), 3))
+    walked = walk_on_surface(pair.target_vertices, pair.target_faces, faces, bary, step)
+    return walked.faces, walked.barycentric

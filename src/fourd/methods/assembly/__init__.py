@@ -4,27 +4,48 @@ assembled from per-frame meshes by pairwise cross-parameterisation in a binary h
 **Under construction**: the method is not registered yet (``fourd reconstruct --method
 assembly`` does not exist). What is here is its core, each part tested on its own:
 
-- :mod:`.anchors`: sparse source-to-target correspondences (section 5.4.1);
+- :mod:`.anchors`: sparse source-to-target correspondences, the forward-backward check and
+  spreading to a uniform density (section 5.4.1);
 - :mod:`.patches`: matching disk-shaped patches grown around anchors (5.4.2);
 - :mod:`.crossparam`: the local patch cross-parameterisation, each patch pair flattened
   (ABF++ or LSCM, :mod:`fourd.geometry.flattening`), aligned by its anchors and the most
-  central patch chosen per vertex (5.4.2).
+  central patch chosen per vertex (5.4.2);
+- :mod:`.relax`: the local relaxation of that map, its Laplacian coordinates kept by walks
+  over the target, flipped triangles fixed (5.4.3);
+- :mod:`.registration` and :mod:`.refine`: the source registered in the target's frame by its
+  Laplacian coordinates, and anchors added where it lands on the target (5.4.4);
+- :mod:`.pair`: those steps chained, one source mesh mapped onto one target mesh.
 
-Still to come: local relaxation of the map (5.4.3), anchor set refinement (5.4.4), analysis
+Still to come: analysis
 and correction (5.5), geometry completion and connectivity combination (5.6), the
 hierarchical assembly (5.3), and the method module itself. Bench input for it: the remeshed
 scan mode (``fourd synth --meshes``, the ``*-remeshed`` bench scenes).
 """
 
-from fourd.methods.assembly.anchors import Anchors, anchors_at_vertices
+from fourd.methods.assembly.anchors import (
+    Anchors,
+    anchors_at_vertices,
+    consistent_anchors,
+    returned_points,
+    spread_anchors,
+)
 from fourd.methods.assembly.crossparam import (
     CrossParameterization,
     PatchMap,
     cross_parameterize,
     map_patch,
 )
-from fourd.methods.assembly.options import CrossParamOptions
+from fourd.methods.assembly.options import (
+    CrossParamOptions,
+    PairOptions,
+    RefineOptions,
+    RelaxOptions,
+)
+from fourd.methods.assembly.pair import PairMap, cross_parameterize_pair
 from fourd.methods.assembly.patches import GrownPatches, Patch, PatchPair, grow_patches
+from fourd.methods.assembly.refine import Refinement, refine_anchors
+from fourd.methods.assembly.registration import register_by_laplacian
+from fourd.methods.assembly.relax import RelaxedMap, flipped_triangles, mapped_points, relax_map
 
 __all__ = [
     "Anchors",
@@ -33,9 +54,24 @@ __all__ = [
     "GrownPatches",
     "Patch",
     "PatchMap",
+    "PairMap",
+    "PairOptions",
     "PatchPair",
+    "RefineOptions",
+    "Refinement",
+    "RelaxOptions",
+    "RelaxedMap",
     "anchors_at_vertices",
+    "consistent_anchors",
     "cross_parameterize",
+    "cross_parameterize_pair",
+    "flipped_triangles",
     "grow_patches",
     "map_patch",
+    "refine_anchors",
+    "register_by_laplacian",
+    "mapped_points",
+    "relax_map",
+    "returned_points",
+    "spread_anchors",
 ]

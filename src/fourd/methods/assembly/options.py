@@ -56,3 +56,112 @@ class CrossParamOptions:
             raise ValueError(f"max_residual must be > 0, got {self.max_residual!r}")
         if self.flattening not in ("abf", "lscm"):
             raise ValueError(f"flattening must be 'abf' or 'lscm', got {self.flattening!r}")
+
+
+@dataclass(frozen=True)
+class RelaxOptions:
+    """Settings of :func:`~fourd.methods.assembly.relax.relax_map` (thesis section 5.4.3).
+
+    Attributes
+    ----------
+    sweeps : int
+        Global sweeps over all vertices (the thesis: five to six).
+    walks : int
+        Random directions tried per vertex and step (the thesis: about a hundred random walks
+        per vertex). Half are line searches: walked over the target to the point along them
+        nearest the vertex's Laplacian optimum; half walk a random length, log-uniform from a
+        hundredth of a source edge to one edge, which is what frees a flipped sliver (on
+        bending-arm frames 0 and 3 remeshed apart, from a map slid by 0.4 edges: 12 flipped
+        triangles left after 6 sweeps with line searches only, none with both). The steepest
+        direction is always tried beside them.
+    steps : int
+        Moves per vertex in a sweep (each the best of its walks).
+    laplacian : {"uniform", "cotangent"}
+        The source Laplacian ``L``. Uniform by default: per-frame meshes from marching cubes
+        have slivers whose cotangent weights run into the hundreds (bending-arm remeshed:
+        up to 438, down to -13).
+    seed : int
+        Seed of the random directions.
+    """
+
+    sweeps: int = 6
+    walks: int = 16
+    steps: int = 2
+    laplacian: str = "uniform"
+    seed: int = 0
+
+    def __post_init__(self):
+        for name in ("sweeps", "walks", "steps"):
+            value = getattr(self, name)
+            if int(value) != value or value < (1 if name == "steps" else 0):
+                raise ValueError(f"{name} must be a non-negative integer (steps >= 1), got {value!r}")
+        if self.laplacian not in ("uniform", "cotangent"):
+            raise ValueError(f"laplacian must be 'uniform' or 'cotangent', got {self.laplacian!r}")
+
+
+@dataclass(frozen=True)
+class RefineOptions:
+    """Settings of :func:`~fourd.methods.assembly.refine.refine_anchors` (thesis section
+    5.4.4). Lengths are in source edges (the source's median edge length).
+
+    Attributes
+    ----------
+    touch : float
+        An unmapped vertex, registered in the target's frame, becomes an anchor when it lies
+        this close to the target ("a nearly zero distance"; the registration places the
+        vertices of a hole 6 edges wide about 0.03 edges from the truth, at most 0.1).
+    spacing : float
+        Anchors added no closer than this to each other or to the anchors there were
+        (anchors this far apart are about 3% of the vertices, the thesis' density).
+    iterations : int
+        Rotation fits of the registration
+        (:func:`~fourd.methods.assembly.registration.register_by_laplacian`).
+    laplacian : {"uniform", "cotangent"}
+        The Laplacian of the registration.
+    """
+
+    touch: float = 0.1
+    spacing: float = 4.0
+    iterations: int = 16
+    laplacian: str = "uniform"
+
+    def __post_init__(self):
+        for name in ("touch", "spacing"):
+            if not getattr(self, name) > 0:
+                raise ValueError(f"{name} must be > 0, got {getattr(self, name)!r}")
+        if int(self.iterations) != self.iterations or self.iterations < 0:
+            raise ValueError(f"iterations must be a non-negative integer, got {self.iterations!r}")
+        if self.laplacian not in ("uniform", "cotangent"):
+            raise ValueError(f"laplacian must be 'uniform' or 'cotangent', got {self.laplacian!r}")
+
+
+@dataclass(frozen=True)
+class PairOptions:
+    """Settings of :func:`~fourd.methods.assembly.pair.cross_parameterize_pair`.
+
+    Attributes
+    ----------
+    crossparam : CrossParamOptions
+        The patch map (5.4.2).
+    relax : RelaxOptions
+        Its relaxation (5.4.3).
+    refine : RefineOptions or None
+        Anchor refinement (5.4.4) before the patch map; None (the default) skips it. Off
+        because it costs accuracy where it is needed: bending-arm frames 0 -> 3 remeshed
+        apart, the anchors in an 8-edge disc at the elbow dropped, it maps 97% of the vertices
+        instead of 86%, but the map's 95th percentile distance from the truth goes from 0.56
+        to 1.22 edges and 2 flips stay (0 -> 7: 1.19 -> 2.44, 5 flips): the anchors it adds
+        are 0.3-1.7 edges off. With evenly spread anchors (3%) it adds none.
+    refine_radius : float
+        The largest patch radius of the first, limited patch map whose unmapped vertices the
+        refinement fills (fraction of the source's bounding-box diagonal, as ``max_radius``).
+    """
+
+    crossparam: CrossParamOptions = CrossParamOptions()
+    relax: RelaxOptions = RelaxOptions()
+    refine: RefineOptions | None = None
+    refine_radius: float = 0.14
+
+    def __post_init__(self):
+        if not 0 < self.refine_radius <= 1:
+            raise ValueError(f"refine_radius must be in (0, 1], got {self.refine_radius!r}")

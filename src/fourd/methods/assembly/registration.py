@@ -1,0 +1,96 @@
+"""The source registered in the target's frame by its Laplacian coordinates, the mapped vertices
+held (thesis section 5.4.4, after [LSA+05]).
+
+The vertices the cross-parameterisation mapped sit at their mapped points; the others are
+placed so that the source's Laplacian coordinates, turned by each vertex's one-ring rotation,
+are kept as well as possible (least squares over every row):
+
+    min over x_U of  sum_i |(L x)_i - R_i (L v)_i|^2,   x_C = the mapped points.
+
+Unknown rotations and positions are found by alternation: the unmapped vertices start at the
+membrane (harmonic) fill of the mapped ones, then rotations are fitted to the one-rings
+(:func:`fourd.geometry.rotations.one_ring_rotations`) and the positions solved again, a few
+times, with the normal equations factored once. A rigidly moved copy is recovered exactly
+(to rounding, after enough rotation fits).
+Vertices in a connected piece with no mapped vertex cannot be placed (NaN).
+
+References
+----------
+Y. Lipman, O. Sorkine, M. Alexa, D. Cohen-Or, D. Levin, C. Rössl, H.-P. Seidel, "Laplacian
+framework for interactive mesh editing", IJSM 2005 ([LSA+05] of the thesis).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.linalg import splu
+
+from fourd.geometry.meshes import vertex_components
+from fourd.geometry.rotations import one_ring_rotations
+from fourd.methods.assembly.relax import source_laplacian
+
+
+def register_by_laplacian(
+    source_vertices: np.ndarray,
+    source_faces: np.ndarray,
+    known: np.ndarray,
+    points: np.ndarray,
+    *,
+    laplacian: str = "uniform",
+    iterations: int = 16,
+) -> np.ndarray:
+    """Place the source vertices in the target's frame, the ``known`` ones at ``points``
+    (module docstring).
+
+    Parameters
+    ----------
+    source_vertices : array [N, 3]
+    source_faces : int array [F, 3]
+    known : bool array [N]
+        Vertices with a position in the target's frame (the mapped ones).
+    points : array [N, 3]
+        Those positions (other rows ignored).
+    laplacian : {"uniform", "cotangent"}
+    iterations : int
+        Rotation fits after the membrane fill (a hole of 130 of 642 vertices in a rigidly
+        moved sphere: off by 6e-4 edges after 4, 1e-7 after 8, 3e-13 after 16; crane frames 0
+        and 4 remeshed apart, a hole of 6 edges' radius: median 0.08 / largest 0.58 edges from
+        the truth after 4, 0.03 / 0.10 after 16, no better after 32).
+
+    Returns
+    -------
+    ndarray float64 [N, 3]
+        Every vertex's position; the known ones exactly ``points``; NaN where no known vertex
+        shares the vertex's connected piece (and for vertices of no face).
+    """
+    vertices = np.asarray(source_vertices, dtype=np.float64)
+    faces = np.asarray(source_faces, dtype=np.int64)
+    known = np.asarray(known, dtype=bool).reshape(-1)
+    count = len(vertices)
+    if len(known) != count or np.shape(points) != (count, 3):
+        raise ValueError(f"known and points must have one row per source vertex ({count})")
+    result = np.full((count, 3), np.nan)
+    result[known] = np.asarray(points, dtype=np.float64)[known]
+    _, piece = vertex_components(faces, count)
+    in_faces = np.zeros(count, dtype=bool)
+    in_faces[faces.ravel()] = True
+    anchored = np.zeros(piece.max(initial=-1) + 1, dtype=bool)
+    anchored[piece[known & in_faces]] = True
+    free = np.flatnonzero(~known & in_faces & anchored[piece])
+    if len(free) == 0:
+        return result
+    held = np.flatnonzero(known)
+    L = source_laplacian(vertices, faces, laplacian)
+    L_free, L_held = L[:, free].tocsc(), L[:, held].tocsc()
+    fixed_part = L_held @ result[held]  # [N, 3]
+    membrane = splu(L[free][:, free].tocsc())
+    result[free] = membrane.solve(-(L[free][:, held] @ result[held]))
+    normal = splu((L_free.T @ L_free).tocsc())
+    edges = abs(L - sp.diags(L.diagonal())).tocsr()
+    delta = L @ vertices
+    for _ in range(iterations):
+        placed = np.where(np.isnan(result), 0.0, result)
+        goal = np.einsum("nab,nb->na", one_ring_rotations(edges, vertices, placed), delta)
+        result[free] = normal.solve(L_free.T @ (goal - fixed_part))
+    return result

@@ -1,0 +1,341 @@
+"""Local relaxation of a cross-parameterisation (thesis section 5.4.3).
+
+The patch map (:mod:`~fourd.methods.assembly.crossparam`) is close to the right map but can
+be locally bad, with flipped triangles where neighbouring vertices took different patches.
+The relaxation minimises the change of the source's Laplacian coordinates (eq. 5.1),
+
+    min over ṽ on the target surface of  sum_i |(L ṽ)_i - R_i (L v)_i|^2,
+
+``v`` the source vertices, ``ṽ`` their mapped points, ``L`` the source Laplacian. The thesis
+writes ``|L ṽ - L v|``; the frames differ by a motion, so here each source Laplacian vector is
+first turned by its vertex's rotation ``R_i`` (the one best aligning the source one-ring's
+edges with the mapped one-ring's, as in as-rigid-as-possible modelling), which the Laplacian
+editing the thesis cites ([LSA+05]) also factors out. A rigidly moved copy then keeps the
+identity map, where the plain difference would pull every vertex. Rows whose vertex or a
+neighbour has no mapped point are left out; those vertices stay unmapped.
+
+With the rotations held for a sweep, the energy as a function of one vertex's mapped point
+``p`` (everything else held) is ``c_i |p - q_i|^2`` plus a constant: ``q_i`` is where the
+vertex would go unconstrained and ``c_i`` the sum of the squares of ``L``'s column ``i``.
+The search of the thesis, random walks from the vertex's point, each optimising the vertex's
+Laplacian vector, is then mostly a set of line searches: the steepest tangent direction
+(towards ``q_i``) and half of ``walks`` random tangent directions are walked over the target's
+faces (:mod:`fourd.geometry.surface_walk`) by the step that brings the point nearest ``q_i``
+along them; the other half walk a random length. The best end is taken when it lowers the
+energy. A move may not flip more of the vertex's triangles than it finds flipped, and one
+that flips fewer wins over any that does not, whatever it costs: flipped triangles are fixed
+first. A triangle is flipped when its mapped normal points against the target's normals at
+its mapped corners.
+
+Vertices are visited in decreasing order of their error, as in the thesis, but in batches
+that move at once: a batch holds vertices more than two edges apart (an independent set of
+the squared adjacency), whose moves change disjoint sets of rows and so do not interact. The
+batches come from a Jones-Plassmann selection with the error's quartile as the priority (a
+vertex goes when no remaining vertex within two edges is in a higher quartile, ties broken at
+random), so the order follows the error without the long chains a smooth priority gives.
+The rotations are refitted at every sweep.
+
+References
+----------
+Y. Lipman, O. Sorkine, M. Alexa, D. Cohen-Or, D. Levin, C. Rössl, H.-P. Seidel, "Laplacian
+framework for interactive mesh editing", IJSM 2005 ([LSA+05] of the thesis).
+O. Sorkine, M. Alexa, "As-rigid-as-possible surface modeling", SGP 2007 (the one-ring
+rotations).
+M. T. Jones, P. E. Plassmann, "A parallel graph coloring heuristic", SIAM J. Sci. Comput.
+14(3), 1993.
+"""
+
+from __future__ import annotations
+
+import logging
+from typing import NamedTuple
+
+import numpy as np
+import scipy.sparse as sp
+
+from fourd.geometry.laplacian import cotangent_laplacian, uniform_laplacian
+from fourd.geometry.meshes import median_edge_length, vertex_adjacency
+from fourd.geometry.rotations import one_ring_rotations
+from fourd.geometry.surface_walk import face_neighbours, face_unit_normals, walk_on_surface
+from fourd.methods.assembly.options import RelaxOptions
+
+log = logging.getLogger("fourd.methods.assembly.relax")
+
+#: Error levels (quantiles) of the visiting order within a sweep.
+ORDER_LEVELS = 4
+
+
+class RelaxedMap(NamedTuple):
+    """A relaxed map of the source vertices onto the target (:func:`relax_map`).
+
+    faces : int64 [N]
+        Target triangle of each source vertex (-1 where unmapped, as given).
+    barycentric : float64 [N, 3]
+    points : float64 [N, 3]
+        The mapped points (NaN where unmapped).
+    energy : float64 [S + 1]
+        The energy (module docstring; input units squared) before the first sweep and after
+        each of the ``S`` sweeps.
+    flipped : int64 [S + 1]
+        Flipped source triangles (:func:`flipped_triangles`) before and after each sweep.
+    moved : int64 [S]
+        Vertices that moved in each sweep.
+    """
+
+    faces: np.ndarray
+    barycentric: np.ndarray
+    points: np.ndarray
+    energy: np.ndarray
+    flipped: np.ndarray
+    moved: np.ndarray
+
+
+def source_laplacian(vertices: np.ndarray, faces: np.ndarray, kind: str = "uniform") -> sp.csr_matrix:
+    """The Laplacian of the relaxation ``[N, N]`` (positive semi-definite convention of
+    :mod:`fourd.geometry.laplacian`): uniform, or cotangent with negative weights clamped."""
+    if kind == "uniform":
+        return uniform_laplacian(len(vertices), faces)
+    if kind == "cotangent":
+        return cotangent_laplacian(vertices, faces, clamp_negative=True)
+    raise ValueError(f"laplacian must be 'uniform' or 'cotangent', got {kind!r}")
+
+
+def mapped_points(target_vertices: np.ndarray, target_faces: np.ndarray, faces: np.ndarray,
+                  barycentric: np.ndarray) -> np.ndarray:
+    """Points ``[N, 3]`` of a map given as target triangles ``faces [N]`` (-1: unmapped, NaN)
+    and ``barycentric [N, 3]``."""
+    faces = np.asarray(faces, dtype=np.int64)
+    corners = np.asarray(target_vertices, dtype=np.float64)[np.asarray(target_faces)[np.maximum(faces, 0)]]
+    points = np.einsum("nk,nkd->nd", np.asarray(barycentric, dtype=np.float64), corners)
+    points[faces < 0] = np.nan
+    return points
+
+
+def flipped_triangles(source_faces: np.ndarray, target_vertices: np.ndarray, target_faces: np.ndarray,
+                      faces: np.ndarray, barycentric: np.ndarray) -> np.ndarray:
+    """Source triangles the map flips, bool ``[F]``: the normal of the triangle of its mapped
+    corners points against (or is perpendicular to) the sum of the target triangles' normals
+    at those corners. Triangles with an unmapped corner are not flipped."""
+    source_faces = np.asarray(source_faces, dtype=np.int64)
+    faces = np.asarray(faces, dtype=np.int64)
+    points = mapped_points(target_vertices, target_faces, faces, barycentric)
+    normals = face_unit_normals(target_vertices, target_faces)[np.maximum(faces, 0)]
+    corners = points[source_faces]
+    mapped = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    reference = normals[source_faces].sum(axis=1)
+    complete = (faces[source_faces] >= 0).all(axis=1)
+    return complete & ~(np.einsum("fd,fd->f", mapped, reference) > 0)
+
+
+class _Problem(NamedTuple):
+    laplacian: sp.csr_matrix
+    rows: sp.csc_matrix  # the Laplacian's complete rows, by columns
+    weight: np.ndarray  # [N] c_i
+    delta: np.ndarray  # [N, 3] source Laplacian vectors
+    complete: np.ndarray  # [N] rows in the energy
+    edges: sp.csr_matrix  # one-ring weights for the rotations
+    near: sp.csr_matrix  # vertices within two edges (no diagonal)
+    incident: np.ndarray  # [N, D] source faces at each vertex, -1 padded
+    face_ok: np.ndarray  # [F] source faces with every corner mapped
+    source_faces: np.ndarray
+    target_vertices: np.ndarray
+    target_faces: np.ndarray
+    target_normals: np.ndarray
+    target_neighbours: np.ndarray
+    scale: float  # the source's median edge length
+
+
+def _incident_faces(faces: np.ndarray, count: int) -> np.ndarray:
+    vertex = faces.ravel()
+    order = np.argsort(vertex, kind="stable")
+    vertex = vertex[order]
+    start = np.searchsorted(vertex, np.arange(count))
+    slot = np.arange(len(vertex)) - start[vertex]
+    table = np.full((count, max(int(slot.max(initial=-1)) + 1, 1)), -1, dtype=np.int64)
+    table[vertex, slot] = order // 3
+    return table
+
+
+def _problem(source_vertices, source_faces, target_vertices, target_faces, mapped, kind) -> _Problem:
+    count = len(source_vertices)
+    laplacian = source_laplacian(source_vertices, source_faces, kind)
+    adjacency = vertex_adjacency(source_faces, count)
+    unmapped_near = adjacency @ (~mapped).astype(np.float64)
+    complete = mapped & (unmapped_near == 0)
+    rows = sp.diags(complete.astype(np.float64)) @ laplacian
+    weight = np.asarray(rows.multiply(rows).sum(axis=0)).ravel()
+    edges = abs(laplacian - sp.diags(laplacian.diagonal())).tocsr()
+    ring = adjacency + sp.identity(count, format="csr")
+    near = (ring @ ring).tocsr()
+    near.setdiag(0.0)
+    near.eliminate_zeros()
+    return _Problem(
+        laplacian, rows.tocsc(), weight, laplacian @ source_vertices, complete, edges, near,
+        _incident_faces(source_faces, count), mapped[source_faces].all(axis=1), source_faces,
+        target_vertices, target_faces, face_unit_normals(target_vertices, target_faces),
+        face_neighbours(target_faces), median_edge_length(source_vertices, source_faces),
+    )
+
+
+def _goals(problem: _Problem, source_vertices: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """``R_i (L v)_i`` ``[N, 3]``, ``R_i`` the rotation best aligning vertex ``i``'s source
+    one-ring edges with the mapped ones."""
+    return np.einsum("nab,nb->na", one_ring_rotations(problem.edges, source_vertices, points), problem.delta)
+
+
+def _residual(problem: _Problem, points: np.ndarray, goals: np.ndarray) -> np.ndarray:
+    return (problem.laplacian @ points - goals) * problem.complete[:, None]
+
+
+def _energy(problem: _Problem, source_vertices: np.ndarray, points: np.ndarray) -> float:
+    return float(np.sum(_residual(problem, points, _goals(problem, source_vertices, points)) ** 2))
+
+
+def _ring_flips(problem: _Problem, batch, points, faces, candidate_points, candidate_faces) -> np.ndarray:
+    """Flipped triangles around each batch vertex ``[B, K]`` with the vertex at each of its
+    ``K`` candidate points (target triangles ``candidate_faces [B, K]``)."""
+    incident = problem.incident[batch]  # [B, D]
+    triangles = problem.source_faces[np.maximum(incident, 0)]  # [B, D, 3]
+    counted = (incident >= 0) & problem.face_ok[np.maximum(incident, 0)]
+    is_vertex = (triangles == batch[:, None, None])[:, None, :, :, None]  # [B, 1, D, 3, 1]
+    corners = np.where(is_vertex, candidate_points[:, :, None, None, :], points[triangles][:, None])
+    normals = problem.target_normals[faces[triangles]][:, None]
+    normals = np.where(is_vertex, problem.target_normals[candidate_faces][:, :, None, None, :], normals)
+    mapped = np.cross(corners[..., 1, :] - corners[..., 0, :], corners[..., 2, :] - corners[..., 0, :])
+    flipped = ~(np.einsum("bkdx,bkdx->bkd", mapped, normals.sum(axis=3)) > 0)
+    return (flipped & counted[:, None]).sum(axis=2)
+
+
+def _move(problem, batch, faces, bary, points, residual, rng, options: RelaxOptions) -> int:
+    """Move the batch's vertices (in place); returns how many moved."""
+    start = points[batch].copy()
+    pull = problem.rows[:, batch].T @ residual
+    goal = start - pull / problem.weight[batch, None]  # q_i
+    moved = np.zeros(len(batch), dtype=bool)
+    tv, tf = problem.target_vertices, problem.target_faces
+    for _ in range(options.steps):
+        here, face = points[batch], faces[batch]
+        normal = problem.target_normals[face]
+        towards = goal - here
+        towards -= np.einsum("bd,bd->b", towards, normal)[:, None] * normal
+        first = tv[tf[face, 1]] - tv[tf[face, 0]]
+        first /= np.linalg.norm(first, axis=1, keepdims=True)
+        second = np.cross(normal, first)
+        angle = rng.uniform(0.0, 2.0 * np.pi, size=(len(batch), options.walks))
+        direction = np.cos(angle)[..., None] * first[:, None] + np.sin(angle)[..., None] * second[:, None]
+        length = np.einsum("bkd,bd->bk", direction, towards)
+        # the other half walk a random length: the way out of a flip may cost energy
+        wander = np.arange(options.walks) >= options.walks // 2
+        reach = problem.scale * 10.0 ** rng.uniform(-2.0, 0.0, size=length.shape)
+        length = np.where(wander, reach, length)
+        steps = np.concatenate([towards[:, None], length[..., None] * direction], axis=1)  # [B, K, 3]
+        tries = steps.shape[1]
+        walked = walk_on_surface(tv, tf, np.repeat(face, tries), np.repeat(bary[batch], tries, axis=0),
+                                 steps.reshape(-1, 3), neighbours=problem.target_neighbours)
+        end = walked.points.reshape(len(batch), tries, 3)
+        end_face = walked.faces.reshape(len(batch), tries)
+        gain = np.sum((end - goal[:, None]) ** 2, axis=2) - np.sum((here - goal) ** 2, axis=1)[:, None]
+        flips = _ring_flips(problem, batch, points, faces, end, end_face)
+        flips_now = _ring_flips(problem, batch, points, faces, here[:, None], face[:, None])[:, 0]
+        fewest = flips.min(axis=1)
+        best = np.argmin(np.where(flips == fewest[:, None], gain, np.inf), axis=1)
+        rows = np.arange(len(batch))
+        take = (fewest < flips_now) | ((fewest == flips_now) & (gain[rows, best] < 0))
+        chosen = rows[take] * tries + best[take]
+        faces[batch[take]] = walked.faces[chosen]
+        bary[batch[take]] = walked.barycentric[chosen]
+        points[batch[take]] = walked.points[chosen]
+        moved |= take
+    residual += problem.rows[:, batch] @ (points[batch] - start)
+    return int(moved.sum())
+
+
+def _batches(near: sp.csr_matrix, error: np.ndarray, movable: np.ndarray, rng):
+    """Independent sets of ``near`` covering ``movable``, higher error levels first
+    (Jones-Plassmann; module docstring)."""
+    levels = np.zeros(len(error))
+    if movable.any():
+        edges = np.quantile(error[movable], np.linspace(0.0, 1.0, ORDER_LEVELS + 1)[1:-1])
+        levels = np.searchsorted(edges, error, side="right").astype(np.float64)
+    key = levels + rng.random(len(error)) * 0.5  # random ties within a level
+    remaining = movable.copy()
+    filled = np.diff(near.indptr) > 0
+    while remaining.any():
+        current = np.where(remaining, key, -1.0)
+        highest = np.full(len(error), -1.0)
+        highest[filled] = np.maximum.reduceat(current[near.indices], near.indptr[:-1][filled])
+        batch = np.flatnonzero(remaining & (current > highest))
+        remaining[batch] = False
+        yield batch
+
+
+def relax_map(
+    source_vertices: np.ndarray,
+    source_faces: np.ndarray,
+    target_vertices: np.ndarray,
+    target_faces: np.ndarray,
+    faces: np.ndarray,
+    barycentric: np.ndarray,
+    options: RelaxOptions | None = None,
+    *,
+    fixed: np.ndarray | None = None,
+) -> RelaxedMap:
+    """Relax a map of the source vertices onto the target surface (thesis section 5.4.3;
+    module docstring).
+
+    Parameters
+    ----------
+    source_vertices : array [N, 3]
+    source_faces : int array [F, 3]
+    target_vertices : array [M, 3]
+    target_faces : int array [G, 3]
+        Both meshes oriented the same way (outward normals).
+    faces : int array [N]
+        Target triangle of each source vertex's mapped point (-1: unmapped).
+    barycentric : array [N, 3]
+        Its coordinates in that triangle.
+    options : RelaxOptions, optional
+    fixed : bool array [N], optional
+        Vertices that keep their mapped point.
+
+    Returns
+    -------
+    RelaxedMap
+    """
+    options = RelaxOptions() if options is None else options
+    source_vertices = np.asarray(source_vertices, dtype=np.float64)
+    source_faces = np.asarray(source_faces, dtype=np.int64)
+    target_vertices = np.asarray(target_vertices, dtype=np.float64)
+    target_faces = np.asarray(target_faces, dtype=np.int64)
+    faces = np.array(faces, dtype=np.int64).reshape(-1)
+    bary = np.array(barycentric, dtype=np.float64).reshape(-1, 3)
+    count = len(source_vertices)
+    if len(faces) != count or len(bary) != count:
+        raise ValueError(f"faces and barycentric must have one row per source vertex ({count}), "
+                         f"got {len(faces)} and {len(bary)}")
+    if np.any(faces >= len(target_faces)):
+        raise ValueError("faces index target triangles out of range")
+    mapped = faces >= 0
+    fixed = np.zeros(count, dtype=bool) if fixed is None else np.asarray(fixed, dtype=bool).reshape(-1)
+    problem = _problem(source_vertices, source_faces, target_vertices, target_faces, mapped, options.laplacian)
+    movable = mapped & ~fixed & (problem.weight > 0)
+    points = np.nan_to_num(mapped_points(target_vertices, target_faces, faces, bary))
+    rng = np.random.default_rng(options.seed)
+
+    def flips() -> int:
+        return int(flipped_triangles(source_faces, target_vertices, target_faces, faces, bary).sum())
+
+    energy, flipped, moved = [_energy(problem, source_vertices, points)], [flips()], []
+    for _ in range(options.sweeps):
+        residual = _residual(problem, points, _goals(problem, source_vertices, points))
+        error = np.sum(residual**2, axis=1)
+        total = 0
+        for batch in _batches(problem.near, error, movable, rng):
+            total += _move(problem, batch, faces, bary, points, residual, rng, options)
+        energy.append(_energy(problem, source_vertices, points))
+        flipped.append(flips())
+        moved.append(total)
+    log.debug("relaxation: energy %.3g -> %.3g, flipped %d -> %d", energy[0], energy[-1], flipped[0], flipped[-1])
+    points[~mapped] = np.nan
+    return RelaxedMap(faces, bary, points, np.array(energy), np.array(flipped, dtype=np.int64),
+                      np.array(moved, dtype=np.int64))
