@@ -2,6 +2,7 @@
 (``kinematic`` option ``video_anchors``, :mod:`fourd.methods.kinematic.guide`) reduce the drift?
 
     python experiments/video_anchors.py bending-arm cloth 20
+    COLOUR=1 NOBASE=1 python experiments/video_anchors.py bending-arm cloth 20   # with the colour guide too
 
 Prints kinematic's correspondence mean / last frame and Chamfer, with and without the anchors,
 on the scene scanned with the bench protocol plus coloured points and the rig's video.
@@ -51,13 +52,17 @@ def main(name: str, appearance: str, frames: int, video_resolution: int = 256) -
                        video=True, video_resolution=video_resolution, **PROTOCOL)
     gates = [float(g) for g in os.environ.get("GATES", "0").split(",")]
     variants = [(False, 0.0, 0.0)] + [(True, 1.0, g) for g in gates]
+    if os.environ.get("NOBASE"):
+        variants = variants[1:]
+    colour = bool(int(os.environ.get("COLOUR", "0")))
     for anchors, pull, gate in variants:
         started = time.perf_counter()
         result = kinematic.reconstruct(scans, kinematic.Options(
-            video_anchors=anchors, anchor_pull=pull, anchor_gate=gate, color_guide=False))
+            video_anchors=anchors, anchor_pull=pull, anchor_gate=gate, color_guide=colour))
         seconds = time.perf_counter() - started
         r = evaluate(result, truth, samples=20000, seed=0)
-        print(f"{name} {appearance} video_anchors={anchors} anchor_pull={pull} anchor_gate={gate}: correspondence "
+        print(f"{name} {appearance} video_anchors={anchors} anchor_pull={pull} anchor_gate={gate} "
+              f"color_guide={colour}: correspondence "
               f"{r['correspondence_mean']:.4f} / {r['correspondence_last']:.4f}, Chamfer "
               f"{r['chamfer']:.4f}, {seconds / count:.2f} s/frame", flush=True)
 

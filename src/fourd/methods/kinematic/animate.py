@@ -91,9 +91,9 @@ def animate(
         the forward sliding's steps between two consecutive input frames start where they
         went (:mod:`.guide`).
     colors : list of T arrays [P_k, 3] or None, optional
-        Colours of ``points`` (None for a frame without): with ``options.color_guide`` and no
-        ``anchors``, the forward sliding's steps at input frames start and pull where the
-        template's colours say the vertices went (:mod:`.photometric_guide`).
+        Colours of ``points`` (None for a frame without): with ``options.color_guide``, the
+        forward sliding's steps at input frames relax again pulled where the template's
+        colours say the vertices went (:mod:`.photometric_guide`).
     cache : StageCache
         Where the urshape and every slid frame are kept as they finish (a rerun resumes
         after the last slid frame); needs ``field_key``.
@@ -174,7 +174,7 @@ def animate(
         if not cache.enabled:
             return None
         base = stage_key(stage, urshape_key, slide_options, bandwidth, float(slide_times[0]),
-                         anchor_key)
+                         anchor_key, colour_key)
         steps = [
             (float(t), frame_keys[d], None if f < 0 else frame_keys[f])
             for t, d, f in zip(slide_times[1:], data_frames[1:], surface_frames[1:], strict=True)
@@ -184,11 +184,10 @@ def animate(
     anchor_key = None
     if anchors is not None and cache.enabled:
         anchor_key = [(p.source, p.target, p.confidence) for p in anchors]
-    color_guided = (
-        anchors is None and options.color_guide and colors is not None and colors[0] is not None
-    )
+    color_guided = options.color_guide and colors is not None and colors[0] is not None
+    colour_key = None
     if color_guided and cache.enabled:
-        anchor_key = ["colour", options.color_radius, options.color_scale] + [
+        colour_key = ["colour", options.color_radius, options.color_scale] + [
             np.zeros(0) if c is None else c for c in colors
         ]
     t0 = float(times[0])
@@ -228,13 +227,14 @@ def animate(
         [points[k] for k in fwd_frames],
         surfaces(fwd_surfaces),
         chain(SLIDE_STAGE, fwd_times, fwd_frames, fwd_surfaces),
+        _step_anchors(anchors, fwd_surfaces),
         (
             PhotometricGuides(
                 vertices, faces, fwd_surfaces, points, normals, colors,
                 radius=options.color_radius * median_edge_length(vertices, faces),
                 scale=options.color_scale * median_edge_length(vertices, faces),
             )
-            if color_guided else _step_anchors(anchors, fwd_surfaces)
+            if color_guided else None
         ),
     )
     if prepend:
@@ -325,10 +325,11 @@ def _step_anchors(anchors, frames):
 
 
 def _slide_monotone(vertices, faces, field, times, options, data, surfaces, checkpoints=None,
-                    anchors=None):
+                    anchors=None, colour_guides=None):
     """Slide through monotone ``times`` (decreasing allowed); returns (frames, observed).
     ``checkpoints``: the cache entries of the steps (:func:`slide`), or None; ``anchors``:
-    per time, the anchor tracks from the previous one (forward only), or None."""
+    per time, the anchor tracks from the previous one (forward only), or None;
+    ``colour_guides``: per time, the colour guide (forward only), or None."""
     if len(times) == 1:
         from scipy.spatial import cKDTree
 
@@ -339,7 +340,7 @@ def _slide_monotone(vertices, faces, field, times, options, data, surfaces, chec
     if sign > 0:
         anim = slide(
             vertices, faces, field, times, options=options, data=data, surfaces=surfaces,
-            checkpoints=checkpoints, anchors=anchors,
+            checkpoints=checkpoints, anchors=anchors, colour_guides=colour_guides,
         )
     else:
         anim = slide(

@@ -143,7 +143,7 @@ class Options:
         vertices with anchors towards where the anchors went, in units of the vertex's own
         stiffness (0: the anchors only move the start of the step).
     color_guide : bool
-        When the input points have colours (and no video anchors are used): at every input
+        When the input points have colours (with or without video anchors): at every input
         frame, after the step, pull each vertex where the colours the template took from the
         first frame say it went (per-vertex Lucas-Kanade on the frame's coloured points,
         :mod:`.photometric_guide`) with ``anchor_pull``, and relax again. Only the colours' hue

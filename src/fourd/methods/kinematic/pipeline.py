@@ -87,7 +87,7 @@ def reconstruct(
         anchors = track_anchors(seq)
         log.info("anchors from the video: %d over %d frame pairs", anchors.total, len(anchors))
     colors = None
-    if options.color_guide and anchors is None and any(f.colors is not None for f in seq.frames):
+    if options.color_guide and any(f.colors is not None for f in seq.frames):
         colors = [
             colors_of_cleaned(f.points, f.colors, p) for f, p in zip(seq.frames, points, strict=True)
         ]

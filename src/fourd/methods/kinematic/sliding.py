@@ -283,6 +283,7 @@ def slide_step(
     registration_velocity: np.ndarray | None = None,
     previous_registration: tuple[bool, float] | None = None,
     guide=None,
+    late_guide=None,
 ) -> tuple[np.ndarray, np.ndarray, SlideStep]:
     """One step of section 5: ``vertices`` at ``time`` -> positions at ``next_time``.
 
@@ -306,9 +307,11 @@ def slide_step(
 
     ``guide`` (optional): a :class:`~fourd.methods.kinematic.guide.Guide` of anchor-guided
     positions, blended into the start after the rigid prediction by its weights (before the
-    registration and the projection); or a function of positions [N, 3] that returns one (the
-    colour guide, :mod:`.photometric_guide`), called on the step's result, after which the
-    iterations run again from there, pulled towards the guide.
+    registration and the projection).
+
+    ``late_guide`` (optional): a function of positions [N, 3] that returns a Guide (the colour
+    guide, :mod:`.photometric_guide`), called on the step's result, after which the iterations
+    run again from there, pulled towards it.
 
     Returns ``(positions [N, 3], constrained [N] bool, diagnostics)``.
     """
@@ -357,9 +360,6 @@ def slide_step(
                 start = moved
                 if converged:
                     break
-    late_guide = None
-    if callable(guide):
-        late_guide, guide = guide, None
     if guide is not None and len(guide.vertices) and options.anchor_gate > 0:
         # an anchor may correct the prediction by about what the tracking drifts in a step;
         # farther off it is more likely the flow's error than the tracking's (shading, fast
@@ -504,6 +504,7 @@ def slide(
     surfaces: Sequence | None = None,
     checkpoints: Chain | None = None,
     anchors: Sequence | None = None,
+    colour_guides: Sequence | None = None,
 ):
     """Slide a template along ``field = 0`` through ``times``, as rigidly as possible.
 
@@ -537,9 +538,11 @@ def slide(
     anchors : sequence, optional
         Per time, ``(source [M, 3], target [M, 3], confidence [M])`` of the anchor tracks from
         the previous time to this one (entry 0 and unknown steps None): the step starts the
-        vertices near them where they went (:func:`~.guide.anchor_guide`); or per time a
-        function of the step's result that returns a :class:`~.guide.Guide` (the
-        colour guide, :class:`~.photometric_guide.PhotometricGuides`).
+        vertices near them where they went (:func:`~.guide.anchor_guide`).
+    colour_guides : sequence, optional
+        Per time, a function of the step's result that returns a :class:`~.guide.Guide` (the
+        colour guide, :class:`~.photometric_guide.PhotometricGuides`), or None: the step then
+        relaxes again pulled towards it (``late_guide`` of :func:`slide_step`).
 
     Returns
     -------
@@ -623,15 +626,14 @@ def slide(
                 tree = cKDTree(np.full((1, 3), np.inf))
             previous = current
             surface = surfaces[k] if surfaces is not None and s == options.substeps - 1 else None
-            guide = None
+            guide = late_guide = None
             if anchors is not None and anchors[k] is not None and s == options.substeps - 1:
-                if callable(anchors[k]):
-                    guide = anchors[k]
-                else:
-                    source, target, confidence = anchors[k]
-                    guide = anchor_guide(
-                        frames[k - 1], source, target, confidence, radius=2.0 * pre.edge_length
-                    )
+                source, target, confidence = anchors[k]
+                guide = anchor_guide(
+                    frames[k - 1], source, target, confidence, radius=2.0 * pre.edge_length
+                )
+            if colour_guides is not None and s == options.substeps - 1:
+                late_guide = colour_guides[k]
             current, _, info = slide_step(
                 pre,
                 field,
@@ -651,6 +653,7 @@ def slide(
                 ),
                 previous_registration=last_registration,
                 guide=guide,
+                late_guide=late_guide,
             )
             if np.isfinite(info.unexplained):  # nan: no data term or no registration
                 last_registration = (info.registered, info.unexplained)
