@@ -103,3 +103,17 @@ def test_colours_come_from_one_source_for_every_frame(filmed_without_colours):
     assert np.array_equal(from_video[1], colors_from_video(bare, 1))
     # no colours, no video: no guide
     assert _guide_colors(PointCloudSequence(bare.frames), points, normals) is None
+
+
+def test_a_video_that_sees_none_of_the_points_is_refused_naming_the_way_out(filmed_without_colours):
+    from fourd.errors import InputError
+    from fourd.methods.kinematic.pipeline import _guide_colors
+    from fourd.sequence import PointCloudSequence
+
+    _, _, bare = filmed_without_colours
+    away = [f.points + [0.0, 1000.0, 0.0] for f in bare.frames]  # far above every camera's view
+    seq = PointCloudSequence.from_arrays(away)
+    seq = PointCloudSequence(seq.frames, video=bare.video)
+    with pytest.raises(InputError, match="no camera of the video sees any point.*color_guide=false") as error:
+        _guide_colors(seq, away, [None] * len(away))
+    assert "\n" not in str(error.value)

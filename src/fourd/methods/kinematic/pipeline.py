@@ -117,8 +117,14 @@ def _guide_colors(seq: PointCloudSequence, points, normals) -> list | None:
     from fourd.appearance.point_colors import colors_from_video
 
     started = _time.perf_counter()
-    colors = [
-        colors_from_video(seq, t, points=p, normals=n) for t, (p, n) in enumerate(zip(points, normals, strict=True))
-    ]
+    try:
+        colors = [
+            colors_from_video(seq, t, points=p, normals=n)
+            for t, (p, n) in enumerate(zip(points, normals, strict=True))
+        ]
+    except InputError as error:
+        raise InputError(
+            f"colour guide from the video: {error.problem} (color_guide=false goes without)", error.path
+        ) from None
     log.info("point colours from the video: %.2f s", _time.perf_counter() - started)
     return colors
