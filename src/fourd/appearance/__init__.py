@@ -8,7 +8,8 @@ check), :mod:`~fourd.appearance.depth` (depth maps splatted from a frame's point
 points without video), :mod:`~fourd.appearance.vertex_colors` (input colours carried to a
 result's vertices), :mod:`~fourd.appearance.surface_color` (a frame's colours as a field on its
 surface), :mod:`~fourd.appearance.photometric` (per-vertex shifts from the colours: the colour
-guide of ``kinematic``), :mod:`~fourd.appearance.lighting` (the fixed lamps' shading).
+guide of ``kinematic``), :mod:`~fourd.appearance.lighting` (the fixed lamps' shading),
+:mod:`~fourd.appearance.point_colors` (colours for uncoloured points from the video).
 OpenCV is imported only when flow is computed.
 """
 

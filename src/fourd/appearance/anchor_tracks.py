@@ -219,7 +219,7 @@ def anchor_options(options: AnchorOptions | None = None, **overrides) -> AnchorO
     return with_overrides(AnchorOptions, options, what="anchor", **overrides)
 
 
-def _pixel_spacing(camera, points, spacing: float) -> float:
+def pixel_spacing(camera, points, spacing: float) -> float:
     """The point spacing in pixels at the points' median depth (at least 1)."""
     _, z = project(camera, points)
     z = z[z > 0]
@@ -404,7 +404,7 @@ def camera_tracks(
     options = anchor_options(options, **overrides)
     points0, spacing, tolerance = _setup(seq, first, options)
     c = seq.video.camera_index(camera)
-    pixels = _pixel_spacing(seq.video.cameras[c], points0, spacing)
+    pixels = pixel_spacing(seq.video.cameras[c], points0, spacing)
     radius = pixels if options.splat_radius is None else options.splat_radius
     cache: dict = {}
     before = _camera_frame(seq, c, first, radius, tolerance, options, cache)
@@ -429,7 +429,7 @@ def anchor_pair(seq, first: int, options: AnchorOptions | None = None, *, cache=
     cache = {} if cache is None else cache
     indices, cameras, targets, reliabilities = [], [], [], []
     for c, camera in enumerate(video.cameras):
-        pixels = _pixel_spacing(camera, points0, spacing)
+        pixels = pixel_spacing(camera, points0, spacing)
         radius = pixels if options.splat_radius is None else options.splat_radius
         before = cache.pop((c, first), None) or _camera_frame(
             seq, c, first, radius, tolerance, options, cache

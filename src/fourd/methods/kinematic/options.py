@@ -143,13 +143,15 @@ class Options:
         vertices with anchors towards where the anchors went, in units of the vertex's own
         stiffness (0: the anchors only move the start of the step).
     color_guide : bool
-        When the input points have colours (with or without video anchors): at every input
+        When the input points have colours, or have none but the input has calibrated video
+        (then every frame's points are coloured from the cameras that see them,
+        :mod:`fourd.appearance.point_colors`), with or without video anchors: at every input
         frame, after the step, pull each vertex where the colours the template took from the
         first frame say it went (per-vertex Lucas-Kanade on the frame's coloured points,
         :mod:`.photometric_guide`) with ``anchor_pull``, and relax again. Only the colours' hue
         counts (the lamps' shading moves with the lamps, not with the skin) and only where it
         stands out of the colour noise, so a uniform colour and smooth skin change little;
-        silent without colours (benchmarks/METHODS.md).
+        silent without colours or video (benchmarks/METHODS.md).
     color_radius : float
         Patch radius of that Lucas-Kanade, in template edges.
     color_scale : float

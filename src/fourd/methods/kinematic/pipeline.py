@@ -87,10 +87,8 @@ def reconstruct(
         anchors = track_anchors(seq)
         log.info("anchors from the video: %d over %d frame pairs", anchors.total, len(anchors))
     colors = None
-    if options.color_guide and any(f.colors is not None for f in seq.frames):
-        colors = [
-            colors_of_cleaned(f.points, f.colors, p) for f, p in zip(seq.frames, points, strict=True)
-        ]
+    if options.color_guide:
+        colors = _guide_colors(seq, points, normals)
     result = animate(
         field, points, normals, times, spacing=spacing, options=options, cache=cache,
         field_key=key, edge_stiffness=edge_stiffness, anchors=anchors, colors=colors,
@@ -104,3 +102,29 @@ def reconstruct(
         finished - fitted,
     )
     return result
+
+
+def _guide_colors(seq: PointCloudSequence, points, normals) -> list | None:
+    """Per frame, the colours ``[P, 3]`` of its cleaned ``points`` for the colour guide (None
+    where a frame has none): the points' own when every frame has them, else the video's
+    (:func:`fourd.appearance.point_colors.colors_from_video`) for every frame, so that all
+    frames' colours come from one source and compare; without video, the points' own where
+    given. None when there are no colours at all."""
+    if all(f.colors is not None for f in seq.frames) or getattr(seq, "video", None) is None:
+        if not any(f.colors is not None for f in seq.frames):
+            return None
+        return [colors_of_cleaned(f.points, f.colors, p) for f, p in zip(seq.frames, points, strict=True)]
+    from fourd.appearance.point_colors import colors_from_video
+
+    started = _time.perf_counter()
+    try:
+        colors = [
+            colors_from_video(seq, t, points=p, normals=n)
+            for t, (p, n) in enumerate(zip(points, normals, strict=True))
+        ]
+    except InputError as error:
+        raise InputError(
+            f"colour guide from the video: {error.problem} (color_guide=false goes without)", error.path
+        ) from None
+    log.info("point colours from the video: %.2f s", _time.perf_counter() - started)
+    return colors
