@@ -11,10 +11,12 @@ Built so far (modules of this package):
 3. :mod:`.match` (eq. 5), :mod:`.smoothness` (eq. 6-8), :mod:`.motion` (eq. 9, 10) -- the
    energy terms with gradients and Gauss-Newton Hessians (:mod:`.term`), summed by
    :mod:`.energy` (eq. 3);
-4. :mod:`.optimizer` -- the optimiser (sparse Gauss-Newton, preconditioned CG).
+4. :mod:`.optimizer` -- the optimiser (sparse Gauss-Newton, preconditioned CG);
+5. :mod:`.meshing` -- the animated mesh (sec. 3.3): one frame's blended tangent planes
+   contoured with border clipping, carried to every frame by the surfels' Gaussian weights.
 
 Seed regions come from :func:`fourd.geometry.tensor_voting.tensor_voting`. Still to come: the
-iterative model assembly (alignment, stitching, hole filling, resampling, urshape), meshing,
+iterative model assembly (alignment, stitching, hole filling, resampling, urshape),
 ``Options`` with defaults and ``reconstruct``.
 
 References
@@ -31,6 +33,16 @@ from fourd.methods.surfels.match import (
     associate,
     frame_data,
     match_term,
+)
+from fourd.methods.surfels.meshing import (
+    Binding,
+    FrameMesh,
+    MeshingOptions,
+    bind_vertices,
+    carry,
+    mesh_frame,
+    surfel_frames,
+    surfel_mesh,
 )
 from fourd.methods.surfels.motion import accel_term, fit_rotations, rigid_term
 from fourd.methods.surfels.optimizer import (
@@ -59,12 +71,15 @@ from fourd.methods.surfels.topology import (
 )
 
 __all__ = [
+    "Binding",
     "Data",
     "Energy",
+    "FrameMesh",
     "GaussNewtonOptions",
     "Layout",
     "MatchOptions",
     "Matches",
+    "MeshingOptions",
     "Optimization",
     "SurfelState",
     "Term",
@@ -73,12 +88,15 @@ __all__ = [
     "accel_term",
     "build_topology",
     "associate",
+    "bind_vertices",
+    "carry",
     "fit_rotations",
     "frame_data",
     "gauss_newton",
     "laplace_term",
     "layout",
     "match_term",
+    "mesh_frame",
     "move",
     "retract",
     "rigid_term",
@@ -87,6 +105,8 @@ __all__ = [
     "skew",
     "smooth_normal_term",
     "smooth_position_term",
+    "surfel_frames",
+    "surfel_mesh",
     "solve_step",
     "surfel_state",
     "tangent_basis",
