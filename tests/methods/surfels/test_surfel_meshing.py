@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from fourd.geometry.meshes import face_adjacency, vertex_components
-from fourd.methods.surfels import surfel_state
+from fourd.methods.surfels import sample_surfels, surfel_state
 from fourd.methods.surfels.meshing import (
     MeshingOptions,
     bind_vertices,
@@ -82,6 +82,20 @@ def test_sphere_meshes_closed_and_close_to_the_sphere():
     face_normals = np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])
     assert np.all(np.einsum("ij,ij->i", face_normals, v.mean(axis=1)) > 0)
     assert mesh.support.min() >= MeshingOptions().clip
+
+
+def test_irregular_surfels_on_a_sphere_mesh_closed():
+    rng = np.random.default_rng(0)
+    points = rng.normal(size=(30000, 3))
+    points /= np.linalg.norm(points, axis=1, keepdims=True)
+    surfels = points[sample_surfels(points, EPS)]
+    mesh = mesh_frame(surfels, surfels, EPS)
+    edges = np.sort(mesh.faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+    _, counts = np.unique(edges, axis=0, return_counts=True)
+    assert np.all(counts == 2)
+    assert vertex_components(mesh.faces, len(mesh.vertices))[0] == 1
+    radius = np.linalg.norm(mesh.vertices, axis=1)
+    assert 0.0 < radius.min() - 1.0 and radius.max() - 1.0 < 0.1 * EPS  # 0.04-0.07 measured
 
 
 def test_square_patch_meshes_open_and_clipped_at_its_border():
