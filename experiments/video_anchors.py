@@ -55,14 +55,16 @@ def main(name: str, appearance: str, frames: int, video_resolution: int = 256) -
     if os.environ.get("NOBASE"):
         variants = variants[1:]
     colour = bool(int(os.environ.get("COLOUR", "0")))
+    texture = float(os.environ.get("TEXTURE", "0"))
     for anchors, pull, gate in variants:
         started = time.perf_counter()
         result = kinematic.reconstruct(scans, kinematic.Options(
-            video_anchors=anchors, anchor_pull=pull, anchor_gate=gate, color_guide=colour))
+            video_anchors=anchors, anchor_pull=pull, anchor_gate=gate, color_guide=colour,
+            anchor_texture=texture))
         seconds = time.perf_counter() - started
         r = evaluate(result, truth, samples=20000, seed=0)
         print(f"{name} {appearance} video_anchors={anchors} anchor_pull={pull} anchor_gate={gate} "
-              f"color_guide={colour}: correspondence "
+              f"color_guide={colour} anchor_texture={texture}: correspondence "
               f"{r['correspondence_mean']:.4f} / {r['correspondence_last']:.4f}, Chamfer "
               f"{r['chamfer']:.4f}, {seconds / count:.2f} s/frame", flush=True)
 

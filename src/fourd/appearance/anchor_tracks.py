@@ -66,8 +66,10 @@ from fourd.appearance.flow import (
     FLOW_METHODS,
     forward_backward,
     optical_flow,
+    sample_flow,
     sample_image,
 )
+from fourd.appearance.texture import texture_significance
 from fourd.errors import InputError
 from fourd.progress import progress
 
@@ -113,6 +115,14 @@ class AnchorOptions:
         (0: keep all).
     remove_outliers : bool
         Set each frame's outliers aside first (step 0).
+    texture : float
+        Keep only tracks that start where the image has hue texture: the chromaticity's
+        structure tensor at least this many times what the noise alone gives it
+        (:func:`~fourd.appearance.texture.texture_significance`, window ``texture_window``
+        pixels); 0 keeps every track. Flow elsewhere follows the shading, which stays with the
+        lamps while the surface turns.
+    texture_window : float
+        Gaussian window of that structure tensor, pixels.
     """
 
     flow: str = "dis"
@@ -126,6 +136,8 @@ class AnchorOptions:
     neighbours: int = 8
     thin: float = 0.0
     remove_outliers: bool = True
+    texture: float = 0.0
+    texture_window: float = 2.0
 
     def __post_init__(self):
         if self.flow not in FLOW_METHODS:
@@ -301,6 +313,10 @@ def _tracks(points0, before: _CameraFrame, after: _CameraFrame, tolerance, reach
     """One camera's tracks: ``(index [K], target [K, 3], error [K])``."""
     seen, uv = before.view.index, before.view.uv
     counts["seen"] += len(seen)
+    if options.texture > 0 and len(seen):
+        significance = texture_significance(before.image, sigma=options.texture_window)
+        keep = sample_flow(significance[:, :, None], uv, channels=1)[:, 0] >= options.texture
+        seen, uv = seen[keep], uv[keep]
     forward = optical_flow(before.image, after.image, method=options.flow, preset=options.preset)
     backward = optical_flow(after.image, before.image, method=options.flow, preset=options.preset)
     moved, returned, error = forward_backward(forward, backward, uv)

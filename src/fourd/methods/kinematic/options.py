@@ -135,9 +135,10 @@ class Options:
     video_anchors : bool
         When the input has calibrated video (``cameras.json`` and ``video/``), track anchors
         by optical flow between consecutive frames (:func:`fourd.appearance.anchors`) and
-        start each sliding step where they went (:mod:`.guide`); silent without video. Off
-        by default: it halves the drift on printed cloth but on low-contrast skin the flow
-        follows the shading and the anchors mislead (benchmarks/METHODS.md).
+        start each sliding step where they went (:mod:`.guide`); silent without video. Only
+        anchors that start on hue texture count (``anchor_texture``): on low-contrast skin or a
+        uniform colour the flow follows the shading, and those anchors misled the performer
+        (benchmarks/METHODS.md).
     anchor_pull : float
         With ``video_anchors``: how strongly each step's as-rigid-as-possible solve pulls the
         vertices with anchors towards where the anchors went, in units of the vertex's own
@@ -157,6 +158,9 @@ class Options:
     color_scale : float
         A vertex whose colour shift has this uncertainty (template edges) counts exp(-1); the
         weight falls as ``exp(-(uncertainty / scale)^2)``.
+    anchor_texture : float
+        With ``video_anchors``: keep only anchors that start where a camera's image has hue
+        texture this many times above the noise (``AnchorOptions.texture``; 0: every anchor).
     anchor_gate : float
         With ``video_anchors``: an anchor whose target lies farther than this many template
         edges from where the step's prediction puts the vertex counts less (Gaussian weight;
@@ -195,9 +199,10 @@ class Options:
     smoothing_motion: float = 1.0
     times: tuple[float, ...] = ()
     seed: int = 0
-    video_anchors: bool = False
+    video_anchors: bool = True
     anchor_pull: float = 1.0
     anchor_gate: float = 0.0
+    anchor_texture: float = 3.0
     color_guide: bool = True
     color_radius: float = 3.0
     color_scale: float = 0.5

@@ -84,7 +84,7 @@ def reconstruct(
     if options.video_anchors and getattr(seq, "video", None) is not None:
         from fourd.appearance import anchors as track_anchors
 
-        anchors = track_anchors(seq)
+        anchors = track_anchors(seq, texture=options.anchor_texture)
         log.info("anchors from the video: %d over %d frame pairs", anchors.total, len(anchors))
     colors = None
     if options.color_guide:
