@@ -60,13 +60,12 @@ def anchor_guide(
     if len(source) == 0:
         empty = np.zeros(0, dtype=np.int64)
         return Guide(empty, np.zeros((0, 3)), np.zeros(0))
-    tree = cKDTree(np.asarray(source, dtype=np.float64))
-    lists = tree.query_ball_point(reference, 2.0 * radius, workers=-1)
-    counts = np.fromiter((len(item) for item in lists), dtype=np.int64, count=len(reference))
-    rows = np.repeat(np.arange(len(reference)), counts)
-    cols = np.fromiter((j for item in lists for j in item), dtype=np.int64, count=counts.sum())
-    offset = source[cols] - reference[rows]
-    w = np.asarray(confidence, dtype=np.float64)[cols] * np.exp(-np.einsum("ij,ij->i", offset, offset) / radius**2)
+    source = np.asarray(source, dtype=np.float64)
+    pairs = cKDTree(reference).sparse_distance_matrix(
+        cKDTree(source), 2.0 * radius, output_type="coo_matrix"
+    )
+    rows, cols = pairs.row.astype(np.int64), pairs.col.astype(np.int64)
+    w = np.asarray(confidence, dtype=np.float64)[cols] * np.exp(-(pairs.data**2) / radius**2)
     total = np.bincount(rows, w, minlength=len(reference))
     displacement = np.stack(
         [np.bincount(rows, w * (target[cols, c] - source[cols, c]), minlength=len(reference)) for c in range(3)],
