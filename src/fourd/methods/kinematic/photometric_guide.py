@@ -28,6 +28,10 @@ __all__ = ["PhotometricGuides", "colors_of_cleaned"]
 
 log = logging.getLogger("fourd.methods.kinematic.photometric_guide")
 
+#: The colour field of a frame keeps about this many of its points per template vertex (every
+#: ``P // (4 N)``-th point).
+FIELD_POINTS_PER_VERTEX = 4
+
 
 def colors_of_cleaned(raw_points, raw_colors, cleaned) -> np.ndarray | None:
     """Colours ``[P, 3]`` of the ``cleaned`` points [P, 3] of a frame: those of the nearest of its
@@ -72,6 +76,7 @@ class PhotometricGuides(Sequence):
     def __init__(self, template, faces, frames, points, normals, colors, *, radius: float, scale: float,
                  reference_frame: int = 0, shading: bool = False):
         self.frames = [int(k) for k in frames]
+        self.vertex_count = len(template)
         self.faces = np.asarray(faces, dtype=np.int64)
         self.points, self.normals, self.colors = points, normals, colors
         self.radius, self.scale = float(radius), float(scale)
@@ -94,7 +99,9 @@ class PhotometricGuides(Sequence):
         return k >= 0 and self.colors[k] is not None and len(self.points[k]) >= 8
 
     def _field(self, k: int) -> ColorField:
-        return ColorField(self.points[k], self.normals[k], self.colors[k])
+        # the field is read at the template's vertices: a few points per vertex are enough
+        stride = max(1, len(self.points[k]) // (FIELD_POINTS_PER_VERTEX * self.vertex_count))
+        return ColorField(self.points[k][::stride], self.normals[k][::stride], self.colors[k][::stride])
 
     def __len__(self) -> int:
         return len(self.frames)
