@@ -30,6 +30,14 @@ squash-ball cloth 0.0104 / 0.0046, but waving-sheet cloth 0.0322 / 0.0636 (worse
 sheet drifts by more than an edge per step, so the gate drops the anchors that would correct
 it). A gate of 3 edges: crane skin 0.0095 / 0.0168, bending-arm 0.0102 / 0.0190. No setting
 helps every scene.
+
+With the colour guide beside the anchors and the hue texture gate (``COLOUR=1 TEXTURE=3
+NOBASE=1``, the defaults since: kinematic's ``color_guide`` and ``anchor_texture=3``):
+bending-arm cloth 0.0020 / 0.0027, squash-ball cloth 0.0026 / 0.0020, waving-sheet cloth
+0.0012 / 0.0015, crane cloth 0.0041 / 0.0075, crane skin 0.0073 / 0.0124, crane uniform
+0.0074 / 0.0124 (geometry alone 0.0073 / 0.0120). Without the gate (``TEXTURE=0``) crane skin
+0.0068 / 0.0132 and uniform 0.0070 / 0.0136, the cloth scenes the same: the gate drops the
+anchors that follow the shading.
 """
 
 from __future__ import annotations

@@ -123,6 +123,9 @@ class AnchorOptions:
         lamps while the surface turns.
     texture_window : float
         Gaussian window of that structure tensor, pixels.
+    sources : float
+        Track from at most one point per cube of ``sources`` point spacings (0: from every
+        point): fewer tracks to lift when the anchors are denser than their user needs.
     """
 
     flow: str = "dis"
@@ -138,6 +141,7 @@ class AnchorOptions:
     remove_outliers: bool = True
     texture: float = 0.0
     texture_window: float = 2.0
+    sources: float = 0.0
 
     def __post_init__(self):
         if self.flow not in FLOW_METHODS:
@@ -309,9 +313,14 @@ class CameraTracks(NamedTuple):
     counts: dict
 
 
-def _tracks(points0, before: _CameraFrame, after: _CameraFrame, tolerance, reach, options, counts):
-    """One camera's tracks: ``(index [K], target [K, 3], error [K])``."""
+def _tracks(points0, before: _CameraFrame, after: _CameraFrame, tolerance, reach, options, counts,
+            candidates=None):
+    """One camera's tracks: ``(index [K], target [K, 3], error [K])``; ``candidates`` (bool
+    [P], optional): the points tracks may start from."""
     seen, uv = before.view.index, before.view.uv
+    if candidates is not None:
+        keep = candidates[seen]
+        seen, uv = seen[keep], uv[keep]
     counts["seen"] += len(seen)
     if options.texture > 0 and len(seen):
         significance = texture_significance(before.image, sigma=options.texture_window)
@@ -443,6 +452,10 @@ def anchor_pair(seq, first: int, options: AnchorOptions | None = None, *, cache=
     points0, spacing, tolerance = _setup(seq, first, options)
     counts = dict.fromkeys(STAGES, 0)
     cache = {} if cache is None else cache
+    candidates = None
+    if options.sources > 0 and len(points0):
+        candidates = np.zeros(len(points0), dtype=bool)
+        candidates[_thin(points0, np.zeros(len(points0)), options.sources * spacing)] = True
     indices, cameras, targets, reliabilities = [], [], [], []
     for c, camera in enumerate(video.cameras):
         pixels = pixel_spacing(camera, points0, spacing)
@@ -453,7 +466,7 @@ def anchor_pair(seq, first: int, options: AnchorOptions | None = None, *, cache=
         after = _camera_frame(seq, c, second, radius, tolerance, options, cache)
         cache[(c, second)] = after
         index, target, error = _tracks(
-            points0, before, after, tolerance, 2.5 * pixels, options, counts
+            points0, before, after, tolerance, 2.5 * pixels, options, counts, candidates
         )
         indices.append(index)
         cameras.append(np.full(len(index), c))

@@ -23,6 +23,10 @@ from fourd.sequence import PointCloudSequence
 
 log = logging.getLogger("fourd.methods.kinematic")
 
+#: The video's anchors are tracked from one point per cube of this many point spacings
+#: (``AnchorOptions.sources``): the sliding blends them over two template edges anyway.
+ANCHOR_SOURCES = 2.0
+
 
 def reconstruct(
     seq: PointCloudSequence, options: Options | None = None, *, edge_stiffness: tuple | None = None
@@ -84,7 +88,7 @@ def reconstruct(
     if options.video_anchors and getattr(seq, "video", None) is not None:
         from fourd.appearance import anchors as track_anchors
 
-        anchors = track_anchors(seq, texture=options.anchor_texture)
+        anchors = track_anchors(seq, texture=options.anchor_texture, sources=ANCHOR_SOURCES)
         log.info("anchors from the video: %d over %d frame pairs", anchors.total, len(anchors))
     colors = None
     if options.color_guide:

@@ -79,6 +79,10 @@ from fourd.progress import progress
 
 log = logging.getLogger("fourd.methods.kinematic.sliding")
 
+#: The step relaxes again towards a late guide (the colour guide) only when its weights add up
+#: to at least this share of the vertices.
+LATE_GUIDE_SUPPORT = 0.01
+
 
 @dataclass(frozen=True)
 class SlideOptions:
@@ -464,7 +468,10 @@ def slide_step(
     if late_guide is not None:
         # the colour guide reads the frame's colours where the geometry put the vertices, then
         # the iterations run again from there, pulled towards where the colours say
-        current, solver = relax(current, late_guide(current))
+        late = late_guide(current)
+        # a guide that pins nothing down (a uniform colour, smooth skin) would only relax again
+        if late is not None and late.weight.sum() >= LATE_GUIDE_SUPPORT * n:
+            current, solver = relax(current, late)
     residual = np.abs(np.einsum("ij,ij->i", normals, current) - offsets)[solver.constrained]
     if options.project_output:
         mask = solver.constrained
