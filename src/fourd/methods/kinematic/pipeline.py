@@ -19,7 +19,7 @@ from fourd.methods.kinematic.frames import prepare_frames
 from fourd.methods.kinematic.mpu4d import MPUOptions
 from fourd.methods.kinematic.options import MIN_FRAMES, Options
 from fourd.methods.kinematic.photometric_guide import colors_of_cleaned
-from fourd.sequence import PointCloudSequence
+from fourd.sequence import Frame, PointCloudSequence
 
 log = logging.getLogger("fourd.methods.kinematic")
 
@@ -88,7 +88,15 @@ def reconstruct(
     if options.video_anchors and getattr(seq, "video", None) is not None:
         from fourd.appearance import anchors as track_anchors
 
-        anchors = track_anchors(seq, texture=options.anchor_texture, sources=ANCHOR_SOURCES)
+        # on the frames as cleaned above: the anchors' own outlier removal would repeat it
+        cleaned = PointCloudSequence(
+            tuple(Frame(p, time=f.time) for f, p in zip(seq.frames, points, strict=True)),
+            seq.names,
+            seq.video,
+        )
+        anchors = track_anchors(
+            cleaned, texture=options.anchor_texture, sources=ANCHOR_SOURCES, remove_outliers=False
+        )
         log.info("anchors from the video: %d over %d frame pairs", anchors.total, len(anchors))
     colors = None
     if options.color_guide:
