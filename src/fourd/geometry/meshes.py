@@ -25,6 +25,15 @@ def _triple_products(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     return np.einsum("ij,ij->i", tri[:, 0], np.cross(tri[:, 1], tri[:, 2]))
 
 
+def mesh_arrays(vertices, faces) -> tuple[np.ndarray, np.ndarray]:
+    """``(vertices float64 [N, 3], faces int64 [F, 3])`` of any array-likes (no copy when they
+    already are)."""
+    return (
+        np.asarray(vertices, dtype=np.float64).reshape(-1, 3),
+        np.asarray(faces, dtype=np.int64).reshape(-1, 3),
+    )
+
+
 def face_areas(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     """Triangle areas ``[F]`` (input units squared)."""
     a = vertices[faces[:, 0]]

@@ -23,6 +23,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from fourd.geometry.flattening import flatten
+from fourd.geometry.meshes import mesh_arrays
 from fourd.methods.assembly.anchors import Anchors
 from fourd.methods.assembly.options import CrossParamOptions
 from fourd.methods.assembly.patches import PatchPair, grow_patches
@@ -195,10 +196,8 @@ def cross_parameterize(
     CrossParameterization
     """
     options = CrossParamOptions() if options is None else options
-    source_vertices = np.asarray(source_vertices, dtype=np.float64)
-    source_faces = np.asarray(source_faces, dtype=np.int64)
-    target_vertices = np.asarray(target_vertices, dtype=np.float64)
-    target_faces = np.asarray(target_faces, dtype=np.int64)
+    source_vertices, source_faces = mesh_arrays(source_vertices, source_faces)
+    target_vertices, target_faces = mesh_arrays(target_vertices, target_faces)
     if len(anchors.source) < options.min_anchors:
         raise ValueError(f"a cross-parameterisation needs at least {options.min_anchors} anchors, "
                          f"got {len(anchors.source)}")

@@ -20,7 +20,7 @@ from typing import NamedTuple
 import numpy as np
 import trimesh
 
-from fourd.geometry.meshes import median_edge_length
+from fourd.geometry.meshes import median_edge_length, mesh_arrays
 from fourd.methods.assembly.anchors import Anchors, spread_anchors
 from fourd.methods.assembly.options import RefineOptions
 from fourd.methods.assembly.registration import register_by_laplacian
@@ -81,10 +81,8 @@ def refine_anchors(
     Refinement
     """
     options = RefineOptions() if options is None else options
-    source_vertices = np.asarray(source_vertices, dtype=np.float64)
-    source_faces = np.asarray(source_faces, dtype=np.int64)
-    target_vertices = np.asarray(target_vertices, dtype=np.float64)
-    target_faces = np.asarray(target_faces, dtype=np.int64)
+    source_vertices, source_faces = mesh_arrays(source_vertices, source_faces)
+    target_vertices, target_faces = mesh_arrays(target_vertices, target_faces)
     faces = np.asarray(faces, dtype=np.int64).reshape(-1)
     known = faces >= 0
     points = np.nan_to_num(mapped_points(target_vertices, target_faces, faces, barycentric))

@@ -54,7 +54,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from fourd.geometry.laplacian import cotangent_laplacian, uniform_laplacian
-from fourd.geometry.meshes import median_edge_length, vertex_adjacency
+from fourd.geometry.meshes import median_edge_length, mesh_arrays, vertex_adjacency
 from fourd.geometry.rotations import one_ring_rotations
 from fourd.geometry.surface_walk import face_neighbours, face_unit_normals, walk_on_surface
 from fourd.methods.assembly.options import RelaxOptions
@@ -303,10 +303,8 @@ def relax_map(
     RelaxedMap
     """
     options = RelaxOptions() if options is None else options
-    source_vertices = np.asarray(source_vertices, dtype=np.float64)
-    source_faces = np.asarray(source_faces, dtype=np.int64)
-    target_vertices = np.asarray(target_vertices, dtype=np.float64)
-    target_faces = np.asarray(target_faces, dtype=np.int64)
+    source_vertices, source_faces = mesh_arrays(source_vertices, source_faces)
+    target_vertices, target_faces = mesh_arrays(target_vertices, target_faces)
     faces = np.array(faces, dtype=np.int64).reshape(-1)
     bary = np.array(barycentric, dtype=np.float64).reshape(-1, 3)
     count = len(source_vertices)

@@ -18,7 +18,6 @@ from collections.abc import Sequence
 import numpy as np
 from scipy.spatial import cKDTree
 
-from fourd.appearance.lighting import fit_lighting
 from fourd.appearance.photometric import photometric_shift
 from fourd.appearance.surface_color import ColorField
 from fourd.geometry.normals import vertex_normals
@@ -55,16 +54,6 @@ class PhotometricGuides(Sequence):
         Per sliding time, the input frame whose points are the data term (-1: none).
     reference_frame : int
         The input frame the template lies on, whose colours it takes.
-    shading : bool
-        Fit the fixed lamps' shading to the coloured points of every frame
-        (:func:`~fourd.appearance.lighting.fit_lighting`) and expect each vertex's colour to
-        change with it as its normal turns: a patch that turns towards a lamp brightens, and
-        without this the brightening looks like motion. The shading is read at the mesh's
-        normals, which are smooth, not at the points' (dividing the points' colours by the
-        shading of their own noisy normals made the shifts worse). Off: measured worse on crane
-        (20 frames, correspondence mean / last: skin 0.0077 / 0.0126 -> 0.0102 / 0.0145, printed
-        cloth 0.0047 / 0.0068 -> 0.0053 / 0.0079); the shared brightness offset of each patch
-        already absorbs most of a change of light.
     points, normals, colors : lists of per-frame arrays [P_k, 3] (colors may be None)
     radius : float
         Patch radius of the Lucas-Kanade (input units).
@@ -74,7 +63,7 @@ class PhotometricGuides(Sequence):
     """
 
     def __init__(self, template, faces, frames, points, normals, colors, *, radius: float, scale: float,
-                 reference_frame: int = 0, shading: bool = False):
+                 reference_frame: int = 0):
         self.frames = [int(k) for k in frames]
         self.vertex_count = len(template)
         self.faces = np.asarray(faces, dtype=np.int64)
@@ -82,18 +71,6 @@ class PhotometricGuides(Sequence):
         self.radius, self.scale = float(radius), float(scale)
         has = self._has(reference_frame)
         self.reference = self._field(reference_frame).sample(template) if has else None
-        self.lighting = None
-        if has and shading:
-            coloured = [k for k in range(len(colors)) if self._has(k)]
-            self.lighting = fit_lighting(
-                [points[k] for k in coloured], [normals[k] for k in coloured], [colors[k] for k in coloured]
-            )
-            rest_normals = vertex_normals(template, self.faces)
-            # the lamps were fitted on the points' outward normals: the mesh's must agree
-            _, nearest = cKDTree(points[reference_frame]).query(template, workers=-1)
-            agree = np.einsum("ij,ij->i", rest_normals, normals[reference_frame][nearest])
-            self.orientation = 1.0 if np.median(agree) >= 0 else -1.0
-            self.rest_shading = np.log(self.lighting.shading(self.orientation * rest_normals))
 
     def _has(self, k: int) -> bool:
         return k >= 0 and self.colors[k] is not None and len(self.points[k]) >= 8
@@ -113,11 +90,7 @@ class PhotometricGuides(Sequence):
 
         def guide(start: np.ndarray) -> Guide:
             normals = vertex_normals(start, self.faces)
-            reference = self.reference
-            if self.lighting is not None:
-                turned = np.log(self.lighting.shading(self.orientation * normals)) - self.rest_shading
-                reference = reference + turned[:, None]
-            result = photometric_shift(start, normals, reference, self._field(k), radius=self.radius)
+            result = photometric_shift(start, normals, self.reference, self._field(k), radius=self.radius)
             finite = np.flatnonzero(np.isfinite(result.uncertainty))
             weight = np.exp(-((result.uncertainty[finite] / self.scale) ** 2))
             log.debug("colour guide at frame %d: support %.3f", k, weight.sum() / len(start))
