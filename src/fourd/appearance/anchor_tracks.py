@@ -404,7 +404,10 @@ def _thin(source, confidence, cell: float) -> np.ndarray:
     """Indices keeping the most confident anchor per cube of side ``cell``."""
     order = np.argsort(-confidence, kind="stable")
     keys = np.floor(source[order] / cell).astype(np.int64)
-    _, first = np.unique(keys, axis=0, return_index=True)
+    keys -= keys.min(axis=0)
+    extent = keys.max(axis=0) + 1
+    flat = (keys[:, 0] * extent[1] + keys[:, 1]) * extent[2] + keys[:, 2]  # one int per cube
+    _, first = np.unique(flat, return_index=True)
     return np.sort(order[first])
 
 

@@ -99,26 +99,20 @@ def splat_depth(camera: Camera, points, *, radius: float = 1.0) -> DepthMap:
     uv, z = project(camera, points)
     height, width = camera.height, camera.width
     front = np.flatnonzero(in_image(camera, uv) & (z > 0))
+    front = front[np.argsort(z[front], kind="stable")]  # nearest first
     centre = np.rint(uv[front]).astype(np.int64)
-    rows, columns, depths, owners = [], [], [], []
-    for dy, dx in _offsets(radius):
-        i = centre[:, 1] + dy
-        j = centre[:, 0] + dx
-        inside = (i >= 0) & (i < height) & (j >= 0) & (j < width)
-        rows.append(i[inside])
-        columns.append(j[inside])
-        depths.append(z[front][inside])
-        owners.append(front[inside])
-    pixel = np.concatenate(rows) * width + np.concatenate(columns)
-    depth = np.concatenate(depths)
-    owner = np.concatenate(owners)
-    order = np.lexsort((depth, pixel))  # by pixel, nearest first
-    pixel, depth, owner = pixel[order], depth[order], owner[order]
-    first = np.ones(len(pixel), dtype=bool)
-    first[1:] = pixel[1:] != pixel[:-1]
+    offsets = _offsets(radius)
+    # [P, O] candidates, point-major so that a nearer point's pixels come first
+    i = (centre[:, 1][:, None] + offsets[:, 0][None, :]).ravel()
+    j = (centre[:, 0][:, None] + offsets[:, 1][None, :]).ravel()
+    owner = np.repeat(front, len(offsets))
+    inside = (i >= 0) & (i < height) & (j >= 0) & (j < width)
+    pixel = (i * width + j)[inside]
+    owner = owner[inside]
+    _, first = np.unique(pixel, return_index=True)  # the first, so the nearest, per pixel
     depth_map = np.full(height * width, np.inf)
     index_map = np.full(height * width, -1, dtype=np.int64)
-    depth_map[pixel[first]] = depth[first]
+    depth_map[pixel[first]] = z[owner[first]]
     index_map[pixel[first]] = owner[first]
     return DepthMap(depth_map.reshape(height, width), index_map.reshape(height, width))
 
@@ -173,9 +167,9 @@ def lift(view: FrameView, uv, *, tolerance: float, k: int = 8, reach: float = 3.
     near = view.points[neighbour[full]]  # [Q, k, 3]
     centroid = near.mean(axis=1)
     spread = near - centroid[:, None, :]
-    _, vectors = np.linalg.eigh(np.einsum("qki,qkj->qij", spread, spread))
+    _, vectors = np.linalg.eigh(spread.transpose(0, 2, 1) @ spread)
     normal = vectors[:, :, 0]
-    flat = np.abs(np.einsum("qkj,qj->qk", spread, normal)).max(axis=1) <= 0.5 * tolerance
+    flat = np.abs(spread @ normal[:, :, None])[:, :, 0].max(axis=1) <= 0.5 * tolerance
     origin = view.camera.center
     direction = rays(view.camera, uv[at])
     cosine = np.einsum("qj,qj->q", direction, normal)

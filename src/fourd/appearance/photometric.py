@@ -152,7 +152,7 @@ def _normal_equations(patches, total, positions, shift, reference, field, tangen
     else:
         residual = r
     residual = np.sqrt((patches @ (residual**2).sum(axis=1)) / np.maximum(total * r.shape[1], 1e-300))
-    r = r - np.einsum("nci,ni->nc", grads, shift)
+    r = r - (grads @ shift[:, :, None])[:, :, 0]
     if brightness == "chroma":
         # every sample's own offset common to the channels: white light's shading, whatever
         # the lamps, is such an offset in log colour; what is left is the colour's hue
@@ -160,8 +160,8 @@ def _normal_equations(patches, total, positions, shift, reference, field, tangen
         grads = grads - grads.mean(axis=1, keepdims=True)
         noise = noise * (1.0 - 1.0 / r.shape[1])
     n, channels = r.shape
-    gg = patches @ np.einsum("nci,ncj->nij", grads, grads).reshape(n, 9)
-    gr = patches @ np.einsum("nci,nc->ni", grads, r)
+    gg = patches @ (grads.transpose(0, 2, 1) @ grads).reshape(n, 9)
+    gr = patches @ (grads.transpose(0, 2, 1) @ r[:, :, None])[:, :, 0]
     gg, count = gg.reshape(n, 3, 3), total * channels
     if brightness == "shared":
         mean_g = (patches @ grads.sum(axis=1)) / count[:, None]
@@ -173,7 +173,7 @@ def _normal_equations(patches, total, positions, shift, reference, field, tangen
         mean_r = (patches @ r) / total[:, None]
         gg = gg - total[:, None, None] * np.einsum("nci,ncj->nij", mean_g, mean_g)
         gr = gr - total[:, None] * np.einsum("nci,nc->ni", mean_g, mean_r)
-    system = np.einsum("nij,njk,nlk->nil", tangent, gg, tangent)
+    system = tangent @ gg @ tangent.transpose(0, 2, 1)
     right = -np.einsum("nij,nj->ni", tangent, gr)
     # what the colour noise adds to the structure tensor, per tangent direction
     noise_energy = 0.5 * (patches @ noise.sum(axis=1))

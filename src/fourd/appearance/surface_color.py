@@ -46,6 +46,9 @@ class ColorField:
         plane) through its ``max(k, smoothing)`` nearest neighbours' log colours: the fit's value
         at the point itself, so the noise is averaged without the bias a plain mean of
         irregularly placed neighbours has.
+
+    A point's fit is made the first time a sample lands on it (:meth:`fit`), so a field read at
+    a mesh's vertices costs about what those vertices need, not what the whole frame has.
     """
 
     def __init__(self, points, normals, colors, *, lighting=None, smoothing: int = 8, k: int = 16):
@@ -61,12 +64,26 @@ class ColorField:
             raise InputError("a colour field needs at least 8 points")
         if lighting is not None:
             colors = lighting.deshade(colors, normals)
-        values = np.log(np.clip(colors, 0.0, None) + LOG_OFFSET)
         self.tree = cKDTree(points)
-        self.points = points
-        self.values, self.gradients, self.gradient_noise = _local_linear_fit(
-            self.tree, points, normals, values, max(k, smoothing)
-        )
+        self.points, self.normals = points, normals
+        self.log_colors = np.log(np.clip(colors, 0.0, None) + LOG_OFFSET)
+        self.k = max(k, smoothing)
+        channels = colors.shape[1]
+        # each point's fit is made the first time a sample needs it
+        self.fitted = np.zeros(len(points), dtype=bool)
+        self.values = np.zeros((len(points), channels))
+        self.gradients = np.zeros((len(points), channels, 3))
+        self.gradient_noise = np.zeros((len(points), channels))
+
+    def fit(self, indices: np.ndarray) -> None:
+        """Make the local fits of the points ``indices`` that do not have theirs yet."""
+        missing = np.unique(indices[~self.fitted[indices]])
+        if len(missing):
+            fits = _local_linear_fit(
+                self.tree, self.points, self.normals, self.log_colors, self.k, missing
+            )
+            self.values[missing], self.gradients[missing], self.gradient_noise[missing] = fits
+            self.fitted[missing] = True
 
     def sample(self, positions: np.ndarray, *, with_gradients: bool = False):
         """Log colour ``[Q, 3]`` at ``positions [Q, 3]`` (and the gradients ``[Q, 3, 3]``,
@@ -74,8 +91,9 @@ class ColorField:
         positions = np.asarray(positions, dtype=np.float64)
         flat = positions.reshape(-1, 3)
         _, nearest = self.tree.query(flat, workers=-1)
+        self.fit(nearest)
         gradients = self.gradients[nearest]
-        values = self.values[nearest] + np.einsum("qcj,qj->qc", gradients, flat - self.points[nearest])
+        values = self.values[nearest] + (gradients @ (flat - self.points[nearest])[:, :, None])[:, :, 0]
         values = values.reshape(positions.shape[:-1] + (values.shape[-1],))
         if with_gradients:
             noise = self.gradient_noise[nearest].reshape(positions.shape[:-1] + (values.shape[-1],))
@@ -83,8 +101,8 @@ class ColorField:
         return values
 
 
-def _local_linear_fit(tree, points, normals, values, k):
-    """Per point, the least-squares ``value + gradient . (q - p)`` (gradient in the tangent
+def _local_linear_fit(tree, points, normals, values, k, at):
+    """Per point of ``at`` (indices), the least-squares ``value + gradient . (q - p)`` (gradient in the tangent
     plane) through the log colours of its ``k`` nearest neighbours (itself included):
     ``(values [P, C], gradients [P, C, 3], gradient noise [P, C])`` (Park et al. 2017, eq. 6,
     with the intercept fitted too). The gradient noise is the expected squared length of the
@@ -92,16 +110,20 @@ def _local_linear_fit(tree, points, normals, values, k):
     the gradient block of its inverse normal matrix. A uniform colour has gradients of about
     that length and nothing else."""
     k = min(k + 1, len(points))
-    _, near = tree.query(points, k=k, workers=-1)
-    offset = points[near] - points[:, None, :]
-    offset -= np.einsum("pkj,pj->pk", offset, normals)[:, :, None] * normals[:, None, :]
-    design = np.concatenate([np.ones(offset.shape[:2] + (1,)), offset], axis=2)  # [P, k, 4]
-    system = np.einsum("pki,pkj->pij", design, design)
-    system[:, 1:, 1:] += np.einsum("pi,pj->pij", normals, normals) * k
-    right = np.einsum("pki,pkc->pic", design, values[near])  # [P, 4, C]
+    _, near = tree.query(points[at], k=k, workers=-1)
+    offset = points[near] - points[at][:, None, :]
+    normals = normals[at]
+    offset -= (offset @ normals[:, :, None]) * normals[:, None, :]
+    design = np.empty(offset.shape[:2] + (4,))  # [P, k, 4]: intercept, tangent offset
+    design[:, :, 0] = 1.0
+    design[:, :, 1:] = offset
+    transposed = design.transpose(0, 2, 1)
+    system = transposed @ design
+    system[:, 1:, 1:] += normals[:, :, None] * normals[:, None, :] * k
+    near_values = values[near]
     inverse = np.linalg.inv(system)
-    solution = np.einsum("pij,pjc->pic", inverse, right)
-    fitted = np.einsum("pki,pic->pkc", design, solution)
-    variance = ((values[near] - fitted) ** 2).sum(axis=1) / max(k - 3, 1)  # [P, C]
-    spread = np.trace(inverse[:, 1:, 1:], axis1=1, axis2=2)
+    solution = inverse @ (transposed @ near_values)  # [P, 4, C]
+    residual = near_values - design @ solution
+    variance = np.einsum("pkc,pkc->pc", residual, residual) / max(k - 3, 1)  # [P, C]
+    spread = inverse[:, 1, 1] + inverse[:, 2, 2] + inverse[:, 3, 3]
     return solution[:, 0, :], np.transpose(solution[:, 1:, :], (0, 2, 1)), variance * spread[:, None]
