@@ -1,0 +1,46 @@
+"""Method ``garment`` (issue 54; Popa's thesis, chapters 3-4 and Appendix B): markerless
+garment capture and data-driven dynamic wrinkles.
+
+**Under construction**: the method is not registered yet. What is here, tested on its own:
+
+- :mod:`.ellipse`: ellipses in space fitted to boundary points, RANSAC candidates near a
+  reference ellipse, pruning by location, orientation and size, support (Appendix B.1);
+- :mod:`.boundary_tracking`: a garment's boundaries followed through the frames, skipped
+  frames interpolated, smoothed in time, and the off-surface anchors (3.6.1, B.1-B.2).
+
+Still to come: the garment scenes in ``synth``, the base mesh parameterisation (3.6.2), the
+template from a photo (3.7), compatible remeshing and completion (3.7), wrinkles from video
+(chapter 4) and the method module itself.
+"""
+
+from fourd.methods.garment.boundary_tracking import (
+    BoundaryTrack,
+    TrackingOptions,
+    initial_ellipses,
+    track_boundary,
+)
+from fourd.methods.garment.ellipse import (
+    Ellipse,
+    EllipseBatch,
+    fit_ellipse,
+    fit_ellipses,
+    point_distances,
+    prune,
+    ransac_candidates,
+    support,
+)
+
+__all__ = [
+    "BoundaryTrack",
+    "Ellipse",
+    "EllipseBatch",
+    "TrackingOptions",
+    "fit_ellipse",
+    "fit_ellipses",
+    "initial_ellipses",
+    "point_distances",
+    "prune",
+    "ransac_candidates",
+    "support",
+    "track_boundary",
+]

@@ -1,0 +1,110 @@
+"""Garment boundary ellipses (thesis Appendix B): fitting, RANSAC with pruning, tracking and
+the off-surface anchors."""
+
+import numpy as np
+import pytest
+
+from fourd.errors import InputError
+from fourd.methods.garment import (
+    TrackingOptions,
+    fit_ellipse,
+    initial_ellipses,
+    track_boundary,
+)
+
+
+def _rotation(axis, angle):
+    axis = np.asarray(axis, dtype=float) / np.linalg.norm(axis)
+    k = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
+    return np.eye(3) + np.sin(angle) * k + (1 - np.cos(angle)) * k @ k
+
+
+def _ellipse_points(center, rotation, a, b, angles):
+    local = np.column_stack([a * np.cos(angles), b * np.sin(angles), np.zeros(len(angles))])
+    return center + local @ rotation.T
+
+
+def _tube(radius=1.0, length=2.0, rings=12, around=40):
+    """An open cylinder along z: two boundary loops, at z = 0 and z = length."""
+    t = np.linspace(0, 2 * np.pi, around, endpoint=False)
+    z = np.linspace(0, length, rings)
+    vertices = np.array([[radius * np.cos(a), radius * np.sin(a), h] for h in z for a in t])
+    faces = []
+    for r in range(rings - 1):
+        for i in range(around):
+            a, b = r * around + i, r * around + (i + 1) % around
+            c, d = a + around, b + around
+            faces += [[a, b, d], [a, d, c]]
+    return vertices, np.array(faces)
+
+
+def test_ellipse_recovered_from_half_a_noisy_boundary():
+    rng = np.random.default_rng(3)
+    rotation = _rotation([1, 2, 0.5], 0.7)
+    center = np.array([0.3, -0.2, 1.0])
+    half = _ellipse_points(center, rotation, 2.0, 1.2, rng.uniform(0, np.pi, 80))
+    ellipse = fit_ellipse(half + rng.normal(0, 0.005, half.shape))
+    assert np.linalg.norm(ellipse.center - center) < 0.03
+    assert np.allclose(ellipse.radii, [2.0, 1.2], atol=0.03)
+    assert abs(abs(ellipse.normal @ rotation[:, 2]) - 1) < 1e-3
+
+
+def test_points_on_a_line_have_no_ellipse():
+    line = np.outer(np.linspace(0, 1, 10), [1.0, 2.0, 0.0])
+    with pytest.raises(InputError):
+        fit_ellipse(line)
+
+
+def test_tracking_keeps_the_garment_boundary_where_half_is_missing_and_holes_lie_beside():
+    """Each frame sees only half of the moving boundary (the other half occluded) and the
+    boundary of a hole nearby: the tracked centre stays on the true boundary's centre."""
+    rng = np.random.default_rng(0)
+    rotation = _rotation([0, 1, 0], 0.3)
+    frames, truth = [], []
+    for t in range(8):
+        center = np.array([0.08 * t, 0.02 * t, 0.0])
+        seen = rng.uniform(0, np.pi, 60) + 0.2 * t  # a different half each frame
+        boundary = _ellipse_points(center, rotation, 1.0, 0.7, seen)
+        hole = _ellipse_points(center + [0.9, 0.4, 0.3], rotation, 0.25, 0.2, rng.uniform(0, 2 * np.pi, 30))
+        frames.append(np.concatenate([boundary, hole]) + rng.normal(0, 0.003, (90, 3)))
+        truth.append(center)
+    first = fit_ellipse(_ellipse_points(truth[0], rotation, 1.0, 0.7, np.linspace(0, 2 * np.pi, 50)))
+    track = track_boundary(frames, first, TrackingOptions(time_sigma=0))
+    assert track.found.all()
+    assert np.linalg.norm(track.centers - np.array(truth), axis=1).max() < 0.03
+    assert np.allclose(track.radii, [1.0, 0.7], atol=0.03)
+
+
+def test_anchor_follows_a_translating_boundary_and_skipped_frames_are_interpolated():
+    vertices, faces = _tube()
+    first = initial_ellipses(vertices, faces, 2)
+    assert np.allclose([abs(e.normal[2]) for e in first], 1.0, atol=1e-6)
+    # the tube lies behind each opening: the normals point away from it
+    assert sorted(np.sign([e.normal[2] for e in first]).tolist()) == [-1.0, 1.0]
+    top = max(first, key=lambda e: e.center[2])
+    ring = vertices[np.isclose(vertices[:, 2], top.center[2])]
+    shifts = np.array([[0.1 * t, 0.05 * t, 0.0] for t in range(6)])
+    frames = [ring + s for s in shifts]
+    frames[3] = np.zeros((0, 3))  # the boundary not seen at all in frame 3
+    track = track_boundary(frames, top, TrackingOptions(time_sigma=0, anchor_offset=0.5))
+    assert track.found.tolist() == [True, True, True, False, True, True]
+    expected = top.center + shifts + 0.5 * np.array([0, 0, 1.0])  # mean radius 1, normal +z
+    assert np.linalg.norm(track.anchors - expected, axis=1).max() < 1e-3
+
+
+def test_smoothing_in_time_reduces_jitter():
+    rng = np.random.default_rng(1)
+    angles = np.linspace(0, 2 * np.pi, 40, endpoint=False)
+    jitter = rng.normal(0, 0.02, (12, 3))
+    frames = [_ellipse_points(j, np.eye(3), 1.0, 0.8, angles) for j in jitter]
+    first = fit_ellipse(frames[0])
+    rough = track_boundary(frames, first, TrackingOptions(time_sigma=0))
+    smooth = track_boundary(frames, first, TrackingOptions(time_sigma=2.0))
+    assert np.allclose(rough.centers, jitter, atol=1e-6)
+    assert np.std(np.diff(smooth.centers, axis=0)) < 0.5 * np.std(np.diff(rough.centers, axis=0))
+
+
+def test_too_few_boundary_loops_is_an_input_error():
+    vertices, faces = _tube()
+    with pytest.raises(InputError, match="boundary loops"):
+        initial_ellipses(vertices, faces, 3)
