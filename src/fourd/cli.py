@@ -270,7 +270,10 @@ def cmd_synth(args) -> int:
                        resolution=args.resolution, seed=args.seed, appearance=args.appearance,
                        video=args.video, video_resolution=args.video_resolution,
                        mode="remeshed" if args.meshes else "depth")
-    write_synth(truth, scans, args.outdir)
+    from fourd.synth.garments import GARMENT_SCENES, pattern_outline
+
+    pattern = pattern_outline(args.scene) if args.scene in GARMENT_SCENES else None
+    write_synth(truth, scans, args.outdir, pattern=pattern)
     log.info("wrote %d scanned frames and the truth to %s", len(scans), args.outdir)
     return 0
 

@@ -14,6 +14,7 @@ from fourd.bench.report import COLUMNS, format_cell, format_markdown, write_repo
 from fourd.bench.runner import DEFAULT_OUTPUT, QUICK_OUTPUT, RECORD, default_output, run_bench
 from fourd.bench.suite import (
     APPEARANCE_SCENES,
+    GARMENT_BENCH_SCENES,
     HELD_OUT_SCENES,
     PEERS,
     PROTOCOL,
@@ -31,6 +32,7 @@ __all__ = [
     "QUICK_OUTPUT",
     "RECORD",
     "APPEARANCE_SCENES",
+    "GARMENT_BENCH_SCENES",
     "HELD_OUT_SCENES",
     "PEERS",
     "PROTOCOL",

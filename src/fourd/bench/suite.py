@@ -108,6 +108,13 @@ REMESHED_SCENES: tuple[BenchScene, ...] = tuple(
 )
 
 
+#: Garment scenes (issue 54), not run by default (``--scenes tshirt-cloth-video ...``): the
+#: standard scan of a T-shirt and a dress in printed cloth, with the rig's video.
+GARMENT_BENCH_SCENES: tuple[BenchScene, ...] = (
+    BenchScene("tshirt", label="tshirt-cloth-video", appearance="cloth", video=True),
+    BenchScene("dress", label="dress-cloth-video", appearance="cloth", video=True),
+)
+
 #: ``--quick``: two small procedural scenes, 4 frames, coarse cameras (CI-sized).
 QUICK_SCENES: tuple[BenchScene, ...] = (
     BenchScene("squash-ball", frames=4, resolution=96),
@@ -135,7 +142,7 @@ def select_scenes(scenes, quick: bool) -> list[BenchScene]:
     default = QUICK_SCENES if quick else STANDARD_SCENES
     if scenes is None:
         return list(default)
-    named = HELD_OUT_SCENES + APPEARANCE_SCENES + REMESHED_SCENES
+    named = HELD_OUT_SCENES + APPEARANCE_SCENES + REMESHED_SCENES + GARMENT_BENCH_SCENES
     table = {s.key: s for s in (default if quick else STANDARD_SCENES + named)}
     from fourd.synth.scenes import SCENES
 

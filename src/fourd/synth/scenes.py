@@ -32,6 +32,7 @@ from fourd.animation import AnimatedMesh, MeshSequence
 from fourd.errors import InputError
 from fourd.geometry.marching import marching_cubes
 from fourd.geometry.meshes import vertex_adjacency
+from fourd.synth.garments import GARMENT_SCENES, dress, tshirt
 
 logger = logging.getLogger("fourd.synth.scenes")
 
@@ -49,6 +50,7 @@ SCENES: dict[str, str] = {
     "horse-gallop": "shared data: a galloping horse (Sumner & Popovic 2004), 48 frames",
     "elephant-gallop": "shared data: a galloping elephant (Sumner & Popovic 2004), 48 frames",
     "dfaust-hopping": "shared data: a hopping person, 100,000 corresponding points (Dynamic FAUST)",
+    **GARMENT_SCENES,
 }
 
 #: Scenes whose every frame is a closed (watertight) surface (``horse-gallop`` has two boundary
@@ -414,6 +416,8 @@ _BUILDERS = {
     "waving-sheet": _waving_sheet,
     "splitting-blob": _splitting_blob,
     "squash-ball": _squash_ball,
+    "tshirt": tshirt,
+    "dress": dress,
 }
 
 

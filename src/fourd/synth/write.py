@@ -12,6 +12,9 @@ Layout of ``OUTDIR`` (what ``fourd synth SCENE OUTDIR`` produces)::
       truth.npz            the ground truth (AnimatedMesh: vertices, faces, times, observed[, rest];
                            MeshSequence: kind="meshes", vertices_<t>, faces_<t>, times)
       truth.json           what was generated (scene, frames, seed, scan options), when given
+      pattern.png          garment scenes: the photo of the garment laid out flat (white on
+                           black; fourd.synth.garments.pattern_photo)
+      pattern.json         its calibration: pixels_per_unit, origin, outline (garment units)
 
 ``fourd.load_sequence(OUTDIR)`` reads the scans (files named ``truth.*`` are not frames) and
 ``fourd.load_result(OUTDIR / "truth.npz")`` the truth. The folder is assembled under a temporary
@@ -35,6 +38,8 @@ logger = logging.getLogger("fourd.synth.write")
 
 TRUTH_FILE = "truth.npz"
 INFO_FILE = "truth.json"
+PATTERN_IMAGE = "pattern.png"
+PATTERN_FILE = "pattern.json"
 
 
 def save_truth(truth, path: str | os.PathLike) -> None:
@@ -45,7 +50,12 @@ def save_truth(truth, path: str | os.PathLike) -> None:
 
 
 def write_synth(
-    truth, scans: PointCloudSequence, outdir: str | os.PathLike, *, info: dict | None = None
+    truth,
+    scans: PointCloudSequence,
+    outdir: str | os.PathLike,
+    *,
+    info: dict | None = None,
+    pattern=None,
 ) -> Path:
     """Write the scans of a ground truth and the truth itself into ``outdir``.
 
@@ -58,6 +68,8 @@ def write_synth(
         Folder to create (replaced as a whole if it exists; its parent must exist).
     info : dict, optional
         JSON-able description (scene name, seed, options) written to ``truth.json``.
+    pattern : float array [K, 2], optional
+        A garment's flat outline: its photo is written to ``pattern.png`` and ``pattern.json``.
 
     Returns
     -------
@@ -78,6 +90,14 @@ def write_synth(
         save_truth(truth, tmp / TRUTH_FILE)
         if info is not None:
             (tmp / INFO_FILE).write_text(json.dumps(jsonable(info), indent=1) + "\n")
+        if pattern is not None:
+            from PIL import Image
+
+            from fourd.synth.garments import pattern_photo
+
+            image, calibration = pattern_photo(pattern)
+            Image.fromarray(image).save(tmp / PATTERN_IMAGE)
+            (tmp / PATTERN_FILE).write_text(json.dumps(calibration, indent=1) + "\n")
     logger.info("wrote %d scanned frames and the truth to %s", len(scans), outdir)
     return outdir
 
@@ -118,5 +138,8 @@ def synthesize(
         "diagonal": truth.diagonal(),
         "kind": "meshes" if isinstance(truth, MeshSequence) else "animated",
     }
-    write_synth(truth, scans, outdir, info=info)
+    from fourd.synth.garments import GARMENT_SCENES, pattern_outline
+
+    pattern = pattern_outline(name) if name in GARMENT_SCENES else None
+    write_synth(truth, scans, outdir, info=info, pattern=pattern)
     return truth, scans

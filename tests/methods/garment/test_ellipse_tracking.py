@@ -108,3 +108,30 @@ def test_too_few_boundary_loops_is_an_input_error():
     vertices, faces = _tube()
     with pytest.raises(InputError, match="boundary loops"):
         initial_ellipses(vertices, faces, 3)
+
+
+def test_the_tshirts_four_boundaries_are_tracked_within_two_percent_of_the_diagonal():
+    """On the T-shirt truth, each frame showing only part of each boundary (a third of every
+    loop hidden, as the underarms are), the tracked centres stay within 2% of the diagonal of
+    the true loops' centres."""
+    from fourd.geometry.boundary_loops import boundary_loops
+    from fourd.synth.scenes import scene
+
+    truth = scene("tshirt", frames=20)
+    loops = boundary_loops(truth.faces, truth.vertex_count)
+    first = initial_ellipses(truth.vertices[0], truth.faces, 4)
+    rng = np.random.default_rng(2)
+    seen = []
+    for t in range(truth.frame_count):
+        parts = []
+        for loop in loops:
+            start = rng.integers(len(loop))
+            hidden = (np.arange(len(loop)) - start) % len(loop) < len(loop) // 3
+            parts.append(truth.vertices[t, loop[~hidden]])
+        seen.append(np.concatenate(parts))
+    diagonal = truth.diagonal()
+    for ellipse in first:
+        loop = min(loops, key=lambda l: np.linalg.norm(truth.vertices[0, l].mean(axis=0) - ellipse.center))
+        track = track_boundary(seen, ellipse, TrackingOptions(time_sigma=0))
+        true_centres = truth.vertices[:, loop].mean(axis=1)
+        assert np.linalg.norm(track.centers - true_centres, axis=1).max() < 0.02 * diagonal
