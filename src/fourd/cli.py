@@ -272,7 +272,7 @@ def cmd_synth(args) -> int:
                        mode="remeshed" if args.meshes else "depth")
     from fourd.synth.garments import GARMENT_SCENES, pattern_outline
 
-    pattern = pattern_outline(args.scene) if args.scene in GARMENT_SCENES else None
+    pattern = pattern_outline(args.scene, with_openings=True) if args.scene in GARMENT_SCENES else None
     write_synth(truth, scans, args.outdir, pattern=pattern)
     log.info("wrote %d scanned frames and the truth to %s", len(scans), args.outdir)
     return 0

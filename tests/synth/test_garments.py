@@ -48,8 +48,9 @@ def test_synth_writes_the_photo_beside_the_scans(tmp_path):
 
     truth = scene("dress", frames=2, around=40, down=16)
     scans = synth.scan(truth, resolution=48)
-    write_synth(truth, scans, tmp_path / "dress", pattern=pattern_outline("dress"))
+    write_synth(truth, scans, tmp_path / "dress", pattern=pattern_outline("dress", with_openings=True))
     image = np.asarray(Image.open(tmp_path / "dress" / "pattern.png"))
     calibration = json.loads((tmp_path / "dress" / "pattern.json").read_text())
     assert image.ndim == 2 and image.max() == 255
     assert np.allclose(calibration["outline"], pattern_outline("dress"))
+    assert len(calibration["openings"]) == 2  # the waist and the hem

@@ -300,11 +300,14 @@ def dress(
     return AnimatedMesh(faces, vertices, rest=rest)
 
 
-def pattern_outline(name: str) -> np.ndarray:
+def pattern_outline(name: str, *, with_openings: bool = False):
     """The flat outline ``[K, 2]`` (x right, y up, garment units, counter-clockwise) of garment
     ``name`` laid out flat, front on top of back: each tube flattened to half its girth (the
     photo of section 3.7). An approximation from the garment's analytic parts: the torso and
-    the sleeves as rectangles of half their girth, a neck notch, the dress a trapezoid."""
+    the sleeves as rectangles of half their girth, a neck notch, the dress a trapezoid.
+    With ``with_openings``, also the openings (the garment's boundaries, where front and back
+    are not sewn together): a list of polylines ``[M, 2]`` along the outline (the user's brush
+    strokes of section 3.7)."""
     if name == "tshirt":
         rx, rz = _TORSO_RADII
         h = ((rx - rz) / (rx + rz)) ** 2
@@ -317,7 +320,9 @@ def pattern_outline(name: str) -> np.ndarray:
         notch = np.stack([_NECK_RADII[0] * np.cos(neck), top - 0.6 * _NECK_RADII[1] * np.sin(neck)], 1)
         right = [[half, bottom], [half, top - 2 * sleeve], [reach, top - 2 * sleeve], [reach, top]]
         left = [[-reach, top], [-reach, top - 2 * sleeve], [-half, top - 2 * sleeve], [-half, bottom]]
-        return np.concatenate([right, notch, left]).astype(np.float64)
+        outline = np.concatenate([right, notch, left]).astype(np.float64)
+        openings = [outline[[-1, 0]], outline[2:4], notch, outline[-4:-2]]  # waist, sleeves, neck
+        return (outline, openings) if with_openings else outline
     if name == "dress":
         def half_girth(radius):
             a, b = radius, _DRESS_DEPTH * radius
@@ -329,14 +334,18 @@ def pattern_outline(name: str) -> np.ndarray:
         width = np.array([half_girth(_DRESS_WAIST_RADIUS + _DRESS_FLARE * f**1.3) for f in fraction])
         right = np.stack([0.5 * width, y], 1)[::-1]
         left = np.stack([-0.5 * width, y], 1)
-        return np.concatenate([right, left]).astype(np.float64)
+        outline = np.concatenate([right, left]).astype(np.float64)
+        openings = [outline[[len(right) - 1, len(right)]], outline[[-1, 0]]]  # waist, hem
+        return (outline, openings) if with_openings else outline
     raise ValueError(f"no pattern for {name!r}; garments: {', '.join(GARMENT_SCENES)}")
 
 
-def pattern_photo(outline: np.ndarray, *, pixels_per_unit: float = PHOTO_PIXELS_PER_UNIT, margin: float = 0.05):
+def pattern_photo(outline: np.ndarray, openings=None, *, pixels_per_unit: float = PHOTO_PIXELS_PER_UNIT,
+                  margin: float = 0.05):
     """The photo of a garment laid out flat: ``(image uint8 [H, W], calibration)``, white
     garment on black, and a JSON-able dict with ``pixels_per_unit``, ``origin`` (garment
-    coordinates of the top-left pixel's centre; image rows go down, y up) and the ``outline``.
+    coordinates of the top-left pixel's centre; image rows go down, y up), the ``outline`` and
+    the ``openings`` (polylines in garment units, when given).
     """
     import cv2
 
@@ -350,4 +359,6 @@ def pattern_photo(outline: np.ndarray, *, pixels_per_unit: float = PHOTO_PIXELS_
     image = np.zeros((height, width), dtype=np.uint8)
     cv2.fillPoly(image, [np.rint(pixels * 16).astype(np.int32)], 255, lineType=cv2.LINE_AA, shift=4)
     calibration = {"pixels_per_unit": float(pixels_per_unit), "origin": origin.tolist(), "outline": outline.tolist()}
+    if openings is not None:
+        calibration["openings"] = [np.asarray(o, dtype=np.float64).tolist() for o in openings]
     return image, calibration

@@ -14,7 +14,8 @@ Layout of ``OUTDIR`` (what ``fourd synth SCENE OUTDIR`` produces)::
       truth.json           what was generated (scene, frames, seed, scan options), when given
       pattern.png          garment scenes: the photo of the garment laid out flat (white on
                            black; fourd.synth.garments.pattern_photo)
-      pattern.json         its calibration: pixels_per_unit, origin, outline (garment units)
+      pattern.json         its calibration: pixels_per_unit, origin, outline and openings
+                           (the garment's boundaries as polylines; garment units)
 
 ``fourd.load_sequence(OUTDIR)`` reads the scans (files named ``truth.*`` are not frames) and
 ``fourd.load_result(OUTDIR / "truth.npz")`` the truth. The folder is assembled under a temporary
@@ -68,8 +69,9 @@ def write_synth(
         Folder to create (replaced as a whole if it exists; its parent must exist).
     info : dict, optional
         JSON-able description (scene name, seed, options) written to ``truth.json``.
-    pattern : float array [K, 2], optional
-        A garment's flat outline: its photo is written to ``pattern.png`` and ``pattern.json``.
+    pattern : (outline [K, 2], openings) , optional
+        A garment's flat outline and openings (:func:`fourd.synth.garments.pattern_outline`):
+        its photo is written to ``pattern.png`` and ``pattern.json``.
 
     Returns
     -------
@@ -95,7 +97,7 @@ def write_synth(
 
             from fourd.synth.garments import pattern_photo
 
-            image, calibration = pattern_photo(pattern)
+            image, calibration = pattern_photo(*pattern)
             Image.fromarray(image).save(tmp / PATTERN_IMAGE)
             (tmp / PATTERN_FILE).write_text(json.dumps(calibration, indent=1) + "\n")
     logger.info("wrote %d scanned frames and the truth to %s", len(scans), outdir)
@@ -140,6 +142,6 @@ def synthesize(
     }
     from fourd.synth.garments import GARMENT_SCENES, pattern_outline
 
-    pattern = pattern_outline(name) if name in GARMENT_SCENES else None
+    pattern = pattern_outline(name, with_openings=True) if name in GARMENT_SCENES else None
     write_synth(truth, scans, outdir, info=info, pattern=pattern)
     return truth, scans
