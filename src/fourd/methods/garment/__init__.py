@@ -6,11 +6,14 @@ garment capture and data-driven dynamic wrinkles.
 - :mod:`.ellipse`: ellipses in space fitted to boundary points, RANSAC candidates near a
   reference ellipse, pruning by location, orientation and size, support (Appendix B.1);
 - :mod:`.boundary_tracking`: a garment's boundaries followed through the frames, skipped
-  frames interpolated, smoothed in time, and the off-surface anchors (3.6.1, B.1-B.2).
+  frames interpolated, smoothed in time, and the off-surface anchors (3.6.1, B.1-B.2);
+- :mod:`.template`: the template from a photo of the garment laid out flat: silhouette, 2D
+  triangulation, front and back sewn along the outline but the openings, inflation that
+  opposes stretch and compression (3.7, equations 3.2-3.3).
 
-Still to come: the garment scenes in ``synth``, the base mesh parameterisation (3.6.2), the
-template from a photo (3.7), compatible remeshing and completion (3.7), wrinkles from video
-(chapter 4) and the method module itself.
+The garment scenes (``tshirt``, ``dress``, with the photo) are in :mod:`fourd.synth.garments`.
+Still to come: the base mesh parameterisation (3.6.2), compatible remeshing and completion
+(3.7), wrinkles from video (chapter 4) and the method module itself.
 """
 
 from fourd.methods.garment.boundary_tracking import (
@@ -18,6 +21,17 @@ from fourd.methods.garment.boundary_tracking import (
     TrackingOptions,
     initial_ellipses,
     track_boundary,
+)
+from fourd.methods.garment.template import (
+    Template,
+    TemplateOptions,
+    edge_strain,
+    inflate,
+    outline_from_photo,
+    sew_front_and_back,
+    template_from_pattern,
+    template_from_photo,
+    triangulate_outline,
 )
 from fourd.methods.garment.ellipse import (
     Ellipse,
@@ -34,7 +48,16 @@ __all__ = [
     "BoundaryTrack",
     "Ellipse",
     "EllipseBatch",
+    "Template",
+    "TemplateOptions",
     "TrackingOptions",
+    "edge_strain",
+    "inflate",
+    "outline_from_photo",
+    "sew_front_and_back",
+    "template_from_pattern",
+    "template_from_photo",
+    "triangulate_outline",
     "fit_ellipse",
     "fit_ellipses",
     "initial_ellipses",
