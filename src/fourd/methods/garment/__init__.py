@@ -7,13 +7,16 @@ garment capture and data-driven dynamic wrinkles.
   reference ellipse, pruning by location, orientation and size, support (Appendix B.1);
 - :mod:`.boundary_tracking`: a garment's boundaries followed through the frames, skipped
   frames interpolated, smoothed in time, and the off-surface anchors (3.6.1, B.1-B.2);
+- :mod:`.fold_edges`: folds found in a video frame as pairs of parallel, oppositely oriented
+  edges flanking a bright ridge or a dark valley (4.3.1, 4.4);
 - :mod:`.template`: the template from a photo of the garment laid out flat: silhouette, 2D
   triangulation, front and back sewn along the outline but the openings, inflation that
   opposes stretch and compression (3.7, equations 3.2-3.3).
 
 The garment scenes (``tshirt``, ``dress``, with the photo) are in :mod:`fourd.synth.garments`.
 Still to come: the base mesh parameterisation (3.6.2), compatible remeshing and completion
-(3.7), wrinkles from video (chapter 4) and the method module itself.
+(3.7), the best views per frame and the space-time deformation that wrinkles the garment
+(4.4-4.5), and the method module itself.
 """
 
 from fourd.methods.garment.boundary_tracking import (
@@ -22,6 +25,7 @@ from fourd.methods.garment.boundary_tracking import (
     initial_ellipses,
     track_boundary,
 )
+from fourd.methods.garment.fold_edges import FoldEdge, FoldEdgeOptions, FoldPair, fold_edges, trace_edges
 from fourd.methods.garment.template import (
     Template,
     TemplateOptions,
@@ -48,6 +52,9 @@ __all__ = [
     "BoundaryTrack",
     "Ellipse",
     "EllipseBatch",
+    "FoldEdge",
+    "FoldEdgeOptions",
+    "FoldPair",
     "Template",
     "TemplateOptions",
     "TrackingOptions",
@@ -60,10 +67,12 @@ __all__ = [
     "triangulate_outline",
     "fit_ellipse",
     "fit_ellipses",
+    "fold_edges",
     "initial_ellipses",
     "point_distances",
     "prune",
     "ransac_candidates",
     "support",
+    "trace_edges",
     "track_boundary",
 ]
