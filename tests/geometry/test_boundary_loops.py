@@ -15,7 +15,7 @@ def test_an_open_tube_has_two_loops_in_order_and_a_closed_mesh_none():
     assert len(loops) == 2 and all(len(loop) == around for loop in loops)
     for loop in loops:  # consecutive loop vertices are joined by a boundary edge
         edges = {tuple(e) for e in boundary_edges(np.array(faces), len(vertices))}
-        assert all((int(a), int(b)) in edges for a, b in zip(loop, np.roll(loop, -1)))
+        assert all((int(a), int(b)) in edges for a, b in zip(loop, np.roll(loop, -1), strict=True))
     tetrahedron = np.array([[0, 1, 2], [0, 3, 1], [1, 3, 2], [0, 2, 3]])
     assert boundary_loops(tetrahedron, 4) == []
 

@@ -94,8 +94,7 @@ def _cut(vertices: np.ndarray, faces: np.ndarray, removed: np.ndarray):
 def _tshirt_rest(spacing: float) -> tuple[np.ndarray, np.ndarray]:
     """The T-shirt's rest mesh ``(vertices [N, 3], faces [F, 3])``, four boundary loops."""
     from fourd.geometry.boundary_loops import boundary_loops
-    from fourd.geometry.meshes import remove_small_components
-    from fourd.geometry.meshes import vertex_adjacency
+    from fourd.geometry.meshes import remove_small_components, vertex_adjacency
     from fourd.synth.scenes import _implicit_mesh, _numerical_gradient, _project
 
     reach = _SLEEVE_END + 0.25
@@ -124,7 +123,7 @@ def _tshirt_rest(spacing: float) -> tuple[np.ndarray, np.ndarray]:
             kinds.append("neck")
 
     def snap():
-        for loop, kind in zip(loops, kinds):
+        for loop, kind in zip(loops, kinds, strict=True):
             ring = vertices[loop]
             if kind == "waist":
                 vertices[loop, 1] = _WAIST

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from fourd.errors import InputError
-from fourd.methods.garment import FoldEdgeOptions, fold_edges, trace_edges
+from fourd.methods.garment import fold_edges, trace_edges
 
 H, W = 200, 240
 

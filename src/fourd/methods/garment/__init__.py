@@ -25,7 +25,23 @@ from fourd.methods.garment.boundary_tracking import (
     initial_ellipses,
     track_boundary,
 )
-from fourd.methods.garment.fold_edges import FoldEdge, FoldEdgeOptions, FoldPair, fold_edges, trace_edges
+from fourd.methods.garment.ellipse import (
+    Ellipse,
+    EllipseBatch,
+    fit_ellipse,
+    fit_ellipses,
+    point_distances,
+    prune,
+    ransac_candidates,
+    support,
+)
+from fourd.methods.garment.fold_edges import (
+    FoldEdge,
+    FoldEdgeOptions,
+    FoldPair,
+    fold_edges,
+    trace_edges,
+)
 from fourd.methods.garment.template import (
     Template,
     TemplateOptions,
@@ -36,16 +52,6 @@ from fourd.methods.garment.template import (
     template_from_pattern,
     template_from_photo,
     triangulate_outline,
-)
-from fourd.methods.garment.ellipse import (
-    Ellipse,
-    EllipseBatch,
-    fit_ellipse,
-    fit_ellipses,
-    point_distances,
-    prune,
-    ransac_candidates,
-    support,
 )
 
 __all__ = [

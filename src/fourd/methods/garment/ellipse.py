@@ -80,7 +80,7 @@ class Ellipse:
             + np.outer(self.radii[1] * np.sin(t), self.axes[1])
         )
 
-    def flipped(self) -> "Ellipse":
+    def flipped(self) -> Ellipse:
         """The same ellipse with its normal reversed (axes kept right-handed)."""
         return Ellipse(self.center, -self.normal, np.stack([self.axes[0], -self.axes[1]]), self.radii)
 
@@ -102,7 +102,7 @@ class EllipseBatch:
     def __getitem__(self, i: int) -> Ellipse:
         return Ellipse(self.center[i], self.normal[i], self.axes[i], self.radii[i])
 
-    def subset(self, keep: np.ndarray) -> "EllipseBatch":
+    def subset(self, keep: np.ndarray) -> EllipseBatch:
         return EllipseBatch(
             self.center[keep], self.normal[keep], self.axes[keep], self.radii[keep], self.valid[keep]
         )
@@ -113,7 +113,6 @@ def fit_ellipses(samples: np.ndarray) -> EllipseBatch:
     samples = np.asarray(samples, dtype=np.float64)
     if samples.ndim != 3 or samples.shape[2] != 3 or samples.shape[1] < 5:
         raise InputError(f"ellipse samples must be [B, K >= 5, 3], got {list(samples.shape)}")
-    count = len(samples)
     mean = samples.mean(axis=1)
     centred = samples - mean[:, None, :]
     _, vectors = np.linalg.eigh(centred.transpose(0, 2, 1) @ centred)

@@ -136,7 +136,7 @@ def trace_edges(mask: np.ndarray) -> list[np.ndarray]:
     ys, xs, ids = ys[order], xs[order], labels[ys, xs][order]
     starts = np.flatnonzero(np.r_[True, ids[1:] != ids[:-1]])
     ends = np.r_[starts[1:], len(ids)]
-    for a, b in zip(starts, ends):
+    for a, b in zip(starts, ends, strict=True):
         pixels = np.column_stack([xs[a:b], ys[a:b]])
         chains.append(_order_chain(pixels))
     return chains
@@ -249,7 +249,7 @@ def _merged(edges: list[FoldEdge], options: FoldEdgeOptions) -> list[FoldEdge]:
         tails = np.array([e.points[-1] for e in edges])
         gap = np.linalg.norm(tails[:, None, :] - heads[None, :, :], axis=2)
         np.fill_diagonal(gap, np.inf)
-        for i, j in zip(*np.nonzero(gap <= options.merge_gap)):
+        for i, j in zip(*np.nonzero(gap <= options.merge_gap), strict=True):
             joined = np.concatenate([edges[i].points, edges[j].points])
             error, curvature = _quadric_fit(joined)
             if error <= options.max_fit_error and curvature <= options.max_curvature:

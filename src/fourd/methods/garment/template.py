@@ -1,8 +1,9 @@
 """A garment's template mesh from a photo of it laid out flat (Popa's thesis, section 3.7).
 
 The silhouette is taken from the photo (its largest white region), its outline resampled at
-the template's edge length and its interior triangulated (a triangular lattice inside, Delaunay
-triangles kept where their centre is inside: the thesis uses Shewchuk's Triangle). The 2D mesh
+the template's edge length and its interior triangulated
+(:func:`fourd.geometry.polygon_triangulation.triangulate_polygon`; the thesis uses Shewchuk's
+Triangle). The 2D mesh
 is duplicated for the back; front and back share the outline's vertices except along the
 openings (the garment's boundaries, the user's brush strokes), so a T-shirt comes out with
 four boundary loops. The flat double layer is then inflated by the thesis' variant of Mori and
@@ -20,9 +21,10 @@ from dataclasses import dataclass
 from typing import NamedTuple
 
 import numpy as np
-from scipy.spatial import Delaunay, cKDTree
+from scipy.spatial import cKDTree
 
 from fourd.errors import InputError
+from fourd.geometry.polygon_triangulation import signed_area, triangulate_polygon
 
 __all__ = [
     "Template",
@@ -106,14 +108,9 @@ def outline_from_photo(image: np.ndarray, calibration: dict) -> np.ndarray:
     scale = float(calibration["pixels_per_unit"])
     origin = np.asarray(calibration["origin"], dtype=np.float64)
     outline = np.column_stack([origin[0] + contour[:, 0] / scale, origin[1] - contour[:, 1] / scale])
-    if _signed_area(outline) < 0:
+    if signed_area(outline) < 0:
         outline = outline[::-1]
     return outline
-
-
-def _signed_area(polygon: np.ndarray) -> float:
-    x, y = polygon[:, 0], polygon[:, 1]
-    return 0.5 * float(np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y))
 
 
 def _resample(polygon: np.ndarray, edge: float) -> np.ndarray:
@@ -138,7 +135,7 @@ def _resample(polygon: np.ndarray, edge: float) -> np.ndarray:
         kept.pop()
     corners = np.array(kept)
     points = []
-    for a, b in zip(corners, np.roll(corners, -1)):
+    for a, b in zip(corners, np.roll(corners, -1), strict=True):
         piece = polygon[a : b + 1] if b > a else np.concatenate([polygon[a:], polygon[: b + 1]])
         length = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(piece, axis=0), axis=1))])
         count = max(1, int(round(length[-1] / edge)))
@@ -151,31 +148,13 @@ def triangulate_outline(outline: np.ndarray, edge: float):
     """A 2D mesh of the polygon ``outline [K, 2]``: ``(points [P, 2], faces [F, 3]
     counter-clockwise, boundary_count)``; the first ``boundary_count`` points are the outline
     resampled at ``edge``, in order."""
-    from matplotlib.path import Path
-
     outline = np.asarray(outline, dtype=np.float64)
-    if len(outline) < 3 or abs(_signed_area(outline)) < edge**2:
+    if len(outline) < 3 or abs(signed_area(outline)) < edge**2:
         raise InputError("the garment's outline encloses no area")
-    if _signed_area(outline) < 0:
+    if signed_area(outline) < 0:
         outline = outline[::-1]
     boundary = _resample(outline, edge)
-    lower, upper = outline.min(axis=0), outline.max(axis=0)
-    rows = np.arange(lower[1], upper[1] + edge, edge * np.sqrt(3) / 2)
-    columns = np.arange(lower[0], upper[0] + edge, edge)
-    x = columns[None, :] + (np.arange(len(rows)) % 2 * edge / 2)[:, None]  # a triangular lattice
-    lattice = np.column_stack([x.ravel(), np.broadcast_to(rows[:, None], x.shape).ravel()])
-    path = Path(outline)
-    inside = path.contains_points(lattice)
-    dense = _resample(outline, edge / 8)
-    far = cKDTree(dense).query(lattice)[0] > 0.6 * edge
-    points = np.concatenate([boundary, lattice[inside & far]])
-    faces = Delaunay(points).simplices.astype(np.int64)
-    centres = points[faces].mean(axis=1)
-    faces = faces[path.contains_points(centres)]
-    u, v = points[faces[:, 1]] - points[faces[:, 0]], points[faces[:, 2]] - points[faces[:, 0]]
-    cross = u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0]
-    faces[cross < 0] = faces[cross < 0][:, [0, 2, 1]]
-    faces = faces[np.abs(cross) > 1e-12 * edge**2]
+    points, faces = triangulate_polygon(boundary, edge)
     return points, faces, len(boundary)
 
 

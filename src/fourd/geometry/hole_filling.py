@@ -1,0 +1,146 @@
+"""Holes of a mesh filled by a smooth membrane (Popa's thesis, section 3.6.2, after Kraevoy
+and Sheffer 2005).
+
+Each chosen boundary loop is a hole: its vertices are laid out around a circle (by arc length;
+a hole is a disk), the disk is triangulated at the loop's mean edge length
+(:func:`fourd.geometry.polygon_triangulation.triangulate_polygon`), and the new inner vertices
+are placed in 3D by the least-squares membrane of equation 3.1, ``sum_i |P_i - sum_j w_ij
+P_j|^2`` over the hole's inner vertices (uniform weights). With ``smooth`` the thesis' terms
+for the loop's own vertices are added, ``|P'_i - sum_j w_ij P_j|^2`` over their whole new
+neighbourhood (old and new neighbours): they fix nothing on the loop but bend the membrane to
+leave it along the surrounding surface, a C1 join instead of a crease (Figure 3.8).
+
+Examples
+--------
+>>> import trimesh
+>>> sphere = trimesh.creation.icosphere(3)
+>>> keep = sphere.vertices[sphere.faces].mean(axis=1)[:, 2] < 0.8
+>>> filled = fill_holes(sphere.vertices, sphere.faces[keep])
+>>> trimesh.Trimesh(filled.vertices, filled.faces, process=False).is_watertight
+True
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+from fourd.errors import InputError
+from fourd.geometry.boundary_loops import boundary_loops
+from fourd.geometry.polygon_triangulation import triangulate_polygon
+
+__all__ = ["FilledMesh", "fill_holes"]
+
+
+class FilledMesh(NamedTuple):
+    """A mesh with holes filled.
+
+    vertices : float64 [N + M, 3]
+        The input vertices, then the ``M`` new ones.
+    faces : int64 [F + G, 3]
+        The input faces, then the ``G`` new ones (oriented like their neighbours).
+    filled : bool [N + M]
+        True for the new vertices.
+    holes : list of int64 arrays
+        The boundary loops that were filled.
+    """
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    filled: np.ndarray
+    holes: list
+
+
+def fill_holes(
+    vertices: np.ndarray,
+    faces: np.ndarray,
+    *,
+    holes: list | None = None,
+    max_loop: int | None = None,
+    smooth: bool = True,
+) -> FilledMesh:
+    """Fill holes of a triangle mesh (see the module docstring).
+
+    Parameters
+    ----------
+    vertices : float [N, 3]
+    faces : int [F, 3]
+    holes : list of int arrays, optional
+        The loops to fill, as from :func:`fourd.geometry.boundary_loops.boundary_loops` (in
+        their direction). Default: every boundary loop, or those of at most ``max_loop``
+        vertices (a garment keeps its openings, fills the rest).
+    smooth : bool
+        Add the loop vertices' terms (a C1 membrane); False gives the C0 membrane.
+    """
+    vertices = np.asarray(vertices, dtype=np.float64)
+    faces = np.asarray(faces, dtype=np.int64)
+    if vertices.ndim != 2 or vertices.shape[1] != 3 or faces.ndim != 2 or faces.shape[1] != 3:
+        raise InputError("fill_holes needs vertices [N, 3] and faces [F, 3]")
+    if holes is None:
+        holes = boundary_loops(faces, len(vertices))
+        if max_loop is not None:
+            holes = [loop for loop in holes if len(loop) <= max_loop]
+    all_vertices = [vertices]
+    all_faces = [faces]
+    count = len(vertices)
+    inner_sets = []
+    for loop in holes:
+        loop = np.asarray(loop, dtype=np.int64)
+        if len(loop) < 3:
+            continue
+        new_points, new_faces = _disk(vertices[loop])
+        inner = len(new_points) - len(loop)
+        index = np.concatenate([loop[::-1], count + np.arange(inner)])  # disk order: loop reversed
+        start = vertices[loop].mean(axis=0)
+        all_vertices.append(np.repeat(start[None], inner, axis=0))
+        all_faces.append(index[new_faces])
+        inner_sets.append(count + np.arange(inner))
+        count += inner
+    out_vertices = np.concatenate(all_vertices)
+    out_faces = np.concatenate(all_faces)
+    filled = np.zeros(len(out_vertices), dtype=bool)
+    filled[len(vertices):] = True
+    if inner_sets:
+        out_vertices = _membrane(out_vertices, out_faces, filled, holes, smooth)
+    return FilledMesh(out_vertices, out_faces, filled, list(holes))
+
+
+def _disk(ring: np.ndarray):
+    """The hole's triangulation in the plane: the loop (reversed, so the new faces turn like
+    the mesh) on a circle by arc length, inner points at its mean edge length."""
+    ring = ring[::-1]
+    steps = np.linalg.norm(np.diff(np.vstack([ring, ring[:1]]), axis=0), axis=1)
+    perimeter = float(steps.sum())
+    if perimeter <= 0:
+        raise InputError("a hole's boundary has no length")
+    angle = 2 * np.pi * np.concatenate([[0.0], np.cumsum(steps[:-1])]) / perimeter
+    radius = perimeter / (2 * np.pi)
+    circle = radius * np.column_stack([np.cos(angle), np.sin(angle)])
+    return triangulate_polygon(circle, float(steps.mean()))
+
+
+def _membrane(vertices, faces, filled, holes, smooth):
+    """Least-squares positions of the new vertices (equation 3.1, with the C1 terms)."""
+    count = len(vertices)
+    sides = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
+    adjacency = sp.csr_matrix((np.ones(len(sides)), (sides[:, 0], sides[:, 1])), shape=(count, count))
+    adjacency = ((adjacency + adjacency.T) > 0).astype(np.float64)
+    degree = np.asarray(adjacency.sum(axis=1)).ravel()
+    laplacian = sp.identity(count) - sp.diags(1.0 / np.maximum(degree, 1)) @ adjacency  # rows P_i - mean
+    rows = np.flatnonzero(filled)
+    if smooth:
+        rows = np.concatenate([rows, np.unique(np.concatenate([np.asarray(h) for h in holes]))])
+    operator = laplacian[rows]
+    unknown = np.flatnonzero(filled)
+    known = np.flatnonzero(~filled)
+    a = operator[:, unknown].tocsc()
+    b = -(operator[:, known] @ vertices[known])
+    normal = (a.T @ a).tocsc()
+    solve = spla.factorized(normal)
+    right = a.T @ b
+    result = vertices.copy()
+    result[unknown] = np.column_stack([solve(right[:, k]) for k in range(3)])
+    return result

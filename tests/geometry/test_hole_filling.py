@@ -1,0 +1,55 @@
+import numpy as np
+import pytest
+import trimesh
+
+from fourd.errors import InputError
+from fourd.geometry.boundary_loops import boundary_loops
+from fourd.geometry.hole_filling import fill_holes
+from fourd.geometry.polygon_triangulation import signed_area, triangle_areas, triangulate_polygon
+
+
+def _capped_sphere(cut):
+    sphere = trimesh.creation.icosphere(4)
+    keep = sphere.vertices[sphere.faces].mean(axis=1)[:, 2] < cut
+    return np.asarray(sphere.vertices), np.asarray(sphere.faces)[keep]
+
+
+def test_a_filled_hole_closes_the_mesh_with_faces_turned_like_their_neighbours():
+    vertices, faces = _capped_sphere(0.8)
+    filled = fill_holes(vertices, faces)
+    mesh = trimesh.Trimesh(filled.vertices, filled.faces, process=False)
+    assert mesh.is_watertight and mesh.is_winding_consistent and mesh.volume > 0
+    np.testing.assert_array_equal(filled.vertices[: len(vertices)], vertices)  # old vertices kept
+    assert filled.filled.sum() == len(filled.vertices) - len(vertices) > 0
+
+
+def test_the_smooth_membrane_follows_the_surface_where_the_flat_one_creases():
+    """A spherical cap removed: the C1 membrane bulges like the sphere (within 2.5% of its
+    radius), the C0 membrane stays near the flat disk of the hole (thesis Figure 3.8)."""
+    vertices, faces = _capped_sphere(0.8)
+    deviation = {}
+    for smooth in (False, True):
+        filled = fill_holes(vertices, faces, smooth=smooth)
+        deviation[smooth] = np.abs(np.linalg.norm(filled.vertices[filled.filled], axis=1) - 1).max()
+    assert deviation[True] < 0.025 < 0.15 < deviation[False]
+
+
+def test_only_the_small_holes_when_asked():
+    vertices, faces = _capped_sphere(0.8)
+    bottom = vertices[faces].mean(axis=1)[:, 2] > -0.9  # a second, smaller hole at the bottom
+    loops = boundary_loops(faces[bottom], len(vertices))
+    filled = fill_holes(vertices, faces[bottom], max_loop=min(len(loop) for loop in loops))
+    remaining = boundary_loops(filled.faces, len(filled.vertices))
+    assert len(loops) == 2 and len(remaining) == 1 and len(remaining[0]) == max(len(loop) for loop in loops)
+
+
+def test_polygon_triangulation_keeps_the_outline_and_covers_it():
+    angles = np.linspace(0, 2 * np.pi, 40, endpoint=False)
+    radius = 1 + 0.4 * np.cos(5 * angles)  # a star: strongly concave
+    polygon = np.column_stack([radius * np.cos(angles), radius * np.sin(angles)])
+    points, faces = triangulate_polygon(polygon, 0.1)
+    np.testing.assert_array_equal(points[:40], polygon)
+    areas = triangle_areas(points, faces)
+    assert (areas > 0).all() and abs(areas.sum() - signed_area(polygon)) < 1e-9
+    with pytest.raises(InputError):
+        triangulate_polygon(polygon[::-1], 0.1)  # clockwise
