@@ -1,0 +1,58 @@
+"""Issue 56, part 1: what makes ``kinematic`` lose crane's limbs at a sparse rig?
+
+The whole crane capture (175 frames) is scanned by the standard rig (three cameras framing the
+whole capture volume) at ``RESOLUTION`` rays per side (160: about 2,600 points per frame, the
+issue's sparse rig), and ``kinematic`` runs on its first ``FRAMES`` frames with one suspect
+changed at a time: the large-motion registration, the template's resolution, the data ball
+``epsilon``, the rigid prediction, the sliding's iterations. Correspondence mean / last and
+Chamfer, fractions of the 40 frames' truth diagonal; per-frame correspondence every 5 frames.
+
+Run from the repository root (about 10 minutes on 2 cores)::
+
+    .venv/bin/python experiments/sparse_limbs.py
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+
+import numpy as np
+
+from fourd import synth
+from fourd.metrics import evaluate
+from fourd.methods import method_options, reconstruct
+
+FRAMES = 40
+RESOLUTION = 160
+VARIANTS = {
+    "default": {},
+    "large_motion=false": {"large_motion": "false"},
+    "template_vertices=3000": {"template_vertices": "3000"},
+    "epsilon x2 (0.02)": {"epsilon": "0.02"},
+    "rigid_guess=false": {"rigid_guess": "false"},
+    "iterations=8": {"iterations": "8"},
+}
+
+
+def main(names) -> None:
+    truth = synth.scene("crane", frames=175, step=1)
+    started = time.perf_counter()
+    scans = synth.scan(truth, resolution=RESOLUTION, seed=0).select(0, FRAMES)
+    truth = truth.select(0, FRAMES)
+    print(f"scanned in {time.perf_counter() - started:.0f} s: "
+          f"{np.mean([len(f) for f in scans]):.0f} points per frame (mean), diagonal {truth.diagonal():.3f}")
+    for name in names or VARIANTS:
+        options = method_options("kinematic", VARIANTS[name])
+        started = time.perf_counter()
+        result = reconstruct(scans, "kinematic", options)
+        seconds = time.perf_counter() - started
+        report = evaluate(result, truth, samples=20000)
+        curve = report["per_frame"]["correspondence"]
+        print(f"{name:24s} corr {report['correspondence_mean']:.4f} / {report['correspondence_last']:.4f}, "
+              f"Chamfer {report['chamfer']:.4f}, {seconds / FRAMES:.2f} s/frame; every 5th frame: "
+              + " ".join(f"{c:.3f}" for c in curve[::5]), flush=True)
+
+
+if __name__ == "__main__":
+    main(sys.argv[1:])
