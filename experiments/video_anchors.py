@@ -1,5 +1,5 @@
 """Question: does starting each sliding step where the video's anchors went
-(``kinematic`` option ``video_anchors``, :mod:`fourd.methods.kinematic.guide`) reduce the drift?
+(``kinematic`` option ``video_anchors``, :mod:`fourd.appearance.guide`) reduce the drift?
 
     python experiments/video_anchors.py bending-arm cloth 20
     COLOUR=1 NOBASE=1 python experiments/video_anchors.py bending-arm cloth 20   # with the colour guide too

@@ -1,22 +1,27 @@
 """Method ``garment`` (issue 54; Popa's thesis, chapters 3-4 and Appendix B): markerless
-garment capture and data-driven dynamic wrinkles.
+garment capture.
 
-**Under construction**: the method is not registered yet. What is here, tested on its own:
+``fourd reconstruct FRAMES/ --method garment [--set photo=pattern.png]``: the garment's openings
+tracked as ellipses, a template (inflated from a photo of the garment laid flat, or the first
+frame's own surface with its holes filled) fitted onto every frame, the regions no camera sees
+completed by the template (:mod:`.pipeline`). Its parts:
 
 - :mod:`.ellipse`: ellipses in space fitted to boundary points, RANSAC candidates near a
   reference ellipse, pruning by location, orientation and size, support (Appendix B.1);
 - :mod:`.boundary_tracking`: a garment's boundaries followed through the frames, skipped
   frames interpolated, smoothed in time, and the off-surface anchors (3.6.1, B.1-B.2);
-- :mod:`.fold_edges`: folds found in a video frame as pairs of parallel, oppositely oriented
-  edges flanking a bright ridge or a dark valley (4.3.1, 4.4);
 - :mod:`.template`: the template from a photo of the garment laid out flat: silhouette, 2D
   triangulation, front and back sewn along the outline but the openings, inflation that
-  opposes stretch and compression (3.7, equations 3.2-3.3).
+  opposes stretch and compression (3.7, equations 3.2-3.3);
+- :mod:`.fit`: the template fitted onto a frame as rigidly as possible, its openings pulled
+  onto the frame's (in place of the thesis' base-mesh parameterisation, 3.6.2);
+- :mod:`.fold_edges`: folds found in a video frame as pairs of parallel, oppositely oriented
+  edges flanking a bright ridge or a dark valley (4.3.1, 4.4).
 
-The garment scenes (``tshirt``, ``dress``, with the photo) are in :mod:`fourd.synth.garments`.
-Still to come: the base mesh parameterisation (3.6.2), compatible remeshing and completion
-(3.7), the best views per frame and the space-time deformation that wrinkles the garment
-(4.4-4.5), and the method module itself.
+The garment scenes (``tshirt``, ``dress``, with the photo) are in :mod:`fourd.synth.garments`;
+the C1 membrane of 3.6.2 is :mod:`fourd.geometry.hole_filling`. Still to come: the base-mesh
+parameterisation (3.6.2), the best views per frame and the space-time deformation that
+wrinkles the garment (4.4-4.5).
 """
 
 from fourd.methods.garment.boundary_tracking import (
@@ -35,6 +40,7 @@ from fourd.methods.garment.ellipse import (
     ransac_candidates,
     support,
 )
+from fourd.methods.garment.fit import FitOptions, align_template, fit_template, vertex_normals
 from fourd.methods.garment.fold_edges import (
     FoldEdge,
     FoldEdgeOptions,
@@ -42,6 +48,8 @@ from fourd.methods.garment.fold_edges import (
     fold_edges,
     trace_edges,
 )
+from fourd.methods.garment.options import COMMON_OPTIONS, MIN_FRAMES, RESULT, Options
+from fourd.methods.garment.pipeline import reconstruct
 from fourd.methods.garment.template import (
     Template,
     TemplateOptions,
@@ -55,6 +63,15 @@ from fourd.methods.garment.template import (
 )
 
 __all__ = [
+    "COMMON_OPTIONS",
+    "MIN_FRAMES",
+    "RESULT",
+    "FitOptions",
+    "Options",
+    "align_template",
+    "fit_template",
+    "reconstruct",
+    "vertex_normals",
     "BoundaryTrack",
     "Ellipse",
     "EllipseBatch",

@@ -35,7 +35,7 @@ from fourd.errors import InputError
 from fourd.geometry.boundary_loops import boundary_loops
 from fourd.methods.garment.ellipse import (
     Ellipse,
-    EllipseBatch,
+    as_batch,
     fit_ellipse,
     fit_ellipses,
     point_distances,
@@ -164,7 +164,7 @@ def track_boundary(
         reference = chosen[t]
     first_points = np.asarray(boundary_points[0], dtype=np.float64).reshape(-1, 3)
     scale = options.tolerance * first.radii[0]
-    counts[0] = support(_as_batch(first), first_points, scale)[0][0] if len(first_points) else 0
+    counts[0] = support(as_batch(first), first_points, scale)[0][0] if len(first_points) else 0
     found = np.array([e is not None for e in chosen])
     centers, normals, axes, radii = _interpolate(chosen, found)
     if options.time_sigma > 0 and frames > 1:
@@ -203,9 +203,9 @@ def _best_candidate(points, reference: Ellipse, rng, options: TrackingOptions):
         refit = fit_ellipses(inliers[on][None])
         if refit.valid[0]:
             refined = refit[0]
-            if len(prune(_as_batch(refined), reference, **limits)):
+            if len(prune(as_batch(refined), reference, **limits)):
                 ellipse = refined
-                count = int(support(_as_batch(ellipse), points, tolerance)[0][0])
+                count = int(support(as_batch(ellipse), points, tolerance)[0][0])
     return _aligned(ellipse, reference), count
 
 
@@ -218,14 +218,7 @@ def _aligned(ellipse: Ellipse, reference: Ellipse) -> Ellipse:
 
 
 def _point_on(ellipse: Ellipse, points: np.ndarray, tolerance: float) -> np.ndarray:
-    return point_distances(_as_batch(ellipse), points)[0] <= tolerance
-
-
-def _as_batch(ellipse: Ellipse) -> EllipseBatch:
-    return EllipseBatch(
-        ellipse.center[None], ellipse.normal[None], ellipse.axes[None], ellipse.radii[None],
-        np.ones(1, dtype=bool),
-    )
+    return point_distances(as_batch(ellipse), points)[0] <= tolerance
 
 
 def _interpolate(chosen: list, found: np.ndarray):

@@ -31,6 +31,7 @@ from fourd.errors import InputError
 __all__ = [
     "Ellipse",
     "EllipseBatch",
+    "as_batch",
     "fit_ellipse",
     "fit_ellipses",
     "point_distances",
@@ -106,6 +107,14 @@ class EllipseBatch:
         return EllipseBatch(
             self.center[keep], self.normal[keep], self.axes[keep], self.radii[keep], self.valid[keep]
         )
+
+
+def as_batch(ellipse: Ellipse) -> EllipseBatch:
+    """One ellipse as a batch of one."""
+    return EllipseBatch(
+        ellipse.center[None], ellipse.normal[None], ellipse.axes[None], ellipse.radii[None],
+        np.ones(1, dtype=bool),
+    )
 
 
 def fit_ellipses(samples: np.ndarray) -> EllipseBatch:

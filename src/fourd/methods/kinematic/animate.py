@@ -89,7 +89,7 @@ def animate(
     anchors : Anchors, optional
         Anchor tracks between consecutive input frames (:func:`fourd.appearance.anchors`):
         the forward sliding's steps between two consecutive input frames start where they
-        went (:mod:`.guide`).
+        went (:mod:`fourd.appearance.guide`).
     colors : list of T arrays [P_k, 3] or None, optional
         Colours of ``points`` (None for a frame without): with ``options.color_guide``, the
         forward sliding's steps at input frames relax again pulled where the template's

@@ -157,7 +157,7 @@ class ConstrainedSolver:
     regularization : float
     pull : ndarray [N], optional
         An extra weight per vertex (times its Laplacian diagonal) towards the ``reference`` of
-        :meth:`solve`: the anchor-guided positions (:mod:`.guide`).
+        :meth:`solve`: the anchor-guided positions (:mod:`fourd.appearance.guide`).
 
     The reduced matrix ``B^T (L (x) I_3) B`` is assembled directly in the template's
     elimination order (:func:`elimination_order`) and factorised without pivoting (it is

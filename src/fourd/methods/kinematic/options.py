@@ -135,7 +135,7 @@ class Options:
     video_anchors : bool
         When the input has calibrated video (``cameras.json`` and ``video/``), track anchors
         by optical flow between consecutive frames (:func:`fourd.appearance.anchors`) and
-        start each sliding step where they went (:mod:`.guide`); silent without video. Only
+        start each sliding step where they went (:mod:`fourd.appearance.guide`); silent without video. Only
         anchors that start on hue texture count (``anchor_texture``): on low-contrast skin or a
         uniform colour the flow follows the shading, and those anchors misled the performer
         (benchmarks/METHODS.md).

@@ -6,7 +6,7 @@ vertex of the template takes its colour from the first frame's points once; at e
 input frame, after the step's rigid prediction, a per-vertex Lucas-Kanade on that frame's
 coloured points (:func:`fourd.appearance.photometric.photometric_shift`) moves each vertex
 along the surface to where its patch's colours match, and the step starts there and pulls
-towards it as it does towards the video's anchors (:mod:`.guide`). The reference is the first
+towards it as it does towards the video's anchors (:mod:`fourd.appearance.guide`). The reference is the first
 frame, not the previous one, so what the colours correct does not accumulate.
 """
 
@@ -21,7 +21,7 @@ from scipy.spatial import cKDTree
 from fourd.appearance.photometric import photometric_shift
 from fourd.appearance.surface_color import ColorField
 from fourd.geometry.normals import vertex_normals
-from fourd.methods.kinematic.guide import Guide
+from fourd.appearance.guide import Guide
 
 __all__ = ["PhotometricGuides", "colors_of_cleaned"]
 

@@ -65,7 +65,7 @@ from fourd.cache import Chain, report_resumed
 from fourd.geometry.field import Field4D
 from fourd.methods.kinematic.arap import arap_energy, blended_arap_rhs, with_rest_shape
 from fourd.methods.kinematic.arap_solve import ConstrainedSolver, SlidePrecompute, slide_precompute
-from fourd.methods.kinematic.guide import anchor_guide
+from fourd.appearance.guide import anchor_guide
 from fourd.methods.kinematic.projection import (
     _data_target,
     _field_times,
@@ -191,7 +191,7 @@ class SlideOptions:
         Anchors farther than this many template edges from the step's prediction count less
         (Gaussian weight; 0: all count fully).
     anchor_pull : float
-        Weight of the anchor-guided positions (:mod:`.guide`) in the as-rigid-as-possible
+        Weight of the anchor-guided positions (:mod:`fourd.appearance.guide`) in the as-rigid-as-possible
         solve of each step, in units of each vertex's stiffness (0: they only move the start).
     edge_stiffness : tuple or None
         ``(edges [E, 2], values [E])``: factors on the ARAP weights of those template edges
@@ -309,7 +309,7 @@ def slide_step(
     registration_velocity`` when that is given [N, 3] (the previous step's vertex
     velocities), else from the prediction.
 
-    ``guide`` (optional): a :class:`~fourd.methods.kinematic.guide.Guide` of anchor-guided
+    ``guide`` (optional): a :class:`~fourd.appearance.guide.Guide` of anchor-guided
     positions, blended into the start after the rigid prediction by its weights (before the
     registration and the projection).
 

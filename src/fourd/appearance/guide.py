@@ -1,12 +1,11 @@
-"""Anchor-guided prediction of the sliding: where the video's optical flow says the surface went.
+"""Anchor-guided positions: where the video's optical flow says a mesh's vertices went.
 
-The sliding of section 5 (``000_00387fefe94cc850.txt``) finds each frame's vertices from a guess
-projected onto the surface and relaxed as rigidly as possible; geometry alone does not say
-where along the surface the skin went, which is where the correspondences drift. The anchor
-tracks of the appearance (:func:`fourd.appearance.anchors`: optical flow lifted to 3D and
-pruned, thesis ``004_f87f5acf96d50b57.txt`` section 5.4.1) do: a vertex with anchors near it
-in the previous frame starts the step where they went (:func:`anchor_guide`), and the
-projection and the as-rigid-as-possible solve proceed from there.
+Geometry alone does not say where along a surface the skin or the cloth went, which is where
+correspondences drift. The anchor tracks of the appearance (:func:`fourd.appearance.anchors`:
+optical flow lifted to 3D and pruned, thesis ``004_f87f5acf96d50b57.txt`` section 5.4.1) do: a
+vertex with anchors near it in the previous frame is guided to where they went
+(:func:`anchor_guide`). ``kinematic``'s sliding starts each step there and pulls towards it
+(paper ``000_00387fefe94cc850.txt``, section 5); ``garment``'s template fit does the same.
 """
 
 from __future__ import annotations

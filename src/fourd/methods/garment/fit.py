@@ -1,0 +1,190 @@
+"""The garment template fitted onto one frame's surface.
+
+The thesis maps its template into every frame through a common base-mesh parameterisation
+(sections 3.6.2 and 3.7). Here the template is carried from frame to frame by an
+as-rigid-as-possible fit to each frame's mesh instead (Sorkine and Alexa 2007's local and
+global steps; the data in both directions: each template vertex to its closest frame vertex
+whose normal agrees, each frame vertex to its closest template vertex), with the thesis'
+boundary anchors as its strongest data: each of the garment's openings on the template is
+pulled onto the same opening in the frame (the boundary points of the ellipse tracked there,
+:mod:`.boundary_tracking`). Where the frame has no data (the underarms the cameras miss), the
+template keeps its own shape, carried as rigidly as possible: the template's completion of 3.7.
+
+:func:`align_template` places a template (say one inflated from a photo) on the first frame by
+the similarity that best maps its openings' ellipses onto the frame's.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+from scipy.spatial import cKDTree
+
+from fourd.geometry.laplacian import cotangent_weights, weights_laplacian
+from fourd.geometry.rotations import one_ring_rotations, procrustes
+
+__all__ = ["FitOptions", "align_template", "fit_template", "vertex_normals"]
+
+
+@dataclass(frozen=True)
+class FitOptions:
+    """The as-rigid-as-possible fit of the template to a frame.
+
+    Attributes
+    ----------
+    iterations : int
+        Local/global iterations per frame.
+    data_weight : float
+        Weight of the closest-point data, in units of a vertex's stiffness (its Laplacian
+        diagonal).
+    boundary_weight : float
+        Weight of an opening's vertices pulled onto the frame's same opening, same units.
+    anchor_weight : float
+        Weight of the video anchors' guide, same units (times each guided vertex's weight).
+    project : bool
+        Finally move each vertex with agreeing data onto the frame's surface along the
+        surface's normal (to the plane of its closest frame vertex).
+    reject : float
+        Closest pairs farther apart than this many median template edges are ignored.
+    normal_angle : float
+        Closest pairs whose normals differ by more than this (degrees) are ignored.
+    """
+
+    iterations: int = 10
+    data_weight: float = 0.5
+    boundary_weight: float = 4.0
+    anchor_weight: float = 2.0
+    project: bool = True
+    reject: float = 4.0
+    normal_angle: float = 60.0
+
+
+def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """Area-weighted unit vertex normals ``[N, 3]``."""
+    normals = np.zeros_like(vertices)
+    cross = np.cross(vertices[faces[:, 1]] - vertices[faces[:, 0]], vertices[faces[:, 2]] - vertices[faces[:, 0]])
+    for k in range(3):
+        normals[:, 0] += np.bincount(faces[:, k], cross[:, 0], len(vertices))
+        normals[:, 1] += np.bincount(faces[:, k], cross[:, 1], len(vertices))
+        normals[:, 2] += np.bincount(faces[:, k], cross[:, 2], len(vertices))
+    return normals / np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-300)
+
+
+def fit_template(
+    rest: np.ndarray,
+    faces: np.ndarray,
+    start: np.ndarray,
+    target_vertices: np.ndarray,
+    target_faces: np.ndarray,
+    *,
+    openings: list | None = None,
+    guide=None,
+    options: FitOptions | None = None,
+) -> np.ndarray:
+    """The template ``(rest [N, 3], faces)`` fitted onto a frame's mesh from ``start [N, 3]``.
+
+    Parameters
+    ----------
+    openings : list of (template vertex indices, frame points [M, 3]), optional
+        Per garment opening: the template's loop and the frame's boundary points of the same
+        opening (an empty array when the frame lost it).
+    guide : fourd.appearance.guide.Guide, optional
+        Where the video's anchors say vertices went, pulled with ``options.anchor_weight``
+        times the guide's weight.
+
+    Returns
+    -------
+    ndarray float64 [N, 3]
+    """
+    options = options or FitOptions()
+    rest = np.asarray(rest, dtype=np.float64)
+    faces = np.asarray(faces, dtype=np.int64)
+    weights = cotangent_weights(rest, faces, clamp_negative=True)
+    laplacian = weights_laplacian(weights).tocsr()
+    stiffness = laplacian.diagonal()
+    stiffness = np.where(stiffness > 0, stiffness, max(float(stiffness.mean()), 1e-12))
+    edges = sp.triu(weights, k=1).tocoo()
+    edge = float(np.median(np.linalg.norm(rest[edges.row] - rest[edges.col], axis=1)))
+    target_vertices = np.asarray(target_vertices, dtype=np.float64)
+    target_normals = vertex_normals(target_vertices, np.asarray(target_faces, dtype=np.int64))
+    tree = cKDTree(target_vertices)
+    cosine = np.cos(np.radians(options.normal_angle))
+    count = len(rest)
+    x = np.array(start, dtype=np.float64)
+    coo = sp.coo_matrix(weights)
+    wi, wj, ww = coo.row, coo.col, coo.data
+    for _ in range(options.iterations):
+        normals = vertex_normals(x, faces)
+        pull = np.zeros(count)
+        goal = np.zeros((count, 3))
+        # template -> frame
+        distance, nearest = tree.query(x, workers=-1)
+        ok = (distance <= options.reject * edge) & (np.einsum("ij,ij->i", normals, target_normals[nearest]) >= cosine)
+        pull[ok] += options.data_weight
+        goal[ok] += options.data_weight * target_vertices[nearest[ok]]
+        # frame -> template: every frame vertex pulls its closest template vertex
+        back_distance, back = cKDTree(x).query(target_vertices, workers=-1)
+        agree = (back_distance <= options.reject * edge) & (
+            np.einsum("ij,ij->i", target_normals, normals[back]) >= cosine)
+        share = np.bincount(back[agree], minlength=count).astype(np.float64)
+        pulled = share > 0
+        for k in range(3):
+            goal[:, k] += options.data_weight * np.where(
+                pulled, np.bincount(back[agree], target_vertices[agree, k], count) / np.maximum(share, 1), 0.0)
+        pull[pulled] += options.data_weight
+        for loop, points in openings or []:
+            points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+            if not len(points):
+                continue
+            _, closest = cKDTree(points).query(x[loop])
+            pull[loop] += options.boundary_weight
+            goal[loop] += options.boundary_weight * points[closest]
+        if guide is not None and len(guide.vertices):
+            strength = options.anchor_weight * np.asarray(guide.weight, dtype=np.float64)
+            np.add.at(pull, guide.vertices, strength)
+            np.add.at(goal, guide.vertices, strength[:, None] * guide.positions)
+        rotations = one_ring_rotations(weights, rest, x)
+        edge_rest = rest[wi] - rest[wj]
+        rotated = 0.5 * np.einsum("eab,eb->ea", rotations[wi] + rotations[wj], edge_rest) * ww[:, None]
+        rhs = np.stack([np.bincount(wi, rotated[:, k], count) for k in range(3)], axis=1)
+        if not pull.any():  # nothing holds it: keep the position (the rotations alone are free)
+            break
+        system = (laplacian + sp.diags(pull * stiffness)).tocsr()
+        right = rhs + stiffness[:, None] * goal
+        # symmetric positive definite and started from the last iterate: a few preconditioned
+        # conjugate-gradient steps reach it faster than a factorisation per iteration
+        jacobi = sp.diags(1.0 / system.diagonal())
+        x = np.column_stack([
+            spla.cg(system, right[:, k], x0=x[:, k], rtol=1e-7, maxiter=300, M=jacobi)[0] for k in range(3)
+        ])
+    if options.project:
+        # onto the frame's surface along its normal where the data agrees: no sliding
+        distance, nearest = tree.query(x, workers=-1)
+        normals = vertex_normals(x, faces)
+        ok = (distance <= options.reject * edge) & (np.einsum("ij,ij->i", normals, target_normals[nearest]) >= cosine)
+        offset = np.einsum("ij,ij->i", target_vertices[nearest[ok]] - x[ok], target_normals[nearest[ok]])
+        x[ok] += offset[:, None] * target_normals[nearest[ok]]
+    return x
+
+
+def align_template(template_ellipses: list, frame_ellipses: list) -> tuple[np.ndarray, float, np.ndarray]:
+    """The similarity ``(R [3, 3], scale, t [3])`` mapping the template's opening ellipses onto
+    the frame's (same order): their centres, the points one radius along each axis and along
+    each normal, matched in least squares; each axis's sign ambiguity (a fitted ellipse's axes
+    have none) is resolved by trying both and keeping the better fit."""
+    best = None
+    for flip in (1.0, -1.0):
+        source, target = [], []
+        for a, b in zip(template_ellipses, frame_ellipses, strict=True):
+            radius_a, radius_b = a.radii.mean(), b.radii.mean()
+            source += [a.center, a.center + radius_a * a.normal,
+                       a.center + a.radii[0] * a.axes[0], a.center + a.radii[1] * a.axes[1]]
+            target += [b.center, b.center + radius_b * b.normal,
+                       b.center + flip * b.radii[0] * b.axes[0], b.center + flip * b.radii[1] * b.axes[1]]
+        transform = procrustes(np.array(source), np.array(target), with_scale=True)
+        if best is None or transform.rms < best.rms:
+            best = transform
+    return best.rotation, best.scale, best.translation

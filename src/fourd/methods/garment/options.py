@@ -1,0 +1,71 @@
+"""Options of the ``garment`` method."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from fourd.animation import AnimatedMesh
+
+__all__ = ["COMMON_OPTIONS", "MIN_FRAMES", "Options", "RESULT"]
+
+#: A sequence method: one template through the frames.
+MIN_FRAMES = 2
+RESULT = AnimatedMesh
+#: The options users change first (``fourd options garment``).
+COMMON_OPTIONS = ("photo", "boundaries", "time_sigma")
+
+
+@dataclass(frozen=True)
+class Options:
+    """Options of the garment capture (Popa's thesis, chapter 3).
+
+    Attributes
+    ----------
+    photo : str
+        A photo of the garment laid out flat (white on black) with its calibration beside it
+        (``pattern.json`` in the photo's folder: ``pixels_per_unit``, ``origin``, ``openings``;
+        the files ``fourd synth tshirt`` writes): the template is inflated from it (3.7).
+        Empty: the template is the first frame's own surface, its holes but the openings filled
+        by a smooth membrane.
+    boundaries : int
+        How many openings the garment has (a T-shirt 4: neck, sleeves, waist; a skirt 2). 0:
+        the first frame's boundary loops at least a third as long as its longest.
+    template_edge : float
+        Edge length of a template inflated from the photo, in the photo's units (0: 0.04).
+    iterations : int
+        As-rigid-as-possible fitting iterations per frame (three times as many in the first).
+    data_weight : float
+        Weight of the closest-point data in the fit, in units of a vertex's stiffness.
+    boundary_weight : float
+        Weight of the openings pulled onto the frame's tracked openings, same units.
+    anchor_weight : float
+        Weight of the video's anchors (where the optical flow says a vertex went), same units.
+    video_anchors : bool
+        With multi-view video, track anchors by optical flow (:func:`fourd.appearance.anchors`,
+        thesis 5.4.1) and pull the template along them; silent without video.
+    template_scale : float
+        Without a photo: the first frame's template surface is meshed on a grid this many
+        times coarser than the frames' surfaces (the fit's cost grows with its size).
+    time_sigma : float
+        Gaussian smoothing of the vertex trajectories in time, frames (the thesis smooths the
+        sequence in time at the end of 3.7; 0: none, measured better here, METHODS.md).
+    observed_distance : float
+        A vertex counts as observed in a frame when it lies within this many of the frame
+        mesh's median edges of it; elsewhere the template completed it.
+    cache_dir : str or None
+        Folder keeping each frame's surface as it is made; a rerun after an interruption
+        reuses them (``fourd reconstruct --cache``).
+    """
+
+    photo: str = ""
+    boundaries: int = 0
+    template_edge: float = 0.0
+    iterations: int = 10
+    data_weight: float = 0.5
+    boundary_weight: float = 4.0
+    anchor_weight: float = 8.0
+    video_anchors: bool = True
+    template_scale: float = 2.5
+    time_sigma: float = 0.0
+    observed_distance: float = 2.0
+    cache_dir: str | None = None

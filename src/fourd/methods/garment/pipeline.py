@@ -1,0 +1,206 @@
+"""The garment capture, end to end (Popa's thesis, chapter 3).
+
+1. Each frame's surface: its own faces when the input is per-frame meshes, else its points
+   meshed on their own (:func:`fourd.geometry.frame_surface.frame_surface`).
+2. The garment's openings (neck, sleeves, waist) found in the first frame as its longest
+   boundary loops and tracked through every frame as ellipses (3.6.1, Appendix B).
+3. The template: inflated from a photo of the garment laid flat (3.7) when one is given, and
+   placed on the first frame by the similarity that maps its openings onto the frame's; else
+   the first frame's own surface with its other holes filled by the C1 membrane (3.6.2).
+4. The template fitted onto every frame in turn, as rigidly as possible, its openings pulled
+   onto the frame's tracked openings (:mod:`.fit`; the thesis maps the template through a
+   base-mesh parameterisation instead); where no frame data lies near, the template's shape
+   completes the frame and the vertex is marked not observed.
+5. The trajectories smoothed in time by a Gaussian (end of 3.7).
+
+Not yet here: the base-mesh parameterisation of 3.6.2 and the wrinkling of chapter 4 (their
+parts :mod:`.fold_edges` and :mod:`fourd.geometry.hole_filling` exist).
+"""
+
+from __future__ import annotations
+
+import itertools
+import json
+import logging
+from pathlib import Path
+
+import numpy as np
+from scipy.ndimage import gaussian_filter1d
+from scipy.spatial import cKDTree
+
+from fourd.animation import AnimatedMesh
+from fourd.appearance.guide import anchor_guide
+from fourd.cache import StageCache, report_resumed, stage_key
+from fourd.errors import InputError
+from fourd.geometry.boundary_loops import boundary_loops
+from fourd.geometry.frame_surface import SurfaceSettings, frame_surface
+from fourd.geometry.hole_filling import fill_holes
+from fourd.geometry.meshes import median_edge_length, remove_small_components
+from fourd.methods.garment.boundary_tracking import TrackingOptions, track_boundary
+from fourd.methods.garment.ellipse import as_batch, fit_ellipse, point_distances
+from fourd.methods.garment.fit import FitOptions, align_template, fit_template
+from fourd.methods.garment.options import Options
+from fourd.methods.garment.template import TemplateOptions, template_from_photo
+from fourd.progress import progress
+from fourd.sequence import PointCloudSequence
+
+log = logging.getLogger("fourd.methods.garment")
+
+#: The cache entries of the frames' surfaces.
+STAGE = "garment-surface"
+
+__all__ = ["reconstruct"]
+
+
+def _frame_meshes(seq: PointCloudSequence, options: Options) -> list[tuple[np.ndarray, np.ndarray]]:
+    cache = StageCache(options.cache_dir)
+    meshes, found = [], 0
+    for index, frame in enumerate(progress(seq.frames, desc="garment: frame surfaces", unit="frame")):
+        if frame.faces is not None and len(frame.faces):
+            vertices, faces = np.asarray(frame.points, dtype=np.float64), np.asarray(frame.faces, dtype=np.int64)
+        else:
+            key = stage_key(STAGE, frame.points, frame.normals, frame.sensors, SurfaceSettings())
+            stored = cache.load(STAGE, key)
+            if stored is None:
+                vertices, faces = frame_surface(frame.points, normals=frame.normals, sensors=frame.sensors,
+                                                time=frame.time)
+                cache.save(STAGE, key, {"vertices": vertices, "faces": faces})
+            else:
+                vertices, faces = stored["vertices"], stored["faces"]
+                found += 1
+        if len(faces) < 4:
+            raise InputError(f"frame {index}: no surface could be made of its {len(frame.points)} points")
+        meshes.append((vertices, faces))
+    if found:
+        report_resumed(log, f"{found} of {len(seq.frames)} frames' surfaces")
+    return meshes
+
+
+def _openings(vertices, faces, count: int) -> list[np.ndarray]:
+    loops = [loop for loop in boundary_loops(faces, len(vertices)) if len(loop) >= 6]
+    if not loops:
+        raise InputError("the first frame's surface has no boundary: a garment has openings (neck, sleeves, waist)")
+    if count <= 0:
+        perimeter = [np.linalg.norm(np.diff(vertices[np.r_[loop, loop[:1]]], axis=0), axis=1).sum() for loop in loops]
+        count = int(np.sum(np.array(perimeter) >= max(perimeter) / 3.0))
+    if len(loops) < count:
+        raise InputError(f"the first frame's surface has {len(loops)} boundary loops, the garment needs {count}")
+    return loops[:count]
+
+
+def _frame_template(vertices, faces, openings):
+    """The first frame's surface, its holes but the openings filled, the largest piece kept."""
+    vertices, faces = remove_small_components(vertices, faces, min_fraction=0.2)
+    loops = [loop for loop in boundary_loops(faces, len(vertices)) if len(loop) >= 3]
+    kept = _openings(vertices, faces, len(openings))
+    opening_sets = [set(loop.tolist()) for loop in kept]
+    holes = [loop for loop in loops if set(loop.tolist()) not in opening_sets]
+    filled = fill_holes(vertices, faces, holes=holes)
+    return filled.vertices, filled.faces, kept
+
+
+def _photo_template(options: Options):
+    path = Path(options.photo)
+    calibration_path = path.with_name("pattern.json") if path.suffix.lower() != ".json" else path
+    image_path = path if path.suffix.lower() != ".json" else path.with_suffix(".png")
+    try:
+        from PIL import Image
+
+        image = np.asarray(Image.open(image_path))
+        calibration = json.loads(calibration_path.read_text())
+    except FileNotFoundError as error:
+        raise InputError(f"garment photo: {error.filename} not found") from None
+    except (OSError, ValueError) as error:
+        raise InputError(f"garment photo {image_path}: cannot be read ({error})") from None
+    edge = options.template_edge if options.template_edge > 0 else 0.04
+    return template_from_photo(image, calibration, TemplateOptions(edge=edge))
+
+
+def _place_photo_template(template, frame_ellipses):
+    """The photo's template moved onto the first frame: its openings matched to the frame's by
+    the permutation whose similarity fits best."""
+    loops = [loop for loop in boundary_loops(template.faces, len(template.vertices)) if len(loop) >= 6]
+    if len(loops) != len(frame_ellipses):
+        raise InputError(f"the garment photo's template has {len(loops)} openings, the frames "
+                         f"{len(frame_ellipses)}: set the option boundaries")
+    ellipses = [fit_ellipse(template.vertices[loop]) for loop in loops]
+    best = None
+    for order in itertools.permutations(range(len(loops))):
+        rotation, scale, translation = align_template([ellipses[k] for k in order], frame_ellipses)
+        placed = scale * template.vertices @ rotation.T + translation
+        error = sum(np.linalg.norm(placed[loops[k]].mean(axis=0) - e.center) for k, e in zip(order, frame_ellipses, strict=True))
+        if best is None or error < best[0]:
+            best = (error, placed, [loops[k] for k in order])
+    return best[1], best[2]
+
+
+def reconstruct(seq: PointCloudSequence, options: Options | None = None) -> AnimatedMesh:
+    """The garment's animated mesh (see the module docstring)."""
+    options = options or Options()
+    if len(seq) < 2:
+        raise InputError("garment needs at least 2 frames")
+    meshes = _frame_meshes(seq, options)
+    first_vertices, first_faces = meshes[0]
+    anchors = None
+    if options.video_anchors and getattr(seq, "video", None) is not None:
+        from fourd.appearance import anchors as track_anchors
+
+        anchors = track_anchors(seq, texture=3.0, sources=2.0)
+    if options.photo:
+        openings = _openings(first_vertices, first_faces, options.boundaries)
+        frame_ellipses = [fit_ellipse(first_vertices[loop]) for loop in openings]
+        template = _photo_template(options)
+        start, template_loops = _place_photo_template(template, frame_ellipses)
+        rest, faces, uv = start, template.faces, template.uv[template.faces]  # per face corner
+        first_iterations = 4 * options.iterations
+    else:
+        frame = seq.frames[0]
+        coarse = (frame.points, frame.faces) if frame.faces is not None and len(frame.faces) else frame_surface(
+            frame.points, normals=frame.normals, sensors=frame.sensors,
+            settings=SurfaceSettings(grid_scale=options.template_scale))
+        coarse = (np.asarray(coarse[0], dtype=np.float64), np.asarray(coarse[1], dtype=np.int64))
+        rest, faces, openings = _frame_template(*coarse, _openings(*coarse, options.boundaries))
+        template_loops = openings
+        frame_ellipses = [fit_ellipse(rest[loop]) for loop in openings]
+        start, uv = rest, None
+        first_iterations = options.iterations
+    # the openings through the frames
+    boundary_points = []
+    for vertices, mesh_faces in meshes:
+        loops = boundary_loops(mesh_faces, len(vertices))
+        boundary_points.append(vertices[np.concatenate(loops)] if loops else np.zeros((0, 3)))
+    tracks = [track_boundary(boundary_points, ellipse, TrackingOptions()) for ellipse in frame_ellipses]
+    fit_options = FitOptions(iterations=options.iterations, data_weight=options.data_weight,
+                             boundary_weight=options.boundary_weight, anchor_weight=options.anchor_weight)
+    edge = median_edge_length(rest, faces)
+    frames = len(meshes)
+    vertices = np.empty((frames, len(rest), 3))
+    observed = np.zeros((frames, len(rest)), dtype=bool)
+    current = start
+    for t in progress(range(frames), desc="garment: fitting the template", unit="frame"):
+        frame_vertices, frame_faces = meshes[t]
+        pairs = []
+        for loop, track in zip(template_loops, tracks, strict=True):
+            ellipse = track.ellipse(t)
+            points = boundary_points[t]
+            near = point_distances(as_batch(ellipse), points)[0] <= 0.15 * ellipse.radii.mean() if len(points) else []
+            pairs.append((loop, points[near] if len(points) else points))
+        iterations = first_iterations if t == 0 else options.iterations
+        guide = None
+        if anchors is not None and t > 0 and len(anchors[t - 1].source):
+            pair = anchors[t - 1]
+            guide = anchor_guide(current, pair.source, pair.target, pair.confidence, radius=2.0 * edge)
+            start = current.copy()
+            start[guide.vertices] += guide.weight[:, None] * (guide.positions - current[guide.vertices])
+            current = start
+        current = fit_template(rest, faces, current, frame_vertices, frame_faces, openings=pairs, guide=guide,
+                               options=FitOptions(**{**fit_options.__dict__, "iterations": iterations}))
+        vertices[t] = current
+        distance, _ = cKDTree(frame_vertices).query(current, workers=-1)
+        observed[t] = distance <= options.observed_distance * median_edge_length(frame_vertices, frame_faces)
+    if options.time_sigma > 0:
+        vertices = gaussian_filter1d(vertices, options.time_sigma, axis=0, mode="nearest")
+    log.info("garment: %d template vertices, %.0f%% observed", len(rest), 100 * observed.mean())
+    return AnimatedMesh(faces, vertices, times=np.asarray(seq.times, dtype=np.float64), observed=observed,
+                        rest=rest, uv=uv)
+

@@ -1,0 +1,61 @@
+"""The garment method end to end on small generated garments."""
+
+import numpy as np
+import pytest
+import trimesh
+
+from fourd import synth
+from fourd.errors import InputError
+from fourd.geometry.boundary_loops import boundary_loops
+from fourd.methods import method_options, reconstruct
+
+
+@pytest.fixture(scope="module")
+def dress():
+    truth = synth.scene("dress", frames=4, around=48, down=20)
+    return truth, synth.scan(truth, resolution=128, seed=1)
+
+
+def test_the_dress_keeps_its_two_openings_and_lies_on_every_frame(dress):
+    truth, scans = dress
+    result = reconstruct(scans, "garment", method_options("garment", {"boundaries": 2}))
+    assert result.frame_count == truth.frame_count
+    assert len(boundary_loops(result.faces, result.vertex_count)) == 2
+    diagonal = truth.diagonal()
+    for t in range(truth.frame_count):
+        surface = trimesh.Trimesh(truth.vertices[t], truth.faces, process=False)
+        _, distance, _ = trimesh.proximity.closest_point(surface, result.vertices[t])
+        # the frames' own surfaces overshoot the hem by about a point spacing: the tail
+        assert np.median(distance) < 0.002 * diagonal and np.quantile(distance, 0.95) < 0.015 * diagonal
+    assert result.observed.mean() > 0.8
+
+
+def test_a_closed_surface_is_not_a_garment():
+    truth = synth.scene("squash-ball", frames=2)
+    scans = synth.scan(truth, resolution=48, mode="remeshed")  # per-frame closed meshes
+    with pytest.raises(InputError, match="boundary|openings"):
+        reconstruct(scans, "garment", method_options("garment", {"boundaries": 2}))
+
+
+@pytest.mark.slow
+def test_the_tshirt_from_its_photo_keeps_four_openings_and_its_pattern_coordinates(tmp_path):
+    import json
+
+    from PIL import Image
+
+    from fourd.synth.garments import pattern_outline, pattern_photo
+
+    truth = synth.scene("tshirt", frames=4)
+    scans = synth.scan(truth, resolution=128, seed=2)
+    image, calibration = pattern_photo(*pattern_outline("tshirt", with_openings=True))
+    Image.fromarray(image).save(tmp_path / "pattern.png")
+    (tmp_path / "pattern.json").write_text(json.dumps(calibration))
+    options = method_options("garment", {"photo": str(tmp_path / "pattern.png"), "boundaries": 4})
+    result = reconstruct(scans, "garment", options)
+    assert len(boundary_loops(result.faces, result.vertex_count)) == 4
+    assert result.uv is not None and result.uv.shape == (len(result.faces), 3, 2)
+    diagonal = truth.diagonal()
+    for t in range(truth.frame_count):
+        surface = trimesh.Trimesh(truth.vertices[t], truth.faces, process=False)
+        _, distance, _ = trimesh.proximity.closest_point(surface, result.vertices[t])
+        assert np.median(distance) < 0.003 * diagonal
