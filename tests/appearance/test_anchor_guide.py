@@ -5,8 +5,8 @@ import numpy as np
 import pytest
 import trimesh
 
-from fourd.methods.kinematic.arap_solve import ConstrainedSolver, slide_precompute
 from fourd.appearance.guide import anchor_guide
+from fourd.methods.kinematic.arap_solve import ConstrainedSolver, slide_precompute
 
 
 def test_the_guide_is_the_local_mean_motion_and_its_weight_grows_with_support():

@@ -18,10 +18,10 @@ from collections.abc import Sequence
 import numpy as np
 from scipy.spatial import cKDTree
 
+from fourd.appearance.guide import Guide
 from fourd.appearance.photometric import photometric_shift
 from fourd.appearance.surface_color import ColorField
 from fourd.geometry.normals import vertex_normals
-from fourd.appearance.guide import Guide
 
 __all__ = ["PhotometricGuides", "colors_of_cleaned"]
 

@@ -61,11 +61,11 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from fourd.animation import AnimatedMesh
+from fourd.appearance.guide import anchor_guide
 from fourd.cache import Chain, report_resumed
 from fourd.geometry.field import Field4D
 from fourd.methods.kinematic.arap import arap_energy, blended_arap_rhs, with_rest_shape
 from fourd.methods.kinematic.arap_solve import ConstrainedSolver, SlidePrecompute, slide_precompute
-from fourd.appearance.guide import anchor_guide
 from fourd.methods.kinematic.projection import (
     _data_target,
     _field_times,
