@@ -1,6 +1,6 @@
 """Question: does the colour guide (``kinematic`` option ``color_guide``: per-vertex Lucas-Kanade
 on each frame's coloured points against the colours the template took from the first frame,
-:mod:`fourd.methods.kinematic.photometric_guide`) reduce the drift when the input has coloured
+:mod:`fourd.appearance.color_guide`) reduce the drift when the input has coloured
 points but no video?
 
     python experiments/color_guide.py crane skin 20

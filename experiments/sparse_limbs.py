@@ -20,8 +20,8 @@ import time
 import numpy as np
 
 from fourd import synth
-from fourd.metrics import evaluate
 from fourd.methods import method_options, reconstruct
+from fourd.metrics import evaluate
 
 FRAMES = 40
 RESOLUTION = 160

@@ -31,6 +31,7 @@ from __future__ import annotations
 import numpy as np
 
 from fourd.animation import AnimatedMesh
+from fourd.geometry.normals import vertex_normals
 
 __all__ = ["GARMENT_SCENES", "PHOTO_PIXELS_PER_UNIT", "dress", "pattern_outline", "pattern_photo", "tshirt"]
 
@@ -173,14 +174,6 @@ def _without_ears(vertices: np.ndarray, faces: np.ndarray):
     return vertices, faces
 
 
-def _vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    normals = np.zeros_like(vertices)
-    face_normals = np.cross(vertices[faces[:, 1]] - vertices[faces[:, 0]], vertices[faces[:, 2]] - vertices[faces[:, 0]])
-    for k in range(3):
-        np.add.at(normals, faces[:, k], face_normals)
-    return normals / np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-300)
-
-
 def _rotation_z(angle):
     c, s = np.cos(angle), np.sin(angle)
     return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
@@ -209,7 +202,7 @@ def tshirt(
     from fourd.synth.scenes import _phases, _smoothstep
 
     rest, faces = _tshirt_rest(spacing)
-    normals = _vertex_normals(rest, faces)
+    normals = vertex_normals(rest, faces)
     diagonal = float(np.linalg.norm(np.ptp(rest, axis=0)))
     depth = fold_depth * diagonal
     x, y, z = rest[:, 0], rest[:, 1], rest[:, 2]
@@ -282,7 +275,7 @@ def dress(
     from fourd.synth.scenes import _phases
 
     rest, faces, angle, fraction = _dress_rest(around, down)
-    normals = _vertex_normals(rest, faces)
+    normals = vertex_normals(rest, faces)
     # outward: the grid's winding decides; make the normals point away from the axis
     outward = np.einsum("nj,nj->n", normals, rest * [1, 0, 1]) >= 0
     normals[~outward] *= -1

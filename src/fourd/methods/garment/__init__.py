@@ -40,7 +40,7 @@ from fourd.methods.garment.ellipse import (
     ransac_candidates,
     support,
 )
-from fourd.methods.garment.fit import FitOptions, align_template, fit_template, vertex_normals
+from fourd.methods.garment.fit import FitOptions, align_template, fit_template
 from fourd.methods.garment.fold_edges import (
     FoldEdge,
     FoldEdgeOptions,
@@ -71,7 +71,6 @@ __all__ = [
     "align_template",
     "fit_template",
     "reconstruct",
-    "vertex_normals",
     "BoundaryTrack",
     "Ellipse",
     "EllipseBatch",

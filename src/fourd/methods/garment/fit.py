@@ -24,9 +24,10 @@ import scipy.sparse.linalg as spla
 from scipy.spatial import cKDTree
 
 from fourd.geometry.laplacian import cotangent_weights, weights_laplacian
+from fourd.geometry.normals import vertex_normals
 from fourd.geometry.rotations import one_ring_rotations, procrustes
 
-__all__ = ["FitOptions", "align_template", "fit_template", "vertex_normals"]
+__all__ = ["FitOptions", "align_template", "fit_template"]
 
 
 @dataclass(frozen=True)
@@ -60,17 +61,6 @@ class FitOptions:
     project: bool = True
     reject: float = 4.0
     normal_angle: float = 60.0
-
-
-def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    """Area-weighted unit vertex normals ``[N, 3]``."""
-    normals = np.zeros_like(vertices)
-    cross = np.cross(vertices[faces[:, 1]] - vertices[faces[:, 0]], vertices[faces[:, 2]] - vertices[faces[:, 0]])
-    for k in range(3):
-        normals[:, 0] += np.bincount(faces[:, k], cross[:, 0], len(vertices))
-        normals[:, 1] += np.bincount(faces[:, k], cross[:, 1], len(vertices))
-        normals[:, 2] += np.bincount(faces[:, k], cross[:, 2], len(vertices))
-    return normals / np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-300)
 
 
 def fit_template(

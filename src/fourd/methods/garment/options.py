@@ -43,6 +43,11 @@ class Options:
     video_anchors : bool
         With multi-view video, track anchors by optical flow (:func:`fourd.appearance.anchors`,
         thesis 5.4.1) and pull the template along them; silent without video.
+    color_guide : bool
+        With coloured points, after each frame's fit a per-vertex Lucas-Kanade on the frame's
+        colours against the first frame's (:mod:`fourd.appearance.color_guide`) says where each
+        vertex went along the surface, and the fit runs again pulled there (as strongly as the
+        video's anchors); silent without colours.
     template_scale : float
         Without a photo: the first frame's template surface is meshed on a grid this many
         times coarser than the frames' surfaces (the fit's cost grows with its size).
@@ -65,6 +70,7 @@ class Options:
     boundary_weight: float = 4.0
     anchor_weight: float = 8.0
     video_anchors: bool = True
+    color_guide: bool = True
     template_scale: float = 2.5
     time_sigma: float = 0.0
     observed_distance: float = 2.0

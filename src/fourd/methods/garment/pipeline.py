@@ -29,13 +29,15 @@ from scipy.ndimage import gaussian_filter1d
 from scipy.spatial import cKDTree
 
 from fourd.animation import AnimatedMesh
-from fourd.appearance.guide import anchor_guide
+from fourd.appearance.color_guide import PhotometricGuides, colors_of_cleaned
+from fourd.appearance.guide import Guide, anchor_guide
 from fourd.cache import StageCache, report_resumed, stage_key
 from fourd.errors import InputError
 from fourd.geometry.boundary_loops import boundary_loops
 from fourd.geometry.frame_surface import SurfaceSettings, frame_surface
 from fourd.geometry.hole_filling import fill_holes
 from fourd.geometry.meshes import median_edge_length, remove_small_components
+from fourd.geometry.normals import vertex_normals
 from fourd.methods.garment.boundary_tracking import TrackingOptions, track_boundary
 from fourd.methods.garment.ellipse import as_batch, fit_ellipse, point_distances
 from fourd.methods.garment.fit import FitOptions, align_template, fit_template
@@ -48,6 +50,11 @@ log = logging.getLogger("fourd.methods.garment")
 
 #: The cache entries of the frames' surfaces.
 STAGE = "garment-surface"
+#: The colour guide's Lucas-Kanade patch radius and uncertainty scale, in template edges
+#: (``kinematic``'s ``color_radius`` and ``color_scale``), and the least summed weight, as a
+#: fraction of the vertices, for which a frame is fitted again (``kinematic``'s
+#: ``LATE_GUIDE_SUPPORT``).
+COLOR_RADIUS, COLOR_SCALE, LATE_GUIDE_SUPPORT = 3.0, 0.5, 0.01
 
 __all__ = ["reconstruct"]
 
@@ -134,6 +141,17 @@ def _place_photo_template(template, frame_ellipses):
     return best[1], best[2]
 
 
+def _color_guides(seq, meshes, template, faces, edge) -> PhotometricGuides:
+    """Per frame, the colour guide of the template lying on the first frame (its colours read
+    there once): each frame's surface vertices carry the colours of their nearest points."""
+    points = [vertices for vertices, _ in meshes]
+    normals = [vertex_normals(vertices, mesh_faces) for vertices, mesh_faces in meshes]
+    colors = [colors_of_cleaned(frame.points, frame.colors, vertices)
+              for frame, (vertices, _) in zip(seq.frames, meshes, strict=True)]
+    return PhotometricGuides(template, faces, range(len(meshes)), points, normals, colors,
+                             radius=COLOR_RADIUS * edge, scale=COLOR_SCALE * edge)
+
+
 def reconstruct(seq: PointCloudSequence, options: Options | None = None) -> AnimatedMesh:
     """The garment's animated mesh (see the module docstring)."""
     options = options or Options()
@@ -177,6 +195,7 @@ def reconstruct(seq: PointCloudSequence, options: Options | None = None) -> Anim
     vertices = np.empty((frames, len(rest), 3))
     observed = np.zeros((frames, len(rest)), dtype=bool)
     current = start
+    colours = None
     for t in progress(range(frames), desc="garment: fitting the template", unit="frame"):
         frame_vertices, frame_faces = meshes[t]
         pairs = []
@@ -195,6 +214,16 @@ def reconstruct(seq: PointCloudSequence, options: Options | None = None) -> Anim
             current = start
         current = fit_template(rest, faces, current, frame_vertices, frame_faces, openings=pairs, guide=guide,
                                options=FitOptions(**{**fit_options.__dict__, "iterations": iterations}))
+        if t == 0 and options.color_guide and all(f.colors is not None for f in seq.frames):
+            colours = _color_guides(seq, meshes, current, faces, edge)
+        if colours is not None and t > 0:
+            late = colours[t](current)
+            if late is not None and late.weight.sum() >= LATE_GUIDE_SUPPORT * len(current):
+                both = late if guide is None else Guide(np.r_[guide.vertices, late.vertices],
+                                                         np.r_[guide.positions, late.positions],
+                                                         np.r_[guide.weight, late.weight])
+                current = fit_template(rest, faces, current, frame_vertices, frame_faces, openings=pairs,
+                                       guide=both, options=fit_options)
         vertices[t] = current
         distance, _ = cKDTree(frame_vertices).query(current, workers=-1)
         observed[t] = distance <= options.observed_distance * median_edge_length(frame_vertices, frame_faces)

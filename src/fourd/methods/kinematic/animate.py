@@ -12,12 +12,12 @@ from collections.abc import Sequence
 import numpy as np
 
 from fourd.animation import AnimatedMesh
+from fourd.appearance.color_guide import PhotometricGuides
 from fourd.cache import NO_CACHE, Chain, StageCache, cached, report_resumed, stage_key
 from fourd.errors import InputError
 from fourd.geometry.meshes import median_edge_length
 from fourd.methods.kinematic.framesurface import FrameSurface
 from fourd.methods.kinematic.options import PROJECTION_LIMIT, SMOOTHED_PROJECTION_MIN, Options
-from fourd.methods.kinematic.photometric_guide import PhotometricGuides
 from fourd.methods.kinematic.projection import project_to_surface
 from fourd.methods.kinematic.register import RegisterOptions
 from fourd.methods.kinematic.sliding import SlideOptions, slide
@@ -93,7 +93,7 @@ def animate(
     colors : list of T arrays [P_k, 3] or None, optional
         Colours of ``points`` (None for a frame without): with ``options.color_guide``, the
         forward sliding's steps at input frames relax again pulled where the template's
-        colours say the vertices went (:mod:`.photometric_guide`).
+        colours say the vertices went (:mod:`fourd.appearance.color_guide`).
     cache : StageCache
         Where the urshape and every slid frame are kept as they finish (a rerun resumes
         after the last slid frame); needs ``field_key``.

@@ -149,7 +149,7 @@ class Options:
         :mod:`fourd.appearance.point_colors`), with or without video anchors: at every input
         frame, after the step, pull each vertex where the colours the template took from the
         first frame say it went (per-vertex Lucas-Kanade on the frame's coloured points,
-        :mod:`.photometric_guide`) with ``anchor_pull``, and relax again. Only the colours' hue
+        :mod:`fourd.appearance.color_guide`) with ``anchor_pull``, and relax again. Only the colours' hue
         counts (the lamps' shading moves with the lamps, not with the skin) and only where it
         stands out of the colour noise, so a uniform colour and smooth skin change little;
         silent without colours or video (benchmarks/METHODS.md).

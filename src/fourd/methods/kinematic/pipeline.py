@@ -10,6 +10,7 @@ import time as _time
 import numpy as np
 
 from fourd.animation import AnimatedMesh
+from fourd.appearance.color_guide import colors_of_cleaned
 from fourd.cache import StageCache
 from fourd.errors import InputError
 from fourd.geometry.neighbors import point_spacing
@@ -18,7 +19,6 @@ from fourd.methods.kinematic.field import fit_key, fit_windows, space_time_point
 from fourd.methods.kinematic.frames import prepare_frames
 from fourd.methods.kinematic.mpu4d import MPUOptions
 from fourd.methods.kinematic.options import MIN_FRAMES, Options
-from fourd.methods.kinematic.photometric_guide import colors_of_cleaned
 from fourd.sequence import Frame, PointCloudSequence
 
 log = logging.getLogger("fourd.methods.kinematic")

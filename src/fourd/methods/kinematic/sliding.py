@@ -314,7 +314,7 @@ def slide_step(
     registration and the projection).
 
     ``late_guide`` (optional): a function of positions [N, 3] that returns a Guide (the colour
-    guide, :mod:`.photometric_guide`), called on the step's result, after which the iterations
+    guide, :mod:`fourd.appearance.color_guide`), called on the step's result, after which the iterations
     run again from there, pulled towards it.
 
     Returns ``(positions [N, 3], constrained [N] bool, diagnostics)``.
@@ -548,7 +548,7 @@ def slide(
         vertices near them where they went (:func:`~.guide.anchor_guide`).
     colour_guides : sequence, optional
         Per time, a function of the step's result that returns a :class:`~.guide.Guide` (the
-        colour guide, :class:`~.photometric_guide.PhotometricGuides`), or None: the step then
+        colour guide, :class:`~fourd.appearance.color_guide.PhotometricGuides`), or None: the step then
         relaxes again pulled towards it (``late_guide`` of :func:`slide_step`).
 
     Returns

@@ -1,13 +1,14 @@
-"""Colour-guided sliding: where the template's colours say each vertex went, for coloured points.
+"""Colour guides: where a template's colours say each vertex went, for coloured points.
 
 Without video, the colours of the points play the role of the video's anchors (issue 52, part
 4: "a photometric term on the points (coloured ICP, Park, Zhou and Koltun, ICCV 2017)"). Each
 vertex of the template takes its colour from the first frame's points once; at every later
 input frame, after the step's rigid prediction, a per-vertex Lucas-Kanade on that frame's
 coloured points (:func:`fourd.appearance.photometric.photometric_shift`) moves each vertex
-along the surface to where its patch's colours match, and the step starts there and pulls
-towards it as it does towards the video's anchors (:mod:`fourd.appearance.guide`). The reference is the first
-frame, not the previous one, so what the colours correct does not accumulate.
+along the surface to where its patch's colours match; ``kinematic``'s sliding step and
+``garment``'s template fit pull towards it as they do towards the video's anchors
+(:mod:`fourd.appearance.guide`). The reference is the first frame, not the previous one, so
+what the colours correct does not accumulate.
 """
 
 from __future__ import annotations
@@ -25,7 +26,7 @@ from fourd.geometry.normals import vertex_normals
 
 __all__ = ["PhotometricGuides", "colors_of_cleaned"]
 
-log = logging.getLogger("fourd.methods.kinematic.photometric_guide")
+log = logging.getLogger("fourd.appearance.color_guide")
 
 #: The colour field of a frame keeps about this many of its points per template vertex (every
 #: ``P // (4 N)``-th point).
@@ -43,7 +44,8 @@ def colors_of_cleaned(raw_points, raw_colors, cleaned) -> np.ndarray | None:
 
 class PhotometricGuides(Sequence):
     """Per sliding time, a function ``start [N, 3] -> Guide`` (None where the time has no
-    coloured input frame), for :func:`~.sliding.slide`'s ``anchors``.
+    coloured input frame): ``kinematic``'s colour guide
+    (:func:`fourd.methods.kinematic.sliding.slide`), ``garment``'s too.
 
     Parameters
     ----------

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from fourd import synth
+from fourd.appearance.color_guide import PhotometricGuides, colors_of_cleaned
 from fourd.methods import kinematic
-from fourd.methods.kinematic.photometric_guide import PhotometricGuides, colors_of_cleaned
 from fourd.metrics import evaluate
 
 
