@@ -86,10 +86,16 @@ def gauss_newton(
     weights: Weights | None = None,
     match: MatchOptions | None = None,
     options: GaussNewtonOptions | None = None,
+    *,
+    free: np.ndarray | None = None,
 ) -> Optimization:
     """Minimise eq. (3) from ``state``; the data term's scale is ``topology.radius``
     (defaults: :class:`~.energy.Weights`, :class:`~.match.MatchOptions`,
-    :class:`GaussNewtonOptions`)."""
+    :class:`GaussNewtonOptions`).
+
+    ``free`` (bool [:attr:`~.state.Layout.size`], see :func:`free_unknowns`) restricts the
+    steps to those unknowns, the others held as boundary conditions (the assembly's
+    alignment of one frame and its hole filling of new surfels only, sec. 3.2); None: all."""
     weights = weights or Weights()
     match = match or MatchOptions()
     options = options or GaussNewtonOptions()
@@ -102,7 +108,9 @@ def gauss_newton(
         energies.append(current.value)
         if len(energies) > options.iterations:
             break
-        step, count = solve_step(current.hessian, current.gradient, layout(state), options)
+        step, count = solve_step(
+            current.hessian, current.gradient, layout(state), options, free=free
+        )
         cg_counts.append(count)
         accepted = None
         scale = 1.0
@@ -136,12 +144,21 @@ def gauss_newton(
 
 
 def solve_step(
-    hessian: sp.csr_matrix, gradient: np.ndarray, lay: Layout, options: GaussNewtonOptions
+    hessian: sp.csr_matrix,
+    gradient: np.ndarray,
+    lay: Layout,
+    options: GaussNewtonOptions,
+    *,
+    free: np.ndarray | None = None,
 ) -> tuple[np.ndarray, int]:
     """The damped Gauss-Newton step ``-(H + damping diag H)^-1 g`` [n] by preconditioned CG,
-    over the unknowns the energy depends on (the others stay 0), and the CG iteration count."""
+    over the unknowns the energy depends on (and, given ``free`` bool [n], only those; the
+    others stay 0), and the CG iteration count."""
     diagonal = hessian.diagonal()
-    free = np.flatnonzero(diagonal > 1e-300 * max(float(diagonal.max(initial=0.0)), 1e-300))
+    moving = diagonal > 1e-300 * max(float(diagonal.max(initial=0.0)), 1e-300)
+    if free is not None:
+        moving &= np.asarray(free, dtype=bool)
+    free = np.flatnonzero(moving)
     step = np.zeros(len(gradient))
     if not len(free):
         return step, 0
@@ -199,4 +216,22 @@ def _block_jacobi(system: sp.csr_matrix, free: np.ndarray, lay: Layout) -> sp.cs
     return sp.csr_matrix(
         (values[valid], (rows[valid], first[rows][valid] + column[valid])),
         shape=(len(free), len(free)),
+    )
+
+
+def free_unknowns(
+    lay: Layout, surfels: np.ndarray, rotations: np.ndarray | None = None
+) -> np.ndarray:
+    """The unknowns [:attr:`~.state.Layout.size`] a step may change: the position and normal
+    offset of every ``(frame, surfel)`` true in ``surfels`` bool [T, S], and the rotation
+    vectors true in ``rotations`` bool [T - 1, S] (default: those of surfels free in either
+    frame the rotation joins)."""
+    surfels = np.asarray(surfels, dtype=bool)
+    if surfels.shape != (lay.frames, lay.count):
+        raise ValueError(f"surfels must have shape [{lay.frames}, {lay.count}]")
+    if rotations is None:
+        rotations = surfels[:-1] | surfels[1:]
+    rotations = np.asarray(rotations, dtype=bool)
+    return np.concatenate(
+        [np.repeat(surfels.ravel(), 3), np.repeat(surfels.ravel(), 2), np.repeat(rotations.ravel(), 3)]
     )
