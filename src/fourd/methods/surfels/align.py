@@ -57,9 +57,7 @@ def align_ranges(
     p, n = left.state.positions[last], left.state.normals[last]
     state = surfel_state(np.stack([p, p]), np.stack([n, n]))
     target, target_normals = right.state.positions[0], right.state.normals[0]
-    data = frame_data(
-        [np.zeros((0, 3)), target], normals=[np.zeros((0, 3)), target_normals]
-    )
+    data = frame_data([np.zeros((0, 3)), target], normals=[np.zeros((0, 3)), target_normals])
     align_weights = Weights(
         match=data_weight, rigid=weights.rigid, rigid_normal=weights.rigid_normal
     )
@@ -79,5 +77,11 @@ def align_ranges(
     before = moved.positions[0, i] - moved.positions[0, j]
     after = moved.positions[1, i] - moved.positions[1, j]
     predicted = np.einsum("eab,eb->ea", moved.rotations[0, i], before)
-    stretch = float(np.mean(np.sum((predicted - after) ** 2, axis=1)) / max(np.mean(before**2) * 3, 1e-300)) if len(i) else 0.0
+    stretch = (
+        float(
+            np.mean(np.sum((predicted - after) ** 2, axis=1)) / max(np.mean(before**2) * 3, 1e-300)
+        )
+        if len(i)
+        else 0.0
+    )
     return Alignment(moved.positions[1], moved.normals[1], moved.rotations[0], stretch)

@@ -33,7 +33,7 @@ import numpy as np
 from fourd.methods.surfels.align import align_ranges
 from fourd.methods.surfels.energy import Weights
 from fourd.methods.surfels.fill import fill_holes
-from fourd.methods.surfels.match import frame_data
+from fourd.methods.surfels.match import MatchOptions, frame_data
 from fourd.methods.surfels.model import Model, observed_surfels
 from fourd.methods.surfels.motion import fit_rotations
 from fourd.methods.surfels.optimizer import GaussNewtonOptions, gauss_newton
@@ -57,6 +57,8 @@ class Schedule(NamedTuple):
         Stitching filter.
     optimize, fill : GaussNewtonOptions
         The global optimisation of a merged range and the local one of a filled frame.
+    match : MatchOptions
+        The data term's association outside the alignment (the ``"global"`` regime).
     """
 
     sampling: float
@@ -65,6 +67,7 @@ class Schedule(NamedTuple):
     max_stretch: float
     optimize: GaussNewtonOptions
     fill: GaussNewtonOptions
+    match: MatchOptions
 
 
 def range_data(frames: list, start: int, stop: int):
@@ -75,14 +78,25 @@ def range_data(frames: list, start: int, stop: int):
     )
 
 
-def optimize_model(model: Model, frames: list, weights: Weights, options: GaussNewtonOptions) -> Model:
+def optimize_model(
+    model: Model,
+    frames: list,
+    weights: Weights,
+    options: GaussNewtonOptions,
+    match: MatchOptions | None = None,
+) -> Model:
     """Global optimisation of all trajectories of ``model`` against its frames' data."""
     data = range_data(frames, model.start, model.stop)
-    result = gauss_newton(model.state, model.topology, data, weights, options=options)
+    result = gauss_newton(model.state, model.topology, data, weights, match, options)
     log.debug(
         "frames %d-%d, %d surfels: energy %.4g -> %.4g in %d steps (CG %s)",
-        model.start, model.stop - 1, model.state.count, result.energies[0], result.energies[-1],
-        len(result.cg_iterations), result.cg_iterations.tolist(),
+        model.start,
+        model.stop - 1,
+        model.state.count,
+        result.energies[0],
+        result.energies[-1],
+        len(result.cg_iterations),
+        result.cg_iterations.tolist(),
     )
     observed = observed_surfels(result.state, data, model.topology.radius)
     return Model(result.state, model.topology, model.start, observed)
@@ -92,7 +106,9 @@ def merge(left: Model, right: Model, frames: list, schedule: Schedule) -> Model:
     """Merge two adjacent ranges (``left.stop == right.start``) into one model over both
     (sec. 3.2: align, stitch, fill holes, resample, optimise)."""
     if left.stop != right.start:
-        raise ValueError(f"ranges must be adjacent, got {left.start}-{left.stop} and {right.start}-{right.stop}")
+        raise ValueError(
+            f"ranges must be adjacent, got {left.start}-{left.stop} and {right.start}-{right.stop}"
+        )
     aligned = align_ranges(
         left, right, schedule.weights, schedule.optimize, data_weight=schedule.align_data
     )
@@ -126,12 +142,15 @@ def merge(left: Model, right: Model, frames: list, schedule: Schedule) -> Model:
         frames[left.start : right.stop],
         schedule.weights,
         schedule.fill,
+        schedule.match,
     )
     # resampling: keep the surfels with data in the most frames
     observed = np.zeros((frames_count, count), dtype=bool)
     observed[:nl, :sl] = left.observed
     observed[nl:, sl:] = right.observed
-    drop = redundant_surfels(state.positions, 0.5 * schedule.sampling, priority=observed.sum(axis=0))
+    drop = redundant_surfels(
+        state.positions, 0.5 * schedule.sampling, priority=observed.sum(axis=0)
+    )
     keep = np.flatnonzero(~drop)
     topology = build_topology(
         state.positions[:, keep], radius, reference=nl, max_stretch=schedule.max_stretch
@@ -143,10 +162,15 @@ def merge(left: Model, right: Model, frames: list, schedule: Schedule) -> Model:
     )
     log.debug(
         "merged %d-%d: %d + %d surfels -> %d, %d edges",
-        left.start, right.stop - 1, sl, sr, len(keep), len(topology.edges),
+        left.start,
+        right.stop - 1,
+        sl,
+        sr,
+        len(keep),
+        len(topology.edges),
     )
     model = Model(resampled, topology, left.start, observed[:, keep])
-    return optimize_model(model, frames, schedule.weights, schedule.optimize)
+    return optimize_model(model, frames, schedule.weights, schedule.optimize, schedule.match)
 
 
 def assemble(models: list[Model], frames: list, schedule: Schedule, *, progress=None) -> Model:

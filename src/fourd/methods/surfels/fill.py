@@ -16,7 +16,7 @@ from __future__ import annotations
 import numpy as np
 
 from fourd.methods.surfels.energy import Weights
-from fourd.methods.surfels.match import frame_data
+from fourd.methods.surfels.match import MatchOptions, frame_data
 from fourd.methods.surfels.optimizer import GaussNewtonOptions, free_unknowns, gauss_newton
 from fourd.methods.surfels.state import SurfelState, layout
 from fourd.methods.surfels.topology import Topology
@@ -61,7 +61,9 @@ def predict(
             positions[target, done, axis] = (
                 np.bincount(a, guess[:, axis], minlength=len(pending))[done] / count[done]
             )
-            normals[target, done, axis] = np.bincount(a, normal[:, axis], minlength=len(pending))[done]
+            normals[target, done, axis] = np.bincount(a, normal[:, axis], minlength=len(pending))[
+                done
+            ]
         normals[target, done] /= np.maximum(
             np.linalg.norm(normals[target, done], axis=1, keepdims=True), 1e-300
         )
@@ -78,6 +80,7 @@ def fill_holes(
     frames: list,
     weights: Weights,
     options: GaussNewtonOptions,
+    match: MatchOptions | None = None,
 ) -> SurfelState:
     """Fill the unknown trajectory entries (``~known`` bool [T, S]) of ``state`` by region
     growing in time, forward then backward (sec. 3.2): per frame, predict the surfels known in
@@ -116,7 +119,8 @@ def fill_holes(
                 topology,
                 data,
                 weights,
-                options=options,
+                match,
+                options,
                 free=free_unknowns(layout(local), free, moving_rotation),
             )
             positions[t] = result.state.positions[at]

@@ -40,7 +40,9 @@ class Model:
     def __post_init__(self):
         shape = (self.state.frames, self.state.count)
         if self.observed.shape != shape:
-            raise ValueError(f"observed must have shape {list(shape)}, got {list(self.observed.shape)}")
+            raise ValueError(
+                f"observed must have shape {list(shape)}, got {list(self.observed.shape)}"
+            )
         if self.topology.count != self.state.count:
             raise ValueError("the topology must have one node per surfel")
 

@@ -102,14 +102,15 @@ def gauss_newton(
     energies = []
     cg_counts = []
     converged = False
+    columns = None if free is None else np.flatnonzero(free)
     for _ in range(options.iterations + 1):
         matches = associate(state, data, topology.radius, match)
-        current = total_energy(state, topology, data, matches, weights, match)
+        current = total_energy(state, topology, data, matches, weights, match, columns=columns)
         energies.append(current.value)
         if len(energies) > options.iterations:
             break
         step, count = solve_step(
-            current.hessian, current.gradient, layout(state), options, free=free
+            current.hessian, current.gradient, layout(state), options, columns=columns
         )
         cg_counts.append(count)
         accepted = None
@@ -150,19 +151,24 @@ def solve_step(
     options: GaussNewtonOptions,
     *,
     free: np.ndarray | None = None,
+    columns: np.ndarray | None = None,
 ) -> tuple[np.ndarray, int]:
     """The damped Gauss-Newton step ``-(H + damping diag H)^-1 g`` [n] by preconditioned CG,
     over the unknowns the energy depends on (and, given ``free`` bool [n], only those; the
-    others stay 0), and the CG iteration count."""
+    others stay 0), and the CG iteration count.
+
+    With ``columns`` (int [k], sorted), ``hessian`` [k, k] and ``gradient`` [k] are already
+    restricted to those unknowns of the layout (:func:`~.energy.total_energy` ``columns``)."""
     diagonal = hessian.diagonal()
     moving = diagonal > 1e-300 * max(float(diagonal.max(initial=0.0)), 1e-300)
     if free is not None:
         moving &= np.asarray(free, dtype=bool)
-    free = np.flatnonzero(moving)
-    step = np.zeros(len(gradient))
+    local = np.flatnonzero(moving)
+    free = local if columns is None else np.asarray(columns)[local]
+    step = np.zeros(lay.size)
     if not len(free):
         return step, 0
-    system = hessian[free][:, free] + sp.diags(options.damping * diagonal[free])
+    system = hessian[local][:, local] + sp.diags(options.damping * diagonal[local])
     if options.preconditioner == "block":
         preconditioner = _block_jacobi(system, free, lay)
     else:
@@ -174,7 +180,7 @@ def solve_step(
 
     solution, _ = cg(
         system,
-        -gradient[free],
+        -gradient[local],
         rtol=options.cg_tolerance,
         maxiter=options.cg_iterations,
         M=preconditioner,
@@ -233,5 +239,9 @@ def free_unknowns(
         rotations = surfels[:-1] | surfels[1:]
     rotations = np.asarray(rotations, dtype=bool)
     return np.concatenate(
-        [np.repeat(surfels.ravel(), 3), np.repeat(surfels.ravel(), 2), np.repeat(rotations.ravel(), 3)]
+        [
+            np.repeat(surfels.ravel(), 3),
+            np.repeat(surfels.ravel(), 2),
+            np.repeat(rotations.ravel(), 3),
+        ]
     )

@@ -15,6 +15,7 @@ from fourd.animation import AnimatedMesh
 from fourd.errors import InputError
 from fourd.geometry.neighbors import point_spacing
 from fourd.methods.surfels.assembly import Schedule, assemble, optimize_model
+from fourd.methods.surfels.match import MatchOptions
 from fourd.methods.surfels.meshing import MeshingOptions, surfel_mesh
 from fourd.methods.surfels.optimizer import GaussNewtonOptions
 from fourd.methods.surfels.options import MIN_FRAMES, Options, energy_weights
@@ -43,14 +44,20 @@ def reconstruct(seq: PointCloudSequence, options: Options | None = None) -> Anim
     if len(seq) < MIN_FRAMES:
         raise InputError(f"surfels needs at least {MIN_FRAMES} frames, got {len(seq)}")
     if not -len(seq) <= options.reference < len(seq):
-        raise InputError(f"reference {options.reference} is not a frame of the {len(seq)} input frames")
+        raise InputError(
+            f"reference {options.reference} is not a frame of the {len(seq)} input frames"
+        )
     started = _time.perf_counter()
     spacing = point_spacing(seq.frames[0].points)
     sampling = options.sampling * spacing
     noise = options.noise or spacing
     frames = [
         prepare_frame(
-            f.points, f.normals, f.sensors, spacing=spacing, max_ratio=options.tensor_ratio,
+            f.points,
+            f.normals,
+            f.sensors,
+            spacing=spacing,
+            max_ratio=options.tensor_ratio,
             k=options.normals_k,
         )
         for f in progress(seq.frames, desc="surfels: preprocessing")
@@ -69,8 +76,16 @@ def reconstruct(seq: PointCloudSequence, options: Options | None = None) -> Anim
         cg_tolerance=options.cg_tolerance,
         cg_iterations=options.cg_iterations,
     )
+    match = MatchOptions(tangential=options.tangential)
     seeds = [
-        seed_model(frame, index, sampling=sampling, weights=weights, gauss_newton_options=optimize)
+        seed_model(
+            frame,
+            index,
+            sampling=sampling,
+            weights=weights,
+            gauss_newton_options=optimize,
+            match=match,
+        )
         for index, frame in enumerate(progress(frames, desc="surfels: seed regions"))
     ]
     prepared = _time.perf_counter()
@@ -82,6 +97,7 @@ def reconstruct(seq: PointCloudSequence, options: Options | None = None) -> Anim
         max_stretch=options.max_stretch,
         optimize=optimize,
         fill=fill,
+        match=match,
     )
     with progress(total=len(seeds) - 1, desc="surfels: merging", unit="merge") as bar:
         model = assemble(seeds, frames, schedule, progress=bar.update)
@@ -93,7 +109,7 @@ def reconstruct(seq: PointCloudSequence, options: Options | None = None) -> Anim
     )
     if options.final_iterations:
         model = optimize_model(
-            model, frames, energy_weights(options, noise, sampling, final=True), final
+            model, frames, energy_weights(options, noise, sampling, final=True), final, match
         )
     optimized = _time.perf_counter()
     mesh = surfel_mesh(
@@ -109,7 +125,13 @@ def reconstruct(seq: PointCloudSequence, options: Options | None = None) -> Anim
     log.info(
         "surfels: %d frames, %d surfels, %d vertices in %.2f s (preprocessing and seeds %.2f, "
         "merging %.2f, final optimisation %.2f, meshing %.2f)",
-        len(seq), model.state.count, mesh.vertices.shape[1], _time.perf_counter() - started,
-        prepared - started, merged - prepared, optimized - merged, _time.perf_counter() - optimized,
+        len(seq),
+        model.state.count,
+        mesh.vertices.shape[1],
+        _time.perf_counter() - started,
+        prepared - started,
+        merged - prepared,
+        optimized - merged,
+        _time.perf_counter() - optimized,
     )
     return mesh

@@ -26,11 +26,13 @@ def redundant_surfels(
     count = positions.shape[1]
     pairs = cKDTree(positions[0]).query_pairs(radius, output_type="ndarray").reshape(-1, 2)
     if len(pairs):
-        far = np.linalg.norm(
-            positions[:, pairs[:, 0]] - positions[:, pairs[:, 1]], axis=-1
-        ).max(axis=0)
+        far = np.linalg.norm(positions[:, pairs[:, 0]] - positions[:, pairs[:, 1]], axis=-1).max(
+            axis=0
+        )
         pairs = pairs[far < radius]
-    order = np.arange(count) if priority is None else np.argsort(-np.asarray(priority), kind="stable")
+    order = (
+        np.arange(count) if priority is None else np.argsort(-np.asarray(priority), kind="stable")
+    )
     both = np.concatenate([pairs, pairs[:, ::-1]])
     both = both[np.argsort(both[:, 0], kind="stable")]
     starts = np.searchsorted(both[:, 0], np.arange(count + 1))

@@ -75,14 +75,17 @@ def seed_model(
     sampling: float,
     weights: Weights,
     gauss_newton_options: GaussNewtonOptions,
+    match: MatchOptions | None = None,
 ) -> Model:
     """The seed model of frame ``index``: surfels ``sampling`` (``eps_sampl``) apart on its
     points, edges within ``2 eps_sampl``, positions and normals optimised by the data and
-    smoothness terms only (the 3D part of eq. 3)."""
+    smoothness terms only (the 3D part of eq. 3), data associated by ``match``."""
     chosen = sample_surfels(frame.points, sampling)
     state = surfel_state(frame.points[chosen], frame.normals[chosen])
     topology = build_topology(state.positions, 2.0 * sampling, max_stretch=None)
     data = frame_data([frame.points], weight=1.0, normals=[frame.normals])
     spatial = replace(weights, rigid=0.0, rigid_normal=0.0, accel=0.0, accel_normal=0.0)
-    result = gauss_newton(state, topology, data, spatial, MatchOptions(), gauss_newton_options)
-    return Model(result.state, topology, index, observed_surfels(result.state, data, topology.radius))
+    result = gauss_newton(state, topology, data, spatial, match, gauss_newton_options)
+    return Model(
+        result.state, topology, index, observed_surfels(result.state, data, topology.radius)
+    )
