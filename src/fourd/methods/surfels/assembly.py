@@ -55,8 +55,9 @@ class Schedule(NamedTuple):
         Data weight per surfel in the alignment.
     max_stretch : float
         Stitching filter.
-    optimize, fill : GaussNewtonOptions
-        The global optimisation of a merged range and the local one of a filled frame.
+    align, optimize, fill : GaussNewtonOptions
+        The alignment, the global optimisation of a merged range and the local one of a filled
+        frame.
     match : MatchOptions
         The data term's association outside the alignment (the ``"global"`` regime).
     """
@@ -65,6 +66,7 @@ class Schedule(NamedTuple):
     weights: Weights
     align_data: float
     max_stretch: float
+    align: GaussNewtonOptions
     optimize: GaussNewtonOptions
     fill: GaussNewtonOptions
     match: MatchOptions
@@ -109,8 +111,14 @@ def merge(left: Model, right: Model, frames: list, schedule: Schedule) -> Model:
         raise ValueError(
             f"ranges must be adjacent, got {left.start}-{left.stop} and {right.start}-{right.stop}"
         )
+    first = frames[right.start]
     aligned = align_ranges(
-        left, right, schedule.weights, schedule.optimize, data_weight=schedule.align_data
+        left,
+        first.points,
+        first.normals,
+        schedule.weights,
+        schedule.align,
+        data_weight=schedule.align_data,
     )
     nl, nr = left.state.frames, right.state.frames
     sl, sr = left.state.count, right.state.count

@@ -38,11 +38,14 @@ class Options:
     smooth_normal : float
         ``w_smooth^(2)`` (eq. 7), relative to ``eps_sampl^2 / sigma^2``.
     tangential : float
-        Share ``beta`` of the point-to-surfel distance in the data term (:mod:`.match`): it
-        holds each surfel among its data; with the tangent-plane distance alone (0) the
-        surfels slide along the surface and open patches shrink (bending-arm frame 0: the
-        truth seen by the scan 0.040 from the nearest surfel on average at 0, 0.019 at 0.05,
-        0.018 before the optimisation).
+        Share ``beta`` of the point-to-surfel distance in the data term of the seed regions
+        (:mod:`.match`): it holds each surfel among its data; with the tangent-plane distance
+        alone (0) the surfels of one frame slide along the surface and open patches shrink
+        (bending-arm frame 0: the truth seen by the scan 0.040 from the nearest surfel on
+        average at 0, 0.019 at 0.05, 0.018 before the optimisation). Never in the alignment
+        (:mod:`.align`): there it pins each surfel to the data nearest where it starts.
+    linked_tangential : float
+        The same share in the hole filling and the global optimisations.
     laplace : float
         ``w_Laplace`` (eq. 8) as a fraction of ``smooth`` (paper: 10%).
     rigid : float
@@ -60,9 +63,10 @@ class Options:
     final_accel : float
         Factor on the acceleration weights in that final pass.
     align_data : float
-        Weight of the data term in the alignment of two frame ranges (the non-rigid ICP of sec.
-        3.2, the other range's surfels as data), relative to one data point; each surfel
-        stands for about ``(eps_sampl / s)^2`` points, so this multiplies that.
+        Weight of one data point in the alignment of two frame ranges (the non-rigid ICP of
+        sec. 3.2), relative.
+    align_iterations : int
+        Gauss-Newton steps of that alignment (each re-associates the data, as ICP does).
     max_stretch : float
         Stitching filter: an edge whose length changes over its trajectory by more than this
         factor is rejected (paper: 1.5).
@@ -98,6 +102,7 @@ class Options:
     smooth: float = 0.5
     smooth_normal: float = 0.01
     tangential: float = 0.05
+    linked_tangential: float = 0.05
     laplace: float = 0.1
     rigid: float = 1.0
     rigid_normal: float = 1.0
@@ -106,6 +111,7 @@ class Options:
     final_rigid: float = 4.0
     final_accel: float = 4.0
     align_data: float = 1.0
+    align_iterations: int = 12
     max_stretch: float = 1.5
     tensor_ratio: float = 0.8
     iterations: int = 4
@@ -140,7 +146,7 @@ class Options:
                 raise ValueError(f"{name} must not be negative, got {getattr(self, name)}")
         if not 0 < self.tensor_ratio <= 1 or not 0 < self.mesh_clip < 1:
             raise ValueError("need 0 < tensor_ratio <= 1 and 0 < mesh_clip < 1")
-        for name in ("iterations", "fill_iterations", "final_iterations", "cg_iterations"):
+        for name in ("iterations", "align_iterations", "fill_iterations", "final_iterations", "cg_iterations"):
             if getattr(self, name) < 0:
                 raise ValueError(f"{name} must not be negative")
         if self.normals_k < 3:

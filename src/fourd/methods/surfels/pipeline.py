@@ -76,7 +76,8 @@ def reconstruct(seq: PointCloudSequence, options: Options | None = None) -> Anim
         cg_tolerance=options.cg_tolerance,
         cg_iterations=options.cg_iterations,
     )
-    match = MatchOptions(tangential=options.tangential)
+    seed_match = MatchOptions(tangential=options.tangential)
+    match = MatchOptions(tangential=options.linked_tangential)
     seeds = [
         seed_model(
             frame,
@@ -84,16 +85,20 @@ def reconstruct(seq: PointCloudSequence, options: Options | None = None) -> Anim
             sampling=sampling,
             weights=weights,
             gauss_newton_options=optimize,
-            match=match,
+            match=seed_match,
         )
         for index, frame in enumerate(progress(frames, desc="surfels: seed regions"))
     ]
     prepared = _time.perf_counter()
-    per_surfel = (sampling / spacing) ** 2
     schedule = Schedule(
         sampling=sampling,
         weights=weights,
-        align_data=options.align_data * per_surfel / noise**2,
+        align_data=options.align_data / noise**2,
+        align=GaussNewtonOptions(
+            iterations=options.align_iterations,
+            cg_tolerance=options.cg_tolerance,
+            cg_iterations=options.cg_iterations,
+        ),
         max_stretch=options.max_stretch,
         optimize=optimize,
         fill=fill,
