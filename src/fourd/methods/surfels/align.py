@@ -24,6 +24,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from fourd.geometry.icp import rigid_icp
 from fourd.methods.surfels.energy import Weights
 from fourd.methods.surfels.match import MatchOptions, frame_data
 from fourd.methods.surfels.model import Model
@@ -56,14 +57,29 @@ def align_ranges(
     options: GaussNewtonOptions,
     *,
     data_weight: float,
+    rigid_start: bool = True,
 ) -> Alignment:
     """Align ``left``'s last frame to the data ``points`` [P, 3] (oriented ``normals``) of
     the frame after it, the right range's first (sec. 3.2): only the data term (weight
     ``data_weight`` per point, alignment regime, no tangential share) and the rigidity terms of
-    ``weights`` act; returns the moved left surfels."""
+    ``weights`` act; returns the moved left surfels.
+
+    With ``rigid_start`` the second frame starts from the left surfels moved by a rigid
+    point-to-plane ICP onto the points (:func:`fourd.geometry.icp.rigid_icp`) instead of
+    from a copy (the paper): the conjugate gradients of a step resolve the global, smooth
+    part of a motion slowest, so a non-rigid alignment from a copy stops short of it."""
     last = left.state.frames - 1
     p, n = left.state.positions[last], left.state.normals[last]
-    state = surfel_state(np.stack([p, p]), np.stack([n, n]))
+    if rigid_start:
+        fit = rigid_icp(p, points, normals, source_normals=n)
+        moved, turned = p @ fit.rotation.T + fit.translation, n @ fit.rotation.T
+        state = surfel_state(
+            np.stack([p, moved]),
+            np.stack([n, turned]),
+            np.broadcast_to(fit.rotation, (1, len(p), 3, 3)),
+        )
+    else:
+        state = surfel_state(np.stack([p, p]), np.stack([n, n]))
     data = frame_data([np.zeros((0, 3)), points], normals=[np.zeros((0, 3)), normals])
     align_weights = Weights(
         match=data_weight, rigid=weights.rigid, rigid_normal=weights.rigid_normal
