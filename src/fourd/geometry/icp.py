@@ -101,7 +101,8 @@ def rigid_icp(
     rotation, translation = np.eye(3), np.zeros(3)
     rms, done = 0.0, 0
     cosine = np.cos(np.radians(max_angle))
-    for done in range(1, iterations + 1):
+    for step in range(1, iterations + 1):
+        done = step
         moved = source @ rotation.T + translation
         distance, nearest = tree.query(moved, workers=-1)
         keep = distance <= np.percentile(distance, trim)

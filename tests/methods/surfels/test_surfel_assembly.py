@@ -112,10 +112,15 @@ def test_two_scans_of_a_still_surface_merge_into_one_surfel_set():
     rng = np.random.default_rng(3)
     noise = 0.004
 
+    def height(x, y):  # bumpy in both directions, so a rigid slide is not free
+        return 0.15 * np.sin(1.5 * x) * np.cos(1.2 * y)
+
     def scan():
-        uv = rng.uniform(-1, 1, (3000, 2))
-        points = np.c_[uv, 0.15 * np.sin(1.5 * uv[:, 0]) + rng.normal(scale=noise, size=3000)]
-        normals = np.c_[-0.225 * np.cos(1.5 * uv[:, 0]), np.zeros(3000), np.ones(3000)]
+        x, y = rng.uniform(-1, 1, (2, 3000))
+        points = np.c_[x, y, height(x, y) + rng.normal(scale=noise, size=3000)]
+        slope_x = 0.225 * np.cos(1.5 * x) * np.cos(1.2 * y)
+        slope_y = -0.18 * np.sin(1.5 * x) * np.sin(1.2 * y)
+        normals = np.c_[-slope_x, -slope_y, np.ones(3000)]
         return FramePoints(points, normals / np.linalg.norm(normals, axis=1, keepdims=True))
 
     frames = [scan(), scan()]
@@ -134,12 +139,12 @@ def test_two_scans_of_a_still_surface_merge_into_one_surfel_set():
     schedule = Schedule(sampling, weights, 1 / spacing**2, 1.5, quick, quick, quick, match)
     merged = merge(seeds[0], seeds[1], frames, schedule)
     assert merged.start == 0 and merged.state.frames == 2
-    # measured: 1.18 times a seed's count (both seeds kept: 2.0)
+    # measured: 1.14 times a seed's count (both seeds kept: 2.0)
     assert merged.state.count <= 1.4 * max(s.state.count for s in seeds)
-    # a still surface stays still (measured: median motion 0.014 eps_sampl), on the data
-    # (95th percentile off the surface 0.29 noise levels), observed (0.96)
+    # a still surface stays still (measured: median motion 0.055 eps_sampl, about the noise),
+    # on the data (95th percentile off the surface 0.31 noise levels), observed (0.96)
     motion = np.linalg.norm(merged.state.positions[1] - merged.state.positions[0], axis=1)
     assert np.median(motion) <= 0.1 * sampling
-    height = merged.state.positions[..., 2] - 0.15 * np.sin(1.5 * merged.state.positions[..., 0])
-    assert np.percentile(np.abs(height), 95) <= noise
+    p = merged.state.positions
+    assert np.percentile(np.abs(p[..., 2] - height(p[..., 0], p[..., 1])), 95) <= noise
     assert merged.observed.mean() > 0.9
