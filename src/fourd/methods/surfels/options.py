@@ -83,7 +83,9 @@ class Options:
     cg_tolerance : float
         Relative residual at which each step's conjugate gradients stop.
     cg_iterations : int
-        Most conjugate-gradient iterations per step.
+        Most conjugate-gradient iterations per step (an inexact Newton step: rigid-turn, 4
+        frames of 6 degrees at 128 rays, 200 -> 50 took 135 -> 71 s for correspondence
+        0.0035 / 0.0051 -> 0.0039 / 0.0058, mean / last; benchmarks/METHODS.md).
     mesh_sigma : float
         Meshing (sec. 3.3): Gaussian window in ``eps_sampl``.
     mesh_cell : float
@@ -118,7 +120,7 @@ class Options:
     fill_iterations: int = 2
     final_iterations: int = 4
     cg_tolerance: float = 1e-3
-    cg_iterations: int = 200
+    cg_iterations: int = 50
     mesh_sigma: float = 0.75
     mesh_cell: float = 0.5
     mesh_clip: float = 0.3
