@@ -148,7 +148,13 @@ class Options:
                 raise ValueError(f"{name} must not be negative, got {getattr(self, name)}")
         if not 0 < self.tensor_ratio <= 1 or not 0 < self.mesh_clip < 1:
             raise ValueError("need 0 < tensor_ratio <= 1 and 0 < mesh_clip < 1")
-        for name in ("iterations", "align_iterations", "fill_iterations", "final_iterations", "cg_iterations"):
+        for name in (
+            "iterations",
+            "align_iterations",
+            "fill_iterations",
+            "final_iterations",
+            "cg_iterations",
+        ):
             if getattr(self, name) < 0:
                 raise ValueError(f"{name} must not be negative")
         if self.normals_k < 3:
