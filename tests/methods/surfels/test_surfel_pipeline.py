@@ -71,3 +71,30 @@ def test_a_turning_blob_comes_out_on_its_scans_and_turning_with_them():
         # measured: 0.17-0.18 of the motion (0.07 / 0.14 eps_sampl at frames 1 / 2)
         assert error <= 0.3 * motion and error <= 0.25 * sampling
     assert anim.observed.mean() > 0.9
+
+
+@pytest.mark.slow
+def test_surface_seen_only_later_is_in_the_first_frame_not_observed_there():
+    rng = np.random.default_rng(4)
+
+    def sheet(count, x_max):
+        x = rng.uniform(-1, x_max, count)
+        y = rng.uniform(-0.6, 0.6, count)
+        z = 0.1 * np.sin(2 * x) * np.cos(2 * y) + rng.normal(scale=0.003, size=count)
+        return np.c_[x, y, z]
+
+    sensors = np.array([[0.0, 0.0, 3.0]])
+    frames = (
+        Frame(sheet(800, 0.0), time=0.0, sensors=sensors),  # the left half only
+        Frame(sheet(1600, 1.0), time=1.0, sensors=sensors),
+        Frame(sheet(1600, 1.0), time=2.0, sensors=sensors),
+    )
+    anim = reconstruct(PointCloudSequence(frames), method="surfels", **QUICK)
+    first = anim.vertices[0]
+    right = first[:, 0] > 0.3
+    # the right half, seen from frame 1 on, is in frame 0's mesh ...
+    assert right.sum() > 0.2 * len(first) and first[:, 0].max() > 0.8
+    # ... filled in there, observed where frame 0 had points
+    assert anim.observed[0, right].mean() < 0.1
+    assert anim.observed[0, first[:, 0] < -0.3].mean() > 0.9
+    assert anim.observed[1:, right].mean() > 0.9

@@ -193,34 +193,41 @@ def conjugate_gradients(
 ) -> tuple[np.ndarray, int]:
     """Preconditioned conjugate gradients for ``matrix x = rhs`` from ``x = 0``, stopping at
     ``|r| <= tolerance |rhs|`` or after ``iterations``; the solution and the iterations run.
-    A plain loop of sparse products and BLAS dots (scipy's ``cg`` spent 2.7 ms per iteration
-    on its own bookkeeping against 0.5 ms for the product on a merge of 1,300 surfels)."""
+    A plain loop of sparse products and ``einsum`` dots: scipy's ``cg`` spent 2.7 ms per
+    iteration on its own bookkeeping against 0.5 ms for the product on a merge of 1,300
+    surfels, and a threaded BLAS ``x @ x`` of 30,000 entries took 18 ms on the loaded 2-core
+    machine against 14 us for ``einsum``."""
     x = np.zeros_like(rhs)
     r = rhs.copy()
-    goal = tolerance * float(np.linalg.norm(rhs))
+    goal = tolerance * np.sqrt(_dot(rhs, rhs))
     if goal == 0.0:
         return x, 0
     z = preconditioner @ r
     p = z.copy()
-    rz = float(r @ z)
+    rz = _dot(r, z)
     done = 0
     while done < iterations:
         done += 1
         q = matrix @ p
-        curvature = float(p @ q)
+        curvature = _dot(p, q)
         if curvature <= 0.0:
             break
         alpha = rz / curvature
         x += alpha * p
         r -= alpha * q
-        if float(np.linalg.norm(r)) <= goal:
+        if np.sqrt(_dot(r, r)) <= goal:
             break
         z = preconditioner @ r
-        rz_next = float(r @ z)
+        rz_next = _dot(r, z)
         p *= rz_next / rz
         p += z
         rz = rz_next
     return x, done
+
+
+def _dot(a: np.ndarray, b: np.ndarray) -> float:
+    """``a . b`` without BLAS (see :func:`conjugate_gradients`)."""
+    return float(np.einsum("i,i->", a, b))
 
 
 def _block_jacobi(system: sp.csr_matrix, free: np.ndarray, lay: Layout) -> sp.csr_matrix:
