@@ -47,10 +47,9 @@ class Options:
     linked_tangential : float
         The same share in the hole filling and the global optimisations.
     laplace : float
-        ``w_Laplace`` (eq. 8) as a fraction of ``smooth`` (paper: 10%). Off by default: on
-        rigid-turn (4 frames of 6 degrees, 128 rays) 0.1 -> 0 gave Chamfer 0.0100 -> 0.0094,
-        completeness-95 0.110 -> 0.102, correspondence 0.0039 / 0.0058 -> 0.0035 / 0.0048 and
-        18% less time (the term couples neighbours' neighbours, a denser Hessian).
+        ``w_Laplace`` (eq. 8) as a fraction of ``smooth`` (paper: 10%). 0 was 18% faster
+        and a little better on rigid-turn at 128 rays, but at 64 rays (280 surfels a frame)
+        the correspondence error doubled (benchmarks/METHODS.md), so the paper's value stays.
     rigid : float
         ``w_rigid`` (eq. 9) during the merging, relative.
     rigid_normal : float
@@ -108,7 +107,7 @@ class Options:
     smooth_normal: float = 0.01
     tangential: float = 0.05
     linked_tangential: float = 0.05
-    laplace: float = 0.0
+    laplace: float = 0.1
     rigid: float = 1.0
     rigid_normal: float = 1.0
     accel: float = 0.1
