@@ -108,6 +108,7 @@ def test_free_unknowns_checks_its_shape():
         )
 
 
+@pytest.mark.slow
 def test_two_scans_of_a_still_surface_merge_into_one_surfel_set():
     rng = np.random.default_rng(3)
     noise = 0.004
