@@ -13,8 +13,7 @@ by a statistical model and assembled frame range by frame range (Wand et al. 200
    :mod:`.energy` (eq. 3);
 4. :mod:`.optimizer` -- the optimiser (sparse Gauss-Newton, preconditioned CG);
 5. :mod:`.meshing` -- the animated mesh (sec. 3.3): one frame's blended tangent planes
-   contoured with border clipping, carried to every frame by the surfels' Gaussian weights.
-
+   contoured with border clipping, carried to every frame by the surfels' Gaussian weights;
 6. :mod:`.seeds` -- preprocessing (outlier removal, tensor voting with
    :func:`fourd.geometry.tensor_voting.tensor_voting`, oriented normals) and one seed model
    per frame (sec. 3.2);
@@ -29,6 +28,13 @@ Not yet as in the paper: the alignment runs one way (left to right) instead of b
 keeping the one with less stretch; the urshape (a data-free frame tied to every frame by the
 rigidity prior) is not computed, the mesh is carried from one frame (``reference``) of the
 trajectories and that frame's mesh is the result's ``rest``.
+
+Beyond the paper (measured in benchmarks/METHODS.md): the alignment pulls towards the right
+frame's measured points (not its surfels) and starts from a rigid point-to-plane ICP
+(:func:`fourd.geometry.icp.rigid_icp`); a small tangential share of the point distance in the
+data term outside the alignment (``tangential``, ``linked_tangential``), which keeps open
+patches from shrinking. Slow: tens of seconds per frame at a standard scan, against the
+issue's 2 s target.
 
 References
 ----------
