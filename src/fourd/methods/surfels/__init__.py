@@ -19,14 +19,13 @@ by a statistical model and assembled frame range by frame range (Wand et al. 200
    per frame (sec. 3.2);
 7. :mod:`.model`, :mod:`.align`, :mod:`.fill`, :mod:`.resample`, :mod:`.assembly` -- the
    iterative model assembly (sec. 3.2): frame ranges merged in a binary scheme by alignment
-   (non-rigid ICP), stitching with the stretch filter, hole filling by region growing in time,
+   (non-rigid ICP both ways, the one with less stretch kept), stitching with the stretch filter, hole filling by region growing in time,
    greedy resampling and global optimisation, then a final global optimisation with
    increased rigidity and acceleration weights;
 8. :mod:`.pipeline` -- all of it, and the mesh of :mod:`.meshing`.
 
-Not yet as in the paper: the alignment runs one way (left to right) instead of both ways
-keeping the one with less stretch; the urshape (a data-free frame tied to every frame by the
-rigidity prior) is not computed, the mesh is carried from one frame (``reference``) of the
+Not yet as in the paper: the urshape (a data-free frame tied to every frame by the rigidity
+prior) is not computed, the mesh is carried from one frame (``reference``) of the
 trajectories and that frame's mesh is the result's ``rest``.
 
 Beyond the paper (measured in benchmarks/METHODS.md): the alignment pulls towards the right

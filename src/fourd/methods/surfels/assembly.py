@@ -1,10 +1,11 @@
 """Iterative model assembly (sec. 3.2): adjacent frame ranges merged in a binary scheme
 until one model spans every frame. One merge:
 
-1. *alignment* of the left range's last frame to the right range's first
-   (:func:`.align.align_ranges`);
+1. *alignment* of the left range's last frame to the right range's first and of the right's
+   first to the left's last (:func:`.align.align_ranges`); the one with less stretch is kept;
 2. *stitching*: the surfels of both ranges connected from scratch within ``eps_top`` in the
-   aligned frame;
+   aligned frame (the other range's surfels are then carried into it by the hole filling,
+   the paper's third alignment "along the established correspondences");
 3. *hole filling*: the left surfels grown forward through the right frames and the right ones
    backward through the left frames (:func:`.fill.fill_holes`);
 4. *resampling* to ``eps_sampl`` (:func:`.resample.redundant_surfels`) and the topology
@@ -12,10 +13,9 @@ until one model spans every frame. One merge:
    over the trajectories are rejected);
 5. *global optimisation* of all trajectories of the merged range with the full energy.
 
-Not (yet) done as in the paper: the alignment runs one way only (left to right; the paper
-runs both and keeps the one with less stretch), and the urshape (a data-free frame joined to
-every frame by the rigidity prior) is not computed; the mesh is carried from one frame of the
-trajectories instead.
+Not (yet) done as in the paper: the urshape (a data-free frame joined to every frame by the
+rigidity prior) is not computed; the mesh is carried from one frame of the trajectories
+instead.
 
 References
 ----------
@@ -111,8 +111,9 @@ def merge(left: Model, right: Model, frames: list, schedule: Schedule) -> Model:
         raise ValueError(
             f"ranges must be adjacent, got {left.start}-{left.stop} and {right.start}-{right.stop}"
         )
-    first = frames[right.start]
-    aligned = align_ranges(
+    # alignment both ways; the one with less stretch is kept (sec. 3.2)
+    first, last = frames[right.start], frames[left.stop - 1]
+    forward = align_ranges(
         left,
         first.points,
         first.normals,
@@ -120,6 +121,15 @@ def merge(left: Model, right: Model, frames: list, schedule: Schedule) -> Model:
         schedule.align,
         data_weight=schedule.align_data,
     )
+    backward = align_ranges(
+        _first_frame(right),
+        last.points,
+        last.normals,
+        schedule.weights,
+        schedule.align,
+        data_weight=schedule.align_data,
+    )
+    ahead = forward.stretch <= backward.stretch
     nl, nr = left.state.frames, right.state.frames
     sl, sr = left.state.count, right.state.count
     frames_count, count = nl + nr, sl + sr
@@ -129,20 +139,32 @@ def merge(left: Model, right: Model, frames: list, schedule: Schedule) -> Model:
     known = np.zeros((frames_count, count), dtype=bool)
     positions[:nl, :sl], normals[:nl, :sl] = left.state.positions, left.state.normals
     rotations[: nl - 1, :sl] = left.state.rotations
-    positions[nl, :sl], normals[nl, :sl] = aligned.positions, aligned.normals
-    rotations[nl - 1, :sl] = aligned.rotations
-    known[: nl + 1, :sl] = True
+    known[:nl, :sl] = True
     positions[nl:, sl:], normals[nl:, sl:] = right.state.positions, right.state.normals
     rotations[nl:, sl:] = right.state.rotations
     known[nl:, sl:] = True
+    if ahead:  # the left surfels carried into the right's first frame
+        positions[nl, :sl], normals[nl, :sl] = forward.positions, forward.normals
+        rotations[nl - 1, :sl] = forward.rotations
+        known[nl, :sl] = True
+    else:  # the right surfels carried back into the left's last frame
+        positions[nl - 1, sl:], normals[nl - 1, sl:] = backward.positions, backward.normals
+        rotations[nl - 1, sl:] = np.swapaxes(backward.rotations, -1, -2)
+        known[nl - 1, sl:] = True
+    log.debug("alignment stretch: forward %.3g, backward %.3g", forward.stretch, backward.stretch)
     # copies of the nearest known frame, so that nothing undefined enters an energy
-    for t in range(nl + 1, frames_count):
-        positions[t, :sl], normals[t, :sl] = positions[t - 1, :sl], normals[t - 1, :sl]
+    for t in range(nl, frames_count):
+        unknown = ~known[t, :sl]
+        positions[t, :sl][unknown] = positions[t - 1, :sl][unknown]
+        normals[t, :sl][unknown] = normals[t - 1, :sl][unknown]
     for t in range(nl - 1, -1, -1):
-        positions[t, sl:], normals[t, sl:] = positions[t + 1, sl:], normals[t + 1, sl:]
+        unknown = ~known[t, sl:]
+        positions[t, sl:][unknown] = positions[t + 1, sl:][unknown]
+        normals[t, sl:][unknown] = normals[t + 1, sl:][unknown]
     # stitching: from scratch within eps_top in the aligned frame
     radius = 2.0 * schedule.sampling
-    stitched = build_topology(positions, radius, reference=nl, max_stretch=None)
+    aligned_frame = nl if ahead else nl - 1
+    stitched = build_topology(positions, radius, reference=aligned_frame, max_stretch=None)
     state = fill_holes(
         SurfelState(positions, normals, rotations),
         known,
@@ -161,7 +183,10 @@ def merge(left: Model, right: Model, frames: list, schedule: Schedule) -> Model:
     )
     keep = np.flatnonzero(~drop)
     topology = build_topology(
-        state.positions[:, keep], radius, reference=nl, max_stretch=schedule.max_stretch
+        state.positions[:, keep],
+        radius,
+        reference=aligned_frame,
+        max_stretch=schedule.max_stretch,
     )
     resampled = SurfelState(
         state.positions[:, keep],
@@ -179,6 +204,17 @@ def merge(left: Model, right: Model, frames: list, schedule: Schedule) -> Model:
     )
     model = Model(resampled, topology, left.start, observed[:, keep])
     return optimize_model(model, frames, schedule.weights, schedule.optimize, schedule.match)
+
+
+def _first_frame(model: Model) -> Model:
+    """``model`` cut to its first frame (the right range, aligned backwards)."""
+    state = model.state
+    return Model(
+        SurfelState(state.positions[:1], state.normals[:1], state.rotations[:0]),
+        model.topology,
+        model.start,
+        model.observed[:1],
+    )
 
 
 def assemble(models: list[Model], frames: list, schedule: Schedule, *, progress=None) -> Model:
