@@ -99,3 +99,18 @@ def test_surface_seen_only_later_is_in_the_first_frame_not_observed_there():
     assert anim.observed[0, right].mean() < 0.1
     assert anim.observed[0, first[:, 0] < -0.3].mean() > 0.9
     assert anim.observed[1:, right].mean() > 0.9
+
+
+@pytest.mark.slow
+def test_a_rerun_with_a_cache_resumes_every_stage_and_gives_the_same_result(tmp_path, caplog):
+    truth = synth.scene("rigid-turn", frames=3, angle=12.0)
+    scans = synth.scan(truth, resolution=48)
+    options = dict(QUICK, cache_dir=str(tmp_path / "cache"))
+    first = reconstruct(scans, method="surfels", **options)
+    with caplog.at_level("INFO", logger="fourd.methods.surfels"):
+        again = reconstruct(scans, method="surfels", **options)
+    resumed = [r.getMessage() for r in caplog.records if r.getMessage().startswith("resumed")]
+    assert sum("preprocessing" in line for line in resumed) == 3
+    assert sum("merge" in line for line in resumed) == 2
+    assert np.array_equal(first.faces, again.faces)
+    assert np.allclose(first.vertices, again.vertices)

@@ -30,11 +30,12 @@ from typing import NamedTuple
 
 import numpy as np
 
+from fourd.cache import NO_CACHE, StageCache, cached, report_resumed, stage_key
 from fourd.methods.surfels.align import align_ranges
 from fourd.methods.surfels.energy import Weights
 from fourd.methods.surfels.fill import fill_holes
 from fourd.methods.surfels.match import MatchOptions, frame_data
-from fourd.methods.surfels.model import Model, observed_surfels
+from fourd.methods.surfels.model import Model, observed_surfels, pack_model, unpack_model
 from fourd.methods.surfels.motion import fit_rotations
 from fourd.methods.surfels.optimizer import GaussNewtonOptions, gauss_newton
 from fourd.methods.surfels.resample import redundant_surfels
@@ -217,18 +218,42 @@ def _first_frame(model: Model) -> Model:
     )
 
 
-def assemble(models: list[Model], frames: list, schedule: Schedule, *, progress=None) -> Model:
+def assemble(
+    models: list[Model],
+    frames: list,
+    schedule: Schedule,
+    *,
+    progress=None,
+    cache: StageCache = NO_CACHE,
+    keys: list[str] | None = None,
+) -> tuple[Model, str]:
     """Merge adjacent ``models`` (consecutive ranges, e.g. one seed model per frame) pairwise,
     level by level, until one spans them all (sec. 3.2 "Iteration"); ``progress`` is called
-    with the number of merges done after each."""
+    with the number of merges done after each. With a ``cache`` and one key per model, each
+    merged model is kept there under the hash of its two parts' keys and the schedule, so a
+    rerun resumes after the last finished merge. Returns the model and its key."""
     models = list(models)
+    keys = list(keys) if keys is not None else [""] * len(models)
     while len(models) > 1:
-        merged = []
+        merged, merged_keys = [], []
         for k in range(0, len(models) - 1, 2):
-            merged.append(merge(models[k], models[k + 1], frames, schedule))
+            key = stage_key(keys[k], keys[k + 1], schedule) if cache.enabled else ""
+            arrays, resumed = cached(
+                cache,
+                "surfels-merge",
+                key,
+                lambda a=models[k], b=models[k + 1]: pack_model(merge(a, b, frames, schedule)),
+            )
+            if resumed:
+                report_resumed(
+                    log, f"the merge of frames {models[k].start}-{models[k + 1].stop - 1}"
+                )
+            merged.append(unpack_model(arrays))
+            merged_keys.append(key)
             if progress is not None:
                 progress(1)
         if len(models) % 2:
             merged.append(models[-1])
-        models = merged
-    return models[0]
+            merged_keys.append(keys[-1])
+        models, keys = merged, merged_keys
+    return models[0], keys[0]

@@ -52,6 +52,26 @@ class Model:
         return self.start + self.state.frames
 
 
+def pack_model(model: Model) -> dict[str, np.ndarray]:
+    """``model`` as arrays for :mod:`fourd.cache`."""
+    return {
+        "positions": model.state.positions,
+        "normals": model.state.normals,
+        "rotations": model.state.rotations,
+        "edges": model.topology.edges,
+        "radius": np.array(model.topology.radius),
+        "start": np.array(model.start),
+        "observed": model.observed,
+    }
+
+
+def unpack_model(arrays: dict) -> Model:
+    """The :class:`Model` of :func:`pack_model`'s arrays."""
+    state = SurfelState(arrays["positions"], arrays["normals"], arrays["rotations"])
+    topology = Topology(arrays["edges"].astype(np.int64), state.count, float(arrays["radius"]))
+    return Model(state, topology, int(arrays["start"]), arrays["observed"].astype(bool))
+
+
 def observed_surfels(state: SurfelState, data: Data, radius: float) -> np.ndarray:
     """Surfels [T, S] that are the nearest surfel of some data point of their frame within
     ``radius`` (``eps_top``, the data term's global cutoff)."""

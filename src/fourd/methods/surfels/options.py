@@ -99,6 +99,10 @@ class Options:
         result's ``rest``).
     normals_k : int
         Neighbours for PCA normals when the input has none.
+    cache_dir : str or None
+        Folder where each preprocessed frame and each merged model are kept, keyed by the
+        input data and the options that act on them; a rerun resumes after the last finished
+        merge (``fourd reconstruct --cache``). None: nothing is kept.
     """
 
     sampling: float = 4.0
@@ -128,6 +132,7 @@ class Options:
     mesh_clip: float = 0.3
     reference: int = 0
     normals_k: int = 16
+    cache_dir: str | None = None
 
     def __post_init__(self):
         for name in ("sampling", "max_stretch", "mesh_sigma", "mesh_cell", "cg_tolerance"):

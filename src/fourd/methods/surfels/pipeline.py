@@ -12,6 +12,7 @@ import time as _time
 import numpy as np
 
 from fourd.animation import AnimatedMesh
+from fourd.cache import StageCache, cached, option_values, report_resumed, stage_key
 from fourd.errors import InputError
 from fourd.geometry.neighbors import point_spacing
 from fourd.methods.surfels.assembly import Schedule, assemble, optimize_model
@@ -19,7 +20,7 @@ from fourd.methods.surfels.match import MatchOptions
 from fourd.methods.surfels.meshing import MeshingOptions, surfel_mesh
 from fourd.methods.surfels.optimizer import GaussNewtonOptions
 from fourd.methods.surfels.options import MIN_FRAMES, Options, energy_weights
-from fourd.methods.surfels.seeds import prepare_frame, seed_model
+from fourd.methods.surfels.seeds import FramePoints, prepare_frame, seed_model
 from fourd.progress import progress
 from fourd.sequence import PointCloudSequence
 
@@ -48,20 +49,36 @@ def reconstruct(seq: PointCloudSequence, options: Options | None = None) -> Anim
             f"reference {options.reference} is not a frame of the {len(seq)} input frames"
         )
     started = _time.perf_counter()
+    cache = StageCache(options.cache_dir)
     spacing = point_spacing(seq.frames[0].points)
     sampling = options.sampling * spacing
     noise = options.noise or spacing
-    frames = [
-        prepare_frame(
-            f.points,
-            f.normals,
-            f.sensors,
-            spacing=spacing,
-            max_ratio=options.tensor_ratio,
-            k=options.normals_k,
+    frames, keys = [], []
+    for index, f in enumerate(progress(seq.frames, desc="surfels: preprocessing")):
+        key = (
+            stage_key(
+                f.points, f.normals, f.sensors, spacing, options.tensor_ratio, options.normals_k
+            )
+            if cache.enabled
+            else ""
         )
-        for f in progress(seq.frames, desc="surfels: preprocessing")
-    ]
+        arrays, resumed = cached(
+            cache,
+            "surfels-frame",
+            key,
+            lambda f=f: prepare_frame(
+                f.points,
+                f.normals,
+                f.sensors,
+                spacing=spacing,
+                max_ratio=options.tensor_ratio,
+                k=options.normals_k,
+            )._asdict(),
+        )
+        if resumed:
+            report_resumed(log, f"frame {index}'s preprocessing")
+        frames.append(FramePoints(arrays["points"], arrays["normals"]))
+        keys.append(key)
     for index, frame in enumerate(frames):
         if len(frame.points) < 10:
             raise InputError(f"frame {index} has no smooth surface region to start from")
@@ -104,8 +121,23 @@ def reconstruct(seq: PointCloudSequence, options: Options | None = None) -> Anim
         fill=fill,
         match=match,
     )
+    without = (
+        "mesh_sigma",
+        "mesh_cell",
+        "mesh_clip",
+        "reference",
+        "final_rigid",
+        "final_accel",
+        "final_iterations",
+    )
+    seed_keys = [
+        stage_key(key, option_values(options, without=without)) if cache.enabled else ""
+        for key in keys
+    ]
     with progress(total=len(seeds) - 1, desc="surfels: merging", unit="merge") as bar:
-        model = assemble(seeds, frames, schedule, progress=bar.update)
+        model, _ = assemble(
+            seeds, frames, schedule, progress=bar.update, cache=cache, keys=seed_keys
+        )
     merged = _time.perf_counter()
     final = GaussNewtonOptions(
         iterations=options.final_iterations,

@@ -12,7 +12,8 @@ section 3.2 (``001_3fedd1c3a0ac4198.txt``).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import replace
+from typing import NamedTuple
 
 import numpy as np
 
@@ -27,8 +28,7 @@ from fourd.methods.surfels.state import surfel_state
 from fourd.methods.surfels.topology import build_topology, sample_surfels
 
 
-@dataclass(frozen=True)
-class FramePoints:
+class FramePoints(NamedTuple):
     """One frame's data after preprocessing.
 
     points : float64 [P, 3]
