@@ -27,6 +27,7 @@ METHODS: dict[str, str] = {
     "auto": "fourd.methods.auto",
     "kinematic": "fourd.methods.kinematic",
     "flow": "fourd.methods.flow",
+    "surfels": "fourd.methods.surfels",
     "watertight": "fourd.methods.watertight",
     "learned": "fourd.methods.learned",
     "garment": "fourd.methods.garment",

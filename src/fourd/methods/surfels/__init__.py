@@ -1,8 +1,8 @@
-"""Method ``surfels`` (under construction, not registered): a graph of oriented particles
-that move over time, fitted to the data by a statistical model and assembled frame range by
-frame range.
+"""Method ``surfels``: a graph of oriented particles that move over time, fitted to the data
+by a statistical model and assembled frame range by frame range (Wand et al. 2007).
 
-Built so far (modules of this package):
+``fourd reconstruct FRAMES/ --method surfels``; :func:`reconstruct` (:mod:`.pipeline`) with
+:class:`Options` (:mod:`.options`). The modules:
 
 1. :mod:`.state` -- surfel positions, normals and local rotations over time; the tangent-plane
    and rotation-vector parameterisation of a step (eq. 11, 12);
@@ -13,11 +13,27 @@ Built so far (modules of this package):
    :mod:`.energy` (eq. 3);
 4. :mod:`.optimizer` -- the optimiser (sparse Gauss-Newton, preconditioned CG);
 5. :mod:`.meshing` -- the animated mesh (sec. 3.3): one frame's blended tangent planes
-   contoured with border clipping, carried to every frame by the surfels' Gaussian weights.
+   contoured with border clipping, carried to every frame by the surfels' Gaussian weights;
+6. :mod:`.seeds` -- preprocessing (outlier removal, tensor voting with
+   :func:`fourd.geometry.tensor_voting.tensor_voting`, oriented normals) and one seed model
+   per frame (sec. 3.2);
+7. :mod:`.model`, :mod:`.align`, :mod:`.fill`, :mod:`.resample`, :mod:`.assembly` -- the
+   iterative model assembly (sec. 3.2): frame ranges merged in a binary scheme by alignment
+   (non-rigid ICP both ways, the one with less stretch kept), stitching with the stretch filter, hole filling by region growing in time,
+   greedy resampling and global optimisation, then a final global optimisation with
+   increased rigidity and acceleration weights;
+8. :mod:`.pipeline` -- all of it, and the mesh of :mod:`.meshing`.
 
-Seed regions come from :func:`fourd.geometry.tensor_voting.tensor_voting`. Still to come: the
-iterative model assembly (alignment, stitching, hole filling, resampling, urshape),
-``Options`` with defaults and ``reconstruct``.
+Not yet as in the paper: the urshape (a data-free frame tied to every frame by the rigidity
+prior) is not computed, the mesh is carried from one frame (``reference``) of the
+trajectories and that frame's mesh is the result's ``rest``.
+
+Beyond the paper (measured in benchmarks/METHODS.md): the alignment pulls towards the right
+frame's measured points (not its surfels) and starts from a rigid point-to-plane ICP
+(:func:`fourd.geometry.icp.rigid_icp`); a small tangential share of the point distance in the
+data term outside the alignment (``tangential``, ``linked_tangential``), which keeps open
+patches from shrinking. Slow: tens of seconds per frame at a standard scan, against the
+issue's 2 s target.
 
 References
 ----------
@@ -48,9 +64,12 @@ from fourd.methods.surfels.motion import accel_term, fit_rotations, rigid_term
 from fourd.methods.surfels.optimizer import (
     GaussNewtonOptions,
     Optimization,
+    free_unknowns,
     gauss_newton,
     solve_step,
 )
+from fourd.methods.surfels.options import COMMON_OPTIONS, MIN_FRAMES, RESULT, Options
+from fourd.methods.surfels.pipeline import reconstruct
 from fourd.methods.surfels.smoothness import laplace_term, smooth_normal_term, smooth_position_term
 from fourd.methods.surfels.state import (
     Layout,
@@ -71,6 +90,12 @@ from fourd.methods.surfels.topology import (
 )
 
 __all__ = [
+    "COMMON_OPTIONS",
+    "MIN_FRAMES",
+    "Options",
+    "RESULT",
+    "reconstruct",
+    "free_unknowns",
     "Binding",
     "Data",
     "Energy",

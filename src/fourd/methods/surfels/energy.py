@@ -77,9 +77,14 @@ def total_energy(
     match: MatchOptions | None = None,
     *,
     derivatives: bool = True,
+    columns: np.ndarray | None = None,
 ) -> Energy:
     """Eq. (3) with the association ``matches`` held fixed (default weights and options:
-    :class:`Weights`, :class:`~.match.MatchOptions`)."""
+    :class:`Weights`, :class:`~.match.MatchOptions`).
+
+    ``columns`` (int [k], sorted unknowns of the layout) restricts the gradient [k] and
+    Hessian [k, k] to those unknowns (the others held fixed): the Jacobians lose the other
+    columns before ``J^T J`` is formed, which is what makes a local optimisation cheap."""
     w = weights or Weights()
     match = match or MatchOptions()
     d = derivatives
@@ -103,9 +108,16 @@ def total_energy(
     if not derivatives:
         return Energy(total, values, None, None)
     size = layout(state).size
+    if columns is not None:
+        columns = np.asarray(columns, dtype=np.int64)
+        select = sp.csr_matrix(
+            (np.ones(len(columns)), (columns, np.arange(len(columns)))), shape=(size, len(columns))
+        )
+        size = len(columns)
     gradient = np.zeros(size)
     hessian = sp.csr_matrix((size, size))
     for part in parts.values():
-        gradient += part.gradient
-        hessian = hessian + part.hessian
+        jacobian = part.jacobian if columns is None else (part.jacobian @ select).tocsr()
+        gradient += 2.0 * (jacobian.T @ part.residuals)
+        hessian = hessian + 2.0 * (jacobian.T @ jacobian)
     return Energy(total, values, gradient, hessian.tocsr())

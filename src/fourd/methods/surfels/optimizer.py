@@ -16,7 +16,6 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.sparse.linalg import cg
 
 from fourd.methods.surfels.energy import Weights, total_energy
 from fourd.methods.surfels.match import Data, MatchOptions, associate
@@ -86,23 +85,32 @@ def gauss_newton(
     weights: Weights | None = None,
     match: MatchOptions | None = None,
     options: GaussNewtonOptions | None = None,
+    *,
+    free: np.ndarray | None = None,
 ) -> Optimization:
     """Minimise eq. (3) from ``state``; the data term's scale is ``topology.radius``
     (defaults: :class:`~.energy.Weights`, :class:`~.match.MatchOptions`,
-    :class:`GaussNewtonOptions`)."""
+    :class:`GaussNewtonOptions`).
+
+    ``free`` (bool [:attr:`~.state.Layout.size`], see :func:`free_unknowns`) restricts the
+    steps to those unknowns, the others held as boundary conditions (the assembly's
+    alignment of one frame and its hole filling of new surfels only, sec. 3.2); None: all."""
     weights = weights or Weights()
     match = match or MatchOptions()
     options = options or GaussNewtonOptions()
     energies = []
     cg_counts = []
     converged = False
+    columns = None if free is None else np.flatnonzero(free)
     for _ in range(options.iterations + 1):
         matches = associate(state, data, topology.radius, match)
-        current = total_energy(state, topology, data, matches, weights, match)
+        current = total_energy(state, topology, data, matches, weights, match, columns=columns)
         energies.append(current.value)
         if len(energies) > options.iterations:
             break
-        step, count = solve_step(current.hessian, current.gradient, layout(state), options)
+        step, count = solve_step(
+            current.hessian, current.gradient, layout(state), options, columns=columns
+        )
         cg_counts.append(count)
         accepted = None
         scale = 1.0
@@ -136,35 +144,90 @@ def gauss_newton(
 
 
 def solve_step(
-    hessian: sp.csr_matrix, gradient: np.ndarray, lay: Layout, options: GaussNewtonOptions
+    hessian: sp.csr_matrix,
+    gradient: np.ndarray,
+    lay: Layout,
+    options: GaussNewtonOptions,
+    *,
+    free: np.ndarray | None = None,
+    columns: np.ndarray | None = None,
 ) -> tuple[np.ndarray, int]:
     """The damped Gauss-Newton step ``-(H + damping diag H)^-1 g`` [n] by preconditioned CG,
-    over the unknowns the energy depends on (the others stay 0), and the CG iteration count."""
+    over the unknowns the energy depends on (and, given ``free`` bool [n], only those; the
+    others stay 0), and the CG iteration count.
+
+    With ``columns`` (int [k], sorted), ``hessian`` [k, k] and ``gradient`` [k] are already
+    restricted to those unknowns of the layout (:func:`~.energy.total_energy` ``columns``)."""
     diagonal = hessian.diagonal()
-    free = np.flatnonzero(diagonal > 1e-300 * max(float(diagonal.max(initial=0.0)), 1e-300))
-    step = np.zeros(len(gradient))
+    moving = diagonal > 1e-300 * max(float(diagonal.max(initial=0.0)), 1e-300)
+    if free is not None:
+        moving &= np.asarray(free, dtype=bool)
+    local = np.flatnonzero(moving)
+    free = local if columns is None else np.asarray(columns)[local]
+    step = np.zeros(lay.size)
     if not len(free):
         return step, 0
-    system = hessian[free][:, free] + sp.diags(options.damping * diagonal[free])
+    system = hessian[local][:, local] + sp.diags(options.damping * diagonal[local])
     if options.preconditioner == "block":
         preconditioner = _block_jacobi(system, free, lay)
     else:
         preconditioner = sp.diags(1.0 / system.diagonal())
-    count = [0]
-
-    def tally(_):
-        count[0] += 1
-
-    solution, _ = cg(
-        system,
-        -gradient[free],
-        rtol=options.cg_tolerance,
-        maxiter=options.cg_iterations,
-        M=preconditioner,
-        callback=tally,
+    solution, count = conjugate_gradients(
+        system.tocsr(),
+        -gradient[local],
+        preconditioner.tocsr(),
+        tolerance=options.cg_tolerance,
+        iterations=options.cg_iterations,
     )
     step[free] = solution
-    return step, count[0]
+    return step, count
+
+
+def conjugate_gradients(
+    matrix: sp.csr_matrix,
+    rhs: np.ndarray,
+    preconditioner: sp.csr_matrix,
+    *,
+    tolerance: float,
+    iterations: int,
+) -> tuple[np.ndarray, int]:
+    """Preconditioned conjugate gradients for ``matrix x = rhs`` from ``x = 0``, stopping at
+    ``|r| <= tolerance |rhs|`` or after ``iterations``; the solution and the iterations run.
+    A plain loop of sparse products and ``einsum`` dots: scipy's ``cg`` spent 2.7 ms per
+    iteration on its own bookkeeping against 0.5 ms for the product on a merge of 1,300
+    surfels, and a threaded BLAS ``x @ x`` of 30,000 entries took 18 ms on the loaded 2-core
+    machine against 14 us for ``einsum``."""
+    x = np.zeros_like(rhs)
+    r = rhs.copy()
+    goal = tolerance * np.sqrt(_dot(rhs, rhs))
+    if goal == 0.0:
+        return x, 0
+    z = preconditioner @ r
+    p = z.copy()
+    rz = _dot(r, z)
+    done = 0
+    while done < iterations:
+        done += 1
+        q = matrix @ p
+        curvature = _dot(p, q)
+        if curvature <= 0.0:
+            break
+        alpha = rz / curvature
+        x += alpha * p
+        r -= alpha * q
+        if np.sqrt(_dot(r, r)) <= goal:
+            break
+        z = preconditioner @ r
+        rz_next = _dot(r, z)
+        p *= rz_next / rz
+        p += z
+        rz = rz_next
+    return x, done
+
+
+def _dot(a: np.ndarray, b: np.ndarray) -> float:
+    """``a . b`` without BLAS (see :func:`conjugate_gradients`)."""
+    return float(np.einsum("i,i->", a, b))
 
 
 def _block_jacobi(system: sp.csr_matrix, free: np.ndarray, lay: Layout) -> sp.csr_matrix:
@@ -199,4 +262,26 @@ def _block_jacobi(system: sp.csr_matrix, free: np.ndarray, lay: Layout) -> sp.cs
     return sp.csr_matrix(
         (values[valid], (rows[valid], first[rows][valid] + column[valid])),
         shape=(len(free), len(free)),
+    )
+
+
+def free_unknowns(
+    lay: Layout, surfels: np.ndarray, rotations: np.ndarray | None = None
+) -> np.ndarray:
+    """The unknowns [:attr:`~.state.Layout.size`] a step may change: the position and normal
+    offset of every ``(frame, surfel)`` true in ``surfels`` bool [T, S], and the rotation
+    vectors true in ``rotations`` bool [T - 1, S] (default: those of surfels free in either
+    frame the rotation joins)."""
+    surfels = np.asarray(surfels, dtype=bool)
+    if surfels.shape != (lay.frames, lay.count):
+        raise ValueError(f"surfels must have shape [{lay.frames}, {lay.count}]")
+    if rotations is None:
+        rotations = surfels[:-1] | surfels[1:]
+    rotations = np.asarray(rotations, dtype=bool)
+    return np.concatenate(
+        [
+            np.repeat(surfels.ravel(), 3),
+            np.repeat(surfels.ravel(), 2),
+            np.repeat(rotations.ravel(), 3),
+        ]
     )

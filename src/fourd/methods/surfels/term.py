@@ -76,4 +76,8 @@ def term(residuals: np.ndarray, blocks: Blocks | None, constant: float = 0.0) ->
     """The :class:`Term` of ``residuals`` [R] (any shape, flattened in C order) with the
     Jacobian in ``blocks`` (None: value only); ``constant`` adds to the value."""
     r = np.ascontiguousarray(residuals, dtype=np.float64).ravel()
-    return Term(float(r @ r) + float(constant), r, None if blocks is None else blocks.matrix())
+    return Term(
+        float(np.einsum("i,i->", r, r)) + float(constant),
+        r,
+        None if blocks is None else blocks.matrix(),
+    )

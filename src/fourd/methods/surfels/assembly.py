@@ -1,0 +1,259 @@
+"""Iterative model assembly (sec. 3.2): adjacent frame ranges merged in a binary scheme
+until one model spans every frame. One merge:
+
+1. *alignment* of the left range's last frame to the right range's first and of the right's
+   first to the left's last (:func:`.align.align_ranges`); the one with less stretch is kept;
+2. *stitching*: the surfels of both ranges connected from scratch within ``eps_top`` in the
+   aligned frame (the other range's surfels are then carried into it by the hole filling,
+   the paper's third alignment "along the established correspondences");
+3. *hole filling*: the left surfels grown forward through the right frames and the right ones
+   backward through the left frames (:func:`.fill.fill_holes`);
+4. *resampling* to ``eps_sampl`` (:func:`.resample.redundant_surfels`) and the topology
+   rebuilt with the stretch filter (edges whose length changes by more than ``max_stretch``
+   over the trajectories are rejected);
+5. *global optimisation* of all trajectories of the merged range with the full energy.
+
+Not (yet) done as in the paper: the urshape (a data-free frame joined to every frame by the
+rigidity prior) is not computed; the mesh is carried from one frame of the trajectories
+instead.
+
+References
+----------
+Wand et al.: Reconstruction of deforming geometry from time-varying point clouds, SGP 2007,
+section 3.2 (``001_3fedd1c3a0ac4198.txt``).
+"""
+
+from __future__ import annotations
+
+import logging
+from typing import NamedTuple
+
+import numpy as np
+
+from fourd.cache import NO_CACHE, StageCache, cached, report_resumed, stage_key
+from fourd.methods.surfels.align import align_ranges
+from fourd.methods.surfels.energy import Weights
+from fourd.methods.surfels.fill import fill_holes
+from fourd.methods.surfels.match import MatchOptions, frame_data
+from fourd.methods.surfels.model import Model, observed_surfels, pack_model, unpack_model
+from fourd.methods.surfels.motion import fit_rotations
+from fourd.methods.surfels.optimizer import GaussNewtonOptions, gauss_newton
+from fourd.methods.surfels.resample import redundant_surfels
+from fourd.methods.surfels.state import SurfelState
+from fourd.methods.surfels.topology import build_topology
+
+log = logging.getLogger("fourd.methods.surfels.assembly")
+
+
+class Schedule(NamedTuple):
+    """What each stage of a merge runs with.
+
+    sampling : float
+        ``eps_sampl`` (input units).
+    weights : Weights
+        Eq. (3) during the merging.
+    align_data : float
+        Data weight per surfel in the alignment.
+    max_stretch : float
+        Stitching filter.
+    align, optimize, fill : GaussNewtonOptions
+        The alignment, the global optimisation of a merged range and the local one of a filled
+        frame.
+    match : MatchOptions
+        The data term's association outside the alignment (the ``"global"`` regime).
+    """
+
+    sampling: float
+    weights: Weights
+    align_data: float
+    max_stretch: float
+    align: GaussNewtonOptions
+    optimize: GaussNewtonOptions
+    fill: GaussNewtonOptions
+    match: MatchOptions
+
+
+def range_data(frames: list, start: int, stop: int):
+    """:class:`~.match.Data` of frames ``start .. stop - 1`` (indices relative to ``start``)."""
+    return frame_data(
+        [frames[t].points for t in range(start, stop)],
+        normals=[frames[t].normals for t in range(start, stop)],
+    )
+
+
+def optimize_model(
+    model: Model,
+    frames: list,
+    weights: Weights,
+    options: GaussNewtonOptions,
+    match: MatchOptions | None = None,
+) -> Model:
+    """Global optimisation of all trajectories of ``model`` against its frames' data."""
+    data = range_data(frames, model.start, model.stop)
+    result = gauss_newton(model.state, model.topology, data, weights, match, options)
+    log.debug(
+        "frames %d-%d, %d surfels: energy %.4g -> %.4g in %d steps (CG %s)",
+        model.start,
+        model.stop - 1,
+        model.state.count,
+        result.energies[0],
+        result.energies[-1],
+        len(result.cg_iterations),
+        result.cg_iterations.tolist(),
+    )
+    observed = observed_surfels(result.state, data, model.topology.radius)
+    return Model(result.state, model.topology, model.start, observed)
+
+
+def merge(left: Model, right: Model, frames: list, schedule: Schedule) -> Model:
+    """Merge two adjacent ranges (``left.stop == right.start``) into one model over both
+    (sec. 3.2: align, stitch, fill holes, resample, optimise)."""
+    if left.stop != right.start:
+        raise ValueError(
+            f"ranges must be adjacent, got {left.start}-{left.stop} and {right.start}-{right.stop}"
+        )
+    # alignment both ways; the one with less stretch is kept (sec. 3.2)
+    first, last = frames[right.start], frames[left.stop - 1]
+    forward = align_ranges(
+        left,
+        first.points,
+        first.normals,
+        schedule.weights,
+        schedule.align,
+        data_weight=schedule.align_data,
+    )
+    backward = align_ranges(
+        _first_frame(right),
+        last.points,
+        last.normals,
+        schedule.weights,
+        schedule.align,
+        data_weight=schedule.align_data,
+    )
+    ahead = forward.stretch <= backward.stretch
+    nl, nr = left.state.frames, right.state.frames
+    sl, sr = left.state.count, right.state.count
+    frames_count, count = nl + nr, sl + sr
+    positions = np.zeros((frames_count, count, 3))
+    normals = np.zeros((frames_count, count, 3))
+    rotations = np.broadcast_to(np.eye(3), (frames_count - 1, count, 3, 3)).copy()
+    known = np.zeros((frames_count, count), dtype=bool)
+    positions[:nl, :sl], normals[:nl, :sl] = left.state.positions, left.state.normals
+    rotations[: nl - 1, :sl] = left.state.rotations
+    known[:nl, :sl] = True
+    positions[nl:, sl:], normals[nl:, sl:] = right.state.positions, right.state.normals
+    rotations[nl:, sl:] = right.state.rotations
+    known[nl:, sl:] = True
+    if ahead:  # the left surfels carried into the right's first frame
+        positions[nl, :sl], normals[nl, :sl] = forward.positions, forward.normals
+        rotations[nl - 1, :sl] = forward.rotations
+        known[nl, :sl] = True
+    else:  # the right surfels carried back into the left's last frame
+        positions[nl - 1, sl:], normals[nl - 1, sl:] = backward.positions, backward.normals
+        rotations[nl - 1, sl:] = np.swapaxes(backward.rotations, -1, -2)
+        known[nl - 1, sl:] = True
+    log.debug("alignment stretch: forward %.3g, backward %.3g", forward.stretch, backward.stretch)
+    # copies of the nearest known frame, so that nothing undefined enters an energy
+    for t in range(nl, frames_count):
+        unknown = ~known[t, :sl]
+        positions[t, :sl][unknown] = positions[t - 1, :sl][unknown]
+        normals[t, :sl][unknown] = normals[t - 1, :sl][unknown]
+    for t in range(nl - 1, -1, -1):
+        unknown = ~known[t, sl:]
+        positions[t, sl:][unknown] = positions[t + 1, sl:][unknown]
+        normals[t, sl:][unknown] = normals[t + 1, sl:][unknown]
+    # stitching: from scratch within eps_top in the aligned frame
+    radius = 2.0 * schedule.sampling
+    aligned_frame = nl if ahead else nl - 1
+    stitched = build_topology(positions, radius, reference=aligned_frame, max_stretch=None)
+    state = fill_holes(
+        SurfelState(positions, normals, rotations),
+        known,
+        stitched,
+        frames[left.start : right.stop],
+        schedule.weights,
+        schedule.fill,
+        schedule.match,
+    )
+    # resampling: keep the surfels with data in the most frames
+    observed = np.zeros((frames_count, count), dtype=bool)
+    observed[:nl, :sl] = left.observed
+    observed[nl:, sl:] = right.observed
+    drop = redundant_surfels(
+        state.positions, 0.5 * schedule.sampling, priority=observed.sum(axis=0)
+    )
+    keep = np.flatnonzero(~drop)
+    topology = build_topology(
+        state.positions[:, keep],
+        radius,
+        reference=aligned_frame,
+        max_stretch=schedule.max_stretch,
+    )
+    resampled = SurfelState(
+        state.positions[:, keep],
+        state.normals[:, keep],
+        fit_rotations(state.positions[:, keep], topology),
+    )
+    log.debug(
+        "merged %d-%d: %d + %d surfels -> %d, %d edges",
+        left.start,
+        right.stop - 1,
+        sl,
+        sr,
+        len(keep),
+        len(topology.edges),
+    )
+    model = Model(resampled, topology, left.start, observed[:, keep])
+    return optimize_model(model, frames, schedule.weights, schedule.optimize, schedule.match)
+
+
+def _first_frame(model: Model) -> Model:
+    """``model`` cut to its first frame (the right range, aligned backwards)."""
+    state = model.state
+    return Model(
+        SurfelState(state.positions[:1], state.normals[:1], state.rotations[:0]),
+        model.topology,
+        model.start,
+        model.observed[:1],
+    )
+
+
+def assemble(
+    models: list[Model],
+    frames: list,
+    schedule: Schedule,
+    *,
+    progress=None,
+    cache: StageCache = NO_CACHE,
+    keys: list[str] | None = None,
+) -> tuple[Model, str]:
+    """Merge adjacent ``models`` (consecutive ranges, e.g. one seed model per frame) pairwise,
+    level by level, until one spans them all (sec. 3.2 "Iteration"); ``progress`` is called
+    with the number of merges done after each. With a ``cache`` and one key per model, each
+    merged model is kept there under the hash of its two parts' keys and the schedule, so a
+    rerun resumes after the last finished merge. Returns the model and its key."""
+    models = list(models)
+    keys = list(keys) if keys is not None else [""] * len(models)
+    while len(models) > 1:
+        merged, merged_keys = [], []
+        for k in range(0, len(models) - 1, 2):
+            key = stage_key(keys[k], keys[k + 1], schedule) if cache.enabled else ""
+            arrays, resumed = cached(
+                cache,
+                "surfels-merge",
+                key,
+                lambda a=models[k], b=models[k + 1]: pack_model(merge(a, b, frames, schedule)),
+            )
+            if resumed:
+                report_resumed(
+                    log, f"the merge of frames {models[k].start}-{models[k + 1].stop - 1}"
+                )
+            merged.append(unpack_model(arrays))
+            merged_keys.append(key)
+            if progress is not None:
+                progress(1)
+        if len(models) % 2:
+            merged.append(models[-1])
+            merged_keys.append(keys[-1])
+        models, keys = merged, merged_keys
+    return models[0], keys[0]

@@ -1,0 +1,81 @@
+"""A model of a range of frames during the assembly (sec. 3.2): surfel trajectories over
+consecutive frames, their topology graph, and which surfels have data in which frame.
+
+References
+----------
+Wand et al.: Reconstruction of deforming geometry from time-varying point clouds, SGP 2007,
+section 3.2 "Iterative model assembly" (``001_3fedd1c3a0ac4198.txt``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from fourd.methods.surfels.match import Data, associate
+from fourd.methods.surfels.state import SurfelState
+from fourd.methods.surfels.topology import Topology
+
+
+@dataclass(frozen=True)
+class Model:
+    """Surfel trajectories over frames ``start .. start + T - 1`` of the sequence.
+
+    state : SurfelState
+        ``T`` frames of ``S`` surfels.
+    topology : Topology
+        ``T_S``, global over the range.
+    start : int
+        Sequence index of the first frame.
+    observed : bool [T, S]
+        Surfels with data in each frame (the nearest surfel of some point within ``eps_top``).
+    """
+
+    state: SurfelState
+    topology: Topology
+    start: int
+    observed: np.ndarray
+
+    def __post_init__(self):
+        shape = (self.state.frames, self.state.count)
+        if self.observed.shape != shape:
+            raise ValueError(
+                f"observed must have shape {list(shape)}, got {list(self.observed.shape)}"
+            )
+        if self.topology.count != self.state.count:
+            raise ValueError("the topology must have one node per surfel")
+
+    @property
+    def stop(self) -> int:
+        """One past the sequence index of the last frame."""
+        return self.start + self.state.frames
+
+
+def pack_model(model: Model) -> dict[str, np.ndarray]:
+    """``model`` as arrays for :mod:`fourd.cache`."""
+    return {
+        "positions": model.state.positions,
+        "normals": model.state.normals,
+        "rotations": model.state.rotations,
+        "edges": model.topology.edges,
+        "radius": np.array(model.topology.radius),
+        "start": np.array(model.start),
+        "observed": model.observed,
+    }
+
+
+def unpack_model(arrays: dict) -> Model:
+    """The :class:`Model` of :func:`pack_model`'s arrays."""
+    state = SurfelState(arrays["positions"], arrays["normals"], arrays["rotations"])
+    topology = Topology(arrays["edges"].astype(np.int64), state.count, float(arrays["radius"]))
+    return Model(state, topology, int(arrays["start"]), arrays["observed"].astype(bool))
+
+
+def observed_surfels(state: SurfelState, data: Data, radius: float) -> np.ndarray:
+    """Surfels [T, S] that are the nearest surfel of some data point of their frame within
+    ``radius`` (``eps_top``, the data term's global cutoff)."""
+    matches = associate(state, data, radius)
+    observed = np.zeros((state.frames, state.count), dtype=bool)
+    observed[data.frames[matches.active], matches.surfels[matches.active]] = True
+    return observed

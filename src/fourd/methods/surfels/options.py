@@ -1,0 +1,190 @@
+"""Options of the ``surfels`` method, its contract constants, and the energy weights they
+give (:func:`energy_weights`)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from fourd.animation import AnimatedMesh
+from fourd.methods.surfels.energy import Weights
+
+#: Merging needs two frames.
+MIN_FRAMES = 2
+#: One connectivity: one frame's mesh carried to every frame by the surfels (sec. 3.3).
+RESULT = AnimatedMesh
+#: The options users change first (``fourd options surfels``).
+COMMON_OPTIONS = ("sampling", "noise", "rigid", "accel", "iterations", "final_iterations")
+
+
+@dataclass(frozen=True)
+class Options:
+    """Options of the ``surfels`` method (Wand et al. 2007). Lengths in input units; 0 means
+    "derive from the data" (``s``: the median nearest-neighbour spacing of the first frame).
+
+    Every weight is relative: position terms are multiplied by ``1 / noise^2`` and normal
+    terms by ``eps_sampl^2 / noise^2``, so a weight of 1 balances one data point at one noise
+    level (eq. 5-10 of the paper).
+
+    Attributes
+    ----------
+    sampling : float
+        ``eps_sampl`` in point spacings ``s`` (the surfels' distance, sec. 3.1); the
+        topology radius is ``eps_top = 2 eps_sampl``.
+    noise : float
+        Noise level ``sigma`` in normal direction (input units); 0: ``s`` (the data weight is
+        ``omega = 1 / sigma^2``, eq. 5).
+    smooth : float
+        ``w_smooth^(1)`` (eq. 6), relative.
+    smooth_normal : float
+        ``w_smooth^(2)`` (eq. 7), relative to ``eps_sampl^2 / sigma^2``.
+    tangential : float
+        Share ``beta`` of the point-to-surfel distance in the data term of the seed regions
+        (:mod:`.match`): it holds each surfel among its data; with the tangent-plane distance
+        alone (0) the surfels of one frame slide along the surface and open patches shrink
+        (bending-arm frame 0: the truth seen by the scan 0.040 from the nearest surfel on
+        average at 0, 0.019 at 0.05, 0.018 before the optimisation). Never in the alignment
+        (:mod:`.align`): there it pins each surfel to the data nearest where it starts.
+    linked_tangential : float
+        The same share in the hole filling and the global optimisations.
+    laplace : float
+        ``w_Laplace`` (eq. 8) as a fraction of ``smooth`` (paper: 10%). 0 was 18% faster
+        and a little better on rigid-turn at 128 rays, but at 64 rays (280 surfels a frame)
+        the correspondence error doubled (benchmarks/METHODS.md), so the paper's value stays.
+    rigid : float
+        ``w_rigid`` (eq. 9) during the merging, relative.
+    rigid_normal : float
+        eq. (9) on the normals, relative to ``eps_sampl^2 / sigma^2``.
+    accel : float
+        ``w_accel`` (eq. 10) during the merging, relative; the paper keeps it small until the
+        final pass.
+    accel_normal : float
+        eq. (10) on the normals, relative to ``eps_sampl^2 / sigma^2``.
+    final_rigid : float
+        Factor on the rigidity weights in the final global optimisation (sec. 3.2
+        "Iteration": increased rigidity to smooth the reconstruction).
+    final_accel : float
+        Factor on the acceleration weights in that final pass.
+    align_data : float
+        Weight of one data point in the alignment of two frame ranges (the non-rigid ICP of
+        sec. 3.2), relative.
+    align_iterations : int
+        Gauss-Newton steps of that alignment (each re-associates the data, as ICP does).
+    max_stretch : float
+        Stitching filter: an edge whose length changes over its trajectory by more than this
+        factor is rejected (paper: 1.5).
+    tensor_ratio : float
+        Tensor voting: points with second-over-largest eigenvalue ratio above this are not
+        in a seed region (paper: 0.8).
+    iterations : int
+        Gauss-Newton steps of each optimisation during the merging (seed regions, alignment,
+        global optimisation of a merged range).
+    fill_iterations : int
+        Gauss-Newton steps of the local optimisation of each frame filled in.
+    final_iterations : int
+        Gauss-Newton steps of the final global optimisation of all frames.
+    cg_tolerance : float
+        Relative residual at which each step's conjugate gradients stop.
+    cg_iterations : int
+        Most conjugate-gradient iterations per step (an inexact Newton step: rigid-turn, 4
+        frames of 6 degrees at 128 rays, 200 -> 50 took 135 -> 71 s for correspondence
+        0.0035 / 0.0051 -> 0.0039 / 0.0058, mean / last; benchmarks/METHODS.md).
+    mesh_sigma : float
+        Meshing (sec. 3.3): Gaussian window in ``eps_sampl``.
+    mesh_cell : float
+        Meshing: marching-cubes cell in ``eps_sampl``.
+    mesh_clip : float
+        Meshing: border clipping threshold (:class:`~.meshing.MeshingOptions` ``clip``).
+    reference : int
+        The frame whose surfels are meshed and carried to every other frame (its mesh is the
+        result's ``rest``).
+    normals_k : int
+        Neighbours for PCA normals when the input has none.
+    cache_dir : str or None
+        Folder where each preprocessed frame and each merged model are kept, keyed by the
+        input data and the options that act on them; a rerun resumes after the last finished
+        merge (``fourd reconstruct --cache``). None: nothing is kept.
+    """
+
+    sampling: float = 4.0
+    noise: float = 0.0
+    smooth: float = 0.5
+    smooth_normal: float = 0.01
+    tangential: float = 0.05
+    linked_tangential: float = 0.05
+    laplace: float = 0.1
+    rigid: float = 1.0
+    rigid_normal: float = 1.0
+    accel: float = 0.1
+    accel_normal: float = 0.01
+    final_rigid: float = 4.0
+    final_accel: float = 4.0
+    align_data: float = 1.0
+    align_iterations: int = 12
+    max_stretch: float = 1.5
+    tensor_ratio: float = 0.8
+    iterations: int = 4
+    fill_iterations: int = 2
+    final_iterations: int = 4
+    cg_tolerance: float = 1e-3
+    cg_iterations: int = 50
+    mesh_sigma: float = 0.75
+    mesh_cell: float = 0.5
+    mesh_clip: float = 0.3
+    reference: int = 0
+    normals_k: int = 16
+    cache_dir: str | None = None
+
+    def __post_init__(self):
+        for name in ("sampling", "max_stretch", "mesh_sigma", "mesh_cell", "cg_tolerance"):
+            if not getattr(self, name) > 0:
+                raise ValueError(f"{name} must be positive, got {getattr(self, name)}")
+        for name in (
+            "noise",
+            "smooth",
+            "smooth_normal",
+            "laplace",
+            "rigid",
+            "rigid_normal",
+            "accel",
+            "accel_normal",
+            "final_rigid",
+            "final_accel",
+            "align_data",
+        ):
+            if not getattr(self, name) >= 0:
+                raise ValueError(f"{name} must not be negative, got {getattr(self, name)}")
+        if not 0 < self.tensor_ratio <= 1 or not 0 < self.mesh_clip < 1:
+            raise ValueError("need 0 < tensor_ratio <= 1 and 0 < mesh_clip < 1")
+        for name in (
+            "iterations",
+            "align_iterations",
+            "fill_iterations",
+            "final_iterations",
+            "cg_iterations",
+        ):
+            if getattr(self, name) < 0:
+                raise ValueError(f"{name} must not be negative")
+        if self.normals_k < 3:
+            raise ValueError(f"normals_k must be at least 3, got {self.normals_k}")
+
+
+def energy_weights(
+    options: Options, noise: float, sampling: float, *, final: bool = False
+) -> Weights:
+    """The :class:`~.energy.Weights` of eq. (3) for ``options`` at noise level ``noise`` and
+    ``eps_sampl`` ``sampling`` (input units); ``final`` scales rigidity and acceleration by
+    ``final_rigid`` and ``final_accel`` (the last global optimisation, sec. 3.2)."""
+    position = 1.0 / noise**2
+    normal = sampling**2 / noise**2
+    rigid = options.final_rigid if final else 1.0
+    accel = options.final_accel if final else 1.0
+    return Weights(
+        match=position,
+        smooth_position=options.smooth * position,
+        smooth_normal=options.smooth_normal * normal,
+        laplace=options.laplace * options.smooth * position,
+        rigid=rigid * options.rigid * position,
+        rigid_normal=rigid * options.rigid_normal * normal,
+        accel=accel * options.accel * position,
+        accel_normal=accel * options.accel_normal * normal,
+    )

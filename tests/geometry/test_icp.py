@@ -1,0 +1,53 @@
+"""Rigid point-to-plane ICP recovers a known rigid motion, also with outliers among the
+source points."""
+
+import numpy as np
+import pytest
+
+from fourd.geometry.icp import _rotation, rigid_icp
+
+
+def _bumpy_blob(count, rng):
+    directions = rng.normal(size=(count, 3))
+    directions /= np.linalg.norm(directions, axis=1, keepdims=True)
+    radius = 1.0 + 0.1 * np.sin(3 * directions[:, 0]) * np.cos(2 * directions[:, 1])
+    return directions * radius[:, None]
+
+
+def _normals(points):
+    from fourd.geometry.normals import estimate_normals
+
+    return estimate_normals(points).normals
+
+
+def test_a_known_rigid_motion_is_recovered():
+    rng = np.random.default_rng(0)
+    target = _bumpy_blob(6000, rng)
+    normals = _normals(target)
+    turn = _rotation(np.array([0.05, -0.08, 0.1]))
+    shift = np.array([0.04, -0.02, 0.03])
+    # the source: other samples of the same surface, moved away by the inverse motion
+    source = (_bumpy_blob(3000, rng) - shift) @ turn
+    fit = rigid_icp(source, target, normals, trim=100)
+    assert np.allclose(fit.rotation, turn, atol=5e-3)
+    assert np.allclose(fit.translation, shift, atol=5e-3)
+    assert fit.rms < 0.01
+
+
+def test_outliers_are_trimmed():
+    rng = np.random.default_rng(1)
+    target = _bumpy_blob(6000, rng)
+    normals = _normals(target)
+    turn = _rotation(np.array([0.0, 0.06, -0.04]))
+    source = _bumpy_blob(3000, rng) @ turn
+    noisy = np.concatenate([source, rng.uniform(-3, 3, (300, 3))])
+    fit = rigid_icp(noisy, target, normals)  # the 85th percentile of the distances
+    assert np.allclose(fit.rotation, turn, atol=1e-2)
+    assert np.linalg.norm(fit.translation) < 1e-2
+
+
+def test_bad_shapes_are_refused():
+    with pytest.raises(ValueError, match="source"):
+        rigid_icp(np.zeros((2, 3)), np.zeros((5, 3)), np.ones((5, 3)))
+    with pytest.raises(ValueError, match="trim"):
+        rigid_icp(np.zeros((5, 3)), np.zeros((5, 3)), np.ones((5, 3)), trim=0)
