@@ -29,6 +29,7 @@ METHODS: dict[str, str] = {
     "flow": "fourd.methods.flow",
     "watertight": "fourd.methods.watertight",
     "learned": "fourd.methods.learned",
+    "assembly": "fourd.methods.assembly",
     "perframe": "fourd.methods.perframe",
 }
 
