@@ -195,7 +195,9 @@ class Options(SurfaceSettings):
         Largest geodesic patch radius, a fraction of the source's bounding-box diagonal
         (thesis 5.4.2).
     flattening : {"abf", "lscm"}
-        How patches are laid out in the plane (5.4.2).
+        How patches are laid out in the plane (5.4.2). LSCM by default: crane frames 0 -> 4
+        remeshed apart (4,482 vertices), after relaxation 0.424 / 0.702 edges median / 95th
+        percentile from the truth in 9.6 s, ABF++ 0.420 / 0.691 in 25.1 s.
     relax_sweeps : int
         Sweeps of the local relaxation of each pair map (5.4.3; 0 skips it).
     relax_walks : int
@@ -216,7 +218,7 @@ class Options(SurfaceSettings):
     anchor_tolerance: float = 1.5
     alignment_iterations: int = 3
     max_radius: float = 0.2
-    flattening: str = "abf"
+    flattening: str = "lscm"
     relax_sweeps: int = 6
     relax_walks: int = 16
     registration_iterations: int = 16
