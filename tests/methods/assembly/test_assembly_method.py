@@ -11,7 +11,13 @@ from scipy.spatial.transform import Rotation
 import fourd
 from fourd.errors import InputError
 from fourd.methods import method_module
-from fourd.methods.assembly import Block, Options, merge_blocks, reconstruct, reconstruct_with_diagnostics
+from fourd.methods.assembly import (
+    Block,
+    Options,
+    merge_blocks,
+    reconstruct,
+    reconstruct_with_diagnostics,
+)
 from fourd.methods.base import check_method_module
 from fourd.sequence import Frame, PointCloudSequence
 
