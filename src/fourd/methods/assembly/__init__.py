@@ -22,11 +22,21 @@ Frames that are meshes are used as they are; point clouds are meshed per frame f
   the right sub-sequence, unmapped vertices placed by Laplacian registration (5.6);
 - :mod:`.method`: the pipeline (``reconstruct``), :mod:`.options` its ``Options``.
 
-Not yet: analysis and correction (5.5), and pasting geometry only a later frame has into the
-union mesh (second half of 5.6): the result keeps the first frame's connectivity.
+- :mod:`.analysis`: the pair map checked against the gradual change assumption (5.5),
+  inconsistent vertices flagged and clustered; the method's ``correct`` option unmaps them.
+
+Not yet: trying the target's geometry in place of an inconsistent source region (5.5), and
+pasting geometry only a later frame has into the union mesh (second half of 5.6): the result
+keeps the first frame's connectivity.
 """
 
 from fourd.methods.assembly.alignment import Alignment, geometric_anchors
+from fourd.methods.assembly.analysis import (
+    Analysis,
+    edge_ratios,
+    inconsistent_regions,
+    passes_stretch_test,
+)
 from fourd.methods.assembly.anchors import (
     Anchors,
     anchors_at_vertices,
@@ -67,6 +77,10 @@ __all__ = [
     "MIN_FRAMES",
     "RESULT",
     "Alignment",
+    "Analysis",
+    "edge_ratios",
+    "inconsistent_regions",
+    "passes_stretch_test",
     "Anchors",
     "AssemblyDiagnostics",
     "Block",

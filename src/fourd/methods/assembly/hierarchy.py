@@ -19,9 +19,13 @@ by the source's Laplacian coordinates with the mapped vertices held
 unobserved there. A connected piece with no mapped vertex at all follows the rigid motion
 that best fits the mapped vertices (also unobserved).
 
-Not done here: geometry only the target has is not pasted into the union mesh (the second
-half of 5.6), and the map is not analysed and corrected (5.5): the result's connectivity is
-the first frame's mesh.
+With ``correct`` on, the map is first analysed (5.5,
+:func:`~fourd.methods.assembly.analysis.inconsistent_regions`) and the vertices of its
+inconsistent regions unmapped, so the registration places them from the source's geometry
+(the thesis' "source region pasted into the target"; off by default, see
+``benchmarks/METHODS.md``). Not done here: geometry only the target has is not pasted into
+the union mesh (the second half of 5.6), nor is the target's geometry tried in place of the
+source's for an inconsistent region: the result's connectivity is the first frame's mesh.
 
 Merges of one level are independent (5.3) and run side by side in processes when asked.
 """
@@ -37,6 +41,7 @@ import trimesh
 
 from fourd.geometry.rotations import procrustes
 from fourd.methods.assembly.alignment import geometric_anchors
+from fourd.methods.assembly.analysis import inconsistent_regions
 from fourd.methods.assembly.options import Options
 from fourd.methods.assembly.pair import cross_parameterize_pair
 from fourd.methods.assembly.registration import register_by_laplacian
@@ -69,11 +74,14 @@ class MergeReport(NamedTuple):
         Fraction of the source's vertices the pair map placed on the target.
     rigid : float
         Fraction left to the rigid fallback (pieces with no mapped vertex).
+    flagged : int
+        Mapped vertices unmapped by the analysis (``correct``).
     """
 
     anchors: int
     mapped: float
     rigid: float
+    flagged: int = 0
 
 
 def _closest_map(aligned, target_vertices, target_faces):
@@ -115,6 +123,14 @@ def merge_blocks(left: Block, right: Block, options: Options | None = None) -> t
     else:
         map_faces, bary = np.full(count, -1), np.zeros((count, 3))
     mapped = map_faces >= 0
+    flagged = 0
+    if options.correct and mapped.sum() >= 3:
+        points = np.full((count, 3), np.nan)
+        points[mapped] = np.einsum("nk,nkd->nd", bary[mapped], target[target_faces[map_faces[mapped]]])
+        analysis = inconsistent_regions(source, faces, points, mapped, stretch=options.correct_stretch,
+                                        motion=options.correct_motion)
+        mapped &= ~analysis.flagged
+        flagged = int(analysis.flagged.sum())
     if mapped.sum() < 3:
         log.warning("pair map placed %d of %d vertices: closest points of the coarse alignment instead",
                     int(mapped.sum()), count)
@@ -141,7 +157,7 @@ def merge_blocks(left: Block, right: Block, options: Options | None = None) -> t
             rigid |= lost
         vertices[t] = placed
     merged = Block(faces, np.concatenate([left.vertices, vertices]), np.concatenate([left.observed, observed]))
-    return merged, MergeReport(len(alignment.anchors.source), float(mapped.mean()), float(rigid.mean()))
+    return merged, MergeReport(len(alignment.anchors.source), float(mapped.mean()), float(rigid.mean()), flagged)
 
 
 def _merge_pair(args):

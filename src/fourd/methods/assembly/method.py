@@ -122,7 +122,7 @@ def reconstruct_with_diagnostics(seq: PointCloudSequence, options: Options | Non
     result = AnimatedMesh(block.faces, block.vertices, seq.times, block.observed, rest=block.vertices[0])
     mapped = float(np.mean([r.mapped for r in reports])) if reports else 1.0
     for level_report in reports:
-        log.debug("merge: %d anchors, %.3f mapped, %.3f rigid", *level_report)
+        log.debug("merge: %d anchors, %.3f mapped, %.3f rigid, %d flagged", *level_report)
     return Reconstruction(result, AssemblyDiagnostics(mapped, float(block.observed.mean())))
 
 
