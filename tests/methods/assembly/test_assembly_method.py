@@ -158,3 +158,12 @@ def test_point_cloud_frames_are_meshed_first_and_bad_input_is_named():
     tiny = PointCloudSequence([Frame(rng.normal(size=(10, 3)), time=float(t)) for t in range(2)])
     with pytest.raises(InputError):
         fourd.reconstruct(tiny, method="assembly")
+
+
+@pytest.mark.slow
+def test_merges_of_a_level_run_in_processes_with_the_same_result():
+    seq, _ = _remeshed_sequence(4)
+    serial = reconstruct(seq, Options(relax_sweeps=1))
+    parallel = reconstruct(seq, Options(relax_sweeps=1, workers=2))
+    np.testing.assert_array_equal(parallel.vertices, serial.vertices)
+    np.testing.assert_array_equal(parallel.observed, serial.observed)

@@ -33,6 +33,7 @@ Merges of one level are independent (5.3) and run side by side in processes when
 from __future__ import annotations
 
 import logging
+import multiprocessing
 from concurrent.futures import ProcessPoolExecutor
 from typing import NamedTuple
 
@@ -189,7 +190,9 @@ def assemble(blocks: list[Block], options: Options | None = None, *, on_merge=No
         raise ValueError("nothing to assemble")
     reports: list[MergeReport] = []
     blocks = list(blocks)
-    pool = ProcessPoolExecutor(max_workers=options.workers) if options.workers > 1 else None
+    # spawned, not forked: a fork after OpenMP (numba, BLAS) has started aborts the child
+    pool = (ProcessPoolExecutor(max_workers=options.workers, mp_context=multiprocessing.get_context("spawn"))
+            if options.workers > 1 else None)
     try:
         while len(blocks) > 1:
             jobs = [(blocks[i], blocks[i + 1], options) for i in range(0, len(blocks) - 1, 2)]

@@ -218,7 +218,9 @@ class Options(SurfaceSettings):
         Motion deviation from the one-ring's mean (edges) that flags a vertex.
     workers : int
         Merges of one level of the hierarchy run in this many processes (they are
-        independent, 5.3); 1 runs them one after the other.
+        independent, 5.3); 1 runs them one after the other (8 frames of about 360 vertices
+        on the shared 2-core machine: 36.9 / 35.6 s serial, 36.8 / 35.7 s with 2, the same
+        result).
     cache_dir : str or None
         Folder where each frame's mesh (point-cloud input) is kept, keyed by the frame's data
         and these options (``fourd reconstruct --cache``).
