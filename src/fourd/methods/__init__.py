@@ -31,6 +31,7 @@ METHODS: dict[str, str] = {
     "watertight": "fourd.methods.watertight",
     "learned": "fourd.methods.learned",
     "garment": "fourd.methods.garment",
+    "assembly": "fourd.methods.assembly",
     "perframe": "fourd.methods.perframe",
 }
 

@@ -1,11 +1,14 @@
 """The assembly method (issue 51; Popa's thesis, chapter 5): a consistent animated mesh
-assembled from per-frame meshes by pairwise cross-parameterisation in a binary hierarchy.
+assembled from per-frame meshes by pairwise cross-parameterisation in a binary hierarchy
+(``fourd reconstruct MESHES/ --method assembly``).
 
-**Under construction**: the method is not registered yet (``fourd reconstruct --method
-assembly`` does not exist). What is here is its core, each part tested on its own:
+Frames that are meshes are used as they are; point clouds are meshed per frame first
+(:mod:`fourd.geometry.frame_surface`). The parts, each tested on its own:
 
 - :mod:`.anchors`: sparse source-to-target correspondences, the forward-backward check and
   spreading to a uniform density (section 5.4.1);
+- :mod:`.alignment`: anchors from geometry alone (a coarse non-rigid alignment, then closest
+  points), the method's default since scans carry no optical flow;
 - :mod:`.patches`: matching disk-shaped patches grown around anchors (5.4.2);
 - :mod:`.crossparam`: the local patch cross-parameterisation, each patch pair flattened
   (ABF++ or LSCM, :mod:`fourd.geometry.flattening`), aligned by its anchors and the most
@@ -14,14 +17,26 @@ assembly`` does not exist). What is here is its core, each part tested on its ow
   over the target, flipped triangles fixed (5.4.3);
 - :mod:`.registration` and :mod:`.refine`: the source registered in the target's frame by its
   Laplacian coordinates, and anchors added where it lands on the target (5.4.4);
-- :mod:`.pair`: those steps chained, one source mesh mapped onto one target mesh.
+- :mod:`.pair`: those steps chained, one source mesh mapped onto one target mesh;
+- :mod:`.hierarchy`: the hierarchical assembly (5.3) and the propagation of each merge through
+  the right sub-sequence, unmapped vertices placed by Laplacian registration (5.6);
+- :mod:`.method`: the pipeline (``reconstruct``), :mod:`.options` its ``Options``.
 
-Still to come: analysis
-and correction (5.5), geometry completion and connectivity combination (5.6), the
-hierarchical assembly (5.3), and the method module itself. Bench input for it: the remeshed
-scan mode (``fourd synth --meshes``, the ``*-remeshed`` bench scenes).
+- :mod:`.analysis`: the pair map checked against the gradual change assumption (5.5),
+  inconsistent vertices flagged and clustered; the method's ``correct`` option unmaps them.
+
+Not yet: trying the target's geometry in place of an inconsistent source region (5.5), and
+pasting geometry only a later frame has into the union mesh (second half of 5.6): the result
+keeps the first frame's connectivity.
 """
 
+from fourd.methods.assembly.alignment import Alignment, geometric_anchors
+from fourd.methods.assembly.analysis import (
+    Analysis,
+    edge_ratios,
+    inconsistent_regions,
+    passes_stretch_test,
+)
 from fourd.methods.assembly.anchors import (
     Anchors,
     anchors_at_vertices,
@@ -35,8 +50,18 @@ from fourd.methods.assembly.crossparam import (
     cross_parameterize,
     map_patch,
 )
+from fourd.methods.assembly.hierarchy import Block, MergeReport, assemble, merge_blocks
+from fourd.methods.assembly.method import (
+    COMMON_OPTIONS,
+    MIN_FRAMES,
+    RESULT,
+    AssemblyDiagnostics,
+    reconstruct,
+    reconstruct_with_diagnostics,
+)
 from fourd.methods.assembly.options import (
     CrossParamOptions,
+    Options,
     PairOptions,
     RefineOptions,
     RelaxOptions,
@@ -48,7 +73,24 @@ from fourd.methods.assembly.registration import register_by_laplacian
 from fourd.methods.assembly.relax import RelaxedMap, flipped_triangles, mapped_points, relax_map
 
 __all__ = [
+    "COMMON_OPTIONS",
+    "MIN_FRAMES",
+    "RESULT",
+    "Alignment",
+    "Analysis",
+    "edge_ratios",
+    "inconsistent_regions",
+    "passes_stretch_test",
     "Anchors",
+    "AssemblyDiagnostics",
+    "Block",
+    "MergeReport",
+    "Options",
+    "assemble",
+    "geometric_anchors",
+    "merge_blocks",
+    "reconstruct",
+    "reconstruct_with_diagnostics",
     "CrossParamOptions",
     "CrossParameterization",
     "GrownPatches",

@@ -1,8 +1,13 @@
-"""Settings of the local patch cross-parameterisation (thesis section 5.4.2)."""
+"""Settings of the assembly method: the pair map's (thesis sections 5.4.2-5.4.4) and the
+method's own :class:`Options` (5.3, 5.6)."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+
+import numpy as np
+
+from fourd.geometry.frame_surface import SurfaceSettings
 
 
 @dataclass(frozen=True)
@@ -165,3 +170,99 @@ class PairOptions:
     def __post_init__(self):
         if not 0 < self.refine_radius <= 1:
             raise ValueError(f"refine_radius must be in (0, 1], got {self.refine_radius!r}")
+
+
+@dataclass(frozen=True)
+class Options(SurfaceSettings):
+    """Options of the assembly method (thesis chapter 5). Frames that are meshes are used as
+    they are; point-cloud frames are first meshed one by one with the settings inherited from
+    :class:`~fourd.geometry.frame_surface.SurfaceSettings` (``fourd options perframe``
+    describes them). Lengths of the pair maps are in source edges (a mesh's median edge).
+
+    Attributes
+    ----------
+    anchor_spacing : float
+        Geometric anchors about this far apart on each source mesh (edges; 2 maps 81% of
+        crane's vertices frames 0 -> 4 remeshed apart, 3 and 4 only 54%, at the same error,
+        see ``benchmarks/METHODS.md``).
+    anchor_gap : float
+        An aligned source vertex farther than this from the target is no anchor (edges).
+    anchor_tolerance : float
+        Forward-backward tolerance of the anchors (edges, thesis 5.4.1).
+    alignment_iterations : int
+        Non-rigid ICP steps of the coarse alignment the anchors come from.
+    max_radius : float
+        Largest geodesic patch radius, a fraction of the source's bounding-box diagonal
+        (thesis 5.4.2).
+    flattening : {"abf", "lscm"}
+        How patches are laid out in the plane (5.4.2). LSCM by default: crane frames 0 -> 4
+        remeshed apart (4,482 vertices), after relaxation 0.424 / 0.702 edges median / 95th
+        percentile from the truth in 9.6 s, ABF++ 0.420 / 0.691 in 25.1 s.
+    relax_sweeps : int
+        Sweeps of the local relaxation of each pair map (5.4.3; 0 skips it).
+    relax_walks : int
+        Random walks per vertex and step of the relaxation.
+    registration_iterations : int
+        Rotation fits of the Laplacian registration that places the vertices a pair map
+        cannot (thesis 5.6, [LSA+05]).
+    correct : bool
+        Analyse each pair map (thesis 5.5) and unmap the vertices of its inconsistent regions
+        (triangles stretched beyond ``correct_stretch``, vertices moving unlike their
+        neighbours by over ``correct_motion`` edges), so the Laplacian registration places
+        them from the source's geometry. Off: on frames remeshed apart it flags 28-53% of the
+        vertices (the maps' edge-length noise) and raises the error's 95th percentile (crane
+        0 -> 4: 1.75 -> 4.01 edges, bending-arm 0 -> 3: 6.7 -> 8.8; see ``benchmarks/METHODS.md``).
+    correct_stretch : float
+        Edge-length ratio beyond which (or below its inverse) a mapped triangle is stretched.
+    correct_motion : float
+        Motion deviation from the one-ring's mean (edges) that flags a vertex.
+    workers : int
+        Merges of one level of the hierarchy run in this many processes (they are
+        independent, 5.3); 1 runs them one after the other (8 frames of about 360 vertices
+        on the shared 2-core machine: 36.9 / 35.6 s serial, 36.8 / 35.7 s with 2, the same
+        result).
+    cache_dir : str or None
+        Folder where each frame's mesh (point-cloud input) is kept, keyed by the frame's data
+        and these options (``fourd reconstruct --cache``).
+    """
+
+    anchor_spacing: float = 2.0
+    anchor_gap: float = 1.0
+    anchor_tolerance: float = 1.5
+    alignment_iterations: int = 3
+    max_radius: float = 0.2
+    flattening: str = "lscm"
+    relax_sweeps: int = 6
+    relax_walks: int = 16
+    registration_iterations: int = 16
+    correct: bool = False
+    correct_stretch: float = 2.0
+    correct_motion: float = 1.5
+    workers: int = 1
+    cache_dir: str | None = None
+
+    def __post_init__(self):
+        super().__post_init__()
+        if not self.correct_stretch > 1:
+            raise ValueError(f"correct_stretch must be > 1, got {self.correct_stretch!r}")
+        for name in ("anchor_spacing", "anchor_gap", "anchor_tolerance", "correct_motion"):
+            value = getattr(self, name)
+            if not (np.isfinite(value) and value > 0):
+                raise ValueError(f"{name} must be positive, got {value!r}")
+        for name in ("alignment_iterations", "relax_sweeps", "registration_iterations"):
+            value = getattr(self, name)
+            if int(value) != value or value < 0:
+                raise ValueError(f"{name} must be a non-negative integer, got {value!r}")
+        for name in ("relax_walks", "workers"):
+            value = getattr(self, name)
+            if int(value) != value or value < 1:
+                raise ValueError(f"{name} must be a positive integer, got {value!r}")
+        # the pair map's own checks (radius, flattening)
+        self.pair_options()
+
+    def pair_options(self) -> PairOptions:
+        """The :class:`PairOptions` of each merge's pair map."""
+        return PairOptions(
+            crossparam=CrossParamOptions(max_radius=self.max_radius, flattening=self.flattening),
+            relax=RelaxOptions(sweeps=self.relax_sweeps, walks=self.relax_walks, seed=self.seed),
+        )

@@ -1,0 +1,218 @@
+"""Hierarchical assembly of a consistent frame sequence (thesis section 5.3, figure 5.2), with
+the propagation of section 5.6.
+
+A :class:`Block` is a consistent sub-sequence: one connectivity, positions in each of its
+frames. At the bottom level every frame's own mesh is a block of length one; each level merges
+consecutive pairs of blocks (lengths 1, 2, 4, ...; an odd last block waits for the next
+level), so after ``ceil(log2 T)`` levels one block holds the whole sequence.
+
+:func:`merge_blocks` maps the left block's last frame (the source) onto the right block's
+first (the target) with :func:`~fourd.methods.assembly.pair.cross_parameterize_pair`, its
+anchors from a coarse non-rigid alignment
+(:func:`~fourd.methods.assembly.alignment.geometric_anchors`). The merged block keeps the
+left connectivity (the union mesh of 5.6 starts from the source's). A mapped source vertex
+lies in a target triangle with barycentric coordinates; since the right block is already
+consistent, the same triangle and coordinates give its position in every right frame. The
+vertices the map cannot place (geometry only the source has) are placed in each right frame
+by the source's Laplacian coordinates with the mapped vertices held
+(:func:`~fourd.methods.assembly.registration.register_by_laplacian`, [LSA+05]) and marked
+unobserved there. A connected piece with no mapped vertex at all follows the rigid motion
+that best fits the mapped vertices (also unobserved).
+
+With ``correct`` on, the map is first analysed (5.5,
+:func:`~fourd.methods.assembly.analysis.inconsistent_regions`) and the vertices of its
+inconsistent regions unmapped, so the registration places them from the source's geometry
+(the thesis' "source region pasted into the target"; off by default, see
+``benchmarks/METHODS.md``). Not done here: geometry only the target has is not pasted into
+the union mesh (the second half of 5.6), nor is the target's geometry tried in place of the
+source's for an inconsistent region: the result's connectivity is the first frame's mesh.
+
+Merges of one level are independent (5.3) and run side by side in processes when asked.
+"""
+
+from __future__ import annotations
+
+import logging
+import multiprocessing
+from concurrent.futures import ProcessPoolExecutor
+from typing import NamedTuple
+
+import numpy as np
+import trimesh
+
+from fourd.geometry.rotations import procrustes
+from fourd.methods.assembly.alignment import geometric_anchors
+from fourd.methods.assembly.analysis import inconsistent_regions
+from fourd.methods.assembly.options import Options
+from fourd.methods.assembly.pair import cross_parameterize_pair
+from fourd.methods.assembly.registration import register_by_laplacian
+
+log = logging.getLogger("fourd.methods.assembly.hierarchy")
+
+
+class Block(NamedTuple):
+    """A consistent sub-sequence.
+
+    faces : int64 [F, 3]
+    vertices : float64 [T, N, 3]
+        Positions in each of its frames (input units).
+    observed : bool [T, N]
+        False where a vertex was placed by registration rather than found on that frame's
+        surface.
+    """
+
+    faces: np.ndarray
+    vertices: np.ndarray
+    observed: np.ndarray
+
+
+class MergeReport(NamedTuple):
+    """Figures of one merge.
+
+    anchors : int
+        Geometric anchors the pair map started from.
+    mapped : float
+        Fraction of the source's vertices the pair map placed on the target.
+    rigid : float
+        Fraction left to the rigid fallback (pieces with no mapped vertex).
+    flagged : int
+        Mapped vertices unmapped by the analysis (``correct``).
+    """
+
+    anchors: int
+    mapped: float
+    rigid: float
+    flagged: int = 0
+
+
+def _closest_map(aligned, target_vertices, target_faces):
+    """Target triangle and barycentric coordinates of the point closest to each of
+    ``aligned [N, 3]`` (the fallback map when the pair map places almost nothing)."""
+    mesh = trimesh.Trimesh(target_vertices, target_faces, process=False)
+    closest, _, triangle = trimesh.proximity.closest_point(mesh, aligned)
+    bary = np.clip(trimesh.triangles.points_to_barycentric(mesh.triangles[triangle], closest), 0.0, None)
+    return triangle.astype(np.int64), bary / np.maximum(bary.sum(axis=1, keepdims=True), 1e-300)
+
+
+def merge_blocks(left: Block, right: Block, options: Options | None = None) -> tuple[Block, MergeReport]:
+    """Merge two consecutive blocks into one (module docstring).
+
+    Parameters
+    ----------
+    left, right : Block
+        ``left``'s last frame comes just before ``right``'s first.
+    options : Options, optional
+
+    Returns
+    -------
+    Block
+        ``left.faces``, with ``len(left) + len(right)`` frames of positions.
+    MergeReport
+    """
+    options = Options() if options is None else options
+    source, faces = left.vertices[-1], left.faces
+    target, target_faces = right.vertices[0], right.faces
+    alignment = geometric_anchors(
+        source, faces, target, target_faces,
+        spacing=options.anchor_spacing, gap=options.anchor_gap, tolerance=options.anchor_tolerance,
+        iterations=options.alignment_iterations, seed=options.seed,
+    )
+    count = len(source)
+    if len(alignment.anchors.source) >= 3:
+        pair = cross_parameterize_pair(source, faces, target, target_faces, alignment.anchors, options.pair_options())
+        map_faces, bary = pair.faces, pair.barycentric
+    else:
+        map_faces, bary = np.full(count, -1), np.zeros((count, 3))
+    mapped = map_faces >= 0
+    flagged = 0
+    if options.correct and mapped.sum() >= 3:
+        points = np.full((count, 3), np.nan)
+        points[mapped] = np.einsum("nk,nkd->nd", bary[mapped], target[target_faces[map_faces[mapped]]])
+        analysis = inconsistent_regions(source, faces, points, mapped, stretch=options.correct_stretch,
+                                        motion=options.correct_motion)
+        mapped &= ~analysis.flagged
+        flagged = int(analysis.flagged.sum())
+    if mapped.sum() < 3:
+        log.warning("pair map placed %d of %d vertices: closest points of the coarse alignment instead",
+                    int(mapped.sum()), count)
+        map_faces, bary = _closest_map(alignment.aligned, target, target_faces)
+        mapped = np.ones(count, dtype=bool)
+    corners = right.faces[map_faces[mapped]]  # [K, 3]
+    carried = np.einsum("kc,tkcd->tkd", bary[mapped], right.vertices[:, corners])
+    frames = len(right.vertices)
+    vertices = np.empty((frames, count, 3))
+    observed = np.zeros((frames, count), dtype=bool)
+    observed[:, mapped] = right.observed[:, corners].all(axis=2)
+    rigid = np.zeros(count, dtype=bool)
+    for t in range(frames):
+        points = np.zeros((count, 3))
+        points[mapped] = carried[t]
+        if mapped.all():
+            placed = points
+        else:
+            placed = register_by_laplacian(source, faces, mapped, points, iterations=options.registration_iterations)
+        lost = np.isnan(placed).any(axis=1)
+        if lost.any():
+            fit = procrustes(source[mapped], points[mapped])
+            placed[lost] = source[lost] @ fit.rotation.T + fit.translation
+            rigid |= lost
+        vertices[t] = placed
+    merged = Block(faces, np.concatenate([left.vertices, vertices]), np.concatenate([left.observed, observed]))
+    return merged, MergeReport(len(alignment.anchors.source), float(mapped.mean()), float(rigid.mean()), flagged)
+
+
+def _merge_pair(args):
+    left, right, options = args
+    return merge_blocks(left, right, options)
+
+
+def assemble(blocks: list[Block], options: Options | None = None, *, on_merge=None) -> tuple[Block, list[MergeReport]]:
+    """Merge ``blocks`` (consecutive, usually one frame each) level by level into one block
+    (module docstring).
+
+    Parameters
+    ----------
+    blocks : list of Block
+    options : Options, optional
+        ``workers`` > 1 runs the merges of a level in that many processes.
+    on_merge : callable, optional
+        Called with no argument after each merge (progress).
+
+    Returns
+    -------
+    Block
+        The whole sequence, with the first block's connectivity.
+    list of MergeReport
+        One per merge, level by level.
+    """
+    options = Options() if options is None else options
+    if not blocks:
+        raise ValueError("nothing to assemble")
+    reports: list[MergeReport] = []
+    blocks = list(blocks)
+    # spawned, not forked: a fork after OpenMP (numba, BLAS) has started aborts the child
+    pool = (ProcessPoolExecutor(max_workers=options.workers, mp_context=multiprocessing.get_context("spawn"))
+            if options.workers > 1 else None)
+    try:
+        while len(blocks) > 1:
+            jobs = [(blocks[i], blocks[i + 1], options) for i in range(0, len(blocks) - 1, 2)]
+            results = []
+            if pool is not None and len(jobs) > 1:
+                for result in pool.map(_merge_pair, jobs):
+                    results.append(result)
+                    if on_merge:
+                        on_merge()
+            else:
+                for job in jobs:
+                    results.append(_merge_pair(job))
+                    if on_merge:
+                        on_merge()
+            merged = [block for block, _ in results]
+            reports += [report for _, report in results]
+            if len(blocks) % 2:
+                merged.append(blocks[-1])
+            blocks = merged
+    finally:
+        if pool is not None:
+            pool.shutdown()
+    return blocks[0], reports

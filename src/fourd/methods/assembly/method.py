@@ -1,0 +1,145 @@
+"""The assembly method's pipeline (thesis chapter 5): per-frame meshes, then the hierarchical
+assembly of :mod:`~fourd.methods.assembly.hierarchy`.
+
+1. Each frame's mesh: a frame that is a mesh (``Frame.faces``) is used as it is (its
+   unreferenced points dropped); a point cloud is meshed on its own
+   (:func:`fourd.geometry.frame_surface.frame_surface`, the ``perframe`` baseline's meshing),
+   cached per frame when ``cache_dir`` is set. A frame whose mesh comes out empty (too few
+   points) takes the nearest non-empty frame's mesh, every vertex unobserved.
+2. The binary hierarchy merges consecutive sub-sequences into one consistent sequence with the
+   first frame's connectivity (5.3, 5.6).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+
+import numpy as np
+
+from fourd.animation import AnimatedMesh
+from fourd.cache import StageCache, report_resumed, stage_key
+from fourd.errors import InputError
+from fourd.geometry.frame_surface import SurfaceSettings, frame_surface
+from fourd.geometry.marching import compact
+from fourd.methods.assembly.hierarchy import Block, assemble
+from fourd.methods.assembly.options import Options
+from fourd.methods.base import Reconstruction
+from fourd.progress import progress
+from fourd.sequence import Frame, PointCloudSequence
+
+log = logging.getLogger("fourd.methods.assembly")
+
+#: A sequence method: at least two frames.
+MIN_FRAMES = 2
+RESULT = AnimatedMesh
+#: The options users change first (``fourd options assembly``; the others under ``--all``).
+COMMON_OPTIONS = ("anchor_spacing", "max_radius", "relax_sweeps", "workers")
+#: The cache entries of the frames' meshes.
+STAGE = "assembly-surface"
+#: Fewest faces a frame's mesh needs to take part.
+MIN_FACES = 4
+
+
+@dataclasses.dataclass(frozen=True)
+class AssemblyDiagnostics:
+    """Figures of an assembly run.
+
+    mapped_fraction : float
+        Mean over the merges of the fraction of source vertices the pair map placed.
+    observed_fraction : float
+        Fraction of the output's vertex positions (all frames) found on a frame's surface
+        rather than filled in.
+    """
+
+    mapped_fraction: float
+    observed_fraction: float
+
+
+def frame_mesh(frame: Frame, options: Options) -> tuple[np.ndarray, np.ndarray]:
+    """One frame's mesh ``(vertices [N, 3], faces [F, 3])``: its own faces when it has them,
+    else :func:`~fourd.geometry.frame_surface.frame_surface`."""
+    if frame.faces is not None and len(frame.faces):
+        return compact(np.asarray(frame.points, dtype=np.float64), np.asarray(frame.faces, dtype=np.int64))
+    settings = SurfaceSettings(**{f.name: getattr(options, f.name) for f in dataclasses.fields(SurfaceSettings)})
+    return frame_surface(frame.points, normals=frame.normals, sensors=frame.sensors, settings=settings,
+                         time=frame.time)
+
+
+def frame_meshes(seq: PointCloudSequence, options: Options) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Every frame's mesh (step 1 of the module docstring), empty ones included."""
+    cache = StageCache(options.cache_dir)
+    meshes, found = [], 0
+    for frame in progress(seq.frames, desc="assembly meshes", total=len(seq.frames)):
+        if frame.faces is not None and len(frame.faces):
+            meshes.append(frame_mesh(frame, options))
+            continue
+        key = stage_key(STAGE, frame.points, frame.normals, frame.sensors, options)
+        stored = cache.load(STAGE, key)
+        if stored is None:
+            vertices, faces = frame_mesh(frame, options)
+            cache.save(STAGE, key, {"vertices": vertices, "faces": faces})
+        else:
+            vertices, faces = stored["vertices"], stored["faces"]
+            found += 1
+        meshes.append((vertices, faces))
+    if found:
+        report_resumed(log, f"{found} of {len(seq.frames)} frames' meshes")
+    return meshes
+
+
+def base_blocks(seq: PointCloudSequence, meshes) -> list[Block]:
+    """One block per frame; an empty frame borrows the nearest non-empty frame's mesh, all of
+    it unobserved. :class:`InputError` when every frame is empty."""
+    usable = [i for i, (_, faces) in enumerate(meshes) if len(faces) >= MIN_FACES]
+    if not usable:
+        raise InputError(
+            f"no frame gives a surface to assemble (each has fewer than {MIN_FACES} faces, or "
+            f"too few points to mesh): the assembly method needs per-frame meshes or denser scans"
+        )
+    blocks = []
+    for i, (vertices, faces) in enumerate(meshes):
+        seen = len(faces) >= MIN_FACES
+        if not seen:
+            j = min(usable, key=lambda k: (abs(k - i), k))
+            log.warning("frame %d (%s) has no surface: it takes frame %d's, unobserved", i, seq.names[i], j)
+            vertices, faces = meshes[j]
+        blocks.append(Block(np.asarray(faces, dtype=np.int64), np.asarray(vertices, dtype=np.float64)[None],
+                            np.full((1, len(vertices)), seen)))
+    return blocks
+
+
+def reconstruct_with_diagnostics(seq: PointCloudSequence, options: Options | None = None) -> Reconstruction:
+    """:func:`reconstruct`, with an :class:`AssemblyDiagnostics`."""
+    options = Options() if options is None else options
+    if len(seq) < 2:
+        raise InputError(f"the assembly method needs at least 2 frames, the input has {len(seq)}")
+    meshes = frame_meshes(seq, options)
+    blocks = base_blocks(seq, meshes)
+    log.info("assembling %d frames (%d merges)", len(blocks), len(blocks) - 1)
+    with progress(total=len(blocks) - 1, desc="assembly merges", unit="merge") as bar:
+        block, reports = assemble(blocks, options, on_merge=lambda: bar.update(1))
+    result = AnimatedMesh(block.faces, block.vertices, seq.times, block.observed, rest=block.vertices[0])
+    mapped = float(np.mean([r.mapped for r in reports])) if reports else 1.0
+    for level_report in reports:
+        log.debug("merge: %d anchors, %.3f mapped, %.3f rigid, %d flagged", *level_report)
+    return Reconstruction(result, AssemblyDiagnostics(mapped, float(block.observed.mean())))
+
+
+def reconstruct(seq: PointCloudSequence, options: Options | None = None) -> AnimatedMesh:
+    """Assemble ``seq`` into one animated mesh (module docstring); one output frame per input
+    frame, the first frame's connectivity.
+
+    Parameters
+    ----------
+    seq : PointCloudSequence
+        Per-frame meshes (frames with ``faces``) or point clouds, at least 2 frames.
+    options : Options, optional
+
+    Returns
+    -------
+    AnimatedMesh
+        ``observed`` False where a vertex was filled in rather than found on that frame's
+        surface.
+    """
+    return reconstruct_with_diagnostics(seq, options).result

@@ -1,0 +1,169 @@
+"""The registered assembly method (thesis 5.3, 5.6): per-frame meshes in, one connectivity out,
+each output frame on its own input mesh; a rigidly moving shape maps vertices to themselves."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import trimesh
+from scipy.spatial.transform import Rotation
+
+import fourd
+from fourd.errors import InputError
+from fourd.methods import method_module
+from fourd.methods.assembly import (
+    Block,
+    Options,
+    merge_blocks,
+    reconstruct,
+    reconstruct_with_diagnostics,
+)
+from fourd.methods.base import check_method_module
+from fourd.sequence import Frame, PointCloudSequence
+
+
+def _bumpy(subdivisions=3):
+    sphere = trimesh.creation.icosphere(subdivisions=subdivisions)
+    unit = np.asarray(sphere.vertices)
+    # an ellipsoid with bumps: no symmetry for the alignment to slip along
+    vertices = unit * [1.0, 0.7, 0.5] * (1.0 + 0.1 * np.sin(3.0 * unit[:, [0]]) * np.cos(2.0 * unit[:, [1]]))
+    return vertices, np.asarray(sphere.faces, dtype=np.int64)
+
+
+def _motion(t):
+    return Rotation.from_rotvec([0.04 * t, -0.03 * t, 0.02 * t]).as_matrix(), np.array([0.03, 0.02, -0.01]) * t
+
+
+def _rigid_sequence(frames=4):
+    vertices, faces = _bumpy()
+    seq = []
+    for t in range(frames):
+        rotation, shift = _motion(t)
+        seq.append(Frame(vertices @ rotation.T + shift, faces=faces, time=float(t)))
+    return PointCloudSequence(seq), vertices, faces
+
+
+def _remeshed_sequence(frames=4):
+    """The same moving shape, every frame remeshed on its own (a different icosphere level
+    and a random rotation of the sampling)."""
+    from fourd.synth.remesh import remesh_surface
+
+    vertices, faces = _bumpy(4)
+    edge = np.median(np.linalg.norm(vertices[faces] - vertices[np.roll(faces, 1, axis=1)], axis=2))
+    seq, truth = [], []
+    for t in range(frames):
+        rotation, shift = _motion(t)
+        moved = vertices @ rotation.T + shift
+        mesh = remesh_surface(moved, faces, spacing=3.0 * edge, offset=[0.1 * t, 0.3, 0.7 * t % 1.0])
+        seq.append(Frame(mesh.vertices, faces=mesh.faces, time=float(t)))
+        truth.append((moved, faces))
+    return PointCloudSequence(seq), truth
+
+
+def _distance_to(points, vertices, faces):
+    mesh = trimesh.Trimesh(vertices, faces, process=False)
+    return trimesh.proximity.closest_point(mesh, points)[1]
+
+
+def test_the_method_keeps_the_contract_and_is_registered():
+    module = method_module("assembly")
+    assert check_method_module(module) == []
+    assert module.MIN_FRAMES == 2 and module.RESULT is fourd.AnimatedMesh
+    with pytest.raises(ValueError, match="anchor_spacing"):
+        Options(anchor_spacing=0.0)
+    with pytest.raises(ValueError, match="flattening"):
+        Options(flattening="cones")
+
+
+def test_a_rigidly_moving_mesh_maps_every_vertex_to_itself():
+    seq, vertices, faces = _rigid_sequence(4)
+    result = reconstruct(seq)
+    assert isinstance(result, fourd.AnimatedMesh)
+    np.testing.assert_array_equal(result.faces, faces)
+    edge = np.median(np.linalg.norm(vertices[faces] - vertices[np.roll(faces, 1, axis=1)], axis=2))
+    for t in range(4):
+        rotation, shift = _motion(t)
+        error = np.linalg.norm(result.vertices[t] - (vertices @ rotation.T + shift), axis=1)
+        # measured: largest 0.0 edges (every vertex anchored at itself or mapped exactly)
+        assert error.max() < 0.05 * edge, (t, error.max() / edge)
+    # measured: 94% observed (the patch map leaves 13% of the vertices of one merge to the
+    # registration, which places them exactly: the motion is rigid)
+    assert result.observed.mean() > 0.85
+
+
+def test_frames_remeshed_apart_give_one_connectivity_on_every_input_surface():
+    seq, truth = _remeshed_sequence(4)
+    result, figures = reconstruct_with_diagnostics(seq, Options(relax_sweeps=2))
+    first_vertices, first_faces = seq.frames[0].points, seq.frames[0].faces
+    np.testing.assert_array_equal(result.faces, first_faces)
+    assert result.vertices.shape == (4, len(first_vertices), 3)
+    edge = np.median(np.linalg.norm(first_vertices[first_faces] - first_vertices[np.roll(first_faces, 1, axis=1)],
+                                    axis=2))
+    for t in range(4):
+        # on that frame's own input mesh
+        gap = _distance_to(result.vertices[t], seq.frames[t].points, seq.frames[t].faces) / edge
+        # measured (relax_sweeps=2): median <= 0.008, 99th percentile <= 0.15 edges
+        assert np.median(gap) < 0.05 and np.percentile(gap, 99) < 0.5, (t, np.percentile(gap, 99))
+        # and where the true motion takes frame 0's points
+        rotation, shift = _motion(t)
+        rotation0, shift0 = _motion(0)
+        expected = (first_vertices - shift0) @ rotation0 @ rotation.T + shift
+        error = np.linalg.norm(result.vertices[t] - expected, axis=1) / edge
+        # measured: median 0.22 / 0.42 / 0.57 edges at frames 1 / 2 / 3, 95th percentile 0.52 /
+        # 0.82 / 1.37 (the pair maps' errors add up over the hierarchy's merges)
+        assert np.median(error) < 0.8 and np.percentile(error, 95) < 2.0, (t, np.median(error))
+    assert 0.5 < figures.mapped_fraction <= 1.0
+    assert 0.5 < figures.observed_fraction <= 1.0
+
+
+def test_vertices_the_map_cannot_place_are_filled_in_unobserved():
+    vertices, faces = _bumpy()
+    # the right frame lacks a cap: the source's vertices there have no counterpart
+    rotation, shift = _motion(1)
+    moved = vertices @ rotation.T + shift
+    keep = ~(vertices[faces].mean(axis=1)[:, 0] > 0.8)
+    from fourd.geometry.marching import compact
+
+    target_vertices, target_faces = compact(moved, faces[keep])
+    left = Block(faces, vertices[None], np.ones((1, len(vertices)), dtype=bool))
+    right = Block(target_faces, target_vertices[None], np.ones((1, len(target_vertices)), dtype=bool))
+    merged, report = merge_blocks(left, right, Options(relax_sweeps=1))
+    assert merged.vertices.shape == (2, len(vertices), 3) and report.mapped < 1.0
+    cap = vertices[:, 0] > 0.95
+    assert not merged.observed[1, cap].any() and merged.observed[0].all()
+    edge = np.median(np.linalg.norm(vertices[faces] - vertices[np.roll(faces, 1, axis=1)], axis=2))
+    error = np.linalg.norm(merged.vertices[1] - moved, axis=1) / edge
+    # measured: the cap filled in by the Laplacian registration within a fraction of an edge
+    assert error[cap].max() < 1.0 and np.median(error) < 0.1
+
+
+def test_point_cloud_frames_are_meshed_first_and_bad_input_is_named():
+    count = 1500
+    i = np.arange(count) + 0.5
+    z = 1 - 2 * i / count
+    phi = np.pi * (1 + 5**0.5) * i
+    sphere = np.stack([np.sqrt(1 - z * z) * np.cos(phi), np.sqrt(1 - z * z) * np.sin(phi), z], axis=1)
+    frames = [Frame(sphere * [1.0, 0.8, 0.6] + [0.02 * t, 0.0, 0.0], time=float(t)) for t in range(2)]
+    result = fourd.reconstruct(PointCloudSequence(frames), method="assembly", relax_sweeps=1,
+                               grid_scale=2.0, bandwidth=3.0, clip_distance=3.0)
+    assert result.frame_count == 2 and len(result.faces) > 100
+    radial = [np.linalg.norm((result.vertices[t] - [0.02 * t, 0, 0]) / [1.0, 0.8, 0.6], axis=1) - 1 for t in (0, 1)]
+    # the per-frame meshing sits about 3% inside (its smoothing); both frames alike
+    assert np.abs(np.median(radial[0])) < 0.05
+    assert np.percentile(np.abs(radial[1] - radial[0]), 99) < 0.01
+    assert result.observed.mean() > 0.8
+    rng = np.random.default_rng(0)
+    with pytest.raises(InputError, match="needs at least 2 frames"):
+        fourd.reconstruct(PointCloudSequence(frames[:1]), method="assembly")
+    tiny = PointCloudSequence([Frame(rng.normal(size=(10, 3)), time=float(t)) for t in range(2)])
+    with pytest.raises(InputError):
+        fourd.reconstruct(tiny, method="assembly")
+
+
+@pytest.mark.slow
+def test_merges_of_a_level_run_in_processes_with_the_same_result():
+    seq, _ = _remeshed_sequence(4)
+    serial = reconstruct(seq, Options(relax_sweeps=1))
+    parallel = reconstruct(seq, Options(relax_sweeps=1, workers=2))
+    np.testing.assert_array_equal(parallel.vertices, serial.vertices)
+    np.testing.assert_array_equal(parallel.observed, serial.observed)
