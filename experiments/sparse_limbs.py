@@ -28,7 +28,9 @@ RESOLUTION = 160
 VARIANTS = {
     "default": {},
     "large_motion=false": {"large_motion": "false"},
+    "template_vertices=5000": {"template_vertices": "5000"},
     "template_vertices=3000": {"template_vertices": "3000"},
+    "template_vertices=2000": {"template_vertices": "2000"},
     "epsilon x2 (0.02)": {"epsilon": "0.02"},
     "rigid_guess=false": {"rigid_guess": "false"},
     "iterations=8": {"iterations": "8"},

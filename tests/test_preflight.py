@@ -153,7 +153,7 @@ def test_per_frame_meshes_cannot_go_to_a_point_cache():
         assert str(info.value) == (
             f"walk.pc2: a .pc2 file holds one mesh connectivity for all frames, but method "
             f"'{name}' gives a mesh per frame, each with its own: use --method auto, kinematic, "
-            "watertight, learned or assembly, or write .npz, .glb, .usd, .abc or a folder"
+            "surfels, watertight, learned, garment or assembly, or write .npz, .glb, .usd, .abc or a folder"
         )
         for kind in ("npz", "glb", "usd", "abc", "folder"):
             check_result_format(name, method_module(name), kind)
