@@ -32,3 +32,12 @@ def test_extract_template_corrects_its_cell_size_towards_the_target_vertex_count
             assert count == first  # close enough: no second marching cubes
         else:
             assert abs(count / target - 1.0) < 0.05
+
+
+def test_the_template_is_no_denser_than_sparse_frames():
+    from fourd.methods.kinematic.urshape import template_size
+
+    dense = [np.zeros((20000, 3))] * 3
+    sparse = [np.zeros((2500, 3)), np.zeros((3000, 3)), np.zeros((2800, 3))]
+    assert template_size(10000, dense) == 10000
+    assert template_size(10000, sparse) == 2800

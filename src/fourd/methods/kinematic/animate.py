@@ -22,7 +22,7 @@ from fourd.methods.kinematic.projection import project_to_surface
 from fourd.methods.kinematic.register import RegisterOptions
 from fourd.methods.kinematic.sliding import SlideOptions, slide
 from fourd.methods.kinematic.trajectories import smooth_trajectories
-from fourd.methods.kinematic.urshape import extract_template, template_cell_size
+from fourd.methods.kinematic.urshape import extract_template, template_cell_size, template_size
 
 log = logging.getLogger("fourd.methods.kinematic")
 
@@ -109,8 +109,12 @@ def animate(
     if cache.enabled:
         frame_keys = [stage_key(p, n) for p, n in zip(points, normals, strict=True)]
     box = np.array([points[0].min(axis=0), points[0].max(axis=0)]) if bounds is None else bounds
+    target_vertices = template_size(options.template_vertices, points)
+    if target_vertices < options.template_vertices:
+        log.info("sparse frames: a template of about %d vertices (%d asked)", target_vertices,
+                 options.template_vertices)
     cell = options.cell_size or max(
-        template_cell_size(points[0], spacing, options.template_vertices),
+        template_cell_size(points[0], spacing, target_vertices),
         # a few scattered points estimate a tiny area: keep the grid within bounds
         float(np.max(np.ptp(np.asarray(box, dtype=float), axis=0))) / MAX_TEMPLATE_CELLS,
     )
@@ -120,7 +124,7 @@ def animate(
     if cache.enabled:
         urshape_key = stage_key(
             URSHAPE_STAGE, field_key, frame_keys[0], float(times[0]), np.asarray(box, float),
-            cell, options.cell_size, options.template_vertices, options.smoothing_iterations,
+            cell, options.cell_size, target_vertices, options.smoothing_iterations,
             options.data_term, bandwidth, closed,
         )
 
@@ -280,7 +284,7 @@ def _urshape(field, points, normals, times, box, cell, bandwidth, options, close
         data_points=None if closed else points[0],
         smoothing_iterations=options.smoothing_iterations,
         min_component_faces=20,
-        target_vertices=0 if options.cell_size else options.template_vertices,
+        target_vertices=0 if options.cell_size else template_size(options.template_vertices, points),
     )
     if len(faces) == 0:
         raise InputError("the 4D implicit has no surface at the first frame (too few points?)")

@@ -58,7 +58,8 @@ class Options:
         Urshape marching-cubes cell size; 0: chosen from the first frame's surface area so
         that the urshape has about ``template_vertices`` vertices.
     template_vertices : int
-        Target size of the urshape when ``cell_size`` is 0.
+        Target size of the urshape when ``cell_size`` is 0; on sparse frames fewer (at most
+        one per point of the median frame: a template denser than its data loses limbs).
     smoothing_iterations : int
         Laplacian smoothing steps of the urshape before its projection onto ``f = 0``.
     iterations : int

@@ -159,6 +159,21 @@ def extract_template(
     return vertices, faces
 
 
+#: A template at most this many vertices per point of a frame (the median frame): a template
+#: denser than its data has vertices no point holds, and on sparse scans they let limbs go
+#: (experiments/sparse_limbs.py: crane at 2,800 points per frame, 40 frames, correspondence
+#: mean / last 0.0350 / 0.0833 with 10,000 vertices, 0.0188 / 0.0255 with 5,000, 0.0156 /
+#: 0.0160 with 3,000, 0.0137 / 0.0170 with 2,000).
+TEMPLATE_VERTICES_PER_POINT = 1.0
+
+
+def template_size(vertices: int, points) -> int:
+    """The urshape's target size: ``vertices``, or fewer on sparse frames (at most
+    :data:`TEMPLATE_VERTICES_PER_POINT` per point of the median frame ``points [P_k, 3]``)."""
+    median = float(np.median([len(p) for p in points])) if len(points) else 0.0
+    return int(max(100, min(vertices, TEMPLATE_VERTICES_PER_POINT * median)))
+
+
 def template_cell_size(points: np.ndarray, spacing: float, vertices: int) -> float:
     """Marching-cubes cell size giving about ``vertices`` urshape vertices.
 
