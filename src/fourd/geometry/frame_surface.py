@@ -362,3 +362,42 @@ def frame_surface(
         len(faces),
     )
     return vertices, faces
+
+
+def frame_surfaces(
+    frames,
+    settings: SurfaceSettings,
+    *,
+    cache_dir: str | None = None,
+    stage: str = "frame-surface",
+    desc: str = "frame surfaces",
+    use_faces: bool = True,
+    mesh=None,
+):
+    """Every frame's surface ``[(vertices [N, 3], faces [F, 3]), ...]`` and how many came
+    from the cache: a frame's own faces when it has them and ``use_faces`` (unreferenced
+    vertices dropped), else :func:`frame_surface` of its points, kept in ``cache_dir`` under ``stage`` as it is made so
+    that a rerun after an interruption reuses it (``fourd reconstruct --cache``). ``mesh(frame)
+    -> (vertices, faces)`` replaces :func:`frame_surface` (``settings`` still keys the cache)."""
+    from fourd.cache import StageCache, stage_key
+    from fourd.geometry.marching import compact
+    from fourd.progress import progress
+
+    cache = StageCache(cache_dir)
+    surfaces, found = [], 0
+    for frame in progress(frames, desc=desc, total=len(frames)):
+        if use_faces and frame.faces is not None and len(frame.faces):
+            surfaces.append(compact(np.asarray(frame.points, dtype=np.float64),
+                                    np.asarray(frame.faces, dtype=np.int64)))
+            continue
+        key = stage_key(stage, frame.points, frame.normals, frame.sensors, settings)
+        stored = cache.load(stage, key)
+        if stored is None:
+            vertices, faces = mesh(frame) if mesh is not None else frame_surface(
+                frame.points, normals=frame.normals, sensors=frame.sensors, settings=settings, time=frame.time)
+            cache.save(stage, key, {"vertices": vertices, "faces": faces})
+        else:
+            vertices, faces = stored["vertices"], stored["faces"]
+            found += 1
+        surfaces.append((vertices, faces))
+    return surfaces, found

@@ -21,16 +21,16 @@ from dataclasses import dataclass
 import numpy as np
 
 from fourd.animation import MeshSequence
-from fourd.cache import StageCache, report_resumed, stage_key
+from fourd.cache import report_resumed
 from fourd.geometry.frame_surface import (  # noqa: F401  (re-exported: the baseline's helpers)
     SurfaceSettings,
     cell_corner_minimum,
     frame_surface,
+    frame_surfaces,
     oriented_normals,
     taubin_smooth,
     voxel_average,
 )
-from fourd.progress import progress
 from fourd.sequence import Frame, PointCloudSequence
 
 log = logging.getLogger("fourd.methods.perframe")
@@ -102,18 +102,10 @@ def reconstruct(seq: PointCloudSequence, options: Options | None = None) -> Mesh
     """Mesh every frame of ``seq`` independently; one mesh per input frame, same times."""
     options = Options() if options is None else options
     log.info("per-frame meshing of %d frames", len(seq.frames))
-    cache = StageCache(options.cache_dir)
-    meshes, found = [], 0
-    for frame in progress(seq.frames, desc="perframe", total=len(seq.frames)):
-        key = stage_key(STAGE, frame.points, frame.normals, frame.sensors, options)
-        stored = cache.load(STAGE, key)
-        if stored is None:
-            vertices, faces = reconstruct_frame(frame, options)
-            cache.save(STAGE, key, {"vertices": vertices, "faces": faces})
-        else:
-            vertices, faces = stored["vertices"], stored["faces"]
-            found += 1
-        meshes.append((vertices, faces))
+    # every frame's points meshed, also where the input frames have faces of their own
+    meshes, found = frame_surfaces(seq.frames, options, cache_dir=options.cache_dir, stage=STAGE,
+                                   desc="perframe", use_faces=False,
+                                   mesh=lambda frame: reconstruct_frame(frame, options))
     if found:
         report_resumed(log, f"{found} of {len(seq.frames)} frames' meshes")
     return MeshSequence(tuple(meshes), seq.times)

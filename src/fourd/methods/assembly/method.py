@@ -18,15 +18,14 @@ import logging
 import numpy as np
 
 from fourd.animation import AnimatedMesh
-from fourd.cache import StageCache, report_resumed, stage_key
+from fourd.cache import report_resumed
 from fourd.errors import InputError
-from fourd.geometry.frame_surface import SurfaceSettings, frame_surface
-from fourd.geometry.marching import compact
+from fourd.geometry.frame_surface import SurfaceSettings, frame_surfaces
 from fourd.methods.assembly.hierarchy import Block, assemble
 from fourd.methods.assembly.options import Options
 from fourd.methods.base import Reconstruction
 from fourd.progress import progress
-from fourd.sequence import Frame, PointCloudSequence
+from fourd.sequence import PointCloudSequence
 
 log = logging.getLogger("fourd.methods.assembly")
 
@@ -56,33 +55,12 @@ class AssemblyDiagnostics:
     observed_fraction: float
 
 
-def frame_mesh(frame: Frame, options: Options) -> tuple[np.ndarray, np.ndarray]:
-    """One frame's mesh ``(vertices [N, 3], faces [F, 3])``: its own faces when it has them,
-    else :func:`~fourd.geometry.frame_surface.frame_surface`."""
-    if frame.faces is not None and len(frame.faces):
-        return compact(np.asarray(frame.points, dtype=np.float64), np.asarray(frame.faces, dtype=np.int64))
-    settings = SurfaceSettings(**{f.name: getattr(options, f.name) for f in dataclasses.fields(SurfaceSettings)})
-    return frame_surface(frame.points, normals=frame.normals, sensors=frame.sensors, settings=settings,
-                         time=frame.time)
-
-
 def frame_meshes(seq: PointCloudSequence, options: Options) -> list[tuple[np.ndarray, np.ndarray]]:
-    """Every frame's mesh (step 1 of the module docstring), empty ones included."""
-    cache = StageCache(options.cache_dir)
-    meshes, found = [], 0
-    for frame in progress(seq.frames, desc="assembly meshes", total=len(seq.frames)):
-        if frame.faces is not None and len(frame.faces):
-            meshes.append(frame_mesh(frame, options))
-            continue
-        key = stage_key(STAGE, frame.points, frame.normals, frame.sensors, options)
-        stored = cache.load(STAGE, key)
-        if stored is None:
-            vertices, faces = frame_mesh(frame, options)
-            cache.save(STAGE, key, {"vertices": vertices, "faces": faces})
-        else:
-            vertices, faces = stored["vertices"], stored["faces"]
-            found += 1
-        meshes.append((vertices, faces))
+    """Every frame's mesh (step 1 of the module docstring), empty ones included: its own faces
+    when it has them, else :func:`~fourd.geometry.frame_surface.frame_surface` (cached)."""
+    settings = SurfaceSettings(**{f.name: getattr(options, f.name) for f in dataclasses.fields(SurfaceSettings)})
+    meshes, found = frame_surfaces(seq.frames, settings, cache_dir=options.cache_dir, stage=STAGE,
+                                   desc="assembly meshes")
     if found:
         report_resumed(log, f"{found} of {len(seq.frames)} frames' meshes")
     return meshes

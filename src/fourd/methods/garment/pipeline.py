@@ -31,10 +31,10 @@ from scipy.spatial import cKDTree
 from fourd.animation import AnimatedMesh
 from fourd.appearance.color_guide import PhotometricGuides, colors_of_cleaned
 from fourd.appearance.guide import Guide, anchor_guide
-from fourd.cache import StageCache, report_resumed, stage_key
+from fourd.cache import report_resumed
 from fourd.errors import InputError
 from fourd.geometry.boundary_loops import boundary_loops
-from fourd.geometry.frame_surface import SurfaceSettings, frame_surface
+from fourd.geometry.frame_surface import SurfaceSettings, frame_surface, frame_surfaces
 from fourd.geometry.hole_filling import fill_holes
 from fourd.geometry.meshes import median_edge_length, remove_small_components
 from fourd.geometry.normals import vertex_normals
@@ -60,24 +60,11 @@ __all__ = ["reconstruct"]
 
 
 def _frame_meshes(seq: PointCloudSequence, options: Options) -> list[tuple[np.ndarray, np.ndarray]]:
-    cache = StageCache(options.cache_dir)
-    meshes, found = [], 0
-    for index, frame in enumerate(progress(seq.frames, desc="garment: frame surfaces", unit="frame")):
-        if frame.faces is not None and len(frame.faces):
-            vertices, faces = np.asarray(frame.points, dtype=np.float64), np.asarray(frame.faces, dtype=np.int64)
-        else:
-            key = stage_key(STAGE, frame.points, frame.normals, frame.sensors, SurfaceSettings())
-            stored = cache.load(STAGE, key)
-            if stored is None:
-                vertices, faces = frame_surface(frame.points, normals=frame.normals, sensors=frame.sensors,
-                                                time=frame.time)
-                cache.save(STAGE, key, {"vertices": vertices, "faces": faces})
-            else:
-                vertices, faces = stored["vertices"], stored["faces"]
-                found += 1
+    meshes, found = frame_surfaces(seq.frames, SurfaceSettings(), cache_dir=options.cache_dir, stage=STAGE,
+                                   desc="garment: frame surfaces")
+    for index, (_, faces) in enumerate(meshes):
         if len(faces) < 4:
-            raise InputError(f"frame {index}: no surface could be made of its {len(frame.points)} points")
-        meshes.append((vertices, faces))
+            raise InputError(f"frame {index}: no surface could be made of its {len(seq.frames[index].points)} points")
     if found:
         report_resumed(log, f"{found} of {len(seq.frames)} frames' surfaces")
     return meshes
