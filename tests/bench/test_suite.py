@@ -76,3 +76,10 @@ def test_a_scene_may_carry_an_appearance_and_video():
     assert filmed.appearance == "cloth" and filmed.video  # video films a printed surface
     with pytest.raises(InputError, match="unknown appearance"):
         suite.BenchScene("squash-ball", appearance="velvet")
+
+
+def test_the_whole_crane_capture_is_a_bench_scene_at_two_densities():
+    dense, sparse = suite.select_scenes(["crane-full", "crane-full-sparse"], quick=False)
+    assert dense.frames == sparse.frames == 175 and dense.options == {"start": 0, "step": 1}
+    assert sparse.resolution < dense.resolution
+    assert "crane-full" not in {s.key for s in suite.STANDARD_SCENES}  # run on request only

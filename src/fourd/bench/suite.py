@@ -108,6 +108,15 @@ REMESHED_SCENES: tuple[BenchScene, ...] = tuple(
 )
 
 
+#: Whole captures (issue 56), not run by default (``--scenes crane-full crane-full-sparse``): all
+#: 175 crane frames, the rig framing the whole capture, at the standard resolution (about
+#: 16,700 points per frame) and at 160 rays per side (about 2,800: a depth camera a few metres
+#: from a performer).
+WHOLE_CAPTURE_SCENES: tuple[BenchScene, ...] = (
+    BenchScene("crane", frames=175, options={"start": 0, "step": 1}, label="crane-full"),
+    BenchScene("crane", frames=175, options={"start": 0, "step": 1}, resolution=160, label="crane-full-sparse"),
+)
+
 #: Garment scenes (issue 54), not run by default (``--scenes tshirt-cloth-video ...``): the
 #: standard scan of a T-shirt and a dress in printed cloth, with the rig's video.
 GARMENT_BENCH_SCENES: tuple[BenchScene, ...] = (
@@ -142,7 +151,8 @@ def select_scenes(scenes, quick: bool) -> list[BenchScene]:
     default = QUICK_SCENES if quick else STANDARD_SCENES
     if scenes is None:
         return list(default)
-    named = HELD_OUT_SCENES + APPEARANCE_SCENES + REMESHED_SCENES + GARMENT_BENCH_SCENES
+    named = (HELD_OUT_SCENES + APPEARANCE_SCENES + REMESHED_SCENES + GARMENT_BENCH_SCENES
+             + WHOLE_CAPTURE_SCENES)
     table = {s.key: s for s in (default if quick else STANDARD_SCENES + named)}
     from fourd.synth.scenes import SCENES
 
