@@ -22,7 +22,7 @@ from scipy.spatial import Delaunay, cKDTree
 
 from fourd.errors import InputError
 
-__all__ = ["signed_area", "triangle_areas", "triangulate_polygon"]
+__all__ = ["resample_polyline", "signed_area", "triangle_areas", "triangulate_polygon"]
 
 
 def signed_area(polygon: np.ndarray) -> float:
@@ -38,11 +38,13 @@ def triangle_areas(points: np.ndarray, faces: np.ndarray) -> np.ndarray:
     return 0.5 * (u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0])
 
 
-def _dense(polygon: np.ndarray, step: float) -> np.ndarray:
-    closed = np.vstack([polygon, polygon[:1]])
-    length = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(closed, axis=0), axis=1))])
-    at = np.linspace(0.0, length[-1], max(8, int(np.ceil(length[-1] / step)) + 1))
-    return np.column_stack([np.interp(at, length, closed[:, k]) for k in range(2)])
+def resample_polyline(points: np.ndarray, step: float, *, closed: bool = False, least: int = 2) -> np.ndarray:
+    """Points ``[M, 2]`` at most ``step`` apart by arc length along ``points [K, 2]`` (back to
+    the first point when ``closed``), its ends included, at least ``least`` of them."""
+    path = np.vstack([points, points[:1]]) if closed else np.asarray(points, dtype=np.float64)
+    length = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(path, axis=0), axis=1))])
+    at = np.linspace(0.0, length[-1], max(least, int(np.ceil(length[-1] / step)) + 1))
+    return np.column_stack([np.interp(at, length, path[:, k]) for k in range(path.shape[1])])
 
 
 def triangulate_polygon(polygon: np.ndarray, edge: float) -> tuple[np.ndarray, np.ndarray]:
@@ -62,7 +64,7 @@ def triangulate_polygon(polygon: np.ndarray, edge: float) -> tuple[np.ndarray, n
     path = Path(polygon)
     if len(lattice):
         inside = path.contains_points(lattice)
-        far = cKDTree(_dense(polygon, edge / 8)).query(lattice)[0] > 0.6 * edge
+        far = cKDTree(resample_polyline(polygon, edge / 8, closed=True, least=8)).query(lattice)[0] > 0.6 * edge
         lattice = lattice[inside & far]
     points = np.concatenate([polygon, lattice])
     if len(points) >= 4:

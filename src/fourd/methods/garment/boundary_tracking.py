@@ -198,7 +198,7 @@ def _best_candidate(points, reference: Ellipse, rng, options: TrackingOptions):
     ellipse, count = candidates[best], int(counts[best])
     # refit to the points on it: the six samples only found it
     inliers = points[np.linalg.norm(points - ellipse.center, axis=1) <= options.reach * reference.radii[0]]
-    on = _point_on(ellipse, inliers, tolerance)
+    on = point_distances(as_batch(ellipse), inliers)[0] <= tolerance
     if on.sum() >= 6:
         refit = fit_ellipses(inliers[on][None])
         if refit.valid[0]:
@@ -215,10 +215,6 @@ def _aligned(ellipse: Ellipse, reference: Ellipse) -> Ellipse:
     normal = ellipse.normal if ellipse.normal @ reference.normal >= 0 else -ellipse.normal
     major = ellipse.axes[0] if ellipse.axes[0] @ reference.axes[0] >= 0 else -ellipse.axes[0]
     return Ellipse(ellipse.center, normal, np.stack([major, np.cross(normal, major)]), ellipse.radii)
-
-
-def _point_on(ellipse: Ellipse, points: np.ndarray, tolerance: float) -> np.ndarray:
-    return point_distances(as_batch(ellipse), points)[0] <= tolerance
 
 
 def _interpolate(chosen: list, found: np.ndarray):

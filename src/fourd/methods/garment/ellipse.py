@@ -32,6 +32,7 @@ __all__ = [
     "Ellipse",
     "EllipseBatch",
     "as_batch",
+    "ellipse_perimeter",
     "fit_ellipse",
     "fit_ellipses",
     "point_distances",
@@ -43,6 +44,14 @@ __all__ = [
 #: Inverse of the constraint matrix ``4 a c - b^2 = 1`` restricted to ``(a, b, c)`` (Halir and
 #: Flusser 1998, eq. 21).
 _C1_INVERSE = np.array([[0.0, 0.0, 0.5], [0.0, -1.0, 0.0], [0.5, 0.0, 0.0]])
+
+
+def ellipse_perimeter(a, b):
+    """Perimeter of ellipses of radii ``a``, ``b`` (arrays or floats): Ramanujan's second
+    approximation."""
+    a, b = np.asarray(a, dtype=np.float64), np.asarray(b, dtype=np.float64)
+    h = ((a - b) / (a + b)) ** 2
+    return np.pi * (a + b) * (1 + 3 * h / (10 + np.sqrt(4 - 3 * h)))
 
 
 @dataclass(frozen=True)
@@ -68,9 +77,7 @@ class Ellipse:
     @property
     def perimeter(self) -> float:
         """Ramanujan's second approximation of the perimeter."""
-        a, b = float(self.radii[0]), float(self.radii[1])
-        h = ((a - b) / (a + b)) ** 2
-        return float(np.pi * (a + b) * (1 + 3 * h / (10 + np.sqrt(4 - 3 * h))))
+        return float(ellipse_perimeter(self.radii[0], self.radii[1]))
 
     def points(self, count: int = 64) -> np.ndarray:
         """``count`` points along it, ``[count, 3]``."""
@@ -275,10 +282,7 @@ def prune(
     cosine = np.abs(candidates.normal @ reference.normal)
     low, high = 1.0 - size_tolerance, 1.0 + size_tolerance
     ratio = candidates.radii / reference.radii[None, :]
-    a, b = candidates.radii[:, 0], candidates.radii[:, 1]
-    h = ((a - b) / (a + b)) ** 2
-    perimeter = np.pi * (a + b) * (1 + 3 * h / (10 + np.sqrt(4 - 3 * h)))
-    perimeter_ratio = perimeter / reference.perimeter
+    perimeter_ratio = ellipse_perimeter(candidates.radii[:, 0], candidates.radii[:, 1]) / reference.perimeter
     keep = (
         (shift <= max_shift)
         & (cosine >= np.cos(np.radians(max_angle_degrees)))

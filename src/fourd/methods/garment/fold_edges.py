@@ -260,7 +260,7 @@ def _merged(edges: list[FoldEdge], options: FoldEdgeOptions) -> list[FoldEdge]:
     return edges
 
 
-def _pair_candidates(edges: list[FoldEdge], grey: np.ndarray, options: FoldEdgeOptions) -> list[FoldPair]:
+def _pair_candidates(edges: list[FoldEdge], options: FoldEdgeOptions) -> list[FoldPair]:
     pairs = []
     dense = [_densify(e.points) for e in edges]
     trees = [cKDTree(d) for d in dense]
@@ -363,7 +363,7 @@ def fold_edges(image: np.ndarray, options: FoldEdgeOptions | None = None, *, mas
                     if oriented is not None:
                         edges.append(oriented)
             edges = _merged(edges, scaled)
-            for pair in _select(_pair_candidates(edges, small, scaled)):
+            for pair in _select(_pair_candidates(edges, scaled)):
                 pooled.append(FoldPair(
                     FoldEdge(pair.first.points / scale, pair.first.contrast),
                     FoldEdge(pair.second.points / scale, pair.second.contrast),

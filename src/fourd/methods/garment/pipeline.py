@@ -82,11 +82,12 @@ def _openings(vertices, faces, count: int) -> list[np.ndarray]:
     return loops[:count]
 
 
-def _frame_template(vertices, faces, openings):
-    """The first frame's surface, its holes but the openings filled, the largest piece kept."""
+def _frame_template(vertices, faces, count: int):
+    """The first frame's surface, its holes but the ``count`` openings (0: found as in
+    :func:`_openings`) filled, the largest piece kept: ``(vertices, faces, openings)``."""
     vertices, faces = remove_small_components(vertices, faces, min_fraction=0.2)
     loops = [loop for loop in boundary_loops(faces, len(vertices)) if len(loop) >= 3]
-    kept = _openings(vertices, faces, len(openings))
+    kept = _openings(vertices, faces, count)
     opening_sets = [set(loop.tolist()) for loop in kept]
     holes = [loop for loop in loops if set(loop.tolist()) not in opening_sets]
     filled = fill_holes(vertices, faces, holes=holes)
@@ -164,7 +165,7 @@ def reconstruct(seq: PointCloudSequence, options: Options | None = None) -> Anim
             frame.points, normals=frame.normals, sensors=frame.sensors,
             settings=SurfaceSettings(grid_scale=options.template_scale))
         coarse = (np.asarray(coarse[0], dtype=np.float64), np.asarray(coarse[1], dtype=np.int64))
-        rest, faces, openings = _frame_template(*coarse, _openings(*coarse, options.boundaries))
+        rest, faces, openings = _frame_template(*coarse, options.boundaries)
         template_loops = openings
         frame_ellipses = [fit_ellipse(rest[loop]) for loop in openings]
         start, uv = rest, None

@@ -24,7 +24,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from fourd.errors import InputError
-from fourd.geometry.polygon_triangulation import signed_area, triangulate_polygon
+from fourd.geometry.polygon_triangulation import resample_polyline, signed_area, triangulate_polygon
 
 __all__ = [
     "Template",
@@ -168,7 +168,7 @@ def sew_front_and_back(points: np.ndarray, faces: np.ndarray, boundary_count: in
     opening = np.zeros(count, dtype=bool)
     for polyline in openings or []:
         polyline = np.asarray(polyline, dtype=np.float64)
-        dense = _resample_open(polyline, edge / 16)
+        dense = resample_polyline(polyline, edge / 16)
         on = cKDTree(dense).query(points[boundary])[0] < 0.25 * edge
         ends = np.linalg.norm(points[boundary, None, :] - polyline[[0, -1]][None], axis=2).min(axis=1) > 0.25 * edge
         opening[boundary[on & ends]] = True
@@ -185,12 +185,6 @@ def sew_front_and_back(points: np.ndarray, faces: np.ndarray, boundary_count: in
     vertices = np.column_stack([uv, np.zeros(len(uv))])
     back = np.concatenate([np.zeros(count, dtype=bool), np.ones(keep_back.sum(), dtype=bool)])
     return vertices, all_faces, uv, back
-
-
-def _resample_open(polyline: np.ndarray, step: float) -> np.ndarray:
-    length = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(polyline, axis=0), axis=1))])
-    at = np.linspace(0.0, length[-1], max(2, int(np.ceil(length[-1] / step)) + 1))
-    return np.column_stack([np.interp(at, length, polyline[:, k]) for k in range(2)])
 
 
 def _unique_edges(faces: np.ndarray) -> np.ndarray:
