@@ -124,6 +124,13 @@ GARMENT_BENCH_SCENES: tuple[BenchScene, ...] = (
     BenchScene("dress", label="dress-cloth-video", appearance="cloth", video=True),
 )
 
+#: Robustness variants (issue 50), not run by default (``--scenes rigid-turn-outliers``): the
+#: standard rigid-turn scan with 10% uniform outliers instead of 2% (the Venus test of Wand et
+#: al. 2007, sec. 4).
+ROBUSTNESS_SCENES: tuple[BenchScene, ...] = (
+    BenchScene("rigid-turn", label="rigid-turn-outliers", scan={"outliers": 0.10}),
+)
+
 #: ``--quick``: two small procedural scenes, 4 frames, coarse cameras (CI-sized).
 QUICK_SCENES: tuple[BenchScene, ...] = (
     BenchScene("squash-ball", frames=4, resolution=96),
@@ -152,7 +159,7 @@ def select_scenes(scenes, quick: bool) -> list[BenchScene]:
     if scenes is None:
         return list(default)
     named = (HELD_OUT_SCENES + APPEARANCE_SCENES + REMESHED_SCENES + GARMENT_BENCH_SCENES
-             + WHOLE_CAPTURE_SCENES)
+             + WHOLE_CAPTURE_SCENES + ROBUSTNESS_SCENES)
     table = {s.key: s for s in (default if quick else STANDARD_SCENES + named)}
     from fourd.synth.scenes import SCENES
 
