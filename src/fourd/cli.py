@@ -269,7 +269,7 @@ def cmd_synth(args) -> int:
     scans = synth.scan(truth, cameras=args.cameras, noise=args.noise, outliers=args.outliers,
                        resolution=args.resolution, seed=args.seed, appearance=args.appearance,
                        video=args.video, video_resolution=args.video_resolution,
-                       mode="remeshed" if args.meshes else "depth")
+                       lighting=args.lighting, mode="remeshed" if args.meshes else "depth")
     from fourd.synth.garments import GARMENT_SCENES, pattern_outline
 
     pattern = pattern_outline(args.scene, with_openings=True) if args.scene in GARMENT_SCENES else None
@@ -525,6 +525,10 @@ def build_parser() -> argparse.ArgumentParser:
                         "(with --appearance cloth unless another is given)")
     p.add_argument("--video-resolution", type=int, default=None, metavar="N",
                    help="image side in pixels (default: --resolution, one pixel per depth ray)")
+    p.add_argument("--lighting", choices=("lamps", "diffuse"), default="lamps",
+                   help="the studio's light: three fixed lamps, or a uniform diffuse sky in which "
+                        "a fold's valley is darker than its ridge (the garment studio of the "
+                        "thesis; for --set wrinkles=true of the garment method)")
     p.add_argument("--meshes", action="store_true",
                    help="per-frame meshes with perfect geometry instead of scans: each frame's "
                         "true surface remeshed on its own (a different triangulation every "
