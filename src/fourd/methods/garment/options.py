@@ -67,6 +67,11 @@ class Options:
         With multi-view video, wrinkle the captured garment where the video shows folds
         (thesis chapter 4, :mod:`fourd.methods.garment.wrinkling`): for plain fabric under
         diffuse light, where a fold's valley is darker than its ridge; silent without video.
+    scheduler : str
+        Where the frames' own surfaces are made (``fourd reconstruct --scheduler``): ``sync``
+        here, ``processes`` side by side in local processes, or a ``dask.distributed``
+        scheduler's address (``tcp://HOST:PORT``); the same surfaces either way
+        (:func:`fourd.pipeline.map_frames`).
     cache_dir : str or None
         Folder keeping each frame's surface as it is made; a rerun after an interruption
         reuses them (``fourd reconstruct --cache``).
@@ -86,4 +91,5 @@ class Options:
     time_sigma: float = 0.0
     observed_distance: float = 2.0
     wrinkles: bool = False
+    scheduler: str = "sync"
     cache_dir: str | None = None

@@ -64,7 +64,7 @@ __all__ = ["reconstruct"]
 
 def _frame_meshes(seq: PointCloudSequence, options: Options) -> list[tuple[np.ndarray, np.ndarray]]:
     meshes, found = frame_surfaces(seq.frames, SurfaceSettings(), cache_dir=options.cache_dir, stage=STAGE,
-                                   desc="garment: frame surfaces")
+                                   desc="garment: frame surfaces", scheduler=options.scheduler)
     for index, (_, faces) in enumerate(meshes):
         if len(faces) < 4:
             raise InputError(f"frame {index}: no surface could be made of its {len(seq.frames[index].points)} points")
