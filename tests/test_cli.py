@@ -310,6 +310,17 @@ def test_every_method_takes_a_cache_folder(tmp_path, capsys):
                       "kinematic", "--cache", str(blocked)], "--cache", "blocked")
 
 
+def test_per_frame_stages_run_where_scheduler_says_and_other_methods_refuse_it(tmp_path, capsys):
+    folder = _folder(tmp_path, frames=2)
+    out = tmp_path / "meshes.npz"
+    assert main(["reconstruct", str(folder), "-o", str(out), "--method", "perframe", "--scheduler", "processes"]) == 0
+    assert out.exists()
+    _run_bad(capsys, ["reconstruct", str(folder), "-o", str(tmp_path / "k.npz"), "--method", "kinematic",
+                      "--scheduler", "processes"], "--scheduler", "in this process only")
+    _run_bad(capsys, ["reconstruct", str(folder), "-o", str(tmp_path / "p.npz"), "--method", "perframe",
+                      "--scheduler", "threads"], "scheduler", "sync, processes")
+
+
 class _SlideSteps:
     """Counts the kinematic sliding's steps; with ``signum`` set, the second one sends that
     signal to this process (as a user or a scheduler would) and goes on."""

@@ -209,6 +209,13 @@ def cmd_reconstruct(args) -> int:
             raise InputError(f"--cache: method {method!r} cannot resume from a cache yet")
         _check_cache(args.cache)
         values["cache_dir"] = args.cache
+    if args.scheduler:
+        import dataclasses
+
+        if "scheduler" not in {f.name for f in dataclasses.fields(module.Options)}:
+            raise InputError(f"--scheduler: method {method!r} runs its stages in this process only "
+                             "(perframe, assembly and garment map their frames)")
+        values["scheduler"] = args.scheduler
     options = method_options(method, values)
     # What can be told without the data is checked before it is loaded: the output can be
     # written (a missing folder can be made) and its format holds the method's result.
@@ -269,7 +276,7 @@ def cmd_synth(args) -> int:
     scans = synth.scan(truth, cameras=args.cameras, noise=args.noise, outliers=args.outliers,
                        resolution=args.resolution, seed=args.seed, appearance=args.appearance,
                        video=args.video, video_resolution=args.video_resolution,
-                       mode="remeshed" if args.meshes else "depth")
+                       lighting=args.lighting, mode="remeshed" if args.meshes else "depth")
     from fourd.synth.garments import GARMENT_SCENES, pattern_outline
 
     pattern = pattern_outline(args.scene, with_openings=True) if args.scene in GARMENT_SCENES else None
@@ -473,6 +480,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--times", help="output times, comma separated (methods that support it)")
     p.add_argument("--cache", metavar="DIR",
                    help="keep finished stages in DIR; rerunning the same command resumes from them")
+    p.add_argument("--scheduler", metavar="S",
+                   help="where per-frame stages run: sync (here, the default), processes (local "
+                        "processes side by side) or a dask.distributed scheduler's address "
+                        "(tcp://HOST:PORT); the result is the same")
     p.add_argument("--force", action="store_true",
                    help="run even when the up-front estimate of the memory needed exceeds the "
                         "memory available")
@@ -525,6 +536,10 @@ def build_parser() -> argparse.ArgumentParser:
                         "(with --appearance cloth unless another is given)")
     p.add_argument("--video-resolution", type=int, default=None, metavar="N",
                    help="image side in pixels (default: --resolution, one pixel per depth ray)")
+    p.add_argument("--lighting", choices=("lamps", "diffuse"), default="lamps",
+                   help="the studio's light: three fixed lamps, or a uniform diffuse sky in which "
+                        "a fold's valley is darker than its ridge (the garment studio of the "
+                        "thesis; for --set wrinkles=true of the garment method)")
     p.add_argument("--meshes", action="store_true",
                    help="per-frame meshes with perfect geometry instead of scans: each frame's "
                         "true surface remeshed on its own (a different triangulation every "

@@ -42,3 +42,34 @@ def test_bad_lamps():
         Lamps(directions=[[0, 0, 1]], intensities=[1.0, 2.0])
     with pytest.raises(InputError):
         Lamps(ambient=-1)
+
+
+def test_under_a_diffuse_sky_a_valley_is_darker_than_a_ridge_and_a_plane_fully_lit():
+    from fourd.geometry.normals import vertex_normals
+    from fourd.synth.shading import accessibility
+
+    n = 61
+    x, y = np.meshgrid(np.linspace(0, 1, n), np.linspace(0, 1, n), indexing="ij")
+    i, j = np.meshgrid(np.arange(n - 1), np.arange(n - 1), indexing="ij")
+    a = (i * n + j).ravel()
+    faces = np.concatenate([np.stack([a, a + n, a + 1], 1), np.stack([a + 1, a + n, a + n + 1], 1)])
+    for amplitude in (0.0, 0.02):
+        z = amplitude * np.cos(2 * np.pi * x / 0.2)
+        vertices = np.stack([x.ravel(), y.ravel(), z.ravel()], axis=1)
+        normals = vertex_normals(vertices, faces)
+        normals *= np.sign(normals[:, 2:3])  # up
+        sky = accessibility(vertices, faces, normals, reach=0.1)
+        inner = (np.abs(x.ravel() - 0.5) < 0.25) & (np.abs(y.ravel() - 0.5) < 0.25)
+        if amplitude == 0:
+            assert np.allclose(sky[inner], 1.0)
+        else:
+            ridge = inner & (np.cos(2 * np.pi * x.ravel() / 0.2) > 0.95)
+            valley = inner & (np.cos(2 * np.pi * x.ravel() / 0.2) < -0.95)
+            assert sky[ridge].min() > 0.95 and sky[valley].max() < sky[ridge].min() - 0.1
+
+
+def test_an_unknown_lighting_is_an_input_error():
+    from fourd.synth.scanner import scan_options
+
+    with pytest.raises(InputError, match="lighting"):
+        scan_options(lighting="sun")

@@ -25,6 +25,7 @@ COLUMNS = (
     ("vol. change", "volume_change", "r"),
     ("closed & manifold", "closed_manifold", "%"),
     ("mass err.", "mass_conservation_error", "%1"),
+    ("fold recall", "fold_recall", "%"),
 )
 
 

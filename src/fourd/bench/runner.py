@@ -43,6 +43,7 @@ from fourd.bench.suite import (
 from fourd.errors import InputError
 from fourd.metrics import evaluate, metric_floor
 from fourd.progress import progress
+from fourd.synth.garments import GARMENT_SCENES
 
 log = logging.getLogger("fourd.bench")
 
@@ -206,7 +207,8 @@ def _run_scene(bench_scene: BenchScene, methods, peers, *, samples, seed, repeat
                       "peak_memory_mb": case["peak_mb"], "start_memory_mb": case["start_mb"],
                       "peak_memory_all_runs_mb": case.get("peak_all_mb", case["peak_mb"])}
             try:
-                metrics = evaluate(case["result"], truth, samples=samples, seed=seed, timing=timing)
+                metrics = evaluate(case["result"], truth, samples=samples, seed=seed, timing=timing,
+                                   folds=bench_scene.name in GARMENT_SCENES)
                 metrics.update(case.get("diagnostics") or {})
                 entry["rows"][label] = {"metrics": metrics, "made": made}
             except Exception as error:  # noqa: BLE001

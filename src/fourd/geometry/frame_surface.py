@@ -364,6 +364,12 @@ def frame_surface(
     return vertices, faces
 
 
+def _surface_of(settings: SurfaceSettings, frame) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`frame_surface` of one frame (a module-level function: it travels to workers)."""
+    return frame_surface(frame.points, normals=frame.normals, sensors=frame.sensors, settings=settings,
+                         time=frame.time)
+
+
 def frame_surfaces(
     frames,
     settings: SurfaceSettings,
@@ -372,32 +378,48 @@ def frame_surfaces(
     stage: str = "frame-surface",
     desc: str = "frame surfaces",
     use_faces: bool = True,
-    mesh=None,
+    scheduler: str = "sync",
 ):
     """Every frame's surface ``[(vertices [N, 3], faces [F, 3]), ...]`` and how many came
     from the cache: a frame's own faces when it has them and ``use_faces`` (unreferenced
-    vertices dropped), else :func:`frame_surface` of its points, kept in ``cache_dir`` under ``stage`` as it is made so
-    that a rerun after an interruption reuses it (``fourd reconstruct --cache``). ``mesh(frame)
-    -> (vertices, faces)`` replaces :func:`frame_surface` (``settings`` still keys the cache)."""
+    vertices dropped), else :func:`frame_surface` of its points, kept in ``cache_dir`` under
+    ``stage`` so that a rerun after an interruption reuses it (``fourd reconstruct --cache``).
+
+    ``scheduler`` (:func:`fourd.pipeline.map_frames`): ``"sync"`` makes the frames here one
+    after the other, each cached as it is made; ``"processes"`` or a ``dask.distributed``
+    scheduler's address makes the missing frames side by side (the same surfaces), cached when
+    they come back."""
+    from functools import partial
+
     from fourd.cache import StageCache, stage_key
     from fourd.geometry.marching import compact
+    from fourd.pipeline import check_scheduler, map_frames
     from fourd.progress import progress
 
+    scheduler = check_scheduler(scheduler)
     cache = StageCache(cache_dir)
-    surfaces, found = [], 0
-    for frame in progress(frames, desc=desc, total=len(frames)):
+    surfaces: list = [None] * len(frames)
+    missing, keys, found = [], {}, 0
+    for index, frame in enumerate(frames):
         if use_faces and frame.faces is not None and len(frame.faces):
-            surfaces.append(compact(np.asarray(frame.points, dtype=np.float64),
-                                    np.asarray(frame.faces, dtype=np.int64)))
+            surfaces[index] = compact(np.asarray(frame.points, dtype=np.float64),
+                                      np.asarray(frame.faces, dtype=np.int64))
             continue
-        key = stage_key(stage, frame.points, frame.normals, frame.sensors, settings)
-        stored = cache.load(stage, key)
+        keys[index] = stage_key(stage, frame.points, frame.normals, frame.sensors, settings)
+        stored = cache.load(stage, keys[index])
         if stored is None:
-            vertices, faces = mesh(frame) if mesh is not None else frame_surface(
-                frame.points, normals=frame.normals, sensors=frame.sensors, settings=settings, time=frame.time)
-            cache.save(stage, key, {"vertices": vertices, "faces": faces})
+            missing.append(index)
         else:
-            vertices, faces = stored["vertices"], stored["faces"]
+            surfaces[index] = (stored["vertices"], stored["faces"])
             found += 1
-        surfaces.append((vertices, faces))
+    make = partial(_surface_of, settings)
+    if scheduler == "sync":
+        for index in progress(missing, desc=desc, total=len(missing)):
+            surfaces[index] = make(frames[index])
+            cache.save(stage, keys[index], {"vertices": surfaces[index][0], "faces": surfaces[index][1]})
+    else:
+        made = map_frames(make, [frames[index] for index in missing], scheduler=scheduler, desc=desc)
+        for index, (vertices, faces) in zip(missing, made, strict=True):
+            surfaces[index] = (vertices, faces)
+            cache.save(stage, keys[index], {"vertices": vertices, "faces": faces})
     return surfaces, found

@@ -15,6 +15,7 @@ SIGGRAPH 1992 (the pipeline: normals, signed distance, marching cubes, sections 
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 from dataclasses import dataclass
 
@@ -57,9 +58,23 @@ class Options(SurfaceSettings):
     cache_dir : str or None
         Folder where each finished frame is kept (keyed by the frame's data and these
         options); a rerun after an interruption reuses them (``fourd reconstruct --cache``).
+    scheduler : str
+        Where the frames are meshed (``fourd reconstruct --scheduler``): ``sync`` one after
+        the other here, ``processes`` side by side in local processes, or the address of a
+        ``dask.distributed`` scheduler (``tcp://HOST:PORT``) whose workers mesh them; the
+        meshes are the same (:func:`fourd.pipeline.map_frames`).
     """
 
     cache_dir: str | None = None
+    scheduler: str = "sync"
+
+    def __post_init__(self):
+        from fourd.pipeline import check_scheduler
+
+        super_init = getattr(super(), "__post_init__", None)
+        if super_init is not None:
+            super_init()
+        object.__setattr__(self, "scheduler", check_scheduler(self.scheduler))
 
 
 def reconstruct_frame(
@@ -103,9 +118,9 @@ def reconstruct(seq: PointCloudSequence, options: Options | None = None) -> Mesh
     options = Options() if options is None else options
     log.info("per-frame meshing of %d frames", len(seq.frames))
     # every frame's points meshed, also where the input frames have faces of their own
-    meshes, found = frame_surfaces(seq.frames, options, cache_dir=options.cache_dir, stage=STAGE,
-                                   desc="perframe", use_faces=False,
-                                   mesh=lambda frame: reconstruct_frame(frame, options))
+    settings = SurfaceSettings(**{f.name: getattr(options, f.name) for f in dataclasses.fields(SurfaceSettings)})
+    meshes, found = frame_surfaces(seq.frames, settings, cache_dir=options.cache_dir, stage=STAGE,
+                                   desc="perframe", use_faces=False, scheduler=options.scheduler)
     if found:
         report_resumed(log, f"{found} of {len(seq.frames)} frames' meshes")
     return MeshSequence(tuple(meshes), seq.times)

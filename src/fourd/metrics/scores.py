@@ -112,7 +112,8 @@ def _volume_change(volumes: list[float | None]) -> float | None:
     return float((values.max() - values.min()) / mean) if mean > 0 else None
 
 
-def evaluate(result, truth, *, samples: int = 60000, seed: int = 0, timing: dict | None = None) -> dict:
+def evaluate(result, truth, *, samples: int = 60000, seed: int = 0, timing: dict | None = None,
+             folds: bool = False) -> dict:
     """Score ``result`` against ``truth``; see the module docstring for every metric.
 
     Parameters
@@ -127,6 +128,10 @@ def evaluate(result, truth, *, samples: int = 60000, seed: int = 0, timing: dict
         Sampling seed (result and truth samples are drawn from independent streams).
     timing : dict, optional
         Run measurements (e.g. ``seconds_per_frame``, ``peak_memory_mb``), passed through.
+    folds : bool
+        Also score the truth's folds (:func:`fourd.metrics.folds.fold_recall`: ``fold_recall``,
+        ``fold_precision``, ``folds_truth``, ``folds_result``; per frame ``folds_truth`` and
+        ``folds_found``); ``None`` without it or for a result without faces.
 
     Returns
     -------
@@ -231,6 +236,9 @@ def evaluate(result, truth, *, samples: int = 60000, seed: int = 0, timing: dict
             "nonmanifold_edges_max": max(topo.nonmanifold_edges for topo in topologies),
         }
     )
+    report.update(_folds(result, truth) if folds else _NO_FOLDS)
+    fold_frames = {"folds_truth": report.pop("per_frame_folds_truth", None),
+                   "folds_found": report.pop("per_frame_folds_found", None)}
     per_frame = report.pop("_per_frame_correspondence")
     report["per_frame"] = {
         "accuracy": accuracy,
@@ -246,9 +254,21 @@ def evaluate(result, truth, *, samples: int = 60000, seed: int = 0, timing: dict
         "euler": [topo.euler for topo in topologies],
         "nonmanifold_edges": [topo.nonmanifold_edges for topo in topologies],
         "closed_manifold": [topo.closed_manifold for topo in topologies],
+        **fold_frames,
     }
     report["timing"] = dict(timing) if timing is not None else None
     return jsonable(report)
+
+
+_NO_FOLDS = {"fold_recall": None, "fold_precision": None, "folds_truth": None, "folds_result": None}
+
+
+def _folds(result, truth) -> dict:
+    from fourd.metrics.folds import fold_recall
+
+    if not any(len(result.frame(t)[1]) for t in range(truth.frame_count)):
+        return dict(_NO_FOLDS)
+    return fold_recall(result, truth)
 
 
 def _no_correspondence() -> dict:
@@ -256,6 +276,7 @@ def _no_correspondence() -> dict:
         "correspondence_mean": None,
         "correspondence_first": None,
         "correspondence_last": None,
+        "correspondence_slope": None,
         "jitter": None,
         "jitter_output": None,
         "jitter_truth": None,
@@ -276,6 +297,7 @@ def _correspondence(result: AnimatedMesh, truth, truth_samples, diagonal: float)
         "correspondence_mean": float(errors.mean()),
         "correspondence_first": float(curve[0]),
         "correspondence_last": float(curve[-1]),
+        "correspondence_slope": correspondence_slope(curve),
         "_per_frame_correspondence": curve,
         "jitter": None,
         "jitter_output": None,
@@ -289,6 +311,30 @@ def _correspondence(result: AnimatedMesh, truth, truth_samples, diagonal: float)
         if jitter_truth > 1e-9:
             out["jitter"] = jitter_output / jitter_truth
     return out
+
+
+#: Frames at the start of a sequence left out of the correspondence slope (the error's first
+#: rise from zero at the binding frame is not drift), when at least as many remain.
+SLOPE_SKIP = 20
+
+
+def correspondence_slope(curve) -> float | None:
+    """The trend of a per-frame correspondence curve: its least-squares slope against the frame
+    index, per 100 frames (diagonal fractions), over the frames after the first
+    :data:`SLOPE_SKIP` when at least as many follow them, else over all; None for fewer than 3
+    frames. Near zero: no drift; positive: the error grows (issue 56).
+
+    >>> round(correspondence_slope([0.0, 0.01, 0.02, 0.03]), 6)
+    1.0
+    """
+    curve = np.asarray(curve, dtype=np.float64)
+    if len(curve) < 3:
+        return None
+    if len(curve) >= 2 * SLOPE_SKIP:
+        frames, curve = np.arange(SLOPE_SKIP, len(curve)), curve[SLOPE_SKIP:]
+    else:
+        frames = np.arange(len(curve))
+    return float(np.polyfit(frames, curve, 1)[0] * 100)
 
 
 def _rms_second_difference(trajectories: np.ndarray) -> float:

@@ -15,6 +15,7 @@ REPORT_ROWS = (
     ("correspondence_mean", "correspondence error, mean"),
     ("correspondence_first", "correspondence error, first frame"),
     ("correspondence_last", "correspondence error, last frame"),
+    ("correspondence_slope", "correspondence trend, per 100 frames"),
     ("jitter", "jitter (output / truth, 1 = as smooth)"),
     ("volume_change", "relative volume change"),
     ("truth_volume_change", "truth's relative volume change"),
@@ -22,6 +23,7 @@ REPORT_ROWS = (
     ("components_max", "connected components (max)"),
     ("boundary_loops_max", "boundary loops (max)"),
     ("nonmanifold_edges_max", "non-manifold edges (max)"),
+    ("fold_recall", "truth folds found"),
 )
 
 

@@ -66,6 +66,7 @@ def film_frame(truth, index: int, options, *, rig=None) -> np.ndarray:
         _truth_frames,
         camera_rays,
         camera_rig,
+        studio_lamps,
     )
 
     if options.appearance is None:
@@ -86,7 +87,7 @@ def film_frame(truth, index: int, options, *, rig=None) -> np.ndarray:
     vertices = np.asarray(vertices, dtype=np.float64)
     faces = np.asarray(faces, dtype=np.int64)
     normals = vertex_normals(vertices, faces)
-    paint = truth_paint(truth, options.appearance, options.seed)
+    paint = truth_paint(truth, options.appearance, options.seed, lamps=studio_lamps(options.lighting))
     all_vertices, all_faces = vertices, faces
     if options.occluder:
         ball = trimesh.creation.icosphere(subdivisions=3, radius=0.12 * diagonal)

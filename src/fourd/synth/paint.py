@@ -111,4 +111,22 @@ def hit_colors(
     """Recorded colours ``[P, 3]`` in [0, 1] of hits: albedo x shading + noise (see module)."""
     base = hit_albedo(paint, vertices, faces, triangle, points)
     normals = hit_normals(vertex_normals, vertices, faces, triangle, points, directions)
-    return shaded_colors(base, normals, noise=noise, rng=rng, lamps=paint.lamps)
+    sky = hit_sky(paint, vertices, faces, vertex_normals, triangle, points, directions) if paint.lamps.diffuse else None
+    return shaded_colors(base, normals, noise=noise, rng=rng, lamps=paint.lamps, sky=sky)
+
+
+def hit_sky(paint: Paint, vertices, faces, vertex_normals, triangle, points, directions) -> np.ndarray:
+    """The diffuse sky's share ``[P]`` at hits (:func:`fourd.synth.shading.accessibility` of
+    the side facing the viewer, interpolated over the hit triangle)."""
+    from fourd.synth.shading import DIFFUSE_REACH, accessibility
+
+    vertices = np.asarray(vertices, dtype=np.float64)
+    reach = DIFFUSE_REACH * float(np.linalg.norm(paint.bounds[1] - paint.bounds[0]))
+    outside = accessibility(vertices, faces, vertex_normals, reach=reach)
+    inside = accessibility(vertices, faces, -np.asarray(vertex_normals), reach=reach)
+    corners = faces[np.asarray(triangle, dtype=np.int64)]
+    weights = barycentric(points, vertices[corners])
+    normals = np.einsum("pk,pkj->pj", weights, vertex_normals[corners])
+    facing_out = np.einsum("ij,ij->i", normals, directions) < 0
+    return np.where(facing_out, np.einsum("pk,pk->p", weights, outside[corners]),
+                    np.einsum("pk,pk->p", weights, inside[corners]))

@@ -117,6 +117,10 @@ class ScanOptions:
         The pattern is chosen by ``seed``.
     color_noise : float
         Standard deviation of the colour noise, fraction of full scale (points and images).
+    lighting : {"lamps", "diffuse"}
+        ``"lamps"``: the studio's fixed directional lamps (:class:`fourd.synth.shading.Lamps`).
+        ``"diffuse"``: a uniform diffuse sky (:func:`fourd.synth.shading.diffuse_studio`, the
+        garment studio of Popa's thesis), where brightness says how deep a point lies.
     video : bool
         Also film the scene: the sequence's ``video`` holds one image per camera and frame
         (:mod:`fourd.synth.filming`); without an ``appearance`` the surface is ``"cloth"``.
@@ -150,6 +154,7 @@ class ScanOptions:
     ray_backend: str = "auto"
     appearance: str | None = None
     color_noise: float = 0.01
+    lighting: str = "lamps"
     video: bool = False
     video_resolution: int | None = None
     mode: str = "depth"
@@ -188,6 +193,8 @@ class ScanOptions:
         object.__setattr__(self, "appearance", check_appearance(self.appearance))
         if not np.isfinite(self.color_noise) or self.color_noise < 0:
             raise InputError(f"color_noise must be finite and >= 0, got {self.color_noise!r}")
+        if self.lighting not in ("lamps", "diffuse"):
+            raise InputError(f"lighting must be 'lamps' or 'diffuse', got {self.lighting!r}")
         object.__setattr__(self, "video", bool(self.video))
         if self.video and self.appearance is None:  # film a textured surface by default
             object.__setattr__(self, "appearance", "cloth")
@@ -659,7 +666,7 @@ def _point_colors(truth, index, options, vertices, faces, clean, directions, hit
     from fourd.synth.paint import hit_colors, truth_paint
     from fourd.synth.shading import shaded_colors
 
-    paint = truth_paint(truth, options.appearance, options.seed)
+    paint = truth_paint(truth, options.appearance, options.seed, lamps=studio_lamps(options.lighting))
     rng = np.random.default_rng([options.seed, index, 1])
     if len(faces):
         normals = vertex_normals(vertices, faces)
@@ -670,6 +677,13 @@ def _point_colors(truth, index, options, vertices, faces, clean, directions, hit
     normals = pca_normals(clean, min(16, len(clean))).normals
     normals[np.einsum("ij,ij->i", normals, directions) > 0] *= -1.0
     return shaded_colors(base, normals, noise=options.color_noise, rng=rng, lamps=paint.lamps)
+
+
+def studio_lamps(lighting: str):
+    """The :class:`~fourd.synth.shading.Lamps` of a ``lighting`` name (``ScanOptions``)."""
+    from fourd.synth.shading import Lamps, diffuse_studio
+
+    return diffuse_studio() if lighting == "diffuse" else Lamps()
 
 
 def scan_options(options: ScanOptions | None = None, **overrides) -> ScanOptions:

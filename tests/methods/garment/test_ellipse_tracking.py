@@ -135,3 +135,42 @@ def test_the_tshirts_four_boundaries_are_tracked_within_two_percent_of_the_diago
         track = track_boundary(seen, ellipse, TrackingOptions(time_sigma=0))
         true_centres = truth.vertices[:, loop].mean(axis=1)
         assert np.linalg.norm(track.centers - true_centres, axis=1).max() < 0.02 * diagonal
+
+
+def test_a_keyframe_carries_the_track_over_frames_the_search_cannot_follow(tmp_path):
+    import json
+
+    from fourd.methods.garment import read_keyframes
+
+    vertices, faces = _tube()
+    top = max(initial_ellipses(vertices, faces, 2), key=lambda e: e.center[2])
+    ring = vertices[np.isclose(vertices[:, 2], top.center[2])]
+    # the boundary jumps by three radii at frame 3 (too far for the search) and stays there
+    shifts = np.array([[0.0, 0.0, 0.0]] * 3 + [[3.0, 0.0, 0.0]] * 3)
+    frames = [ring + s for s in shifts]
+    lost = track_boundary(frames, top, TrackingOptions(time_sigma=0))
+    assert lost.found.tolist() == [True, True, True, False, False, False]
+    picked = ring[::5] + shifts[3]  # eight points a user clicked on the boundary in frame 3
+    path = tmp_path / "keyframes.json"
+    path.write_text(json.dumps({"keyframes": [{"frame": 3, "points": picked.tolist()}]}))
+    keyframes = read_keyframes(path)
+    kept = track_boundary(frames, top, TrackingOptions(time_sigma=0, reach=4.0), keyframes)
+    assert kept.found.tolist() == [True] * 6
+    assert np.linalg.norm(kept.centers - (top.center + shifts), axis=1).max() < 1e-6
+
+
+@pytest.mark.parametrize("content, message", [
+    ("not json", "not a readable JSON"),
+    ('{"keyframes": [{"frame": 1}]}', 'needs "frame" and "points"'),
+    ('{"keyframes": [{"frame": -1, "points": []}]}', "integer >= 0"),
+    ('{"keyframes": [{"frame": 1, "points": [[0, 0, 0], [1, 1, 1]]}]}', "at least six"),
+    ('{"keyframes": [{"frame": 1, "points": [[0,0,0],[1,0,0],[2,0,0],[3,0,0],[4,0,0],[5,0,0]]}]}', "no ellipse"),
+])
+def test_a_bad_keyframes_file_names_the_file_and_the_entry(tmp_path, content, message):
+    from fourd.methods.garment import read_keyframes
+
+    path = tmp_path / "keys.json"
+    path.write_text(content)
+    with pytest.raises(InputError, match=message) as error:
+        read_keyframes(path)
+    assert "keys.json" in str(error.value)

@@ -60,7 +60,7 @@ def frame_meshes(seq: PointCloudSequence, options: Options) -> list[tuple[np.nda
     when it has them, else :func:`~fourd.geometry.frame_surface.frame_surface` (cached)."""
     settings = SurfaceSettings(**{f.name: getattr(options, f.name) for f in dataclasses.fields(SurfaceSettings)})
     meshes, found = frame_surfaces(seq.frames, settings, cache_dir=options.cache_dir, stage=STAGE,
-                                   desc="assembly meshes")
+                                   desc="assembly meshes", scheduler=options.scheduler)
     if found:
         report_resumed(log, f"{found} of {len(seq.frames)} frames' meshes")
     return meshes

@@ -221,6 +221,11 @@ class Options(SurfaceSettings):
         independent, 5.3); 1 runs them one after the other (8 frames of about 360 vertices
         on the shared 2-core machine: 36.9 / 35.6 s serial, 36.8 / 35.7 s with 2, the same
         result).
+    scheduler : str
+        Where the frames' own surfaces are made (``fourd reconstruct --scheduler``): ``sync``
+        here, ``processes`` side by side in local processes, or a ``dask.distributed``
+        scheduler's address (``tcp://HOST:PORT``); the same surfaces either way
+        (:func:`fourd.pipeline.map_frames`).
     cache_dir : str or None
         Folder where each frame's mesh (point-cloud input) is kept, keyed by the frame's data
         and these options (``fourd reconstruct --cache``).
@@ -239,6 +244,7 @@ class Options(SurfaceSettings):
     correct_stretch: float = 2.0
     correct_motion: float = 1.5
     workers: int = 1
+    scheduler: str = "sync"
     cache_dir: str | None = None
 
     def __post_init__(self):

@@ -95,12 +95,24 @@ class _Mesh(NamedTuple):
     faces: np.ndarray
     graph: sp.csr_matrix  # edge lengths
     adjacency: np.ndarray  # face pairs sharing an edge [E, 2]
+    incidence: sp.csr_matrix  # vertex -> faces [N, F]
+    face_graph: sp.csr_matrix  # face -> edge-adjacent faces [F, F]
+    border: np.ndarray  # faces with an edge on the mesh's own boundary, bool [F]
 
 
 def _mesh(vertices, faces) -> _Mesh:
     vertices = np.asarray(vertices, dtype=np.float64)
     faces = np.asarray(faces, dtype=np.int64)
-    return _Mesh(vertices, faces, _edge_lengths(vertices, faces), face_adjacency(faces)[0])
+    adjacency = face_adjacency(faces)[0]
+    count = len(faces)
+    rows = np.repeat(np.arange(count), 3)
+    incidence = sp.csr_matrix((np.ones(3 * count, dtype=bool), (faces.ravel(), rows)), shape=(len(vertices), count))
+    face_graph = sp.csr_matrix(
+        (np.ones(2 * len(adjacency), dtype=bool), (np.r_[adjacency[:, 0], adjacency[:, 1]], np.r_[adjacency[:, 1], adjacency[:, 0]])),
+        shape=(count, count),
+    )
+    border = np.bincount(adjacency.ravel(), minlength=count) < 3
+    return _Mesh(vertices, faces, _edge_lengths(vertices, faces), adjacency, incidence, face_graph, border)
 
 
 def _edge_lengths(vertices: np.ndarray, faces: np.ndarray) -> sp.csr_matrix:
@@ -122,46 +134,51 @@ def _distances(mesh: _Mesh, seeds: np.ndarray, offsets: np.ndarray, limit: float
 
 def _disk(mesh: _Mesh, distance: np.ndarray, radius: float, seed_face: int) -> Patch | None:
     """The geodesic ball of ``radius`` as a disk holding ``seed_face``, or None when it is
-    not one."""
-    face_in = (distance[mesh.faces] <= radius).all(axis=1)
-    if not face_in[seed_face]:
+    not one.
+
+    Works on the faces near the ball only (a corner within ``HOLE_REACH * radius``): a piece of
+    the rest of the mesh that leaves them reaches farther than that, so it is not a hole."""
+    near_vertices = np.flatnonzero(distance <= HOLE_REACH * radius)
+    local = np.unique(mesh.incidence[near_vertices].indices)  # sorted global face indices
+    at = np.searchsorted(local, seed_face)
+    if at >= len(local) or local[at] != seed_face:
         return None
-    face_in = _piece(mesh, face_in, seed_face)
-    # pieces of the rest that stay near the centre are holes
+    corner_distance = distance[mesh.faces[local]]
+    face_in = (corner_distance <= radius).all(axis=1)
+    if not face_in[at]:
+        return None
+    graph = mesh.face_graph[local][:, local].tocoo()
+    face_in = _piece(graph, face_in, at)
+    # pieces of the rest that stay near the centre are holes; a piece that touches a face
+    # beyond the local faces, or the mesh's own border, is the outside
     rest = ~face_in
-    pairs = mesh.adjacency[rest[mesh.adjacency].all(axis=1)]
-    count = len(mesh.faces)
-    graph = sp.coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(count, count))
-    _, label = connected_components(graph, directed=False)
-    reach = np.full(label.max() + 1, 0.0)
-    np.maximum.at(reach, label[rest], distance[mesh.faces[rest]].max(axis=1))
-    touches_border = np.zeros(label.max() + 1, dtype=bool)
-    touches_border[label[rest & _border_faces(mesh)]] = True
-    hole = rest & (reach[label] <= HOLE_REACH * radius) & ~touches_border[label]
-    face_in |= hole
-    faces = np.flatnonzero(face_in)
+    keep = rest[graph.row] & rest[graph.col]
+    _, label = connected_components(
+        sp.coo_matrix((np.ones(keep.sum()), (graph.row[keep], graph.col[keep])), shape=graph.shape), directed=False
+    )
+    reach = np.zeros(label.max() + 1)
+    np.maximum.at(reach, label[rest], corner_distance[rest].max(axis=1))
+    leaves = np.asarray(mesh.face_graph[local].sum(axis=1)).ravel() > np.bincount(graph.row, minlength=len(local))
+    outside = np.zeros(label.max() + 1, dtype=bool)
+    outside[label[rest & (mesh.border[local] | leaves)]] = True
+    hole = rest & (reach[label] <= HOLE_REACH * radius) & ~outside[label]
+    faces = local[face_in | hole]
     vertices = np.unique(mesh.faces[faces])
-    local = np.searchsorted(vertices, mesh.faces[faces])
+    local_faces = np.searchsorted(vertices, mesh.faces[faces])
     try:
-        boundary_loop_vertices(local, len(vertices))
+        boundary_loop_vertices(local_faces, len(vertices))
     except ValueError:
         return None
     return Patch(faces, vertices, distance[vertices], float(radius))
 
 
-def _border_faces(mesh: _Mesh) -> np.ndarray:
-    """Faces with an edge on the mesh's own boundary, bool [F]."""
-    sides = np.bincount(mesh.adjacency.ravel(), minlength=len(mesh.faces))
-    return sides < 3
-
-
-def _piece(mesh: _Mesh, face_in: np.ndarray, seed_face: int) -> np.ndarray:
-    """The faces of ``face_in`` edge-connected to ``seed_face``."""
-    pairs = mesh.adjacency[face_in[mesh.adjacency].all(axis=1)]
-    count = len(mesh.faces)
-    graph = sp.coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(count, count))
-    _, label = connected_components(graph, directed=False)
-    return face_in & (label == label[seed_face])
+def _piece(graph: sp.coo_matrix, face_in: np.ndarray, seed: int) -> np.ndarray:
+    """The faces of ``face_in`` edge-connected (``graph``, local) to face ``seed``."""
+    keep = face_in[graph.row] & face_in[graph.col]
+    _, label = connected_components(
+        sp.coo_matrix((np.ones(keep.sum()), (graph.row[keep], graph.col[keep])), shape=graph.shape), directed=False
+    )
+    return face_in & (label == label[seed])
 
 
 def _pair(source: _Mesh, target: _Mesh, anchors: Anchors, centre: int, ds: np.ndarray,

@@ -16,18 +16,22 @@ completed by the template (:mod:`.pipeline`). Its parts:
 - :mod:`.fit`: the template fitted onto a frame as rigidly as possible, its openings pulled
   onto the frame's (in place of the thesis' base-mesh parameterisation, 3.6.2);
 - :mod:`.fold_edges`: folds found in a video frame as pairs of parallel, oppositely oriented
-  edges flanking a bright ridge or a dark valley (4.3.1, 4.4).
+  edges flanking a bright ridge or a dark valley (4.3.1, 4.4);
+- :mod:`.wrinkle_anchors`: per frame the best views, their fold edges projected onto the
+  garment as anchor triangles, and each anchor's rotation (4.4, 4.5.1);
+- :mod:`.wrinkling`: the space-time deformation that puts those folds into the garment:
+  rotations blended over space and time, vertex positioning, stretch reduction (4.5).
 
 The garment scenes (``tshirt``, ``dress``, with the photo) are in :mod:`fourd.synth.garments`;
 the C1 membrane of 3.6.2 is :mod:`fourd.geometry.hole_filling`. Still to come: the base-mesh
-parameterisation (3.6.2), the best views per frame and the space-time deformation that
-wrinkles the garment (4.4-4.5).
+parameterisation (3.6.2).
 """
 
 from fourd.methods.garment.boundary_tracking import (
     BoundaryTrack,
     TrackingOptions,
     initial_ellipses,
+    read_keyframes,
     track_boundary,
 )
 from fourd.methods.garment.ellipse import (
@@ -60,6 +64,20 @@ from fourd.methods.garment.template import (
     template_from_pattern,
     template_from_photo,
     triangulate_outline,
+)
+from fourd.methods.garment.wrinkle_anchors import (
+    AnchorOptions,
+    FrameAnchors,
+    frame_anchors,
+    rotation_between,
+)
+from fourd.methods.garment.wrinkling import (
+    WrinkleOptions,
+    WrinkleResult,
+    position_vertices,
+    spacetime_rotations,
+    triangle_stretch,
+    wrinkle,
 )
 
 __all__ = [
@@ -97,4 +115,15 @@ __all__ = [
     "support",
     "trace_edges",
     "track_boundary",
+    "read_keyframes",
+    "AnchorOptions",
+    "FrameAnchors",
+    "WrinkleOptions",
+    "WrinkleResult",
+    "frame_anchors",
+    "position_vertices",
+    "rotation_between",
+    "spacetime_rotations",
+    "triangle_stretch",
+    "wrinkle",
 ]

@@ -44,7 +44,7 @@ from fourd.methods.garment.ellipse import (
     support,
 )
 
-__all__ = ["BoundaryTrack", "TrackingOptions", "initial_ellipses", "track_boundary"]
+__all__ = ["BoundaryTrack", "TrackingOptions", "initial_ellipses", "read_keyframes", "track_boundary"]
 
 
 @dataclass(frozen=True)
@@ -145,18 +145,38 @@ def initial_ellipses(vertices: np.ndarray, faces: np.ndarray, count: int) -> lis
 
 
 def track_boundary(
-    boundary_points: Sequence[np.ndarray], first: Ellipse, options: TrackingOptions | None = None
+    boundary_points: Sequence[np.ndarray],
+    first: Ellipse,
+    options: TrackingOptions | None = None,
+    keyframes: Sequence[tuple[int, Ellipse]] = (),
 ) -> BoundaryTrack:
     """Follow the boundary that ``first`` fits in frame 0 through every frame's boundary points
-    (``boundary_points[t] [P_t, 3]``: the vertices of all boundary loops of frame ``t``)."""
+    (``boundary_points[t] [P_t, 3]``: the vertices of all boundary loops of frame ``t``).
+
+    ``keyframes``: ``(frame, ellipse)`` a user chose (B.2, the semi-automatic path), of this
+    boundary or of others: in its frame, the keyframe ellipse nearest the reference (its centre
+    within ``reach`` times the reference's largest radius) is taken as found and becomes the
+    reference."""
     options = options or TrackingOptions()
     rng = np.random.default_rng(options.seed)
     frames = len(boundary_points)
     chosen: list[Ellipse | None] = [first] + [None] * (frames - 1)
     counts = np.zeros(frames, dtype=np.int64)
     reference = first
+    given: dict[int, list[Ellipse]] = {}
+    for frame, ellipse in keyframes:
+        if not 0 <= int(frame) < frames:
+            raise InputError(f"keyframe {frame} is not one of the {frames} frames")
+        given.setdefault(int(frame), []).append(ellipse)
     for t in range(1, frames):
         points = np.asarray(boundary_points[t], dtype=np.float64).reshape(-1, 3)
+        keyed = _keyframe(given.get(t, ()), reference, options)
+        if keyed is not None:
+            chosen[t] = keyed
+            scale = options.tolerance * keyed.radii[0]
+            counts[t] = support(as_batch(keyed), points, scale)[0][0] if len(points) else 0
+            reference = keyed
+            continue
         best = _best_candidate(points, reference, rng, options)
         if best is None:
             continue  # skipped: the last good ellipse stays the reference (B.2)
@@ -175,6 +195,17 @@ def track_boundary(
     normals, axes = _orthonormal(normals, axes)
     anchors = centers + options.anchor_offset * radii.mean(axis=1)[:, None] * normals
     return BoundaryTrack(centers, normals, axes, radii, found, counts, anchors)
+
+
+def _keyframe(ellipses, reference: Ellipse, options: TrackingOptions) -> Ellipse | None:
+    """The given ellipse of this boundary in a keyframe (nearest the reference, within
+    ``reach`` of its largest radius), turned to the reference's side; None without one."""
+    best, distance = None, options.reach * reference.radii[0]
+    for ellipse in ellipses:
+        gap = float(np.linalg.norm(ellipse.center - reference.center))
+        if gap <= distance:
+            best, distance = ellipse, gap
+    return None if best is None else _aligned(best, reference)
 
 
 def _best_candidate(points, reference: Ellipse, rng, options: TrackingOptions):
@@ -245,3 +276,42 @@ def _orthonormal(normals: np.ndarray, axes: np.ndarray):
     major /= np.maximum(np.linalg.norm(major, axis=1, keepdims=True), 1e-300)
     minor = np.cross(normals, major)
     return normals, np.stack([major, minor], axis=1)
+
+
+def read_keyframes(path) -> list[tuple[int, Ellipse]]:
+    """Keyframe ellipses from a JSON file (B.2): ``{"keyframes": [{"frame": 12, "points":
+    [[x, y, z], ...]}, ...]}``, each entry at least six points a user picked along one garment
+    boundary in that frame (input units); each becomes the least-squares ellipse of its points.
+    Raises :class:`InputError` naming the file and the entry for anything else."""
+    import json
+    from pathlib import Path
+
+    path = Path(path)
+    try:
+        data = json.loads(path.read_text())
+    except FileNotFoundError:
+        raise InputError(f"{path}: no such keyframes file") from None
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as error:
+        raise InputError(f"{path}: not a readable JSON file ({error})") from None
+    entries = data.get("keyframes") if isinstance(data, dict) else None
+    if not isinstance(entries, list):
+        raise InputError(f'{path}: expected {{"keyframes": [{{"frame": ..., "points": [...]}}, ...]}}')
+    keyframes = []
+    for index, entry in enumerate(entries):
+        where = f"{path}: keyframe {index}"
+        if not isinstance(entry, dict) or "frame" not in entry or "points" not in entry:
+            raise InputError(f'{where} needs "frame" and "points"')
+        frame = entry["frame"]
+        if isinstance(frame, bool) or not isinstance(frame, int) or frame < 0:
+            raise InputError(f"{where}: frame must be an integer >= 0, got {frame!r}")
+        try:
+            points = np.asarray(entry["points"], dtype=np.float64)
+        except (TypeError, ValueError):
+            raise InputError(f"{where}: points must be [[x, y, z], ...] numbers") from None
+        if points.ndim != 2 or points.shape[1] != 3 or len(points) < 6 or not np.isfinite(points).all():
+            raise InputError(f"{where}: points must be at least six finite [x, y, z], got shape {list(points.shape)}")
+        batch = fit_ellipses(points[None])
+        if not batch.valid[0]:
+            raise InputError(f"{where}: no ellipse fits these points (collinear or repeated?)")
+        keyframes.append((frame, batch[0]))
+    return keyframes

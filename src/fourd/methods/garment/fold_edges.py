@@ -47,6 +47,10 @@ class FoldEdgeOptions:
     canny_sigmas : tuple of float
         Gaussian widths of the Canny detector, one pass each (Table 4.1: 1, 2, 3 for most
         garments).
+    canny_quantiles : (float, float)
+        Canny's hysteresis thresholds as quantiles of the gradient magnitude (inside the mask):
+        a fold's shading is soft, and its contrast depends on the light and the fabric, so the
+        thresholds follow the image rather than fixed grey levels.
     scales : tuple of float
         Image resolutions searched (1: full).
     max_distance : float
@@ -74,6 +78,7 @@ class FoldEdgeOptions:
     """
 
     canny_sigmas: tuple[float, ...] = (1.0, 2.0, 3.0)
+    canny_quantiles: tuple[float, float] = (0.8, 0.9)
     scales: tuple[float, ...] = (1.0, 0.5)
     max_distance: float = 100.0
     max_angle_degrees: float = 45.0
@@ -355,7 +360,8 @@ def fold_edges(image: np.ndarray, options: FoldEdgeOptions | None = None, *, mas
             "max_distance": options.max_distance * scale, "min_length": options.min_length * scale,
             "merge_gap": max(2.0, options.merge_gap * scale), "side_offset": max(1.5, options.side_offset * scale)}})
         for sigma in options.canny_sigmas:
-            edges_map = canny(small, sigma=sigma, mask=small_mask)
+            edges_map = canny(small, sigma=sigma, mask=small_mask, low_threshold=options.canny_quantiles[0],
+                              high_threshold=options.canny_quantiles[1], use_quantiles=True)
             edges = []
             for chain in trace_edges(edges_map):
                 for piece in _smooth_pieces(chain, scaled):

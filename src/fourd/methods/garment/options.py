@@ -30,6 +30,12 @@ class Options:
     boundaries : int
         How many openings the garment has (a T-shirt 4: neck, sleeves, waist; a skirt 2). 0:
         the first frame's boundary loops at least a third as long as its longest.
+    keyframes : str
+        A JSON file of boundary points a user picked in some frames, for sequences where the
+        automatic boundary tracking loses an opening (Appendix B.2): a list ``keyframes`` of
+        entries ``{"frame": 12, "points": [[x, y, z], [x, y, z], [x, y, z]]}`` with at least
+        six points along one opening each; each becomes that frame's ellipse of the opening
+        nearest it. Empty: automatic tracking only.
     template_edge : float
         Edge length of a template inflated from the photo, in the photo's units (0: 0.04).
     iterations : int
@@ -57,6 +63,15 @@ class Options:
     observed_distance : float
         A vertex counts as observed in a frame when it lies within this many of the frame
         mesh's median edges of it; elsewhere the template completed it.
+    wrinkles : bool
+        With multi-view video, wrinkle the captured garment where the video shows folds
+        (thesis chapter 4, :mod:`fourd.methods.garment.wrinkling`): for plain fabric under
+        diffuse light, where a fold's valley is darker than its ridge; silent without video.
+    scheduler : str
+        Where the frames' own surfaces are made (``fourd reconstruct --scheduler``): ``sync``
+        here, ``processes`` side by side in local processes, or a ``dask.distributed``
+        scheduler's address (``tcp://HOST:PORT``); the same surfaces either way
+        (:func:`fourd.pipeline.map_frames`).
     cache_dir : str or None
         Folder keeping each frame's surface as it is made; a rerun after an interruption
         reuses them (``fourd reconstruct --cache``).
@@ -64,6 +79,7 @@ class Options:
 
     photo: str = ""
     boundaries: int = 0
+    keyframes: str = ""
     template_edge: float = 0.0
     iterations: int = 10
     data_weight: float = 0.5
@@ -74,4 +90,6 @@ class Options:
     template_scale: float = 2.5
     time_sigma: float = 0.0
     observed_distance: float = 2.0
+    wrinkles: bool = False
+    scheduler: str = "sync"
     cache_dir: str | None = None

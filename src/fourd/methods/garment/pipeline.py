@@ -12,9 +12,11 @@
    base-mesh parameterisation instead); where no frame data lies near, the template's shape
    completes the frame and the vertex is marked not observed.
 5. The trajectories smoothed in time by a Gaussian (end of 3.7).
+6. With ``wrinkles`` and video: folds seen in the video put into the garment by the
+   space-time deformation of chapter 4 (:mod:`.wrinkling`).
 
-Not yet here: the base-mesh parameterisation of 3.6.2 and the wrinkling of chapter 4 (their
-parts :mod:`.fold_edges` and :mod:`fourd.geometry.hole_filling` exist).
+Not yet here: the base-mesh parameterisation of 3.6.2 (its part
+:mod:`fourd.geometry.hole_filling` exists).
 """
 
 from __future__ import annotations
@@ -38,11 +40,12 @@ from fourd.geometry.frame_surface import SurfaceSettings, frame_surface, frame_s
 from fourd.geometry.hole_filling import fill_holes
 from fourd.geometry.meshes import median_edge_length, remove_small_components
 from fourd.geometry.normals import vertex_normals
-from fourd.methods.garment.boundary_tracking import TrackingOptions, track_boundary
+from fourd.methods.garment.boundary_tracking import TrackingOptions, read_keyframes, track_boundary
 from fourd.methods.garment.ellipse import as_batch, fit_ellipse, point_distances
 from fourd.methods.garment.fit import FitOptions, align_template, fit_template
 from fourd.methods.garment.options import Options
 from fourd.methods.garment.template import TemplateOptions, template_from_photo
+from fourd.methods.garment.wrinkling import wrinkle
 from fourd.progress import progress
 from fourd.sequence import PointCloudSequence
 
@@ -61,7 +64,7 @@ __all__ = ["reconstruct"]
 
 def _frame_meshes(seq: PointCloudSequence, options: Options) -> list[tuple[np.ndarray, np.ndarray]]:
     meshes, found = frame_surfaces(seq.frames, SurfaceSettings(), cache_dir=options.cache_dir, stage=STAGE,
-                                   desc="garment: frame surfaces")
+                                   desc="garment: frame surfaces", scheduler=options.scheduler)
     for index, (_, faces) in enumerate(meshes):
         if len(faces) < 4:
             raise InputError(f"frame {index}: no surface could be made of its {len(seq.frames[index].points)} points")
@@ -175,7 +178,8 @@ def reconstruct(seq: PointCloudSequence, options: Options | None = None) -> Anim
     for vertices, mesh_faces in meshes:
         loops = boundary_loops(mesh_faces, len(vertices))
         boundary_points.append(vertices[np.concatenate(loops)] if loops else np.zeros((0, 3)))
-    tracks = [track_boundary(boundary_points, ellipse, TrackingOptions()) for ellipse in frame_ellipses]
+    keyframes = read_keyframes(options.keyframes) if options.keyframes else ()
+    tracks = [track_boundary(boundary_points, ellipse, TrackingOptions(), keyframes) for ellipse in frame_ellipses]
     fit_options = FitOptions(iterations=options.iterations, data_weight=options.data_weight,
                              boundary_weight=options.boundary_weight, anchor_weight=options.anchor_weight)
     edge = median_edge_length(rest, faces)
@@ -217,6 +221,11 @@ def reconstruct(seq: PointCloudSequence, options: Options | None = None) -> Anim
         observed[t] = distance <= options.observed_distance * median_edge_length(frame_vertices, frame_faces)
     if options.time_sigma > 0:
         vertices = gaussian_filter1d(vertices, options.time_sigma, axis=0, mode="nearest")
+    if options.wrinkles and getattr(seq, "video", None) is not None:
+        wrinkled = wrinkle(vertices, faces, seq.video)
+        log.info("garment: wrinkled from %d fold pairs in the video, largest edge stretch %.3f",
+                 sum(frame.used for frame in wrinkled.anchors), float(wrinkled.stretch.max()))
+        vertices = wrinkled.vertices
     log.info("garment: %d template vertices, %.0f%% observed", len(rest), 100 * observed.mean())
     return AnimatedMesh(faces, vertices, times=np.asarray(seq.times, dtype=np.float64), observed=observed,
                         rest=rest, uv=uv)
