@@ -123,12 +123,15 @@ def _edge_lengths(vertices: np.ndarray, faces: np.ndarray) -> sp.csr_matrix:
     a, b = a[first], b[first]
     length = np.linalg.norm(vertices[a] - vertices[b], axis=1)
     count = len(vertices)
-    return sp.csr_matrix((np.r_[length, length], (np.r_[a, b], np.r_[b, a])), shape=(count, count))
+    graph = sp.csr_matrix((np.r_[length, length], (np.r_[a, b], np.r_[b, a])), shape=(count, count))
+    graph.sum_duplicates()  # canonical (sorted, no duplicates): Dijkstra then takes it as it is
+    return graph
 
 
 def _distances(mesh: _Mesh, seeds: np.ndarray, offsets: np.ndarray, limit: float) -> np.ndarray:
     """Geodesic distance ``[N]`` from the nearest seed plus its offset (inf beyond ``limit``)."""
-    rows = dijkstra(mesh.graph, directed=False, indices=np.asarray(seeds), limit=limit)
+    # the graph holds each edge both ways: as directed, Dijkstra skips symmetrising it
+    rows = dijkstra(mesh.graph, directed=True, indices=np.asarray(seeds), limit=limit)
     return np.min(np.atleast_2d(rows) + np.asarray(offsets, dtype=np.float64)[:, None], axis=0)
 
 
@@ -187,13 +190,9 @@ def _pair(source: _Mesh, target: _Mesh, anchors: Anchors, centre: int, ds: np.nd
     """Grow the pair around ``centre`` (source) and the target point of ``dt``'s origin (in
     ``target_face``) with one radius until it holds ``patch_anchors`` matching anchors."""
     support = anchors.target_corners(target.faces)
-    reach = np.where(support >= 0, dt[np.maximum(support, 0)], -np.inf).max(axis=1)
-    entry = np.maximum(ds[anchors.source], reach)
-    entry = np.sort(entry[entry <= largest])
-    if len(entry) < options.min_anchors:
+    radius = _radius(anchors, support, ds, dt, options, largest)
+    if radius is None:
         return None
-    radius = entry[min(options.patch_anchors, len(entry)) - 1] / (1.0 - options.boundary_band)
-    radius = min(radius, largest)
     src = _disk(source, ds, radius, _face_at(source.faces, centre))
     tgt = _disk(target, dt, radius, target_face)
     if src is None or tgt is None:
@@ -204,6 +203,38 @@ def _pair(source: _Mesh, target: _Mesh, anchors: Anchors, centre: int, ds: np.nd
     if len(matching) < options.min_anchors:
         return None
     return PatchPair(src, tgt, matching, int(centre))
+
+
+def _radius(anchors: Anchors, support: np.ndarray, ds: np.ndarray, dt: np.ndarray,
+            options: CrossParamOptions, largest: float) -> float | None:
+    """The pair's radius: the one at which ``patch_anchors`` anchors lie in both patches (an
+    anchor enters at the larger of its source and target distances), widened by the ignored
+    boundary band, at most ``largest``; None when fewer than ``min_anchors`` enter by then."""
+    reach = np.where(support >= 0, dt[np.maximum(support, 0)], -np.inf).max(axis=1)
+    entry = np.maximum(ds[anchors.source], reach)
+    entry = np.sort(entry[entry <= largest])
+    if len(entry) < options.min_anchors:
+        return None
+    return min(entry[min(options.patch_anchors, len(entry)) - 1] / (1.0 - options.boundary_band), largest)
+
+
+def _near_distances(source: _Mesh, target: _Mesh, anchors: Anchors, centre: int, seeds, offsets,
+                    options: CrossParamOptions, largest: float) -> tuple[np.ndarray, np.ndarray]:
+    """The geodesic distances ``(ds, dt)`` a pair around ``centre`` and the target ``seeds``
+    needs, searched no farther than it needs: from a quarter of ``largest``, doubled until
+    the pair's radius times ``HOLE_REACH`` lies within the search (then every distance
+    :func:`_pair` reads is the same as with the search to ``largest``)."""
+    support = anchors.target_corners(target.faces)
+    limit = largest / 4.0
+    while True:
+        ds = _distances(source, [centre], [0.0], limit)
+        dt = _distances(target, seeds, offsets, limit)
+        if limit >= largest:
+            return ds, dt
+        radius = _radius(anchors, support, ds, dt, options, largest)
+        if radius is not None and HOLE_REACH * radius <= limit:
+            return ds, dt
+        limit = min(largest, 2.0 * limit)
 
 
 def _image(target: _Mesh, corners: np.ndarray, offsets: np.ndarray, reach: np.ndarray,
@@ -270,8 +301,8 @@ def grow_patches(
         covered[pair.source.vertices[inner]] = True
 
     for a in range(len(anchors.source)):
-        ds = _distances(source, [anchors.source[a]], [0.0], largest)
-        dt = _distances(target, corners[a], offsets[a], largest)
+        ds, dt = _near_distances(source, target, anchors, anchors.source[a], corners[a], offsets[a],
+                                 options, largest)
         keep(_pair(source, target, anchors, anchors.source[a], ds, dt,
                    int(anchors.target_faces[a]), options, largest))
         used[anchors.source[a]] = True
