@@ -3,9 +3,9 @@ then closest points (the fallback of thesis section 5.4, "without any correspond
 geometric proximity is the only way to initialize such a parameterization"; the thesis takes
 its anchors from optical flow, 5.4.1, which scans without video do not have).
 
-1. Rigid ICP: the source is moved by the rigid transform (:func:`~fourd.geometry.rotations.
-   procrustes`) that best fits each source vertex to its nearest target vertex, pairs whose
-   normals disagree or that lie far apart (beyond three times their median gap) left out.
+1. Rigid ICP: the source is moved by the trimmed point-to-plane ICP of
+   :func:`fourd.geometry.icp.rigid_icp` (pairs whose normals disagree or that lie beyond the
+   85th percentile of the gaps left out), from two starts.
 2. Non-rigid ICP: a spread of control vertices jumps to its nearest target vertices and the
    rest follows by the source's Laplacian coordinates
    (:func:`~fourd.methods.assembly.registration.register_by_laplacian`), a few times.
@@ -25,9 +25,9 @@ import numpy as np
 import trimesh
 from scipy.spatial import cKDTree
 
+from fourd.geometry.icp import rigid_icp as point_to_plane_icp
 from fourd.geometry.meshes import median_edge_length, mesh_arrays
 from fourd.geometry.normals import vertex_normals
-from fourd.geometry.rotations import procrustes
 from fourd.methods.assembly.anchors import (
     Anchors,
     consistent_anchors,
@@ -63,23 +63,17 @@ def _pairs(points, normals, tree, target_normals):
 
 def rigid_icp(source, source_normals, target, target_normals, *, iterations: int = 10) -> np.ndarray:
     """``source [N, 3]`` moved rigidly onto the target's vertices ``[M, 3]`` (step 1 of the
-    module docstring); returns the moved points ``[N, 3]``. ICP runs twice, from where the
-    source is and with its centroid moved onto the target's, and the fit with the smaller
-    median gap wins (a part that moves alone, an arm bending, drags the centroid away)."""
+    module docstring, :func:`fourd.geometry.icp.rigid_icp`); returns the moved points
+    ``[N, 3]``. ICP runs twice, from where the source is and with its centroid moved onto the
+    target's, and the fit with the smaller median gap wins (a part that moves alone, an arm
+    bending, drags the centroid away)."""
     tree = cKDTree(target)
     best, best_gap = source, np.inf
     for start in (source, source - source.mean(axis=0) + target.mean(axis=0)):
-        moved, normals = start.copy(), source_normals.copy()
-        for _ in range(iterations):
-            _, nearest, usable = _pairs(moved, normals, tree, target_normals)
-            if usable.sum() < 3:
-                break
-            fit = procrustes(moved[usable], target[nearest[usable]])
-            moved = moved @ fit.rotation.T + fit.translation
-            normals = normals @ fit.rotation.T
-            if fit.rms == 0.0:
-                break
-        gap, _, usable = _pairs(moved, normals, tree, target_normals)
+        fit = point_to_plane_icp(start, target, target_normals, source_normals=source_normals,
+                                 iterations=iterations)
+        moved = start @ fit.rotation.T + fit.translation
+        gap, _, usable = _pairs(moved, source_normals @ fit.rotation.T, tree, target_normals)
         median = float(np.median(gap[usable])) if usable.any() else np.inf
         if median < best_gap:
             best, best_gap = moved, median
