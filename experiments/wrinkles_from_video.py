@@ -51,10 +51,10 @@ import numpy as np
 from fourd import synth
 from fourd.animation import AnimatedMesh
 from fourd.geometry.low_pass import low_pass_surface
+from fourd.geometry.surface_walk import face_unit_normals
 from fourd.methods.garment.wrinkle_anchors import rotation_between
 from fourd.methods.garment.wrinkling import (
     WrinkleOptions,
-    _face_normals,
     _positioning_solver,
     position_vertices,
     spacetime_rotations,
@@ -70,7 +70,7 @@ def _positions(smooth, faces, anchors, options: WrinkleOptions):
     for t in range(len(smooth)):
         current = position_vertices(smooth[t], faces, rotations[t], solver=solve, pull=options.pull)
         for _ in range(options.stretch_iterations):
-            turn = rotation_between(_face_normals(smooth[t], faces), _face_normals(current, faces))
+            turn = rotation_between(face_unit_normals(smooth[t], faces), face_unit_normals(current, faces))
             current = position_vertices(smooth[t], faces, turn, solver=solve, pull=options.pull)
         out.append(current)
     return np.stack(out)

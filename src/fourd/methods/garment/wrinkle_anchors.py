@@ -33,6 +33,7 @@ from scipy.spatial.transform import Rotation
 from fourd.appearance.cameras import Camera, project, rays
 from fourd.appearance.depth import frame_view
 from fourd.geometry.meshes import face_areas
+from fourd.geometry.surface_walk import face_unit_normals
 from fourd.methods.garment.fold_edges import FoldEdgeOptions, FoldPair, fold_edges
 
 __all__ = ["AnchorOptions", "FrameAnchors", "frame_anchors", "rotation_between"]
@@ -92,11 +93,6 @@ def rotation_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     with np.errstate(invalid="ignore", divide="ignore"):
         vectors = axis * np.where(sine > 1e-12, angle / sine, 0.0)[:, None]
     return vectors
-
-
-def _face_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    normal = np.cross(vertices[faces[:, 1]] - vertices[faces[:, 0]], vertices[faces[:, 2]] - vertices[faces[:, 0]])
-    return normal / np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-300)
 
 
 def _view_scores(cameras, centres, normals, areas, views) -> list[float]:
@@ -170,8 +166,8 @@ def frame_anchors(
     vertices = np.asarray(vertices, dtype=np.float64)
     faces = np.asarray(faces, dtype=np.int64)
     centres = vertices[faces].mean(axis=1)
-    normals = _face_normals(vertices, faces)
-    base_normals = _face_normals(np.asarray(base_vertices, dtype=np.float64), faces)
+    normals = face_unit_normals(vertices, faces)
+    base_normals = face_unit_normals(np.asarray(base_vertices, dtype=np.float64), faces)
     areas = face_areas(vertices, faces)
     edge = float(np.sqrt(np.median(areas) * 4 / np.sqrt(3)))
     views, reaches = [], []

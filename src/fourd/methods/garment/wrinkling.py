@@ -34,6 +34,7 @@ from scipy.spatial.transform import Rotation
 
 from fourd.geometry.low_pass import low_pass_surface
 from fourd.geometry.meshes import face_adjacency
+from fourd.geometry.surface_walk import face_unit_normals
 from fourd.methods.garment.wrinkle_anchors import (
     AnchorOptions,
     FrameAnchors,
@@ -163,11 +164,6 @@ def triangle_stretch(before: np.ndarray, after: np.ndarray, faces: np.ndarray) -
     return (b / np.maximum(a, 1e-300)).max(axis=1)
 
 
-def _face_normals(vertices, faces):
-    normal = np.cross(vertices[faces[:, 1]] - vertices[faces[:, 0]], vertices[faces[:, 2]] - vertices[faces[:, 0]])
-    return normal / np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-300)
-
-
 def wrinkle(vertices: np.ndarray, faces: np.ndarray, video, options: WrinkleOptions | None = None) -> WrinkleResult:
     """The garment ``vertices`` [T, N, 3] (one connectivity ``faces`` [F, 3]) wrinkled where the
     ``video`` (:class:`fourd.io.video.Video`, frame ``t`` its image ``t``) shows folds (module
@@ -193,7 +189,7 @@ def wrinkle(vertices: np.ndarray, faces: np.ndarray, video, options: WrinkleOpti
             continue
         current = position_vertices(vertices[t], faces, rotations[t], solver=solve, pull=options.pull)
         for _ in range(options.stretch_iterations):
-            turn = rotation_between(_face_normals(vertices[t], faces), _face_normals(current, faces))
+            turn = rotation_between(face_unit_normals(vertices[t], faces), face_unit_normals(current, faces))
             current = position_vertices(vertices[t], faces, turn, solver=solve, pull=options.pull)
         result[t] = current
         stretch[t] = float(triangle_stretch(vertices[t], current, faces).max())
