@@ -270,26 +270,27 @@ def test_every_subcommand_has_help(capsys):
 
 
 def test_an_interrupted_run_resumes_from_its_cache(tmp_path, monkeypatch, capsys):
-    from fourd.methods import perframe
+    from fourd.geometry import frame_surface
 
     folder = _folder(tmp_path, frames=3)
     cache = tmp_path / "cache"
     calls = []
-    original = perframe.reconstruct_frame
+    original = frame_surface._surface_of  # one frame's mesh, as perframe makes it
 
-    def fail_on_third(frame, options):
+    def fail_on_third(settings, frame):
         calls.append(frame.time)
         if len(calls) == 3:
             raise KeyboardInterrupt
-        return original(frame, options)
+        return original(settings, frame)
 
-    monkeypatch.setattr(perframe, "reconstruct_frame", fail_on_third)
+    monkeypatch.setattr(frame_surface, "_surface_of", fail_on_third)
     out = tmp_path / "o.npz"
     argv = ["reconstruct", str(folder), "-o", str(out), "--method", "perframe", "--cache", str(cache), "--quiet"]
     assert main(argv) == 130
     assert not out.exists() and len(list(cache.glob("perframe-*.npz"))) == 2
     calls.clear()
-    monkeypatch.setattr(perframe, "reconstruct_frame", lambda frame, options: (calls.append(frame.time), original(frame, options))[1])
+    monkeypatch.setattr(frame_surface, "_surface_of",
+                        lambda settings, frame: (calls.append(frame.time), original(settings, frame))[1])
     assert main(argv) == 0
     assert calls == [2.0] and out.exists()
     assert main(argv[:-1]) == 0  # not quiet: the resumed frames are named
