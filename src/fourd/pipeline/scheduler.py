@@ -87,7 +87,8 @@ def map_frames(
     except OSError as error:
         raise InputError(f"scheduler {scheduler}: cannot connect ({error})") from None
     try:
-        futures = client.map(function, items, pure=False)
+        # the frames go to the workers as data of their own, not inside the task graph
+        futures = client.map(function, client.scatter(items), pure=False)
         return client.gather(futures)
     finally:
         client.close()
