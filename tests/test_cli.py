@@ -215,6 +215,22 @@ def test_evaluate_refuses_a_truth_that_does_not_match(tmp_path, capsys):
     assert '"frames": 2' in capsys.readouterr().out
 
 
+def test_evaluate_scores_a_garments_folds_when_asked(tmp_path, capsys):
+    from fourd.synth.garments import tshirt
+
+    garment = tshirt(6, 0)
+    folded, plain = tmp_path / "folded.npz", tmp_path / "plain.npz"
+    np.savez(folded, vertices=garment.vertices, faces=garment.faces)
+    np.savez(plain, vertices=tshirt(6, 0, fold_depth=0.0).vertices, faces=garment.faces)
+    assert main(["evaluate", str(folded), str(folded), "--json", "--folds"]) == 0
+    assert json.loads(capsys.readouterr().out)["fold_recall"] == 1.0
+    assert main(["evaluate", str(plain), str(folded), "--folds"]) == 0
+    line = next(x for x in capsys.readouterr().out.splitlines() if "truth folds found" in x)
+    assert float(line.split()[-2]) < 0.4  # (the last column is the floor: not scored for folds)
+    assert main(["evaluate", str(plain), str(folded), "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["fold_recall"] is None  # only when asked
+
+
 def test_view_refuses_a_truth_that_does_not_match(tmp_path, capsys):
     files = _truth_files(tmp_path)
     _run_bad(capsys, ["view", str(files["millimetres"]), "--truth", str(files["truth"]), "-o", str(tmp_path / "v")],

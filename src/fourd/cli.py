@@ -288,7 +288,7 @@ def cmd_synth(args) -> int:
 def cmd_evaluate(args) -> int:
     from fourd.metrics import evaluate_files, format_report
 
-    report = evaluate_files(args.result, args.truth, force=args.force)
+    report = evaluate_files(args.result, args.truth, force=args.force, folds=args.folds)
     if args.json:
         print(json.dumps(jsonable(report), indent=2))
     else:
@@ -555,6 +555,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--force", action="store_true",
                    help="score a truth whose frame count or bounding box differs from the "
                         "result's (frames matched by time)")
+    p.add_argument("--folds", action="store_true",
+                   help="also score the truth's folds: the share of those deeper than 0.5%% of "
+                        "the diagonal that the result has within 1%% (garments; fourd.metrics.folds)")
 
     p = add("bench", "run methods x scenes and write a report (benchmarks/out/BENCHMARKS.md "
                      "unless -o names another)", cmd_bench)

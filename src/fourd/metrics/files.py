@@ -63,19 +63,21 @@ def evaluate_files(
     seed: int = 0,
     floor: bool = True,
     force: bool = False,
+    folds: bool = False,
 ) -> dict:
     """:func:`evaluate` a saved result against a saved truth (see :func:`load_truth`); with
     ``floor`` the truth's :func:`metric_floor` is added under ``"floor"``.
 
     A truth with another frame count or a bounding box unlike the result's is refused
     (InputError naming both files, :func:`~fourd.metrics.match.check_truth`); ``force``
-    scores it anyway (frames matched by time where the counts differ)."""
+    scores it anyway (frames matched by time where the counts differ). ``folds`` also scores
+    the truth's folds (:func:`fourd.metrics.folds.fold_recall`)."""
     result = _load_result(Path(result_path)) if Path(result_path).exists() else None
     if result is None:
         raise InputError("no such file or folder", result_path)
     truth = load_truth(truth_path)
     truth = check_truth(result, truth, result_path, truth_path, force=force)
-    report = evaluate(result, truth, samples=samples, seed=seed)
+    report = evaluate(result, truth, samples=samples, seed=seed, folds=folds)
     report["result_path"] = os.fspath(result_path)
     report["truth_path"] = os.fspath(truth_path)
     if floor:
