@@ -51,12 +51,9 @@ import numpy as np
 from fourd import synth
 from fourd.animation import AnimatedMesh
 from fourd.geometry.low_pass import low_pass_surface
-from fourd.geometry.surface_walk import face_unit_normals
-from fourd.methods.garment.wrinkle_anchors import rotation_between
 from fourd.methods.garment.wrinkling import (
     WrinkleOptions,
-    _positioning_solver,
-    position_vertices,
+    positioned_frames,
     spacetime_rotations,
     wrinkle,
 )
@@ -64,16 +61,7 @@ from fourd.metrics.folds import fold_recall
 
 
 def _positions(smooth, faces, anchors, options: WrinkleOptions):
-    rotations = spacetime_rotations(faces, len(smooth), anchors, options)
-    solve = _positioning_solver(smooth.shape[1], faces, options.pull)
-    out = []
-    for t in range(len(smooth)):
-        current = position_vertices(smooth[t], faces, rotations[t], solver=solve, pull=options.pull)
-        for _ in range(options.stretch_iterations):
-            turn = rotation_between(face_unit_normals(smooth[t], faces), face_unit_normals(current, faces))
-            current = position_vertices(smooth[t], faces, turn, solver=solve, pull=options.pull)
-        out.append(current)
-    return np.stack(out)
+    return positioned_frames(smooth, faces, spacetime_rotations(faces, len(smooth), anchors, options), options)
 
 
 def main() -> None:

@@ -98,6 +98,7 @@ class _Mesh(NamedTuple):
     incidence: sp.csr_matrix  # vertex -> faces [N, F]
     face_graph: sp.csr_matrix  # face -> edge-adjacent faces [F, F]
     border: np.ndarray  # faces with an edge on the mesh's own boundary, bool [F]
+    degree: np.ndarray  # edge-adjacent faces of each face [F]
 
 
 def _mesh(vertices, faces) -> _Mesh:
@@ -111,8 +112,8 @@ def _mesh(vertices, faces) -> _Mesh:
         (np.ones(2 * len(adjacency), dtype=bool), (np.r_[adjacency[:, 0], adjacency[:, 1]], np.r_[adjacency[:, 1], adjacency[:, 0]])),
         shape=(count, count),
     )
-    border = np.bincount(adjacency.ravel(), minlength=count) < 3
-    return _Mesh(vertices, faces, _edge_lengths(vertices, faces), adjacency, incidence, face_graph, border)
+    degree = np.bincount(adjacency.ravel(), minlength=count)
+    return _Mesh(vertices, faces, _edge_lengths(vertices, faces), adjacency, incidence, face_graph, degree < 3, degree)
 
 
 def _edge_lengths(vertices: np.ndarray, faces: np.ndarray) -> sp.csr_matrix:
@@ -161,7 +162,7 @@ def _disk(mesh: _Mesh, distance: np.ndarray, radius: float, seed_face: int) -> P
     )
     reach = np.zeros(label.max() + 1)
     np.maximum.at(reach, label[rest], corner_distance[rest].max(axis=1))
-    leaves = np.asarray(mesh.face_graph[local].sum(axis=1)).ravel() > np.bincount(graph.row, minlength=len(local))
+    leaves = mesh.degree[local] > np.bincount(graph.row, minlength=len(local))
     outside = np.zeros(label.max() + 1, dtype=bool)
     outside[label[rest & (mesh.border[local] | leaves)]] = True
     hole = rest & (reach[label] <= HOLE_REACH * radius) & ~outside[label]

@@ -43,7 +43,7 @@ from fourd.methods.garment.wrinkle_anchors import (
 )
 from fourd.progress import progress
 
-__all__ = ["WrinkleOptions", "WrinkleResult", "position_vertices", "spacetime_rotations", "triangle_stretch", "wrinkle"]
+__all__ = ["WrinkleOptions", "WrinkleResult", "position_vertices", "positioned_frames", "spacetime_rotations", "triangle_stretch", "wrinkle"]
 
 
 @dataclass(frozen=True)
@@ -179,18 +179,25 @@ def wrinkle(vertices: np.ndarray, faces: np.ndarray, video, options: WrinkleOpti
         base = low_pass_surface(vertices[t], faces, options.base_wavelength * diagonal)
         images = [video.image(c, t) for c in range(len(cameras))]
         anchors.append(frame_anchors(vertices[t], faces, base, cameras, images, options.anchors))
-    rotations = spacetime_rotations(faces, frames, anchors, options)
+    result = positioned_frames(vertices, faces, spacetime_rotations(faces, frames, anchors, options), options)
+    stretch = np.array([float(triangle_stretch(vertices[t], result[t], faces).max()) for t in range(frames)])
+    return WrinkleResult(result, anchors, stretch)
+
+
+def positioned_frames(vertices: np.ndarray, faces: np.ndarray, rotations: np.ndarray,
+                      options: WrinkleOptions | None = None) -> np.ndarray:
+    """Every frame's vertices [T, N, 3] positioned by its triangles' ``rotations`` [T, F, 3]
+    (4.5.4), then ``stretch_iterations`` passes of stretch reduction (4.5.5); a frame without
+    rotations stays as it is. One factorisation serves every frame and pass."""
+    options = options or WrinkleOptions()
     solve = _positioning_solver(vertices.shape[1], faces, options.pull)
-    result = np.empty_like(vertices)
-    stretch = np.ones(frames)
-    for t in range(frames):
+    result = np.array(vertices, dtype=np.float64, copy=True)
+    for t in range(len(vertices)):
         if not np.any(rotations[t]):
-            result[t] = vertices[t]
             continue
         current = position_vertices(vertices[t], faces, rotations[t], solver=solve, pull=options.pull)
         for _ in range(options.stretch_iterations):
             turn = rotation_between(face_unit_normals(vertices[t], faces), face_unit_normals(current, faces))
             current = position_vertices(vertices[t], faces, turn, solver=solve, pull=options.pull)
         result[t] = current
-        stretch[t] = float(triangle_stretch(vertices[t], current, faces).max())
-    return WrinkleResult(result, anchors, stretch)
+    return result
