@@ -78,8 +78,8 @@ def test_a_scene_may_carry_an_appearance_and_video():
         suite.BenchScene("squash-ball", appearance="velvet")
 
 
-def test_the_whole_crane_capture_is_a_bench_scene_at_two_densities():
-    dense, sparse = suite.select_scenes(["crane-full", "crane-full-sparse"], quick=False)
-    assert dense.frames == sparse.frames == 175 and dense.options == {"start": 0, "step": 1}
-    assert sparse.resolution < dense.resolution
+def test_the_whole_crane_capture_is_a_bench_scene_at_three_densities():
+    dense, mid, sparse = suite.select_scenes(["crane-full", "crane-full-mid", "crane-full-sparse"], quick=False)
+    assert dense.frames == mid.frames == sparse.frames == 175 and dense.options == {"start": 0, "step": 1}
+    assert sparse.resolution < mid.resolution < dense.resolution
     assert "crane-full" not in {s.key for s in suite.STANDARD_SCENES}  # run on request only
