@@ -27,3 +27,22 @@ def test_frames_prepared_on_threads_are_those_prepared_one_by_one():
         np.testing.assert_array_equal(n, alone_n)
         # outward normals of the blob
         assert np.mean(np.einsum("ij,ij->i", n, blob.gradient(p, frame.time)[:, :3]) > 0) > 0.99
+
+
+def test_sparse_frames_are_densified_to_the_template_on_their_own_surface():
+    from fourd.methods.kinematic.frames import densify_frames
+    from fourd.methods.kinematic.options import DENSIFIED_POINTS_PER_VERTEX
+
+    blob, seq = _blob_sequence(frames=3, count=800)
+    options = K.Options(template_vertices=2000)
+    points, normals = K.prepare_frames(seq, options)
+    dense, dense_normals = densify_frames(points, normals, options)
+    for frame, p, n in zip(seq.frames, dense, dense_normals, strict=True):
+        assert abs(len(p) - DENSIFIED_POINTS_PER_VERTEX * 2000) < 0.25 * DENSIFIED_POINTS_PER_VERTEX * 2000
+        # on the blob (its implicit is a signed distance near the surface), normals outward
+        assert np.quantile(np.abs(blob.value(p, np.full(len(p), frame.time))), 0.95) < 0.02
+        assert np.mean(np.einsum("ij,ij->i", n, blob.gradient(p, frame.time)[:, :3]) > 0) > 0.99
+    # dense enough, or asked not to: the prepared frames themselves
+    assert densify_frames(points, normals, K.Options(template_vertices=500)) == (points, normals)
+    off = K.Options(template_vertices=2000, densify=False)
+    assert densify_frames(points, normals, off) == (points, normals)

@@ -8,12 +8,21 @@ import logging
 from concurrent.futures import ThreadPoolExecutor
 
 import numba
+import numpy as np
 
 from fourd.cache import NO_CACHE, StageCache, report_resumed, stage_key
+from fourd.geometry.densify import densify_points, surface_area
+from fourd.geometry.frame_surface import SurfaceSettings, frame_surface
 from fourd.geometry.neighbors import knn, neighbours_among
 from fourd.geometry.normals import estimate_normals
 from fourd.geometry.outliers import distance_ratio_inliers
-from fourd.methods.kinematic.options import OUTLIER_NEIGHBOURS, PREPARE_THREADS, Options
+from fourd.methods.kinematic.options import (
+    DENSIFIED_POINTS_PER_VERTEX,
+    OUTLIER_NEIGHBOURS,
+    PREPARE_THREADS,
+    Options,
+)
+from fourd.progress import progress
 from fourd.sequence import PointCloudSequence
 
 log = logging.getLogger("fourd.methods.kinematic")
@@ -63,6 +72,36 @@ def prepare_frames(seq: PointCloudSequence, options: Options, cache: StageCache 
             for i, result in zip(rest, done, strict=True):
                 keep(i, result)
     return [p for p, _ in prepared], [n for _, n in prepared]
+
+
+def densify_frames(points: list, normals: list, options: Options) -> tuple[list, list]:
+    """The prepared frames ``points``, ``normals`` (lists of ``[P_k, 3]``), densified when
+    they are sparser than the template (``options.densify``, :mod:`fourd.geometry.densify`):
+    each frame's surface sampled at :data:`DENSIFIED_POINTS_PER_VERTEX` samples per template
+    vertex on the first frame's surface area (a pure function of each frame, seeded by its
+    index). Returned as given when the frames are dense enough or the first frame has no
+    surface."""
+    median = float(np.median([len(p) for p in points])) if points else 0.0
+    if not options.densify or median >= options.template_vertices:
+        return points, normals
+    settings = SurfaceSettings(seed=options.seed)
+    first = frame_surface(points[0], normals=normals[0], settings=settings)
+    area = surface_area(*first)
+    if area <= 0:
+        return points, normals
+    density = DENSIFIED_POINTS_PER_VERTEX * options.template_vertices / area
+    dense_points, dense_normals = [], []
+    for index in progress(range(len(points)), desc="densifying", total=len(points)):
+        p, n = densify_points(points[index], normals[index], density=density,
+                              surface=first if index == 0 else None, seed=options.seed + index)
+        dense_points.append(p)
+        dense_normals.append(n)
+    log.info(
+        "sparse frames (%d points in the median frame, %d template vertices): each frame's "
+        "surface sampled, %d points in the median frame now", median, options.template_vertices,
+        np.median([len(p) for p in dense_points]),
+    )
+    return dense_points, dense_normals
 
 
 def frame_key(frame, options: Options) -> str:

@@ -13,6 +13,7 @@ RESULT = AnimatedMesh
 #: The options users change first (``fourd options kinematic``; the others under ``--all``).
 COMMON_OPTIONS = (
     "template_vertices",
+    "densify",
     "large_motion",
     "shape_memory",
     "slide_memory",
@@ -33,6 +34,9 @@ SMOOTHED_PROJECTION_MIN = 1.0
 SMOOTHING_NEIGHBOURS = 48
 #: Threads of :func:`prepare_frames` (frames prepared at once).
 PREPARE_THREADS = 2
+#: With ``densify``: samples per template vertex on the first frame's surface (the dense rig
+#: of issue 56 has 16,505 points per frame for the default 10,000-vertex template).
+DENSIFIED_POINTS_PER_VERTEX = 1.6
 
 
 @dataclass(frozen=True)
@@ -58,8 +62,15 @@ class Options:
         Urshape marching-cubes cell size; 0: chosen from the first frame's surface area so
         that the urshape has about ``template_vertices`` vertices.
     template_vertices : int
-        Target size of the urshape when ``cell_size`` is 0; on sparse frames fewer (at most
-        one per point of the median frame: a template denser than its data loses limbs).
+        Target size of the urshape when ``cell_size`` is 0; on sparse frames without
+        ``densify`` fewer (at most one per point of the median frame: a template denser than
+        its data loses limbs).
+    densify : bool
+        On sparse frames (the median frame has fewer points than ``template_vertices``), mesh
+        every frame on its own and sample its surface at 1.6 points per template vertex
+        (:mod:`fourd.geometry.densify`; holes stay holes), so that the fit, the data term and
+        the large-motion registration work at the template's resolution; false: the template
+        shrinks to the data instead (measurements: benchmarks/METHODS.md).
     smoothing_iterations : int
         Laplacian smoothing steps of the urshape before its projection onto ``f = 0``.
     iterations : int
@@ -179,6 +190,7 @@ class Options:
     time_scale: float = 2.0
     cell_size: float = 0.0
     template_vertices: int = 10000
+    densify: bool = True
     smoothing_iterations: int = 5
     iterations: int = 4
     substeps: int = 1

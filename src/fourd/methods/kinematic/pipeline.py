@@ -16,7 +16,7 @@ from fourd.errors import InputError
 from fourd.geometry.neighbors import point_spacing
 from fourd.methods.kinematic.animate import animate
 from fourd.methods.kinematic.field import fit_key, fit_windows, space_time_points
-from fourd.methods.kinematic.frames import prepare_frames
+from fourd.methods.kinematic.frames import densify_frames, prepare_frames
 from fourd.methods.kinematic.mpu4d import MPUOptions
 from fourd.methods.kinematic.options import MIN_FRAMES, Options
 from fourd.sequence import Frame, PointCloudSequence
@@ -52,7 +52,7 @@ def reconstruct(
     started = _time.perf_counter()
     cache = StageCache(options.cache_dir)
     times = seq.times
-    points, normals = prepare_frames(seq, options, cache)
+    points, normals = densify_frames(*prepare_frames(seq, options, cache), options)
     spacing = point_spacing(points[0], seed=options.seed)
     steps = np.diff(times)
     time_unit = float(np.median(steps))
