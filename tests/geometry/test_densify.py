@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from scipy.spatial import cKDTree
 
-from fourd.geometry.densify import densify_points, surface_area
+from fourd.geometry.densify import densify_points
 
 
 def _sphere(count, seed=0):
@@ -48,8 +48,3 @@ def test_dense_enough_frames_come_back_unchanged():
     with pytest.raises(ValueError, match="density"):
         densify_points(points, points, density=0.0)
 
-
-def test_surface_area_of_a_unit_square():
-    vertices = np.array([[0.0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]])
-    assert surface_area(vertices, np.array([[0, 1, 2], [0, 2, 3]])) == pytest.approx(1.0)
-    assert surface_area(vertices, np.zeros((0, 3), dtype=np.int64)) == 0.0

@@ -21,11 +21,6 @@ from fourd.geometry.normals import vertex_normals
 from fourd.geometry.surface_samples import sample_surface
 
 
-def surface_area(vertices: np.ndarray, faces: np.ndarray) -> float:
-    """Total area of a triangle mesh (input units squared; 0 for no faces)."""
-    return float(face_areas(vertices, faces).sum()) if len(faces) else 0.0
-
-
 def densify_points(
     points: np.ndarray,
     normals: np.ndarray,
@@ -60,7 +55,7 @@ def densify_points(
     if surface is None:
         surface = frame_surface(points, normals=normals, sensors=sensors, settings=SurfaceSettings(seed=seed))
     vertices, faces = surface
-    count = int(round(density * surface_area(vertices, faces)))
+    count = int(round(density * float(face_areas(vertices, faces).sum())))
     if count <= len(points):
         return points, normals
     samples = sample_surface(vertices, faces, count, np.random.default_rng(seed))

@@ -11,8 +11,9 @@ import numba
 import numpy as np
 
 from fourd.cache import NO_CACHE, StageCache, report_resumed, stage_key
-from fourd.geometry.densify import densify_points, surface_area
+from fourd.geometry.densify import densify_points
 from fourd.geometry.frame_surface import SurfaceSettings, frame_surface
+from fourd.geometry.meshes import face_areas
 from fourd.geometry.neighbors import knn, neighbours_among
 from fourd.geometry.normals import estimate_normals
 from fourd.geometry.outliers import distance_ratio_inliers
@@ -86,7 +87,7 @@ def densify_frames(points: list, normals: list, options: Options) -> tuple[list,
         return points, normals
     settings = SurfaceSettings(seed=options.seed)
     first = frame_surface(points[0], normals=normals[0], settings=settings)
-    area = surface_area(*first)
+    area = float(face_areas(*first).sum())
     if area <= 0:
         return points, normals
     density = DENSIFIED_POINTS_PER_VERTEX * options.template_vertices / area
