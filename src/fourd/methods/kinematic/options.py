@@ -13,7 +13,6 @@ RESULT = AnimatedMesh
 #: The options users change first (``fourd options kinematic``; the others under ``--all``).
 COMMON_OPTIONS = (
     "template_vertices",
-    "densify",
     "large_motion",
     "shape_memory",
     "slide_memory",
