@@ -97,8 +97,7 @@ class _Mesh(NamedTuple):
     adjacency: np.ndarray  # face pairs sharing an edge [E, 2]
     incidence: sp.csr_matrix  # vertex -> faces [N, F]
     face_graph: sp.csr_matrix  # face -> edge-adjacent faces [F, F]
-    border: np.ndarray  # faces with an edge on the mesh's own boundary, bool [F]
-    degree: np.ndarray  # edge-adjacent faces of each face [F]
+    degree: np.ndarray  # edge-adjacent faces of each face [F] (below 3: on the mesh's own boundary)
 
 
 def _mesh(vertices, faces) -> _Mesh:
@@ -113,7 +112,7 @@ def _mesh(vertices, faces) -> _Mesh:
         shape=(count, count),
     )
     degree = np.bincount(adjacency.ravel(), minlength=count)
-    return _Mesh(vertices, faces, _edge_lengths(vertices, faces), adjacency, incidence, face_graph, degree < 3, degree)
+    return _Mesh(vertices, faces, _edge_lengths(vertices, faces), adjacency, incidence, face_graph, degree)
 
 
 def _edge_lengths(vertices: np.ndarray, faces: np.ndarray) -> sp.csr_matrix:
@@ -164,7 +163,7 @@ def _disk(mesh: _Mesh, distance: np.ndarray, radius: float, seed_face: int) -> P
     np.maximum.at(reach, label[rest], corner_distance[rest].max(axis=1))
     leaves = mesh.degree[local] > np.bincount(graph.row, minlength=len(local))
     outside = np.zeros(label.max() + 1, dtype=bool)
-    outside[label[rest & (mesh.border[local] | leaves)]] = True
+    outside[label[rest & ((mesh.degree[local] < 3) | leaves)]] = True
     hole = rest & (reach[label] <= HOLE_REACH * radius) & ~outside[label]
     faces = local[face_in | hole]
     vertices = np.unique(mesh.faces[faces])
