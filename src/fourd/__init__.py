@@ -20,6 +20,7 @@ from __future__ import annotations
 from fourd import appearance, deform, synth
 from fourd.animation import AnimatedMesh, MeshSequence
 from fourd.errors import InputError
+from fourd.frame_source import FrameSource
 from fourd.methods import available_methods, reconstruct
 from fourd.sequence import Frame, PointCloudSequence
 
@@ -31,6 +32,14 @@ def load_sequence(path) -> PointCloudSequence:
     from fourd.io.frames import load_sequence as _load
 
     return _load(path)
+
+
+def open_sequence(path) -> FrameSource:
+    """A folder of frame files read a frame at a time when asked (a :class:`FrameSource`, for
+    whole captures that do not fit in memory; :func:`fourd.methods.kinematic.reconstruct_streamed`)."""
+    from fourd.io.frames import open_sequence as _open
+
+    return _open(path)
 
 
 def save(result, path, **options):
@@ -62,6 +71,7 @@ def evaluate(result, truth, **options) -> dict:
 __all__ = [
     "AnimatedMesh",
     "Frame",
+    "FrameSource",
     "InputError",
     "MeshSequence",
     "PointCloudSequence",
@@ -71,6 +81,7 @@ __all__ = [
     "evaluate",
     "load_result",
     "load_sequence",
+    "open_sequence",
     "reconstruct",
     "save",
     "synth",

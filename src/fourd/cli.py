@@ -196,6 +196,8 @@ def cmd_reconstruct(args) -> int:
     method = args.method or config_method or DEFAULT_METHOD
     method, values = resolve_alias(method, values)
     module = method_module(method)
+    if args.stream:
+        return _reconstruct_streamed(args, method, values)
     if args.times:
         import dataclasses
 
@@ -251,6 +253,41 @@ def cmd_reconstruct(args) -> int:
     log.info("wrote %s (%d frames, %.2f s, %.2f s/frame%s%s)", output, result.frame_count, elapsed,
              elapsed / max(len(seq), 1), _time_note(base, kind),
              "; resumed from the cache: the time counts only the work done now" if resumed else "")
+    return 0
+
+
+def _reconstruct_streamed(args, method: str, values: dict) -> int:
+    """``reconstruct --stream``: kinematic over frames read a window at a time, the result
+    written frame by frame (:mod:`fourd.methods.kinematic.stream`)."""
+    from fourd.io.frames import open_sequence
+    from fourd.methods import method_options
+    from fourd.methods.kinematic.stream import reconstruct_streamed
+
+    if method == "auto" and not args.method:
+        method = "kinematic"
+    if method != "kinematic":
+        raise InputError(f"--stream: only kinematic runs streamed (asked for {method})")
+    for flag, given in (("--times", args.times), ("--uv", args.uv), ("--colors", args.colors),
+                        ("--scheduler", args.scheduler)):
+        if given:
+            raise InputError(f"--stream: {flag} is not available on streamed runs")
+    if Path(args.output).suffix.lower() != ".npz":
+        raise InputError("--stream writes a fourd .npz (fourd.load_result and fourd.save "
+                         "convert it)", args.output)
+    if args.scale != 1.0 or args.up != "y" or args.fps is not None:
+        log.warning("--stream writes a .npz in the data's units and axes: --fps, --up and "
+                    "--scale apply when it is converted")
+    if args.cache:
+        _check_cache(args.cache)
+        values["cache_dir"] = args.cache
+    options = method_options(method, values)
+    source = _select_frames(open_sequence(args.input), args.frames, args.input)
+    log.info("%s: %d frames, read a window at a time", args.input, len(source))
+    summary = reconstruct_streamed(source, args.output, options)
+    log.info("wrote %s (%d frames, %.2f s, %.2f s/frame, %d windows%s)", summary.output,
+             summary.frames, summary.seconds, summary.seconds / summary.frames, summary.windows,
+             f"; {summary.resumed} resumed from the cache: the time counts only the work done now"
+             if summary.resumed else "")
     return 0
 
 
@@ -484,6 +521,11 @@ def build_parser() -> argparse.ArgumentParser:
                    help="where per-frame stages run: sync (here, the default), processes (local "
                         "processes side by side) or a dask.distributed scheduler's address "
                         "(tcp://HOST:PORT); the result is the same")
+    p.add_argument("--stream", action="store_true",
+                   help="whole captures: read the frames a window at a time (the kinematic "
+                        "option window, default 20) and write the result (.npz) frame by "
+                        "frame, so memory is bounded by the window, not the capture's length "
+                        "(kinematic only; --cache resumes it window by window)")
     p.add_argument("--force", action="store_true",
                    help="run even when the up-front estimate of the memory needed exceeds the "
                         "memory available")

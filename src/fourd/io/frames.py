@@ -35,6 +35,7 @@ from typing import NamedTuple
 import numpy as np
 
 from fourd.errors import InputError
+from fourd.frame_source import FrameSource
 from fourd.io.atomic import atomic_dir
 from fourd.io.meshfiles import read_obj, read_xyz, write_xyz
 from fourd.io.ply import PlyMesh, read_ply, write_ply
@@ -64,6 +65,7 @@ __all__ = [
     "natural_key",
     "read_frame",
     "read_ply",
+    "open_sequence",
     "read_sensors",
     "read_times",
     "write_frames",
@@ -456,6 +458,41 @@ def load_sequence(path: str | os.PathLike) -> PointCloudSequence:
     elif (path / VIDEO_FOLDER).is_dir():
         log.warning("%s: a %s/ folder without %s; ignoring the video", path, VIDEO_FOLDER, CAMERAS_FILE)
     return PointCloudSequence(tuple(frames), tuple(f.name for f in files), video)
+
+
+def open_sequence(path: str | os.PathLike) -> FrameSource:
+    """A sequence of frames read when asked (:class:`~fourd.frame_source.FrameSource`): a
+    folder's frame files are listed now (with ``times.txt`` and ``sensors.json``) and each is
+    read when a streamed method asks for it, so a whole capture need not fit in memory. A
+    ``.npz`` or a single frame file is read whole (:func:`load_sequence`). Video is not read
+    (the streamed methods do not use it).
+
+    Raises
+    ------
+    InputError
+        As :func:`load_sequence` for the listing; a bad frame file when it is read.
+    """
+    path = Path(path)
+    if not path.exists():
+        raise InputError("does not exist", path)
+    if not path.is_dir():
+        return FrameSource.of(load_sequence(path))
+    files = _frame_files(path)
+    if not files:
+        raise InputError(f"the folder holds no frame files ({', '.join(FRAME_SUFFIXES)})", path)
+    count = len(files)
+    times = np.arange(count, dtype=np.float64)
+    if (path / "times.txt").exists():
+        times = read_times(path / "times.txt", count)
+    sensors: list = [None] * count
+    if (path / "sensors.json").exists():
+        sensors = read_sensors(path / "sensors.json", count)
+
+    def read(i: int) -> Frame:
+        raw = _read_guarded(files[i])
+        return _make_frame(files[i], raw.points, raw.normals, raw.colors, sensors[i], times[i], raw.faces)
+
+    return FrameSource(times, tuple(f.name for f in files), read)
 
 
 def write_frames(

@@ -9,6 +9,10 @@ optional ``rest`` float32 ``[N, 3]``, ``uv`` float32 ``[F, 3, 2]`` (per face cor
 
 from __future__ import annotations
 
+import os
+import zipfile
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -91,3 +95,63 @@ def _colors(stored: np.ndarray | None) -> np.ndarray | None:
     if np.issubdtype(stored.dtype, np.integer):
         return stored / 255.0
     return stored
+
+
+class FrameWriter:
+    """Appends frames to an open output (:func:`npz_frames`, :func:`fourd.io.pc2.pc2_frames`):
+    :meth:`write` takes the next frames' vertices ``[k, N, 3]`` and observed flags ``[k, N]``."""
+
+    def __init__(self, count: int, vertex_count: int, append: Callable[[np.ndarray, np.ndarray], None]):
+        self.count, self.vertex_count, self.written = int(count), int(vertex_count), 0
+        self._append = append
+
+    def write(self, vertices: np.ndarray, observed: np.ndarray) -> None:
+        """Append frames (no more than the output was opened for)."""
+        vertices = np.asarray(vertices, dtype=np.float64).reshape(-1, self.vertex_count, 3)
+        observed = np.asarray(observed, dtype=bool).reshape(len(vertices), self.vertex_count)
+        if self.written + len(vertices) > self.count:
+            raise ValueError(f"{self.written + len(vertices)} frames written to an output of {self.count}")
+        self._append(vertices, observed)
+        self.written += len(vertices)
+
+    def check_complete(self, path) -> None:
+        if self.written != self.count:
+            raise InputError(f"only {self.written} of {self.count} frames were written", path)
+
+
+@contextmanager
+def npz_frames(
+    path: str | os.PathLike,
+    *,
+    faces: np.ndarray,
+    times: np.ndarray,
+    rest: np.ndarray | None = None,
+) -> Iterator[FrameWriter]:
+    """Write an AnimatedMesh ``.npz`` (:func:`write_npz`'s layout) frame by frame: yields a
+    :class:`FrameWriter` whose frames go straight to the file's ``vertices`` (memory holds
+    the ``observed`` flags, one byte per vertex and frame). The file appears, complete, when
+    the block ends without an error and every frame of ``times`` was written (atomically:
+    an interrupted run leaves no file)."""
+    faces = np.asarray(faces, dtype=np.int32).reshape(-1, 3)
+    times = np.asarray(times, dtype=np.float64).ravel()
+    vertex_count = int(np.max(faces)) + 1 if rest is None else len(rest)
+    observed = np.zeros((len(times), vertex_count), dtype=bool)
+    with atomic_path(path) as tmp, zipfile.ZipFile(tmp, "w", allowZip64=True) as archive:
+        with archive.open("vertices.npy", "w", force_zip64=True) as entry:
+            header = {"descr": "<f4", "fortran_order": False, "shape": (len(times), vertex_count, 3)}
+            np.lib.format.write_array_header_2_0(entry, header)
+            writer = None
+
+            def append(vertices, seen):
+                observed[writer.written : writer.written + len(vertices)] = seen
+                entry.write(vertices.astype("<f4").tobytes())
+
+            writer = FrameWriter(len(times), vertex_count, append)
+            yield writer
+            writer.check_complete(path)
+        arrays = {"kind": np.array("animated"), "faces": faces, "times": times, "observed": observed}
+        if rest is not None:
+            arrays["rest"] = np.asarray(rest, dtype=np.float32)
+        for name, array in arrays.items():
+            with archive.open(f"{name}.npy", "w", force_zip64=True) as entry:
+                np.lib.format.write_array(entry, array, allow_pickle=False)

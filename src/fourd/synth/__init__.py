@@ -15,3 +15,11 @@ def scan(truth, **options):
     from fourd.synth.scanner import scan as _scan
 
     return _scan(truth, **options)
+
+
+def long_capture(frames: int, **options):
+    """A capture of any length read a frame at a time (a scene played ping-pong, each frame
+    scanned when read); see :func:`fourd.synth.whole_capture.long_capture`."""
+    from fourd.synth.whole_capture import long_capture as _long_capture
+
+    return _long_capture(frames, **options)

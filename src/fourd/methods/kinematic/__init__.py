@@ -18,6 +18,10 @@ Pipeline (000_00387fefe94cc850.txt):
    :mod:`.trajectories`);
 5. output at the input times or at any requested ``times``.
 
+Whole captures (issue 56): :func:`reconstruct_streamed` (:mod:`.stream`, ``fourd reconstruct
+--stream``) runs the same steps window by window on frames read when needed and writes the
+result frame by frame, so memory is bounded by the window, not the capture's length.
+
 Beyond the paper (all documented options): robust MPU error / normal-spread quantile,
 rigid point-to-plane prediction of the initial guess, constraint linearised at the guess,
 time sub-steps, sliding windows of frames for the 4D fit, every second point in the 4D fit
@@ -62,6 +66,7 @@ from fourd.methods.kinematic.options import COMMON_OPTIONS, MIN_FRAMES, RESULT, 
 from fourd.methods.kinematic.pipeline import reconstruct
 from fourd.methods.kinematic.projection import project_to_surface
 from fourd.methods.kinematic.sliding import SlideOptions, slide
+from fourd.methods.kinematic.stream import StreamSummary, reconstruct_streamed
 from fourd.methods.kinematic.trajectories import smooth_trajectories
 from fourd.methods.kinematic.urshape import extract_template, template_cell_size
 
@@ -71,6 +76,8 @@ __all__ = [
     "RESULT",
     "Options",
     "reconstruct",
+    "reconstruct_streamed",
+    "StreamSummary",
     "animate",
     "extract_template",
     "slide",

@@ -8,6 +8,7 @@ from __future__ import annotations
 import logging
 import time as _time
 from collections.abc import Sequence
+from typing import NamedTuple
 
 import numpy as np
 
@@ -108,18 +109,7 @@ def animate(
     frame_keys = None
     if cache.enabled:
         frame_keys = [stage_key(p, n) for p, n in zip(points, normals, strict=True)]
-    box = np.array([points[0].min(axis=0), points[0].max(axis=0)]) if bounds is None else bounds
-    target_vertices = template_size(options.template_vertices, points)
-    if target_vertices < options.template_vertices:
-        log.info("sparse frames: a template of about %d vertices (%d asked)", target_vertices,
-                 options.template_vertices)
-    cell = options.cell_size or max(
-        template_cell_size(points[0], spacing, target_vertices),
-        # a few scattered points estimate a tiny area: keep the grid within bounds
-        float(np.max(np.ptp(np.asarray(box, dtype=float), axis=0))) / MAX_TEMPLATE_CELLS,
-    )
-
-    bandwidth = options.data_bandwidth or 2.0 * spacing
+    box, target_vertices, cell, bandwidth = template_settings(points, spacing, options, bounds)
     urshape_key = ""
     if cache.enabled:
         urshape_key = stage_key(
@@ -129,7 +119,9 @@ def animate(
         )
 
     def urshape():
-        vertices, faces = _urshape(field, points, normals, times, box, cell, bandwidth, options, closed)
+        vertices, faces = urshape_of_field(
+            field, points, normals, times, box, cell, bandwidth, options, closed
+        )
         return {"vertices": vertices, "faces": faces}
 
     template, resumed = cached(cache, URSHAPE_STAGE, urshape_key, urshape)
@@ -151,26 +143,7 @@ def animate(
     def surfaces(frames):
         return _FrameSurfaces(frames, points, normals, bandwidth)
 
-    slide_options = SlideOptions(
-        iterations=options.iterations,
-        # a vertex is observed when an input point lies within 2 edges, or within 3 point
-        # spacings when the urshape is finer than the data
-        epsilon=options.epsilon or max(2.0 * median_edge_length(vertices, faces), 3.0 * spacing),
-        substeps=options.substeps,
-        rigid_guess=options.rigid_guess,
-        rigid_neighbours=options.rigid_neighbours,
-        # both act only at input times with the data term
-        register=(
-            RegisterOptions(previous_shape=options.shape_memory) if options.large_motion
-            else None
-        ),
-        projection_limit=PROJECTION_LIMIT,
-        still_normals=options.still_normals,
-        previous_shape=options.slide_memory,
-        edge_stiffness=edge_stiffness,
-        anchor_pull=options.anchor_pull,
-        anchor_gate=options.anchor_gate,
-    )
+    slide_options = slide_settings(options, vertices, faces, spacing, edge_stiffness)
 
     def chain(stage, slide_times, data_frames, surface_frames):
         """The cache entries of one sliding run: each step keyed by the step before it, its
@@ -271,7 +244,59 @@ def animate(
     )
 
 
-def _urshape(field, points, normals, times, box, cell, bandwidth, options, closed):
+class TemplateSettings(NamedTuple):
+    """How the urshape is extracted (:func:`template_settings`): the box ``[2, 3]`` it is
+    polygonised in, its target vertex count, the marching-cubes cell and the data term's
+    bandwidth."""
+
+    box: np.ndarray
+    target_vertices: int
+    cell: float
+    bandwidth: float
+
+
+def template_settings(points, spacing: float, options: Options, bounds=None) -> TemplateSettings:
+    """The urshape's settings from the cleaned frames ``points`` (list of ``[P_k, 3]``; the
+    first frame's box unless ``bounds``) and the point spacing."""
+    box = np.array([points[0].min(axis=0), points[0].max(axis=0)]) if bounds is None else bounds
+    target_vertices = template_size(options.template_vertices, points)
+    if target_vertices < options.template_vertices:
+        log.info("sparse frames: a template of about %d vertices (%d asked)", target_vertices,
+                 options.template_vertices)
+    cell = options.cell_size or max(
+        template_cell_size(points[0], spacing, target_vertices),
+        # a few scattered points estimate a tiny area: keep the grid within bounds
+        float(np.max(np.ptp(np.asarray(box, dtype=float), axis=0))) / MAX_TEMPLATE_CELLS,
+    )
+    bandwidth = options.data_bandwidth or 2.0 * spacing
+    return TemplateSettings(box, target_vertices, cell, bandwidth)
+
+
+def slide_settings(options: Options, vertices, faces, spacing: float, edge_stiffness=None) -> SlideOptions:
+    """The sliding's options for the urshape ``vertices``, ``faces``."""
+    return SlideOptions(
+        iterations=options.iterations,
+        # a vertex is observed when an input point lies within 2 edges, or within 3 point
+        # spacings when the urshape is finer than the data
+        epsilon=options.epsilon or max(2.0 * median_edge_length(vertices, faces), 3.0 * spacing),
+        substeps=options.substeps,
+        rigid_guess=options.rigid_guess,
+        rigid_neighbours=options.rigid_neighbours,
+        # both act only at input times with the data term
+        register=(
+            RegisterOptions(previous_shape=options.shape_memory) if options.large_motion
+            else None
+        ),
+        projection_limit=PROJECTION_LIMIT,
+        still_normals=options.still_normals,
+        previous_shape=options.slide_memory,
+        edge_stiffness=edge_stiffness,
+        anchor_pull=options.anchor_pull,
+        anchor_gate=options.anchor_gate,
+    )
+
+
+def urshape_of_field(field, points, normals, times, box, cell, bandwidth, options, closed):
     """The urshape at ``times[0]``: ``(vertices [N, 3], faces [F, 3])``."""
     # the area estimate of template_cell_size is rough on curved or thin shapes
     # (dfaust-hopping: 1.7x the target), so an automatic cell size is corrected once from the

@@ -202,25 +202,48 @@ def fit_windows(
     if window <= 0 or window >= count:
         mpu = fitted(0, stp.points, stp.normals, "the 4D fit")
         return SpaceTimeField.single(mpu, time_origin=time_origin, time_scale=time_scale)
-    starts = list(range(0, count, window))
-    windows = []
-    for k, a in enumerate(starts):
-        b = min(a + window, count) - 1
-        lo = times[a] if k > 0 else -np.inf
-        hi = 0.5 * (times[b] + times[b + 1]) if b + 1 < count else np.inf
-        if k > 0:
-            lo = windows[-1][1]
-        windows.append((lo, hi))
+    spans = window_spans(times, window, overlap)
 
     def build(index: int) -> MPU4D:
-        a = starts[index]
-        b = min(a + window, count) - 1
-        lo, hi = max(0, a - overlap), min(count - 1, b + overlap)
-        sel = (stp.frame >= lo) & (stp.frame <= hi)
-        log.debug("fitting window %d: frames %d-%d (%d points)", index, lo, hi, int(sel.sum()))
+        span = spans[index]
+        sel = (stp.frame >= span.fit_first) & (stp.frame <= span.fit_last)
+        log.debug("fitting window %d: frames %d-%d (%d points)", index, span.fit_first,
+                  span.fit_last, int(sel.sum()))
         return fitted(
             index, stp.points[sel], stp.normals[sel],
-            f"the 4D fit of window {index + 1} of {len(starts)}",
+            f"the 4D fit of window {index + 1} of {len(spans)}",
         )
 
-    return SpaceTimeField(windows, build, time_origin=time_origin, time_scale=time_scale)
+    return SpaceTimeField([(s.start, s.stop) for s in spans], build, time_origin=time_origin,
+                          time_scale=time_scale)
+
+
+class WindowSpan(NamedTuple):
+    """One window of :func:`window_spans`: its frames ``first..last``, the frames its 4D fit
+    takes in (``fit_first..fit_last``, the overlap added) and the times it answers for
+    (``start`` to ``stop``: from the previous window's stop to halfway to the next frame)."""
+
+    first: int
+    last: int
+    fit_first: int
+    fit_last: int
+    start: float
+    stop: float
+
+
+def window_spans(times: np.ndarray, window: int, overlap: int) -> list[WindowSpan]:
+    """The windows of ``window`` frames over frames with ``times`` [T] (the last may be
+    shorter), each fitted with ``overlap`` extra frames on both sides.
+
+    >>> [tuple(s)[:4] for s in window_spans(np.arange(5.0), 2, 1)]
+    [(0, 1, 0, 2), (2, 3, 1, 4), (4, 4, 3, 4)]
+    """
+    count = len(times)
+    spans = []
+    for a in range(0, count, window):
+        b = min(a + window, count) - 1
+        start = spans[-1].stop if spans else -np.inf
+        stop = 0.5 * (times[b] + times[b + 1]) if b + 1 < count else np.inf
+        spans.append(WindowSpan(a, b, max(0, a - overlap), min(count - 1, b + overlap),
+                                float(start), float(stop)))
+    return spans

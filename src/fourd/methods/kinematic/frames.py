@@ -75,34 +75,52 @@ def prepare_frames(seq: PointCloudSequence, options: Options, cache: StageCache 
     return [p for p, _ in prepared], [n for _, n in prepared]
 
 
-def densify_frames(points: list, normals: list, options: Options) -> tuple[list, list]:
+def densify_frames(
+    points: list, normals: list, options: Options, *, density: float | None = None, first: int = 0
+) -> tuple[list, list]:
     """The prepared frames ``points``, ``normals`` (lists of ``[P_k, 3]``), densified when
     they are sparser than the template (``options.densify``, :mod:`fourd.geometry.densify`):
     each frame's surface sampled at :data:`DENSIFIED_POINTS_PER_VERTEX` samples per template
     vertex on the first frame's surface area (a pure function of each frame, seeded by its
     index). Returned as given when the frames are dense enough or the first frame has no
-    surface."""
-    median = float(np.median([len(p) for p in points])) if points else 0.0
-    if not options.densify or median >= options.template_vertices:
+    surface.
+
+    ``density`` (samples per unit area, 0: none) decides for frames that are part of a longer
+    sequence (a streamed run's later windows: :func:`densify_density` of its first), and
+    ``first`` is the index of ``points[0]`` in that sequence (the seeds)."""
+    surface = None
+    if density is None:
+        density, surface = densify_density(points, normals, options)
+    if density <= 0:
         return points, normals
-    settings = SurfaceSettings(seed=options.seed)
-    first = frame_surface(points[0], normals=normals[0], settings=settings)
-    area = float(face_areas(*first).sum())
-    if area <= 0:
-        return points, normals
-    density = DENSIFIED_POINTS_PER_VERTEX * options.template_vertices / area
     dense_points, dense_normals = [], []
     for index in progress(range(len(points)), desc="densifying", total=len(points)):
         p, n = densify_points(points[index], normals[index], density=density,
-                              surface=first if index == 0 else None, seed=options.seed + index)
+                              surface=surface if index == 0 else None,
+                              seed=options.seed + first + index)
         dense_points.append(p)
         dense_normals.append(n)
     log.info(
         "sparse frames (%d points in the median frame, %d template vertices): each frame's "
-        "surface sampled, %d points in the median frame now", median, options.template_vertices,
+        "surface sampled, %d points in the median frame now",
+        np.median([len(p) for p in points]), options.template_vertices,
         np.median([len(p) for p in dense_points]),
     )
     return dense_points, dense_normals
+
+
+def densify_density(points: list, normals: list, options: Options) -> tuple[float, tuple | None]:
+    """The density (samples per unit area) :func:`densify_frames` samples ``points`` at, 0
+    when they are not densified, and the first frame's surface ``(vertices, faces)`` it was
+    measured on (None when there is none)."""
+    median = float(np.median([len(p) for p in points])) if points else 0.0
+    if not options.densify or median >= options.template_vertices:
+        return 0.0, None
+    first = frame_surface(points[0], normals=normals[0], settings=SurfaceSettings(seed=options.seed))
+    area = float(face_areas(*first).sum())
+    if area <= 0:
+        return 0.0, None
+    return DENSIFIED_POINTS_PER_VERTEX * options.template_vertices / area, first
 
 
 def frame_key(frame, options: Options) -> str:

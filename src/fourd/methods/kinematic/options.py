@@ -86,7 +86,9 @@ class Options:
         Patch size of the local rigid predictions (0: one global rigid motion only).
     window : int
         Frames per 4D fit (0: one fit over the whole sequence); longer sequences are fitted
-        window by window with ``window_overlap`` extra frames on each side.
+        window by window with ``window_overlap`` extra frames on each side. A streamed run
+        (``--stream``, :func:`~fourd.methods.kinematic.reconstruct_streamed`) also reads the
+        frames and writes the result per window (0 there: 20 frames).
     window_overlap : int
         Extra frames on both sides of each window that its 4D fit takes in (with ``window``),
         so that ``f`` is continuous enough across the windows' boundaries.

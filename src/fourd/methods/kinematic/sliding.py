@@ -53,7 +53,7 @@ Beyond the paper (documented options, defaults on):
 from __future__ import annotations
 
 import logging
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Literal, NamedTuple
 
@@ -495,8 +495,14 @@ def slide_step(
 
 
 class SlideResult(NamedTuple):
+    """What :func:`slide` returns with ``return_steps``: the animation, each sub-step's
+    diagnostics, and ``state``, what a sliding that goes on from the last time starts from
+    (its ``start``: ``vertices`` [N, 3], ``motion`` [N, 3] when there was a step,
+    ``registration`` ``[kept, unexplained]`` when one ran)."""
+
     animation: AnimatedMesh
     steps: list
+    state: dict
 
 
 def slide(
@@ -512,6 +518,7 @@ def slide(
     checkpoints: Chain | None = None,
     anchors: Sequence | None = None,
     colour_guides: Sequence | None = None,
+    start: Mapping[str, np.ndarray] | None = None,
 ):
     """Slide a template along ``field = 0`` through ``times``, as rigidly as possible.
 
@@ -550,6 +557,10 @@ def slide(
         Per time, a function of the step's result that returns a :class:`~.guide.Guide` (the
         colour guide, :class:`~fourd.appearance.color_guide.PhotometricGuides`), or None: the step then
         relaxes again pulled towards it (``late_guide`` of :func:`slide_step`).
+    start : mapping, optional
+        Go on from an earlier sliding that ended at ``times[0]``: its :attr:`SlideResult.state`
+        (``vertices`` are then the first output frame; ``rest_vertices`` stays the rest
+        shape). The result is the same as one sliding over both runs' times.
 
     Returns
     -------
@@ -599,6 +610,15 @@ def slide(
     observed[0] = observed_at(0, rest)
     current = rest
     motion = None  # the previous step's vertex velocities [N, 3]
+    last_registration = None  # (kept, unexplained fraction) of the previous data step
+    if start is not None:
+        current = np.asarray(start["vertices"], dtype=np.float64).reshape(rest.shape).copy()
+        frames[0] = current
+        observed[0] = observed_at(0, current)
+        motion = start.get("motion")
+        if "registration" in start:
+            kept, unexplained = start["registration"]
+            last_registration = (bool(kept), float(unexplained))
     steps = []
     patches = None
     if options.rigid_guess and 1 < options.rigid_neighbours < len(rest):
@@ -609,7 +629,6 @@ def slide(
         if options.register is not None and surfaces is not None
         else None
     )
-    last_registration = None  # (kept, unexplained fraction) of the previous data step
     first = 1
     if checkpoints is not None:
         done = checkpoints.prefix()
@@ -678,4 +697,11 @@ def slide(
     animation = AnimatedMesh(
         faces=faces, vertices=frames, times=times, observed=observed, rest=rest
     )
-    return SlideResult(animation, steps) if return_steps else animation
+    if not return_steps:
+        return animation
+    state = {"vertices": current}
+    if motion is not None:
+        state["motion"] = motion
+    if last_registration is not None:
+        state["registration"] = np.array(last_registration, dtype=np.float64)
+    return SlideResult(animation, steps, state)

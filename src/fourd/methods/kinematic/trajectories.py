@@ -16,6 +16,7 @@ def smooth_trajectories(
     *,
     motion_threshold: float = 0.0,
     neighbours: int = SMOOTHING_NEIGHBOURS,
+    reference: np.ndarray | None = None,
 ) -> np.ndarray:
     """``passes`` of ``x_k <- x_k + w (x_k^lin - x_k)`` over frames ``vertices`` [T, N, 3], with
     ``x_k^lin`` the linear interpolation of the neighbouring frames at ``times[k]`` (with
@@ -31,7 +32,9 @@ def smooth_trajectories(
     vertex's own deviation is the frame's noise, and a whole region's deviation that reverses
     in the next frame is a one-frame jump (a tracking glitch or a bounce): both are smoothed.
     A deviation that a region keeps over consecutive frames is an acceleration (a kick), which
-    the plain filter would cut off the surface.
+    the plain filter would cut off the surface. ``reference`` [N, 3]: the positions whose
+    nearest vertices are the neighbourhoods instead of the first frame (a stretch of a longer
+    sequence takes the sequence's first frame).
     """
     x = np.array(vertices, dtype=np.float64, copy=True)
     if passes <= 0 or len(x) < 3:
@@ -44,7 +47,7 @@ def smooth_trajectories(
         k = max(min(neighbours, n), 1)
         near = np.arange(n)[:, None]  # the vertex itself and its k - 1 nearest
         if k > 1:
-            near = np.hstack([near, knn(x[0], k - 1)[1]])
+            near = np.hstack([near, knn(x[0] if reference is None else reference, k - 1)[1]])
         rows = np.repeat(np.arange(n), k)
         average = sp.csr_matrix(
             (np.full(rows.size, 1.0 / k), (rows, near.ravel())), shape=(n, n)

@@ -1,0 +1,47 @@
+"""The fourd .npz written frame by frame (:func:`fourd.io.npz.npz_frames`): the same file as
+:func:`write_npz`, and nothing on disk unless every frame arrived."""
+
+import numpy as np
+import pytest
+
+import fourd
+from fourd.errors import InputError
+from fourd.io.npz import npz_frames, read_npz, write_npz
+
+
+def _animation():
+    rng = np.random.default_rng(0)
+    vertices = rng.normal(size=(7, 5, 3))
+    faces = np.array([[0, 1, 2], [2, 3, 4]])
+    observed = rng.random((7, 5)) > 0.3
+    return fourd.AnimatedMesh(
+        faces, vertices, times=np.arange(7.0) * 0.5, observed=observed, rest=vertices[0]
+    )
+
+
+def test_frame_by_frame_reads_back_as_the_whole_file(tmp_path):
+    anim = _animation()
+    write_npz(tmp_path / "whole.npz", anim)
+    with npz_frames(
+        tmp_path / "frames.npz", faces=anim.faces, times=anim.times, rest=anim.rest
+    ) as out:
+        for a, b in ((0, 3), (3, 4), (4, 7)):
+            out.write(anim.vertices[a:b], anim.observed[a:b])
+    whole, frames = read_npz(tmp_path / "whole.npz"), read_npz(tmp_path / "frames.npz")
+    for name in ("vertices", "faces", "times", "observed", "rest"):
+        np.testing.assert_array_equal(getattr(frames, name), getattr(whole, name))
+
+
+def test_an_incomplete_or_failed_write_leaves_nothing(tmp_path):
+    anim = _animation()
+    with pytest.raises(InputError, match="only 3 of 7 frames"):
+        with npz_frames(
+            tmp_path / "a.npz", faces=anim.faces, times=anim.times, rest=anim.rest
+        ) as out:
+            out.write(anim.vertices[:3], anim.observed[:3])
+    with pytest.raises(ValueError, match="8 frames written to an output of 7"):
+        with npz_frames(
+            tmp_path / "b.npz", faces=anim.faces, times=anim.times, rest=anim.rest
+        ) as out:
+            out.write(np.concatenate([anim.vertices, anim.vertices[:1]]), np.ones((8, 5), bool))
+    assert list(tmp_path.iterdir()) == []
