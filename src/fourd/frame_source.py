@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from fourd.errors import InputError
-from fourd.sequence import Frame, PointCloudSequence
+from fourd.sequence import Frame, PointCloudSequence, check_increasing
 
 
 @dataclass(frozen=True, eq=False)
@@ -44,12 +44,7 @@ class FrameSource:
         names = tuple(self.names) or tuple(f"frame_{i}" for i in range(len(times)))
         if len(names) != len(times):
             raise InputError(f"{len(names)} names for {len(times)} frames")
-        steps = np.diff(times)
-        if np.any(steps <= 0):
-            i = int(np.argmax(steps <= 0))
-            raise InputError(
-                f"times must increase strictly: {names[i + 1]} has time {times[i + 1]} after {times[i]}"
-            )
+        check_increasing(times, names)
         object.__setattr__(self, "times", times)
         object.__setattr__(self, "names", names)
 

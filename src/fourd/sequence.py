@@ -56,6 +56,17 @@ def _frame_faces(faces, count: int) -> np.ndarray | None:
     return np.ascontiguousarray(values, dtype=np.int64)
 
 
+def check_increasing(times: np.ndarray, names: Sequence[str]) -> None:
+    """:class:`InputError` naming the first frame whose time does not follow its
+    predecessor's strictly (``names`` [T] name the frames)."""
+    steps = np.diff(times)
+    if np.any(steps <= 0):
+        i = int(np.argmax(steps <= 0))
+        raise InputError(
+            f"times must increase strictly: {names[i + 1]} has time {times[i + 1]} after {times[i]}"
+        )
+
+
 @dataclass(frozen=True, eq=False)
 class Frame:
     """One scan: points at one time.
@@ -143,13 +154,7 @@ class PointCloudSequence:
         names = tuple(self.names) or tuple(f"frame_{i}" for i in range(len(frames)))
         if len(names) != len(frames):
             raise InputError(f"{len(names)} names for {len(frames)} frames")
-        times = np.array([f.time for f in frames])
-        steps = np.diff(times)
-        if np.any(steps <= 0):
-            i = int(np.argmax(steps <= 0))
-            raise InputError(
-                f"times must increase strictly: {names[i + 1]} has time {times[i + 1]} after {times[i]}"
-            )
+        check_increasing(np.array([f.time for f in frames]), names)
         object.__setattr__(self, "frames", frames)
         object.__setattr__(self, "names", names)
         if self.video is not None:

@@ -377,6 +377,22 @@ def _npz_sequence(path: Path) -> PointCloudSequence:
     return PointCloudSequence(tuple(frames), tuple(names))
 
 
+def _folder_listing(path: Path) -> tuple[list[Path], np.ndarray, list]:
+    """A frame folder's files (natural order), their times (``times.txt``, default 0, 1,
+    2, ...) and sensors (``sensors.json``, default None per frame)."""
+    files = _frame_files(path)
+    if not files:
+        raise InputError(f"the folder holds no frame files ({', '.join(FRAME_SUFFIXES)})", path)
+    count = len(files)
+    times = np.arange(count, dtype=np.float64)
+    if (path / "times.txt").exists():
+        times = read_times(path / "times.txt", count)
+    sensors: list = [None] * count
+    if (path / "sensors.json").exists():
+        sensors = read_sensors(path / "sensors.json", count)
+    return files, times, sensors
+
+
 def load_sequence(path: str | os.PathLike) -> PointCloudSequence:
     """Read a sequence of frames.
 
@@ -423,16 +439,8 @@ def load_sequence(path: str | os.PathLike) -> PointCloudSequence:
         if path.suffix.lower() == ".npz":
             return _npz_sequence(path)
         return PointCloudSequence((read_frame(path),), (path.name,))
-    files = _frame_files(path)
-    if not files:
-        raise InputError(f"the folder holds no frame files ({', '.join(FRAME_SUFFIXES)})", path)
+    files, times, sensors = _folder_listing(path)
     count = len(files)
-    times = np.arange(count, dtype=np.float64)
-    if (path / "times.txt").exists():
-        times = read_times(path / "times.txt", count)
-    sensors: list = [None] * count
-    if (path / "sensors.json").exists():
-        sensors = read_sensors(path / "sensors.json", count)
     frames = []
     first_columns: tuple[int, Path] | None = None
     for i, file in enumerate(files):
@@ -477,16 +485,7 @@ def open_sequence(path: str | os.PathLike) -> FrameSource:
         raise InputError("does not exist", path)
     if not path.is_dir():
         return FrameSource.of(load_sequence(path))
-    files = _frame_files(path)
-    if not files:
-        raise InputError(f"the folder holds no frame files ({', '.join(FRAME_SUFFIXES)})", path)
-    count = len(files)
-    times = np.arange(count, dtype=np.float64)
-    if (path / "times.txt").exists():
-        times = read_times(path / "times.txt", count)
-    sensors: list = [None] * count
-    if (path / "sensors.json").exists():
-        sensors = read_sensors(path / "sensors.json", count)
+    files, times, sensors = _folder_listing(path)
 
     def read(i: int) -> Frame:
         raw = _read_guarded(files[i])

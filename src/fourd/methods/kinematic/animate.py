@@ -141,7 +141,7 @@ def animate(
     surface_frames = list(np.where(exact & has_points & options.data_term, nearest, -1))
 
     def surfaces(frames):
-        return _FrameSurfaces(frames, points, normals, bandwidth)
+        return FrameSurfaces(frames, points, normals, bandwidth)
 
     slide_options = slide_settings(options, vertices, faces, spacing, edge_stiffness)
 
@@ -325,7 +325,7 @@ def urshape_of_field(field, points, normals, times, box, cell, bandwidth, option
     return vertices, faces
 
 
-class _FrameSurfaces(Sequence):
+class FrameSurfaces(Sequence):
     """Per sliding time, the :class:`FrameSurface` of input frame ``frames[i]`` (None where
     it is -1), built when the sliding asks for it: one frame's grid in memory at a time."""
 

@@ -36,7 +36,7 @@ from fourd.frame_source import FrameSource
 from fourd.geometry.neighbors import point_spacing
 from fourd.io.npz import npz_frames
 from fourd.methods.kinematic.animate import (
-    _FrameSurfaces,
+    FrameSurfaces,
     slide_settings,
     template_settings,
     urshape_of_field,
@@ -222,7 +222,7 @@ class _Run:
             times[slid.start : slid.stop],
             options=slide_settings(options, self.rest, self.faces, self.spacing),
             data=data,
-            surfaces=_FrameSurfaces(
+            surfaces=FrameSurfaces(
                 with_surface, data, [frames.normals(i) for i in slid], self.bandwidth
             ),
             return_steps=True,
