@@ -612,13 +612,10 @@ def slide(
     motion = None  # the previous step's vertex velocities [N, 3]
     last_registration = None  # (kept, unexplained fraction) of the previous data step
     if start is not None:
-        current = np.asarray(start["vertices"], dtype=np.float64).reshape(rest.shape).copy()
+        current, motion, last_registration = _from_state(start)
+        current = current.reshape(rest.shape)
         frames[0] = current
         observed[0] = observed_at(0, current)
-        motion = start.get("motion")
-        if "registration" in start:
-            kept, unexplained = start["registration"]
-            last_registration = (bool(kept), float(unexplained))
     steps = []
     patches = None
     if options.rigid_guess and 1 < options.rigid_neighbours < len(rest):
@@ -636,11 +633,7 @@ def slide(
             frames[k] = entry["vertices"]
             observed[k] = entry["observed"]
         if done:
-            current = frames[len(done)].copy()
-            motion = done[-1].get("motion")
-            if "registration" in done[-1]:
-                kept, unexplained = done[-1]["registration"]
-                last_registration = (bool(kept), float(unexplained))
+            current, motion, last_registration = _from_state(done[-1])
             first = len(done) + 1
             report_resumed(log, f"{len(done)} of {len(times) - 1} slid frames")
     for k in progress(range(first, len(times)), desc="sliding", total=len(times) - first):
@@ -688,20 +681,31 @@ def slide(
         frames[k] = current
         observed[k] = observed_at(k, current)
         if checkpoints is not None:
-            state = {"vertices": current, "observed": observed[k]}
-            if motion is not None:
-                state["motion"] = motion
-            if last_registration is not None:
-                state["registration"] = np.array(last_registration, dtype=np.float64)
-            checkpoints.save(k - 1, state)
+            state = _state(current, motion, last_registration)
+            checkpoints.save(k - 1, {**state, "observed": observed[k]})
     animation = AnimatedMesh(
         faces=faces, vertices=frames, times=times, observed=observed, rest=rest
     )
     if not return_steps:
         return animation
-    state = {"vertices": current}
+    return SlideResult(animation, steps, _state(current, motion, last_registration))
+
+
+def _state(vertices, motion, registration) -> dict[str, np.ndarray]:
+    """What the next step starts from, as arrays (:attr:`SlideResult.state`, the checkpoints)."""
+    state = {"vertices": vertices}
     if motion is not None:
         state["motion"] = motion
-    if last_registration is not None:
-        state["registration"] = np.array(last_registration, dtype=np.float64)
-    return SlideResult(animation, steps, state)
+    if registration is not None:
+        state["registration"] = np.array(registration, dtype=np.float64)
+    return state
+
+
+def _from_state(state) -> tuple:
+    """``(vertices, motion or None, (kept, unexplained) or None)`` of a :func:`_state`."""
+    registration = None
+    if "registration" in state:
+        kept, unexplained = state["registration"]
+        registration = (bool(kept), float(unexplained))
+    vertices = np.array(state["vertices"], dtype=np.float64)
+    return vertices, state.get("motion"), registration
