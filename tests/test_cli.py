@@ -904,3 +904,15 @@ def test_stream_writes_a_npz_read_a_window_at_a_time(tmp_path, capsys):
     _run_bad(capsys, argv[:3] + [str(tmp_path / "out.glb"), "--stream"], "out.glb", ".npz")
     _run_bad(capsys, argv + ["--method", "flow"], "--stream", "kinematic")
     _run_bad(capsys, argv + ["--times", "0.5"], "--stream", "--times")
+
+
+def test_running_out_of_memory_is_one_line_that_names_stream(tmp_path, capsys, monkeypatch):
+    def exhausted(*args, **kwargs):
+        raise MemoryError
+
+    monkeypatch.setattr("fourd.methods.reconstruct", exhausted)
+    folder = _folder(tmp_path, frames=3)
+    assert main(["reconstruct", str(folder), "-o", str(tmp_path / "o.npz"), "-q"]) == 3
+    err = capsys.readouterr().err.strip()
+    assert err.splitlines() == [err] and "out of memory" in err and "--stream" in err
+    assert not (tmp_path / "o.npz").exists()

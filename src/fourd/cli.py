@@ -21,6 +21,8 @@ from fourd.jsonable import jsonable
 log = logging.getLogger("fourd.cli")
 
 EXIT_BAD_INPUT = 2
+#: A run that ran out of memory (a MemoryError; the kernel's OOM killer ends a process unseen).
+EXIT_OUT_OF_MEMORY = 3
 #: Exit status after Ctrl-C (SIGINT) and after SIGTERM: 128 + the signal's number.
 EXIT_INTERRUPTED = 128 + signal.SIGINT
 EXIT_TERMINATED = 128 + signal.SIGTERM
@@ -725,6 +727,13 @@ def main(argv: list[str] | None = None) -> int:
         name = error.filename or ""
         print(f"fourd: error: {name}: {error.strerror}", file=sys.stderr)
         return EXIT_BAD_INPUT
+    except MemoryError:
+        hint = ""
+        if getattr(args, "func", None) is cmd_reconstruct and not args.stream:
+            hint = ("; for a long capture, --stream (kinematic) bounds the memory by a window of "
+                    "frames, or --frames A:B reconstructs part of it")
+        print(f"fourd: error: out of memory{hint}", file=sys.stderr)
+        return EXIT_OUT_OF_MEMORY
     except BrokenPipeError:
         # The reader of our output went away (`fourd evaluate ... | head`): not an error.
         devnull = os.open(os.devnull, os.O_WRONLY)
