@@ -76,7 +76,13 @@ def prepare_frames(seq: PointCloudSequence, options: Options, cache: StageCache 
 
 
 def densify_frames(
-    points: list, normals: list, options: Options, *, density: float | None = None, first: int = 0
+    points: list,
+    normals: list,
+    options: Options,
+    *,
+    density: float | None = None,
+    first: int = 0,
+    surface: tuple | None = None,
 ) -> tuple[list, list]:
     """The prepared frames ``points``, ``normals`` (lists of ``[P_k, 3]``), densified when
     they are sparser than the template (``options.densify``, :mod:`fourd.geometry.densify`):
@@ -87,8 +93,8 @@ def densify_frames(
 
     ``density`` (samples per unit area, 0: none) decides for frames that are part of a longer
     sequence (a streamed run's later windows: :func:`densify_density` of its first), and
-    ``first`` is the index of ``points[0]`` in that sequence (the seeds)."""
-    surface = None
+    ``first`` is the index of ``points[0]`` in that sequence (the seeds); ``surface``: the
+    surface of ``points[0]`` when :func:`densify_density` made it."""
     if density is None:
         density, surface = densify_density(points, normals, options)
     if density <= 0:

@@ -67,13 +67,8 @@ def reconstruct(
         time_origin=times[0],
         time_unit=time_unit,
     )
-    mpu_options = MPUOptions(
-        error=options.mpu_error or 2.0 * spacing,
-        min_points=options.min_points,
-        error_quantile=options.error_quantile,
-    )
     fit = dict(
-        mpu_options=mpu_options,
+        mpu_options=fit_options(options, spacing),
         window=options.window,
         overlap=options.window_overlap,
         time_origin=times[0],
@@ -114,6 +109,15 @@ def reconstruct(
         finished - fitted,
     )
     return result
+
+
+def fit_options(options: Options, spacing: float) -> MPUOptions:
+    """The 4D fit's options for frames whose point spacing is ``spacing``."""
+    return MPUOptions(
+        error=options.mpu_error or 2.0 * spacing,
+        min_points=options.min_points,
+        error_quantile=options.error_quantile,
+    )
 
 
 def _guide_colors(seq: PointCloudSequence, points, normals) -> list | None:

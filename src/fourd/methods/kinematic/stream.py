@@ -43,8 +43,9 @@ from fourd.methods.kinematic.animate import (
 )
 from fourd.methods.kinematic.field import SpaceTimeField, space_time_points, window_spans
 from fourd.methods.kinematic.frames import densify_density, densify_frames, prepare_frames
-from fourd.methods.kinematic.mpu4d import MPUOptions, fit_mpu4d, mpu_arrays, mpu_from_arrays
+from fourd.methods.kinematic.mpu4d import fit_mpu4d, mpu_arrays, mpu_from_arrays
 from fourd.methods.kinematic.options import MIN_FRAMES, Options
+from fourd.methods.kinematic.pipeline import fit_options
 from fourd.methods.kinematic.sliding import slide
 from fourd.methods.kinematic.trajectories import smooth_trajectories
 from fourd.sequence import PointCloudSequence
@@ -185,11 +186,7 @@ class _Run:
             time_origin=times[0],
             time_unit=self.time_unit,
         )
-        mpu_options = MPUOptions(
-            error=options.mpu_error or 2.0 * self.spacing,
-            min_points=options.min_points,
-            error_quantile=options.error_quantile,
-        )
+        mpu_options = fit_options(options, self.spacing)
         fits = [
             *([self.fit] if self.fit else []),
             (span, fit_mpu4d(stp.points, stp.normals, options=mpu_options)),
@@ -298,11 +295,12 @@ class _Frames:
         indices = sorted(self.raw)
         part = PointCloudSequence(tuple(self.raw[i] for i in indices))
         points, normals = prepare_frames(part, self.options)
+        surface = None
         if self.density is None:  # the first window decides (densify_frames)
-            self.density, _ = densify_density(points, normals, self.options)
+            self.density, surface = densify_density(points, normals, self.options)
         # the raw frames held are always consecutive: read in order, forgotten from the front
         points, normals = densify_frames(
-            points, normals, self.options, density=self.density, first=indices[0]
+            points, normals, self.options, density=self.density, first=indices[0], surface=surface
         )
         for i, p, n in zip(indices, points, normals, strict=True):
             self.prepared[i] = (p, n)
