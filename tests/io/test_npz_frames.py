@@ -6,7 +6,7 @@ import pytest
 
 import fourd
 from fourd.errors import InputError
-from fourd.io.npz import npz_frames, read_npz, write_npz
+from fourd.io.npz import npz_frames, npz_meshes, read_npz, write_npz
 
 
 def _animation():
@@ -45,3 +45,38 @@ def test_an_incomplete_or_failed_write_leaves_nothing(tmp_path):
         ) as out:
             out.write(np.concatenate([anim.vertices, anim.vertices[:1]]), np.ones((8, 5), bool))
     assert list(tmp_path.iterdir()) == []
+
+
+def _meshes():
+    rng = np.random.default_rng(1)
+    meshes = tuple(
+        (rng.normal(size=(n, 3)), rng.integers(0, n, size=(n - 2, 3))) for n in (5, 8, 6)
+    )
+    return fourd.MeshSequence(meshes, np.array([0.0, 0.5, 1.0]))
+
+
+def test_a_mesh_sequence_frame_by_frame_reads_back_as_the_whole_file(tmp_path):
+    seq = _meshes()
+    write_npz(tmp_path / "whole.npz", seq)
+    with npz_meshes(tmp_path / "frames.npz", times=seq.times) as out:
+        for vertices, faces in seq.meshes:
+            out.write(vertices, faces)
+    whole, frames = read_npz(tmp_path / "whole.npz"), read_npz(tmp_path / "frames.npz")
+    np.testing.assert_array_equal(frames.times, whole.times)
+    for (v, f), (vw, fw) in zip(frames.meshes, whole.meshes, strict=True):
+        np.testing.assert_array_equal(v, vw)
+        np.testing.assert_array_equal(f, fw)
+
+
+def test_a_mesh_sequence_missing_a_frame_leaves_nothing(tmp_path):
+    seq = _meshes()
+    with pytest.raises(InputError, match="only 2 of 3 frames"):
+        with npz_meshes(tmp_path / "a.npz", times=seq.times) as out:
+            for vertices, faces in seq.meshes[:2]:
+                out.write(vertices, faces)
+    assert not (tmp_path / "a.npz").exists()
+    with pytest.raises(ValueError, match="4 frames written"):
+        with npz_meshes(tmp_path / "b.npz", times=seq.times) as out:
+            for vertices, faces in seq.meshes + seq.meshes[:1]:
+                out.write(vertices, faces)
+    assert not list(tmp_path.iterdir())

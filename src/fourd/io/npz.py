@@ -97,6 +97,18 @@ def _colors(stored: np.ndarray | None) -> np.ndarray | None:
     return stored
 
 
+def streamed_output(path: str | os.PathLike) -> Path:
+    """``path`` as the output of a streamed run, which writes a fourd ``.npz`` (one line
+    naming it otherwise)."""
+    path = Path(path)
+    if path.suffix.lower() != ".npz":
+        raise InputError(
+            "a streamed run writes a fourd .npz (fourd.load_result and fourd.save convert it)",
+            path,
+        )
+    return path
+
+
 class FrameWriter:
     """Appends frames to an open output (:func:`npz_frames`, :func:`fourd.io.pc2.pc2_frames`):
     :meth:`write` takes the next frames' vertices ``[k, N, 3]`` and observed flags ``[k, N]``."""
@@ -153,5 +165,53 @@ def npz_frames(
         if rest is not None:
             arrays["rest"] = np.asarray(rest, dtype=np.float32)
         for name, array in arrays.items():
+            with archive.open(f"{name}.npy", "w", force_zip64=True) as entry:
+                np.lib.format.write_array(entry, array, allow_pickle=False)
+
+
+class MeshWriter:
+    """Appends the frames of a :class:`~fourd.animation.MeshSequence` to an open ``.npz``
+    (:func:`npz_meshes`): :meth:`write` takes the next frame's vertices ``[N, 3]`` and faces
+    ``[F, 3]``."""
+
+    def __init__(self, count: int, append: Callable[[np.ndarray, np.ndarray], None]):
+        self.count, self.written = int(count), 0
+        self._append = append
+
+    def write(self, vertices: np.ndarray, faces: np.ndarray) -> None:
+        """Append one frame (no more than the output was opened for)."""
+        if self.written == self.count:
+            raise ValueError(f"{self.written + 1} frames written to an output of {self.count}")
+        self._append(
+            np.asarray(vertices, dtype="<f4").reshape(-1, 3),
+            np.asarray(faces, dtype="<i4").reshape(-1, 3),
+        )
+        self.written += 1
+
+    def check_complete(self, path) -> None:
+        if self.written != self.count:
+            raise InputError(f"only {self.written} of {self.count} frames were written", path)
+
+
+@contextmanager
+def npz_meshes(path: str | os.PathLike, *, times: np.ndarray) -> Iterator[MeshWriter]:
+    """Write a MeshSequence ``.npz`` (:func:`write_npz`'s layout) frame by frame: yields a
+    :class:`MeshWriter` whose frames go straight to the file, so memory holds none of them.
+    The file appears, complete, when the block ends without an error and every frame of
+    ``times`` was written (atomically: an interrupted run leaves no file)."""
+    times = np.asarray(times, dtype=np.float64).ravel()
+    with atomic_path(path) as tmp, zipfile.ZipFile(tmp, "w", allowZip64=True) as archive:
+        writer = None
+
+        def append(vertices, faces):
+            for name, array in ((f"vertices_{writer.written}", vertices),
+                                (f"faces_{writer.written}", faces)):
+                with archive.open(f"{name}.npy", "w", force_zip64=True) as entry:
+                    np.lib.format.write_array(entry, array, allow_pickle=False)
+
+        writer = MeshWriter(len(times), append)
+        yield writer
+        writer.check_complete(path)
+        for name, array in (("kind", np.array("meshes")), ("times", times)):
             with archive.open(f"{name}.npy", "w", force_zip64=True) as entry:
                 np.lib.format.write_array(entry, array, allow_pickle=False)

@@ -34,7 +34,7 @@ from fourd.cache import StageCache, report_resumed, stage_key
 from fourd.errors import InputError
 from fourd.frame_source import FrameSource
 from fourd.geometry.neighbors import point_spacing
-from fourd.io.npz import npz_frames
+from fourd.io.npz import npz_frames, streamed_output
 from fourd.methods.kinematic.animate import (
     FrameSurfaces,
     slide_settings,
@@ -98,12 +98,7 @@ def reconstruct_streamed(
     000_00387fefe94cc850.txt sections 2-5; the windows are this project's (issue 56).
     """
     options = options or Options()
-    output = Path(output)
-    if output.suffix.lower() != ".npz":
-        raise InputError(
-            "a streamed run writes a fourd .npz (fourd.load_result and fourd.save convert it)",
-            output,
-        )
+    output = streamed_output(output)
     if len(source) < MIN_FRAMES:
         raise InputError(f"kinematic needs at least {MIN_FRAMES} frames, got {len(source)}")
     if options.times:
