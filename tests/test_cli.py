@@ -9,7 +9,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import trimesh
 
+import fourd
 from fourd.cli import main
 from fourd.methods import METHODS, method_module
 
@@ -902,8 +904,26 @@ def test_stream_writes_a_npz_read_a_window_at_a_time(tmp_path, capsys):
         radius = np.linalg.norm(result.vertices[t] - [0.05 * t] * 3, axis=1)
         assert np.abs(np.median(radius) - 1.0) < 0.05, t
     _run_bad(capsys, argv[:3] + [str(tmp_path / "out.glb"), "--stream"], "out.glb", ".npz")
-    _run_bad(capsys, argv + ["--method", "flow"], "--stream", "kinematic")
+    _run_bad(capsys, argv + ["--method", "perframe"], "--stream", "kinematic and flow")
     _run_bad(capsys, argv + ["--times", "0.5"], "--stream", "--times")
+
+
+@pytest.mark.slow
+def test_stream_runs_flow_in_windows(tmp_path):
+    folder = _folder(tmp_path, frames=5)
+    out = tmp_path / "out.npz"
+    argv = ["reconstruct", str(folder), "-o", str(out), "--stream", "-q", "--method", "flow",
+            "--set", "window=3", "--set", "window_overlap=1", "--set", "resolution=12"]
+    assert main(argv) == 0
+    from fourd.io.results import load_result
+
+    result = load_result(out)
+    assert isinstance(result, fourd.MeshSequence) and result.frame_count == 5
+    for t, (vertices, faces) in enumerate(result.meshes):
+        mesh = trimesh.Trimesh(vertices, faces)
+        assert mesh.is_watertight, t
+        radius = np.linalg.norm(vertices - [0.05 * t] * 3, axis=1)
+        assert np.abs(np.median(radius) - 1.0) < 0.05, t
 
 
 def test_running_out_of_memory_is_one_line_that_names_stream(tmp_path, capsys, monkeypatch):

@@ -259,16 +259,17 @@ def cmd_reconstruct(args) -> int:
 
 
 def _reconstruct_streamed(args, method: str, values: dict) -> int:
-    """``reconstruct --stream``: kinematic over frames read a window at a time, the result
-    written frame by frame (:mod:`fourd.methods.kinematic.stream`)."""
+    """``reconstruct --stream``: kinematic or flow over frames read a window at a time, the
+    result written frame by frame (:mod:`fourd.methods.kinematic.stream`,
+    :mod:`fourd.methods.flow.windows`)."""
     from fourd.io.frames import open_sequence
-    from fourd.methods import method_options
-    from fourd.methods.kinematic.stream import reconstruct_streamed
+    from fourd.methods import flow, kinematic, method_options
 
     if method == "auto" and not args.method:
         method = "kinematic"
-    if method != "kinematic":
-        raise InputError(f"--stream: only kinematic runs streamed (asked for {method})")
+    streamed = {"kinematic": kinematic.reconstruct_streamed, "flow": flow.reconstruct_streamed}
+    if method not in streamed:
+        raise InputError(f"--stream: only kinematic and flow run streamed (asked for {method})")
     for flag, given in (("--times", args.times), ("--uv", args.uv), ("--colors", args.colors),
                         ("--scheduler", args.scheduler)):
         if given:
@@ -285,7 +286,7 @@ def _reconstruct_streamed(args, method: str, values: dict) -> int:
     options = method_options(method, values)
     source = _select_frames(open_sequence(args.input), args.frames, args.input)
     log.info("%s: %d frames, read a window at a time", args.input, len(source))
-    summary = reconstruct_streamed(source, args.output, options)
+    summary = streamed[method](source, args.output, options)
     log.info("wrote %s (%d frames, %.2f s, %.2f s/frame, %d windows%s)", summary.output,
              summary.frames, summary.seconds, summary.seconds / summary.frames, summary.windows,
              f"; {summary.resumed} resumed from the cache: the time counts only the work done now"
@@ -524,10 +525,10 @@ def build_parser() -> argparse.ArgumentParser:
                         "processes side by side) or a dask.distributed scheduler's address "
                         "(tcp://HOST:PORT); the result is the same")
     p.add_argument("--stream", action="store_true",
-                   help="whole captures: read the frames a window at a time (the kinematic "
-                        "option window, default 20) and write the result (.npz) frame by "
-                        "frame, so memory is bounded by the window, not the capture's length "
-                        "(kinematic only; --cache resumes it window by window)")
+                   help="whole captures: read the frames a window at a time (the option "
+                        "window, default 20) and write the result (.npz) frame by frame, so "
+                        "memory is bounded by the window, not the capture's length (kinematic "
+                        "and flow; --cache resumes it window by window)")
     p.add_argument("--force", action="store_true",
                    help="run even when the up-front estimate of the memory needed exceeds the "
                         "memory available")
@@ -730,8 +731,8 @@ def main(argv: list[str] | None = None) -> int:
     except MemoryError:
         hint = ""
         if getattr(args, "func", None) is cmd_reconstruct and not args.stream:
-            hint = ("; for a long capture, --stream (kinematic) bounds the memory by a window of "
-                    "frames, or --frames A:B reconstructs part of it")
+            hint = ("; for a long capture, --stream (kinematic, flow) bounds the memory by a "
+                    "window of frames, or --frames A:B reconstructs part of it")
         print(f"fourd: error: out of memory{hint}", file=sys.stderr)
         return EXIT_OUT_OF_MEMORY
     except BrokenPipeError:

@@ -211,13 +211,13 @@ def test_squash_ball_scene_volume_target(squash_scene_volumes):
 
 def test_reconstruct_with_diagnostics_reports_the_mass_error(monkeypatch):
     import fourd.methods.flow as flow
-    import fourd.methods.flow.pipeline as pipeline
+    import fourd.methods.flow.method as method
     from fourd.methods import reconstruct_with_diagnostics
 
     scans = synth.scan(synth.scene("squash-ball", frames=2), resolution=32)
     meshes = MeshSequence(meshes=((np.eye(3), np.array([[0, 1, 2]])),) * 2)
     fake = SimpleNamespace(meshes=meshes, mass_error=0.017)
-    monkeypatch.setattr(pipeline, "run", lambda seq, options=None: fake)  # where it is looked up
+    monkeypatch.setattr(method, "run", lambda seq, options=None: fake)  # where it is looked up
     result, diagnostics = reconstruct_with_diagnostics(scans, method="flow")
     assert result is meshes and diagnostics == flow.FlowDiagnostics(0.017)
 

@@ -18,6 +18,10 @@ Pipeline (modules of this package):
    inner solves by AMG (:mod:`.amg`);
 5. :mod:`.post` -- refinement near the surface, Laplace solve, :class:`FlowField`, marching cubes.
 
+Longer sequences are solved in overlapping windows whose surfaces are blended over the frames
+they share (:mod:`.windows`, ``Options.window``); :func:`reconstruct_streamed` reads the frames
+and writes the meshes a window at a time.
+
 :func:`estimate_peak_bytes` (:mod:`.memory`) tells the memory a run will need before it starts
 (the up-front check of :mod:`fourd.preflight`).
 
@@ -29,18 +33,18 @@ using incompressible flow. ACM Transactions on Graphics 27(5), SIGGRAPH Asia 200
 """
 
 from fourd.methods.flow.memory import MEMORY_OPTIONS, estimate_peak_bytes
+from fourd.methods.flow.method import reconstruct, reconstruct_with_diagnostics
 from fourd.methods.flow.options import COMMON_OPTIONS, MIN_FRAMES, RESULT, Options
 from fourd.methods.flow.pipeline import (
     FlowDiagnostics,
     FlowResult,
     mass_conservation_error,
-    reconstruct,
-    reconstruct_with_diagnostics,
     run,
     surface_distance,
 )
 from fourd.methods.flow.post import FlowField
 from fourd.methods.flow.saddle import SaddleSolution, solve_saddle
+from fourd.methods.flow.windows import reconstruct_streamed, window_ranges
 
 __all__ = [
     "COMMON_OPTIONS",
@@ -56,8 +60,10 @@ __all__ = [
     "reconstruct",
     "reconstruct_with_diagnostics",
     "RESULT",
+    "reconstruct_streamed",
     "run",
     "solve_saddle",
+    "window_ranges",
     "surface_distance",
 ]
 

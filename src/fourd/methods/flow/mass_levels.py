@@ -48,6 +48,7 @@ def mass_meshes(
     steps: int = 3,
     all_or_nothing: bool = False,
     observed_cell: float | None = None,
+    target: float | None = None,
 ) -> list[tuple[np.ndarray, np.ndarray]]:
     """The frames' closed meshes with their unobserved parts moved so that each frame's
     enclosed volume follows the flow's (conserved) mass.
@@ -79,6 +80,9 @@ def mass_meshes(
     h : float, the flow cell (input units).
     observed_cell : float, optional
         The length unit of ``reach`` and of the weight's ramp (input units; default ``h``).
+    target : float, optional
+        The volume every frame is moved to (input units^3; default ``V0``, the mean
+        contoured volume of ``meshes``): a windowed flow carries it from window to window.
     """
     cell = h if observed_cell is None else observed_cell
     volumes = np.array([_mesh_volume(v, f) for v, f in meshes])
@@ -89,7 +93,7 @@ def mass_meshes(
     # one target for every frame, the mean contoured volume: the flow conserves mass, and its
     # per-frame mass deviates from the mean only by the capped solves' error (squash-ball:
     # 1.2%; volumes that followed it changed by 3.0%, at the mean by 0.9%)
-    target = volumes[good].mean()
+    target = volumes[good].mean() if target is None else float(target)
     out = list(meshes)
     for i in np.flatnonzero(good):
         vertices, faces = meshes[i]

@@ -80,7 +80,9 @@ def estimate_peak_bytes(
         quarter).
     options : Options, optional
     frames : int, optional
-        Frames of the input, needed with bounds (default: the sequence's).
+        Frames of the input, needed with bounds (default: the sequence's). With
+        ``options.window`` one window's frames are solved at a time (on the whole input's
+        bounds here, which errs high).
 
     Returns
     -------
@@ -107,7 +109,7 @@ def estimate_peak_bytes(
         if frames is None:
             raise InputError("frames is needed to estimate from bounds alone")
         points = None
-    frames = int(frames)
+    frames = int(frames) if not options.window else min(int(frames), options.window)
     substeps = options.time_substeps or options.max_substeps
     slices = frames if frames < 2 else (frames - 1) * max(substeps, 1) + 1
     shape = _grid_shape(bounds, options.resolution)

@@ -190,12 +190,27 @@ class Options:
         offset (default 100). Steps are per mesh edge, so the smoothed distance shrinks with
         finer meshes (higher ``resolution``); each frame's steps are scaled by how far its
         volume is off, its first offset in flow cells, at most 1 (:func:`mass_meshes`).
+    window : int
+        Frames per flow solve (0: one solve over the whole sequence). A longer sequence is
+        solved window by window, consecutive windows sharing at least ``window_overlap``
+        frames, and each shared frame's mesh is the zero set of the two windows' signed
+        distances blended by its place in the overlap, so the surface passes from one solve
+        to the next without a jump. Memory is then bounded by the window, and each window's
+        grid fits its own frames (``fourd.methods.flow.windows``). A streamed run
+        (``--stream``) also reads the frames and writes the meshes per window (0 there: 20
+        frames). Only the ``flow`` method's own meshes are solved in windows (``watertight``
+        needs 0).
+    window_overlap : int
+        Frames that consecutive windows share at least (with ``window``), blended from one
+        window's surface into the next one's; from 1 to half the window, so that no frame is
+        in more than two windows.
     cache_dir : str or None
         Folder where the finished stages are kept: the grid, visual hull and initial labels,
         each IRLS iteration while the solve runs (with the AMG hierarchy the next one reuses,
         so a resumed solve gives the same result), the solve's result and the meshes, keyed
         by the input data and the options that act on them; a rerun after an interruption
-        resumes after the last one (``fourd reconstruct --cache``). None: nothing is kept.
+        resumes after the last one (``fourd reconstruct --cache``). In windows (``window``)
+        each finished window is kept instead. None: nothing is kept.
     """
 
     resolution: int = 32
@@ -242,6 +257,8 @@ class Options:
     observed_distance: float = 0.5
     level_limit: float = 4.0
     unobserved_smoothing: int = 100
+    window: int = 0
+    window_overlap: int = 4
     cache_dir: str | None = None
 
     def __post_init__(self):
@@ -294,4 +311,9 @@ class Options:
         for name in ("regularization", "softness", "band", "smoothness", "time_smoothness", "gamma"):
             if getattr(self, name) < 0 or (name in ("band", "gamma") and getattr(self, name) == 0):
                 raise ValueError(f"{name} must be positive, got {getattr(self, name)}")
+        if self.window < 0 or (self.window and not 1 <= self.window_overlap <= self.window // 2):
+            raise ValueError(
+                f"window must be 0 (one solve) or at least 2, with window_overlap from 1 to half "
+                f"the window; got {self.window} and {self.window_overlap}"
+            )
         object.__setattr__(self, "missing_frames", tuple(int(i) for i in self.missing_frames))

@@ -1,5 +1,5 @@
 """The ``flow`` pipeline (:func:`run`): frames, grid, labels, IRLS over the saddle system,
-the implicit function and its meshes; :func:`reconstruct` and its diagnostics.
+the implicit function and its meshes, and the method's diagnostics.
 """
 
 from __future__ import annotations
@@ -26,7 +26,6 @@ from fourd.errors import InputError
 from fourd.geometry.neighbors import point_spacing
 from fourd.geometry.normals import estimate_normals, pca_normals
 from fourd.geometry.outliers import distance_ratio_inliers
-from fourd.methods.base import Reconstruction
 from fourd.methods.flow.fit import deep_inside, fit_gradient, fit_implicit, fit_labels
 from fourd.methods.flow.grid import (
     SpaceTimeGrid,
@@ -68,7 +67,8 @@ class FlowResult(NamedTuple):
     field : FlowField, the 4D implicit function (a ``Field4D``).
     grid : SpaceTimeGrid of the flow solution.
     x : float64 [S, X, Y, Z], the flow solution (characteristic function).
-    mass : float64 [T], total mass (cell volume units) at each input frame.
+    mass : float64 [T], total mass at each input frame (input units^3: the cells' values times
+        their volume).
     mass_error : float, :func:`mass_conservation_error` of ``mass``.
     history : list of dict, one per IRLS iteration.
     seconds : dict, wall time per stage.
@@ -124,13 +124,16 @@ def mass_conservation_error(mass) -> float:
     return float(np.sqrt(totals.var()) / abs(mean))
 
 
+def check_missing_frames(missing, count: int) -> None:
+    """``missing_frames`` are frames of a sequence of ``count`` frames."""
+    bad = [i for i in missing if not 0 <= i < count]
+    if bad:
+        raise InputError(f"missing_frames {sorted(bad)} are outside the sequence's {count} frames")
+
+
 def _frame_points(seq: PointCloudSequence, options: Options) -> list[np.ndarray | None]:
     missing = set(options.missing_frames)
-    bad = [i for i in missing if not 0 <= i < len(seq)]
-    if bad:
-        raise InputError(
-            f"missing_frames {sorted(bad)} are outside the sequence's {len(seq)} frames"
-        )
+    check_missing_frames(missing, len(seq))
     kept = []
     for i, frame in enumerate(seq.frames):
         if i in missing:
@@ -361,18 +364,26 @@ def _post(options: Options, grid, irls, trim, frame_points, slice_points, slice_
     if not options.cavities:
         meshes = [(v, f) for v, f, _ in filled]
     if options.mass_levels:
-        meshes = mass_meshes(
-            meshes,
-            frame_points,
-            mass,
-            h=h,
-            reach=options.observed_distance,
-            observed_cell=h * max(1.0, options.resolution / OBSERVED_RESOLUTION),
-            limit=options.level_limit,
-            smoothing=options.unobserved_smoothing,
-            all_or_nothing=options.mass_levels == "auto",
-        )
+        meshes = level_meshes(meshes, frame_points, mass, h, options)
     return field, meshes, mass, cavity_frames
+
+
+def level_meshes(meshes, frame_points, mass, h: float, options: Options, volume=None) -> list:
+    """:func:`~.mass_levels.mass_meshes` with ``options``' settings: the frames' closed meshes
+    with their unobserved parts moved to enclose one volume (``volume``, input units^3; None:
+    their mean contoured volume)."""
+    return mass_meshes(
+        meshes,
+        frame_points,
+        mass,
+        h=h,
+        reach=options.observed_distance,
+        observed_cell=h * max(1.0, options.resolution / OBSERVED_RESOLUTION),
+        limit=options.level_limit,
+        smoothing=options.unobserved_smoothing,
+        all_or_nothing=options.mass_levels == "auto",
+        target=volume,
+    )
 
 
 def run(seq: PointCloudSequence, options: Options | None = None) -> FlowResult:
@@ -383,6 +394,11 @@ def run(seq: PointCloudSequence, options: Options | None = None) -> FlowResult:
     the last one (:mod:`fourd.cache`) with the same result.
     """
     options = Options() if options is None else options
+    if options.window and len(seq) > options.window:
+        raise InputError(
+            f"window {options.window}: this run needs one flow solve over all {len(seq)} frames "
+            "(only the flow method's own meshes are solved in windows; set window to 0)"
+        )
     cache = StageCache(options.cache_dir)
     seconds = {}
     offsets = neighbourhood(options.neighbourhood)
@@ -546,21 +562,3 @@ def surface_distance(result: FlowResult) -> FlowField:
     (:func:`~.post.redistanced`): a :class:`~fourd.geometry.field.Field4D` to slide a
     template along."""
     return redistanced(result.field, result.grid.frame_slice, result.meshes.meshes)
-
-
-def reconstruct(seq: PointCloudSequence, options: Options | None = None) -> MeshSequence:
-    """Closed, manifold meshes per frame.
-
-    The mass conservation error is logged at info level; :func:`run` returns it with every
-    other intermediate result.
-    """
-    return run(seq, options).meshes
-
-
-def reconstruct_with_diagnostics(
-    seq: PointCloudSequence, options: Options | None = None
-) -> Reconstruction:
-    """:func:`reconstruct` and :class:`FlowDiagnostics` (the paper's mass conservation
-    error)."""
-    result = run(seq, options)
-    return Reconstruction(result.meshes, FlowDiagnostics(float(result.mass_error)))

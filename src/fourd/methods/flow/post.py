@@ -66,6 +66,10 @@ class FlowField:
             [self.origin, self.origin + self.spacing * (np.array(self.values.shape[1:]) - 1)]
         )
 
+    def nodes(self) -> np.ndarray:
+        """The grid's nodes [nx * ny * nz, 3] in C order (a slice's values ``.ravel()``)."""
+        return self.origin + self.spacing * np.indices(self.values.shape[1:]).reshape(3, -1).T
+
     def _time_weights(self, times: np.ndarray):
         s = np.interp(times, self.times, np.arange(len(self.times)))
         s0 = np.clip(np.floor(s).astype(np.int64), 0, max(len(self.times) - 2, 0))
@@ -404,7 +408,7 @@ def redistanced(
     """
     slice_index = np.asarray(slice_index, dtype=np.int64)
     shape = field.values.shape[1:]
-    nodes = field.origin + field.spacing * np.indices(shape).reshape(3, -1).T
+    nodes = field.nodes()
     out = np.empty((len(slice_index), *shape), dtype=np.float32)
     for i, (s, (vertices, faces)) in enumerate(zip(slice_index, meshes, strict=True)):
         if len(faces) == 0:
