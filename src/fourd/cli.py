@@ -263,6 +263,7 @@ def _reconstruct_streamed(args, method: str, values: dict) -> int:
     result written frame by frame (:mod:`fourd.methods.kinematic.stream`,
     :mod:`fourd.methods.flow.windows`)."""
     from fourd.io.frames import open_sequence
+    from fourd.io.npz import streamed_output
     from fourd.methods import flow, kinematic, method_options
 
     if method == "auto" and not args.method:
@@ -274,9 +275,7 @@ def _reconstruct_streamed(args, method: str, values: dict) -> int:
                         ("--scheduler", args.scheduler)):
         if given:
             raise InputError(f"--stream: {flag} is not available on streamed runs")
-    if Path(args.output).suffix.lower() != ".npz":
-        raise InputError("--stream writes a fourd .npz (fourd.load_result and fourd.save "
-                         "convert it)", args.output)
+    streamed_output(args.output)
     if args.scale != 1.0 or args.up != "y" or args.fps is not None:
         log.warning("--stream writes a .npz in the data's units and axes: --fps, --up and "
                     "--scale apply when it is converted")

@@ -12,10 +12,6 @@ from fourd.methods.flow.windows import reconstruct_windowed
 from fourd.sequence import PointCloudSequence
 
 
-def _windowed(seq: PointCloudSequence, options: Options) -> bool:
-    return bool(options.window) and len(seq) > options.window
-
-
 def reconstruct(seq: PointCloudSequence, options: Options | None = None) -> MeshSequence:
     """Closed, manifold meshes per frame.
 
@@ -23,10 +19,7 @@ def reconstruct(seq: PointCloudSequence, options: Options | None = None) -> Mesh
     with every other intermediate result (one solve), :func:`reconstruct_with_diagnostics`
     also for windows.
     """
-    options = Options() if options is None else options
-    if _windowed(seq, options):
-        return reconstruct_windowed(seq, options).meshes
-    return run(seq, options).meshes
+    return reconstruct_with_diagnostics(seq, options).result
 
 
 def reconstruct_with_diagnostics(
@@ -35,8 +28,8 @@ def reconstruct_with_diagnostics(
     """:func:`reconstruct` and :class:`~.pipeline.FlowDiagnostics` (the paper's mass
     conservation error, over the whole sequence also when it is solved in windows)."""
     options = Options() if options is None else options
-    if _windowed(seq, options):
+    if options.window and len(seq) > options.window:
         result = reconstruct_windowed(seq, options)
-        return Reconstruction(result.meshes, FlowDiagnostics(float(result.mass_error)))
-    result = run(seq, options)
+    else:
+        result = run(seq, options)
     return Reconstruction(result.meshes, FlowDiagnostics(float(result.mass_error)))
