@@ -1,8 +1,11 @@
-"""The bench report's Markdown: the run history, the commit and repeats of every row."""
+"""The bench report's Markdown: the run history, the commit and repeats of every row; its JSON
+record: the plotted curves only."""
 
 from __future__ import annotations
 
-from fourd.bench.report import format_markdown
+import json
+
+from fourd.bench.report import format_markdown, write_report
 
 
 def _report(scenes: dict, notes: list[str]) -> dict:
@@ -38,3 +41,19 @@ def test_each_row_says_at_which_commit_and_with_how_many_runs_it_was_measured():
     summary = text[text.index("## Summary"):text.index("\n## squash-ball")].strip().splitlines()[2:]
     assert summary[0].endswith("| measured at |") and summary[2].endswith("| def5678, 3 runs |")
     assert {line.count("|") for line in summary} == {summary[0].count("|")}
+
+
+def test_the_json_record_keeps_the_plotted_curves_at_four_digits(tmp_path):
+    curves = {"accuracy": [0.00123456, 0.002], "completeness": [0.00312345, 0.001],
+              "correspondence": None, "volume": [1.0, 1.1], "euler": [2, 2]}
+    metrics = {"chamfer": 0.00123456, "completeness_95": 0.01, "correspondence_mean": None,
+               "correspondence_last": None, "per_frame": curves, "timing": {"seconds_per_frame": 0.5}}
+    entry = {"settings": {"name": "squash-ball", "options": {}, "resolution": 64}, "frames": 2,
+             "truth_kind": "AnimatedMesh", "points_per_frame": 1000.0,
+             "floor": {"chamfer": 0.001, "per_frame": curves}, "rows": {"m": {"metrics": metrics}}}
+    write_report(_report({"squash-ball": entry}, []), tmp_path / "r.md")
+    written = json.loads((tmp_path / "r.json").read_text())["scenes"]["squash-ball"]
+    kept = {"accuracy": [0.001235, 0.002], "completeness": [0.003123, 0.001], "correspondence": None}
+    assert written["rows"]["m"]["metrics"]["per_frame"] == kept
+    assert written["floor"]["per_frame"] == kept
+    assert written["rows"]["m"]["metrics"]["chamfer"] == 0.00123456  # scalars as measured

@@ -199,7 +199,34 @@ def write_report(report: dict, output: str | os.PathLike) -> dict[str, str]:
              "plots": [str(p) for p in plots.values()]}
     report = {**report, "paths": paths}
     with atomic_path(output.with_suffix(".json")) as tmp:
-        tmp.write_text(json.dumps(report, indent=1))
+        tmp.write_text(json.dumps(_record(report), separators=(",", ":")))
     with atomic_path(output) as tmp:
         tmp.write_text(format_markdown(report, plots, output.parent))
     return paths
+
+
+#: The per-frame curves the report keeps (those :func:`~.plots.plot_scene` draws), and their
+#: significant digits: the rest of ``evaluate``'s per-frame lists stay out of the record, whose
+#: scalars are all the tables read.
+RECORD_CURVES = ("accuracy", "completeness", "correspondence")
+RECORD_DIGITS = 4
+
+
+def _record(value):
+    """``value`` (a report or a part of one) with every ``per_frame`` table cut to
+    :data:`RECORD_CURVES` at :data:`RECORD_DIGITS` significant digits."""
+    if isinstance(value, list):
+        return [_record(item) for item in value]
+    if not isinstance(value, dict):
+        return value
+    out = {}
+    for key, item in value.items():
+        if key == "per_frame" and isinstance(item, dict):
+            out[key] = {
+                name: None if item[name] is None
+                else [None if x is None else float(f"{x:.{RECORD_DIGITS}g}") for x in item[name]]
+                for name in RECORD_CURVES if name in item
+            }
+        else:
+            out[key] = _record(item)
+    return out
