@@ -9,6 +9,7 @@ from fourd.methods.garment import (
     TrackingOptions,
     fit_ellipse,
     initial_ellipses,
+    loop_ellipse,
     track_boundary,
 )
 
@@ -47,6 +48,26 @@ def test_ellipse_recovered_from_half_a_noisy_boundary():
     assert np.linalg.norm(ellipse.center - center) < 0.03
     assert np.allclose(ellipse.radii, [2.0, 1.2], atol=0.03)
     assert abs(abs(ellipse.normal @ rotation[:, 2]) - 1) < 1e-3
+
+
+def test_an_opening_merged_with_an_occlusion_hole_keeps_its_own_ellipse():
+    # a sleeve's hem seen over 60% of it, the rest of its boundary loop running down into the
+    # sleeve around a hole the cameras missed: one loop, two shapes
+    rng = np.random.default_rng(5)
+    rotation = _rotation([0.3, 1, 0.2], 0.5)
+    center = np.array([0.2, 0.1, -0.4])
+    hem = _ellipse_points(center, rotation, 1.0, 0.7, np.linspace(0.0, 1.2 * np.pi, 70))
+    start, end = hem[-1], hem[0]
+    s = np.linspace(0, 1, 60)[1:-1, None]
+    depth = np.sin(np.pi * s) * 0.9 * rotation[:, 2]  # away from the hem's plane
+    hole = start + s * (end - start) - depth + 0.25 * np.sin(2 * np.pi * s) * rotation[:, 0]
+    loop = np.concatenate([hem, hole]) + rng.normal(0, 0.004, (len(hem) + len(hole), 3))
+    ellipse = loop_ellipse(loop)
+    assert np.linalg.norm(ellipse.center - center) < 0.03
+    assert np.allclose(ellipse.radii, [1.0, 0.7], atol=0.03)
+    assert abs(abs(ellipse.normal @ rotation[:, 2]) - 1) < 1e-2
+    # the least-squares ellipse of the whole loop lies between the two
+    assert np.linalg.norm(fit_ellipse(loop).center - center) > 0.1
 
 
 def test_points_on_a_line_have_no_ellipse():

@@ -31,6 +31,7 @@ from fourd.methods.garment.boundary_tracking import (
     BoundaryTrack,
     TrackingOptions,
     initial_ellipses,
+    loop_ellipse,
     read_keyframes,
     track_boundary,
 )
@@ -109,6 +110,7 @@ __all__ = [
     "fit_ellipses",
     "fold_edges",
     "initial_ellipses",
+    "loop_ellipse",
     "point_distances",
     "prune",
     "ransac_candidates",

@@ -2,8 +2,9 @@
 (Popa's thesis, section 3.6.1 and Appendix B).
 
 A garment's natural boundaries (a T-shirt's neck, sleeves and waist) are nearly elliptical.
-In the first frame each is the least-squares ellipse of one of the mesh's longest boundary
-loops (:func:`initial_ellipses`; the thesis lets the user pick it from the candidates). In
+In the first frame each is the ellipse most of one of the mesh's longest boundary loops lies
+on (:func:`loop_ellipse`, :func:`initial_ellipses`; the thesis lets the user pick it from the
+candidates). In
 every later frame (B.1): RANSAC candidates from six boundary points near the previous good
 ellipse, pruned by location, orientation and size against it, the one that most boundary
 points lie on kept and refitted to those points; a frame with no candidate left is skipped,
@@ -26,7 +27,7 @@ Examples
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.ndimage import gaussian_filter1d
@@ -44,7 +45,8 @@ from fourd.methods.garment.ellipse import (
     support,
 )
 
-__all__ = ["BoundaryTrack", "TrackingOptions", "initial_ellipses", "read_keyframes", "track_boundary"]
+__all__ = ["BoundaryTrack", "TrackingOptions", "initial_ellipses", "loop_ellipse", "read_keyframes",
+           "track_boundary"]
 
 
 @dataclass(frozen=True)
@@ -123,8 +125,26 @@ class BoundaryTrack:
         return Ellipse(self.centers[t], self.normals[t], self.axes[t], self.radii[t])
 
 
+def loop_ellipse(points: np.ndarray, options: TrackingOptions | None = None) -> Ellipse:
+    """The ellipse of one boundary loop ``points [P, 3]`` (at least 6) of the first frame: the
+    RANSAC candidate from six of its points that most of them lie on, refitted to those (B.1.1
+    against the loop's least-squares ellipse, with loose limits: centre within its largest
+    radius, size within 60%).
+
+    Where an occlusion hole runs into an opening (an underarm's hole into the sleeve), the two
+    are one boundary loop: its least-squares ellipse lies between them, while the opening's own
+    arc, the part of the loop that is an ellipse, holds the most support."""
+    options = options or TrackingOptions()
+    points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    fitted = fit_ellipse(points)
+    loose = replace(options, reach=np.inf, max_shift=float(fitted.radii.max() / fitted.radii[0]),
+                    max_angle_degrees=90.0, size_tolerance=0.6, min_support=6)
+    best = _best_candidate(points, fitted, np.random.default_rng(options.seed), loose)
+    return fitted if best is None else best[0]
+
+
 def initial_ellipses(vertices: np.ndarray, faces: np.ndarray, count: int) -> list[Ellipse]:
-    """The least-squares ellipses of the ``count`` longest boundary loops of a frame's mesh,
+    """The ellipses (:func:`loop_ellipse`) of the ``count`` longest boundary loops of a frame's mesh,
     longest first, each normal turned away from the garment (the mesh's vertices within two
     radii of the centre lie behind it)."""
     vertices = np.asarray(vertices, dtype=np.float64)
@@ -136,7 +156,7 @@ def initial_ellipses(vertices: np.ndarray, faces: np.ndarray, count: int) -> lis
         )
     ellipses = []
     for loop in loops[:count]:
-        ellipse = fit_ellipse(vertices[loop])
+        ellipse = loop_ellipse(vertices[loop])
         near = vertices[np.linalg.norm(vertices - ellipse.center, axis=1) <= 2.0 * ellipse.radii[0]]
         if len(near) and float(np.mean((near - ellipse.center) @ ellipse.normal)) > 0:
             ellipse = ellipse.flipped()

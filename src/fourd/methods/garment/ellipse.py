@@ -195,12 +195,17 @@ def _conic_geometry(conic: np.ndarray):
     quadratic_safe = np.where(safe[:, None, None], quadratic, np.eye(2)[None])
     center = np.linalg.solve(2 * quadratic_safe, -linear[:, :, None])[:, :, 0]
     at_center = 0.5 * np.einsum("bi,bi->b", linear, center) + np.where(finite, f, 0.0)
-    values, directions = np.linalg.eigh(quadratic_safe)  # ascending: the major axis first
+    values, directions = np.linalg.eigh(quadratic_safe)
     with np.errstate(divide="ignore", invalid="ignore"):
         squared = -at_center[:, None] / values
     valid = finite & safe & (squared > 0).all(axis=1)
     radii = np.sqrt(np.where(valid[:, None], squared, 1.0))
-    return center, radii, directions.transpose(0, 2, 1), valid
+    axes = directions.transpose(0, 2, 1)
+    # the conic's sign is arbitrary, and with it which eigenvalue belongs to the major axis
+    swap = radii[:, 0] < radii[:, 1]
+    radii = np.where(swap[:, None], radii[:, ::-1], radii)
+    axes = np.where(swap[:, None, None], axes[:, ::-1], axes)
+    return center, radii, axes, valid
 
 
 def point_distances(ellipses: EllipseBatch, points: np.ndarray) -> np.ndarray:

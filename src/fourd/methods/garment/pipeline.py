@@ -3,12 +3,15 @@
 1. Each frame's surface: its own faces when the input is per-frame meshes, else its points
    meshed on their own (:func:`fourd.geometry.frame_surface.frame_surface`).
 2. The garment's openings (neck, sleeves, waist) found in the first frame as its longest
-   boundary loops and tracked through every frame as ellipses (3.6.1, Appendix B).
+   boundary loops and tracked through every frame as ellipses (3.6.1, Appendix B); a loop's
+   ellipse is the one most of it lies on, since an occlusion hole that runs into an opening
+   is part of the opening's loop.
 3. The template: inflated from a photo of the garment laid flat (3.7) when one is given, and
    placed on the first frame by the similarity that maps its openings onto the frame's; else
    the first frame's own surface with its other holes filled by the C1 membrane (3.6.2).
 4. The template fitted onto every frame in turn, as rigidly as possible, its openings pulled
-   onto the frame's tracked openings (:mod:`.fit`; the thesis maps the template through a
+   onto the frame's tracked openings (the frame's boundary points on the tracked ellipse, and
+   the ellipse itself where the cameras missed an arc; :mod:`.fit`; the thesis maps the template through a
    base-mesh parameterisation instead); where no frame data lies near, the template's shape
    completes the frame and the vertex is marked not observed.
 5. The trajectories smoothed in time by a Gaussian (end of 3.7).
@@ -40,7 +43,12 @@ from fourd.geometry.frame_surface import SurfaceSettings, frame_surface, frame_s
 from fourd.geometry.hole_filling import fill_holes
 from fourd.geometry.meshes import median_edge_length, remove_small_components
 from fourd.geometry.normals import vertex_normals
-from fourd.methods.garment.boundary_tracking import TrackingOptions, read_keyframes, track_boundary
+from fourd.methods.garment.boundary_tracking import (
+    TrackingOptions,
+    loop_ellipse,
+    read_keyframes,
+    track_boundary,
+)
 from fourd.methods.garment.ellipse import as_batch, fit_ellipse, point_distances
 from fourd.methods.garment.fit import FitOptions, align_template, fit_template
 from fourd.methods.garment.options import Options
@@ -58,6 +66,12 @@ STAGE = "garment-surface"
 #: fraction of the vertices, for which a frame is fitted again (``kinematic``'s
 #: ``LATE_GUIDE_SUPPORT``).
 COLOR_RADIUS, COLOR_SCALE, LATE_GUIDE_SUPPORT = 3.0, 0.5, 0.01
+#: A boundary point belongs to an opening when it lies within this many of the opening's mean
+#: radii of its ellipse.
+OPENING_REACH = 0.15
+#: Points along a tracked opening's ellipse that its template vertices are pulled to, besides
+#: the frame's own boundary points on it.
+OPENING_SAMPLES = 512
 
 __all__ = ["reconstruct"]
 
@@ -157,7 +171,7 @@ def reconstruct(seq: PointCloudSequence, options: Options | None = None) -> Anim
         anchors = track_anchors(seq, texture=3.0, sources=2.0)
     if options.photo:
         openings = _openings(first_vertices, first_faces, options.boundaries)
-        frame_ellipses = [fit_ellipse(first_vertices[loop]) for loop in openings]
+        frame_ellipses = [loop_ellipse(first_vertices[loop]) for loop in openings]
         template = _photo_template(options)
         start, template_loops = _place_photo_template(template, frame_ellipses)
         rest, faces, uv = start, template.faces, template.uv[template.faces]  # per face corner
@@ -169,8 +183,11 @@ def reconstruct(seq: PointCloudSequence, options: Options | None = None) -> Anim
             settings=SurfaceSettings(grid_scale=options.template_scale))
         coarse = (np.asarray(coarse[0], dtype=np.float64), np.asarray(coarse[1], dtype=np.int64))
         rest, faces, openings = _frame_template(*coarse, options.boundaries)
-        template_loops = openings
-        frame_ellipses = [fit_ellipse(rest[loop]) for loop in openings]
+        frame_ellipses = [loop_ellipse(rest[loop]) for loop in openings]
+        # an occlusion hole run into an opening is part of its loop: only the opening's own
+        # arc (near its ellipse) is pulled onto the frames' openings
+        template_loops = [loop[point_distances(as_batch(ellipse), rest[loop])[0] <= OPENING_REACH * ellipse.radii.mean()]
+                          for loop, ellipse in zip(openings, frame_ellipses, strict=True)]
         start, uv = rest, None
         first_iterations = options.iterations
     # the openings through the frames
@@ -194,8 +211,10 @@ def reconstruct(seq: PointCloudSequence, options: Options | None = None) -> Anim
         for loop, track in zip(template_loops, tracks, strict=True):
             ellipse = track.ellipse(t)
             points = boundary_points[t]
-            near = point_distances(as_batch(ellipse), points)[0] <= 0.15 * ellipse.radii.mean() if len(points) else []
-            pairs.append((loop, points[near] if len(points) else points))
+            near = point_distances(as_batch(ellipse), points)[0] <= OPENING_REACH * ellipse.radii.mean() if len(points) else []
+            # the ellipse completes the arcs of the opening the cameras missed
+            kept = np.concatenate([points[near] if len(points) else points, ellipse.points(OPENING_SAMPLES)])
+            pairs.append((loop, kept))
         iterations = first_iterations if t == 0 else options.iterations
         guide = None
         if anchors is not None and t > 0 and len(anchors[t - 1].source):

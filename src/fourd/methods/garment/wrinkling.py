@@ -20,6 +20,9 @@ Given a captured garment (one connectivity, every frame) and the anchors the vid
    are integrated. The matrix is the same for every frame and iteration: factored once.
 3. **Stretch reduction** (4.5.5). The rotations taking each input triangle's normal to its
    positioned normal replace the rotations, and the positions are solved again.
+4. **Folds only** (not in the thesis). Of each frame's displacement, only the part finer than
+   the folds' wavelength is kept: the anchors' rotations blended over the surface also bend it
+   broadly, which is no fold, and moves a garment captured from depth scans off its data.
 """
 
 from __future__ import annotations
@@ -65,6 +68,9 @@ class WrinkleOptions:
     base_wavelength : float
         The low-pass cutoff (fraction of the garment's bounding-box diagonal) of the surface the
         anchors' angles are measured from (:mod:`.wrinkle_anchors`).
+    fold_band : float
+        The displacement is kept only finer than this fraction of ``base_wavelength`` (its
+        low-pass at that wavelength is taken out; 0: all of it kept, as the thesis).
     anchors : AnchorOptions
         Views, angles and the fold-edge filter.
     """
@@ -76,6 +82,7 @@ class WrinkleOptions:
     stretch_iterations: int = 0
     pull: float = 0.1
     base_wavelength: float = 0.1
+    fold_band: float = 1.0
     anchors: AnchorOptions = field(default_factory=AnchorOptions)
 
 
@@ -180,6 +187,13 @@ def wrinkle(vertices: np.ndarray, faces: np.ndarray, video, options: WrinkleOpti
         images = [video.image(c, t) for c in range(len(cameras))]
         anchors.append(frame_anchors(vertices[t], faces, base, cameras, images, options.anchors))
     result = positioned_frames(vertices, faces, spacetime_rotations(faces, frames, anchors, options), options)
+    if options.fold_band > 0:
+        for t in range(frames):
+            displacement = result[t] - vertices[t]
+            if np.any(displacement):
+                broad = low_pass_surface(vertices[t], faces, options.fold_band * options.base_wavelength * diagonal,
+                                         values=displacement)
+                result[t] -= broad
     stretch = np.array([float(triangle_stretch(vertices[t], result[t], faces).max()) for t in range(frames)])
     return WrinkleResult(result, anchors, stretch)
 

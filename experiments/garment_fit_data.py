@@ -1,0 +1,79 @@
+"""Question: what holds the `garment` template's correspondence on the printed T-shirt at 0.0062
+(mean) when `kinematic` reaches 0.0024 on the same scan, and which change to the template's
+fit to each frame (`methods/garment/fit.py`) closes the gap?
+
+    python experiments/garment_fit_data.py tshirt-cloth-video
+    VARIANTS="iterations=20;data_weight=2" python experiments/garment_fit_data.py tshirt-cloth-video
+
+Prints correspondence mean / last frame, Chamfer and completeness-95 of `garment` (its bench
+options, `boundaries` from the scene) with its defaults and with each variant (options of
+`garment.Options`; `fit.*` ones set module constants of the fit), 20k samples. The scan is kept
+in /tmp between runs.
+
+Answer: see the end of this docstring once measured.
+"""
+
+from __future__ import annotations
+
+import os
+import pickle
+import sys
+import time
+from dataclasses import replace
+from pathlib import Path
+
+from fourd import synth
+from fourd.bench.suite import GARMENT_BENCH_SCENES, PROTOCOL
+from fourd.methods import garment
+from fourd.methods.garment import pipeline
+from fourd.metrics import evaluate
+
+BOUNDARIES = {"tshirt": 4, "dress": 2}
+
+
+def _value(text: str):
+    for kind in (int, float):
+        try:
+            return kind(text)
+        except ValueError:
+            pass
+    return {"true": True, "false": False}.get(text, text)
+
+
+def _variant(text: str) -> dict:
+    return {key: _value(value) for key, value in (item.split("=") for item in filter(None, text.split(",")))}
+
+
+def _scene(label: str):
+    scene = next(s for s in GARMENT_BENCH_SCENES if s.key == label)
+    cache = Path(f"/tmp/garment_{label}.pkl")
+    if cache.exists():
+        return scene, *pickle.loads(cache.read_bytes())
+    truth = synth.scene(scene.name, frames=scene.frames, seed=0, **scene.options)
+    scans = synth.scan(truth, resolution=scene.resolution, seed=0, appearance=scene.appearance,
+                       video=scene.video, **{**PROTOCOL, **scene.scan})
+    cache.write_bytes(pickle.dumps((truth, scans)))
+    return scene, truth, scans
+
+
+def main(label: str) -> None:
+    scene, truth, scans = _scene(label)
+    base = garment.Options(boundaries=BOUNDARIES[scene.name])
+    variants = [{}] + [_variant(v) for v in filter(None, os.environ.get("VARIANTS", "").split(";"))]
+    fit = pipeline.fit_template
+    for variant in variants:
+        fit_fields = {key[4:]: value for key, value in variant.items() if key.startswith("fit.")}
+        pipeline.fit_template = lambda *a, options=None, _f=fit_fields, **k: fit(
+            *a, options=replace(options, **_f) if options is not None else None, **k)
+        options = replace(base, **{key: value for key, value in variant.items() if not key.startswith("fit.")})
+        started = time.perf_counter()
+        result = garment.reconstruct(scans, options)
+        seconds = time.perf_counter() - started
+        r = evaluate(result, truth, samples=20000, seed=0)
+        print(f"{label} {variant or 'defaults'}: correspondence {r['correspondence_mean']:.4f} / "
+              f"{r['correspondence_last']:.4f}, Chamfer {r['chamfer']:.4f}, completeness-95 "
+              f"{r['completeness_95']:.4f}, {seconds / len(scans):.2f} s/frame", flush=True)
+
+
+if __name__ == "__main__":
+    main(sys.argv[1] if len(sys.argv) > 1 else "tshirt-cloth-video")
