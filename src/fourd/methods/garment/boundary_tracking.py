@@ -137,7 +137,7 @@ def loop_ellipse(points: np.ndarray, options: TrackingOptions | None = None) -> 
     options = options or TrackingOptions()
     points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     fitted = fit_ellipse(points)
-    loose = replace(options, reach=np.inf, max_shift=float(fitted.radii.max() / fitted.radii[0]),
+    loose = replace(options, reach=np.inf, max_shift=1.0,
                     max_angle_degrees=90.0, size_tolerance=0.6, min_support=6)
     best = _best_candidate(points, fitted, np.random.default_rng(options.seed), loose)
     return fitted if best is None else best[0]

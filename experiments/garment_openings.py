@@ -1,0 +1,63 @@
+"""Question: how close to the true openings do `garment`'s tracked ellipses stay on the bench's
+T-shirt scan (issue 54: anchors within 2% of the diagonal of the true boundary centres)?
+
+    python experiments/garment_openings.py tshirt-cloth-video
+
+Per opening (the first frame's longest boundary loops, as `garment` finds them): the tracked
+ellipse's centre against the centroid of the truth's matching hem loop in every frame, as
+fractions of the truth's diagonal (median and largest over the frames), for the first
+frame's ellipse fitted by least squares to the whole loop (before) and by
+`boundary_tracking.loop_ellipse` (now). Uses the scan cache of `garment_fit_data.py`.
+
+Answer (bench scan, 20 frames; median / largest over the frames, frames over 0.02):
+- least squares: waist 0.0065 / 0.0081, 0; neck 0.0152 / 0.0260, 5; left sleeve 0.0455 /
+  0.0988, 13 (an occlusion hole run into its first loop); right sleeve 0.0099 / 0.0153, 0.
+- loop_ellipse: waist the same; neck 0.0130 / 0.0204, 1 (the last frame, the back of the neck
+  hidden); left sleeve 0.0092 / 0.0156, 0; right sleeve 0.0096 / 0.0156, 0.
+"""
+
+from __future__ import annotations
+
+import sys
+
+import numpy as np
+
+from fourd.geometry.boundary_loops import boundary_loops
+from fourd.methods.garment import (
+    Options,
+    TrackingOptions,
+    fit_ellipse,
+    loop_ellipse,
+    track_boundary,
+)
+from fourd.methods.garment.pipeline import _frame_meshes, _openings
+
+sys.path.insert(0, "experiments")
+from garment_fit_data import BOUNDARIES, _scene  # noqa: E402
+
+
+def main(label: str) -> None:
+    scene, truth, scans = _scene(label)
+    diagonal = truth.diagonal()
+    meshes = _frame_meshes(scans, Options(boundaries=BOUNDARIES[scene.name]))
+    boundary_points = []
+    for vertices, faces in meshes:
+        loops = boundary_loops(faces, len(vertices))
+        boundary_points.append(vertices[np.concatenate(loops)] if loops else np.zeros((0, 3)))
+    first_vertices, first_faces = meshes[0]
+    openings = _openings(first_vertices, first_faces, BOUNDARIES[scene.name])
+    hems = boundary_loops(truth.faces, truth.vertex_count)
+    for name, fit in (("least squares", fit_ellipse), ("loop_ellipse", loop_ellipse)):
+        for k, loop in enumerate(openings):
+            track = track_boundary(boundary_points, fit(first_vertices[loop]), TrackingOptions())
+            first = track.ellipse(0).center
+            hem = hems[int(np.argmin([np.linalg.norm(truth.vertices[0][h].mean(axis=0) - first) for h in hems]))]
+            errors = np.array([np.linalg.norm(track.ellipse(t).center - truth.vertices[t][hem].mean(axis=0))
+                               for t in range(len(meshes))]) / diagonal
+            print(f"{label} {name}: opening {k} ({len(loop)} loop vertices): centre error median "
+                  f"{np.median(errors):.4f}, largest {errors.max():.4f} (frame {int(errors.argmax())}), "
+                  f"frames over 0.02: {int((errors > 0.02).sum())} of {len(errors)}", flush=True)
+
+
+if __name__ == "__main__":
+    main(sys.argv[1] if len(sys.argv) > 1 else "tshirt-cloth-video")
