@@ -31,3 +31,16 @@ def test_a_sinusoid_keeps_the_share_of_its_amplitude_the_filter_says():
         kept = np.abs(smooth[inner, 2]).max() / 0.02
         expected = 1 / (1 + (cutoff / wavelength) ** 4)
         assert abs(kept - expected) < 0.08, (wavelength, kept, expected)
+
+
+def test_values_on_the_surface_are_low_passed_like_its_shape():
+    vertices, faces = _sheet(0.25, amplitude=0.0)
+    x = vertices[:, 0]
+    fine = 0.01 * np.sin(2 * np.pi * x / 0.125)  # a fold-sized ripple of a displacement
+    broad = np.column_stack([np.full(len(x), 0.03), 0.02 * x, np.zeros(len(x))])  # a drift
+    smooth = low_pass_surface(vertices, faces, 0.25, values=broad + fine[:, None])
+    inner = np.all(np.abs(vertices[:, :2] - 0.5) < 0.2, axis=1)
+    assert np.abs(smooth[inner] - broad[inner]).max() < 0.1 * 0.01 + 1e-3  # the ripple goes
+    curved, _ = _sheet(0.5)
+    assert np.allclose(low_pass_surface(curved, faces, 0.25, values=curved),
+                       low_pass_surface(curved, faces, 0.25))
