@@ -14,7 +14,7 @@ the colour guide's second fit): the worst 2% (last-frame error 0.066; observed 9
 time) are guided in every fit, like every vertex, but more weakly. The anchors' guide gives
 them 0.6-0.7 where the mean vertex gets 0.94, the colour guide 0.6-1.2 where it gets 1.5. Both
 drop to 0.37-0.42 and 0.60-0.66 in frames 11-13, the frames where those vertices' error jumps
-(0.017 -> 0.034). They do not slide unguided: their guides are weak, and in those frames steer
+(the worst 1%, measured the same way: 0.017 at frame 11, 0.034 at 13). They do not slide unguided: their guides are weak, and in those frames steer
 them wrongly. The next step is to look at the anchors (optical flow) there, not the fit.
 """
 
