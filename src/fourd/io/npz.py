@@ -109,13 +109,26 @@ def streamed_output(path: str | os.PathLike) -> Path:
     return path
 
 
-class FrameWriter:
+class _CountedWriter:
+    """An open output of ``count`` frames, ``written`` of them so far, each handed to
+    ``append``."""
+
+    def __init__(self, count: int, append: Callable[[np.ndarray, np.ndarray], None]):
+        self.count, self.written = int(count), 0
+        self._append = append
+
+    def check_complete(self, path) -> None:
+        if self.written != self.count:
+            raise InputError(f"only {self.written} of {self.count} frames were written", path)
+
+
+class FrameWriter(_CountedWriter):
     """Appends frames to an open output (:func:`npz_frames`, :func:`fourd.io.pc2.pc2_frames`):
     :meth:`write` takes the next frames' vertices ``[k, N, 3]`` and observed flags ``[k, N]``."""
 
     def __init__(self, count: int, vertex_count: int, append: Callable[[np.ndarray, np.ndarray], None]):
-        self.count, self.vertex_count, self.written = int(count), int(vertex_count), 0
-        self._append = append
+        super().__init__(count, append)
+        self.vertex_count = int(vertex_count)
 
     def write(self, vertices: np.ndarray, observed: np.ndarray) -> None:
         """Append frames (no more than the output was opened for)."""
@@ -125,10 +138,6 @@ class FrameWriter:
             raise ValueError(f"{self.written + len(vertices)} frames written to an output of {self.count}")
         self._append(vertices, observed)
         self.written += len(vertices)
-
-    def check_complete(self, path) -> None:
-        if self.written != self.count:
-            raise InputError(f"only {self.written} of {self.count} frames were written", path)
 
 
 @contextmanager
@@ -165,18 +174,13 @@ def npz_frames(
         if rest is not None:
             arrays["rest"] = np.asarray(rest, dtype=np.float32)
         for name, array in arrays.items():
-            with archive.open(f"{name}.npy", "w", force_zip64=True) as entry:
-                np.lib.format.write_array(entry, array, allow_pickle=False)
+            _write_entry(archive, name, array)
 
 
-class MeshWriter:
+class MeshWriter(_CountedWriter):
     """Appends the frames of a :class:`~fourd.animation.MeshSequence` to an open ``.npz``
     (:func:`npz_meshes`): :meth:`write` takes the next frame's vertices ``[N, 3]`` and faces
     ``[F, 3]``."""
-
-    def __init__(self, count: int, append: Callable[[np.ndarray, np.ndarray], None]):
-        self.count, self.written = int(count), 0
-        self._append = append
 
     def write(self, vertices: np.ndarray, faces: np.ndarray) -> None:
         """Append one frame (no more than the output was opened for)."""
@@ -187,10 +191,6 @@ class MeshWriter:
             np.asarray(faces, dtype="<i4").reshape(-1, 3),
         )
         self.written += 1
-
-    def check_complete(self, path) -> None:
-        if self.written != self.count:
-            raise InputError(f"only {self.written} of {self.count} frames were written", path)
 
 
 @contextmanager
@@ -204,14 +204,17 @@ def npz_meshes(path: str | os.PathLike, *, times: np.ndarray) -> Iterator[MeshWr
         writer = None
 
         def append(vertices, faces):
-            for name, array in ((f"vertices_{writer.written}", vertices),
-                                (f"faces_{writer.written}", faces)):
-                with archive.open(f"{name}.npy", "w", force_zip64=True) as entry:
-                    np.lib.format.write_array(entry, array, allow_pickle=False)
+            _write_entry(archive, f"vertices_{writer.written}", vertices)
+            _write_entry(archive, f"faces_{writer.written}", faces)
 
         writer = MeshWriter(len(times), append)
         yield writer
         writer.check_complete(path)
-        for name, array in (("kind", np.array("meshes")), ("times", times)):
-            with archive.open(f"{name}.npy", "w", force_zip64=True) as entry:
-                np.lib.format.write_array(entry, array, allow_pickle=False)
+        _write_entry(archive, "kind", np.array("meshes"))
+        _write_entry(archive, "times", times)
+
+
+def _write_entry(archive: zipfile.ZipFile, name: str, array: np.ndarray) -> None:
+    """``array`` as the archive's ``name.npy`` (zip64: entries may pass 4 GB)."""
+    with archive.open(f"{name}.npy", "w", force_zip64=True) as entry:
+        np.lib.format.write_array(entry, array, allow_pickle=False)

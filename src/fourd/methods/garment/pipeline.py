@@ -111,6 +111,12 @@ def _frame_template(vertices, faces, count: int):
     return filled.vertices, filled.faces, kept
 
 
+def _on_opening(points: np.ndarray, ellipse) -> np.ndarray:
+    """Which of ``points [P, 3]`` lie on the opening that ``ellipse`` fits (within
+    :data:`OPENING_REACH` of its mean radii): bool [P]."""
+    return point_distances(as_batch(ellipse), points)[0] <= OPENING_REACH * ellipse.radii.mean()
+
+
 def _photo_template(options: Options):
     path = Path(options.photo)
     calibration_path = path.with_name("pattern.json") if path.suffix.lower() != ".json" else path
@@ -186,8 +192,7 @@ def reconstruct(seq: PointCloudSequence, options: Options | None = None) -> Anim
         frame_ellipses = [loop_ellipse(rest[loop]) for loop in openings]
         # an occlusion hole run into an opening is part of its loop: only the opening's own
         # arc (near its ellipse) is pulled onto the frames' openings
-        template_loops = [loop[point_distances(as_batch(ellipse), rest[loop])[0] <= OPENING_REACH * ellipse.radii.mean()]
-                          for loop, ellipse in zip(openings, frame_ellipses, strict=True)]
+        template_loops = [loop[_on_opening(rest[loop], ellipse)] for loop, ellipse in zip(openings, frame_ellipses, strict=True)]
         start, uv = rest, None
         first_iterations = options.iterations
     # the openings through the frames
@@ -210,10 +215,9 @@ def reconstruct(seq: PointCloudSequence, options: Options | None = None) -> Anim
         pairs = []
         for loop, track in zip(template_loops, tracks, strict=True):
             ellipse = track.ellipse(t)
+            # the frame's boundary points on the opening, and the ellipse where the cameras missed an arc
             points = boundary_points[t]
-            near = point_distances(as_batch(ellipse), points)[0] <= OPENING_REACH * ellipse.radii.mean() if len(points) else []
-            # the ellipse completes the arcs of the opening the cameras missed
-            kept = np.concatenate([points[near] if len(points) else points, ellipse.points(OPENING_SAMPLES)])
+            kept = np.concatenate([points[_on_opening(points, ellipse)], ellipse.points(OPENING_SAMPLES)])
             pairs.append((loop, kept))
         iterations = first_iterations if t == 0 else options.iterations
         guide = None
