@@ -70,7 +70,12 @@ __all__ = [
     "Options",
     "RESULT",
     "WatertightDiagnostics",
+    "off_surface_fraction",
     "off_surface_fractions",
+    "ClosedTemplate",
+    "closed_template",
+    "carry_frame",
+    "free_offsets",
     "reconstruct",
     "reconstruct_with_diagnostics",
     "close_animation",
@@ -176,53 +181,123 @@ def close_animation(
     the nearest bound corner, and False for the vertices carried along.
     """
     times = np.asarray(opened.times, dtype=float)
-    start = np.asarray(opened.vertices[0], dtype=float)
-    faces_o = opened.faces
-    vertices, faces = kinematic.extract_template(
-        field, float(times[0]), bounds=np.asarray(bounds, float), cell_size=cell_size,
+    template = closed_template(
+        opened.vertices[0], opened.faces, field, float(times[0]), bounds=bounds,
+        cell_size=cell_size, target_vertices=target_vertices, reach=reach,
+    )
+    out = np.empty((len(times), len(template.rest), 3))
+    observed = np.zeros((len(times), len(template.rest)), dtype=bool)
+    offsets = np.zeros((len(times), len(template.free), 3))
+    for k, t in enumerate(times):
+        out[k], observed[k] = carry_frame(template, opened.vertices[k], opened.observed[k])
+        offsets[k] = free_offsets(template, out[k], field, float(t))
+    if len(times) > 2:
+        # the flow's surface moves by a fraction of a cell from frame to frame in the filled
+        # parts; one [1, 2, 1] pass over time keeps that from showing as flicker
+        offsets[1:-1] = 0.25 * offsets[:-2] + 0.5 * offsets[1:-1] + 0.25 * offsets[2:]
+    out[:, template.free] += offsets
+    return AnimatedMesh(
+        faces=template.faces, vertices=out, times=times, observed=observed, rest=template.rest
+    )
+
+
+class ClosedTemplate(NamedTuple):
+    """A closed template bound to an open animation's first frame (:func:`closed_template`).
+
+    rest : [N, 3], faces : [F, 3]: the template, its bound vertices on the open mesh.
+    bound : int [B], the vertices bound to the open mesh; corners : int [B, 3], the open
+        mesh's vertices of the triangle each lies on; barycentric : [B, 3], where on it.
+    free : int [M], the vertices carried along; near : int [M, K], their nearest bound
+        vertices (indices into ``bound``); weights : [M, K], those vertices' weights (None
+        without three bound vertices).
+    cell_size : float, the template's marching-cubes cell (the projections' step bound).
+    """
+
+    rest: np.ndarray
+    faces: np.ndarray
+    bound: np.ndarray
+    corners: np.ndarray
+    barycentric: np.ndarray
+    free: np.ndarray
+    near: np.ndarray | None
+    weights: np.ndarray | None
+    cell_size: float
+
+
+def closed_template(
+    first: np.ndarray,
+    faces: np.ndarray,
+    field,
+    time: float,
+    *,
+    bounds: np.ndarray,
+    cell_size: float,
+    target_vertices: int = 10000,
+    reach: float = 0.0,
+) -> ClosedTemplate:
+    """The closed template of :func:`close_animation`: ``field``'s surface at ``time``, its
+    vertices within ``reach`` of the open mesh ``(first [V, 3], faces)`` and facing its way
+    bound to it, the others given their nearest bound vertices. Parameters as
+    :func:`close_animation`'s."""
+    first = np.asarray(first, dtype=float)
+    vertices, template_faces = kinematic.extract_template(
+        field, float(time), bounds=np.asarray(bounds, float), cell_size=cell_size,
         min_component_faces=20, target_vertices=target_vertices,
     )
-    mesh = trimesh.Trimesh(start, faces_o, process=False)
+    mesh = trimesh.Trimesh(first, faces, process=False)
     closest, distance, triangle = trimesh.proximity.closest_point(mesh, vertices)
-    corners = faces_o[triangle]
-    weights_b = trimesh.triangles.points_to_barycentric(start[corners], closest)
-    normals = trimesh.Trimesh(vertices, faces, process=False).vertex_normals
+    normals = trimesh.Trimesh(vertices, template_faces, process=False).vertex_normals
     facing = np.einsum("ij,ij->i", normals, mesh.face_normals[triangle]) > 0.3
-    bound = (distance < max(reach, BIND_EDGES * median_edge_length(start, faces_o))) & facing
-    free = np.flatnonzero(~bound)
+    is_bound = (distance < max(reach, BIND_EDGES * median_edge_length(first, faces))) & facing
+    bound, free = np.flatnonzero(is_bound), np.flatnonzero(~is_bound)
     log.info(
         "watertight: closed template of %d vertices, %d (%.0f%%) carried along the open mesh's "
         "holes", len(vertices), len(free), 100 * len(free) / len(vertices),
     )
+    corners = faces[triangle[bound]]
+    barycentric = trimesh.triangles.points_to_barycentric(first[corners], closest[bound])
     rest = vertices.copy()
     rest[bound] = closest[bound]
-    out = np.empty((len(times), len(vertices), 3))
-    observed = np.zeros((len(times), len(vertices)), dtype=bool)
-    anchors = np.flatnonzero(bound)
-    offsets = np.zeros((len(times), len(free), 3))
-    if len(free) and len(anchors) >= 3:
-        distance, near = cKDTree(rest[anchors]).query(rest[free], k=min(RIGID_ANCHORS, len(anchors)))
-        weights = 1.0 / (distance**2 + (1e-3 * cell_size) ** 2)
-    for k, t in enumerate(times):
-        frame = np.einsum("ij,ijk->ik", weights_b[bound], opened.vertices[k][corners[bound]])
-        out[k, bound] = frame
-        observed[k, bound] = opened.observed[k][corners[bound]].any(axis=1)
-        if len(free) == 0:
-            continue
-        if len(anchors) < 3:
-            out[k, free] = rest[free]
-        else:
-            out[k, free] = rigid_blend(rest[anchors][near], frame[near], weights, rest[free])
-        offsets[k] = kinematic.project_to_surface(
-            field, out[k, free], float(t), iterations=4, max_step=0.5 * cell_size
-        ) - out[k, free]
-    if len(free) and len(times) > 2:
-        # the flow's surface moves by a fraction of a cell from frame to frame in the filled
-        # parts; one [1, 2, 1] pass over time keeps that from showing as flicker
-        offsets[1:-1] = 0.25 * offsets[:-2] + 0.5 * offsets[1:-1] + 0.25 * offsets[2:]
-    if len(free):
-        out[:, free] += offsets
-    return AnimatedMesh(faces=faces, vertices=out, times=times, observed=observed, rest=rest)
+    near = weights = None
+    if len(free) and len(bound) >= 3:
+        distance, near = cKDTree(rest[bound]).query(rest[free], k=min(RIGID_ANCHORS, len(bound)))
+        near = near.reshape(len(free), -1)
+        weights = 1.0 / (distance.reshape(len(free), -1) ** 2 + (1e-3 * cell_size) ** 2)
+    return ClosedTemplate(
+        rest, template_faces, bound, corners, barycentric, free, near, weights, float(cell_size)
+    )
+
+
+def carry_frame(
+    template: ClosedTemplate, vertices: np.ndarray, observed: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """The closed template at one frame of the open animation (its ``vertices`` [V, 3] and
+    ``observed`` [V]): the bound vertices on the open mesh, the free ones moved rigidly with
+    their nearest bound vertices (:func:`rigid_blend`), not yet on the field; ([N, 3], [N])
+    with ``observed`` the open mesh's by the nearest bound corner, False where carried."""
+    vertices = np.asarray(vertices, dtype=float)
+    out = template.rest.copy()
+    seen = np.zeros(len(out), dtype=bool)
+    frame = np.einsum("ij,ijk->ik", template.barycentric, vertices[template.corners])
+    out[template.bound] = frame
+    seen[template.bound] = np.asarray(observed)[template.corners].any(axis=1)
+    if template.near is not None:
+        out[template.free] = rigid_blend(
+            template.rest[template.bound][template.near], frame[template.near], template.weights,
+            template.rest[template.free],
+        )
+    return out, seen
+
+
+def free_offsets(template: ClosedTemplate, vertices: np.ndarray, field, time: float) -> np.ndarray:
+    """How far the free vertices of a carried frame (:func:`carry_frame`) move onto ``field``
+    at ``time``: at most two template cells (four Newton steps of half a cell); [M, 3]."""
+    free = np.asarray(vertices, dtype=float)[template.free]
+    if len(free) == 0:
+        return np.zeros((0, 3))
+    return kinematic.project_to_surface(
+        field, free, float(time), iterations=4, max_step=0.5 * template.cell_size
+    ) - free
 
 
 def rigid_blend(
@@ -261,18 +336,24 @@ def off_surface_fractions(
     """Per frame of ``animation``, the fraction of its vertices where ``|field|`` (a signed
     distance at the animation's times) exceeds ``distance`` (input units) and, where
     ``points`` gives the frame points ([P, 3] or None, one per frame), no point lies within
-    ``distance``; [T]."""
-    vertices = np.asarray(animation.vertices)
-    times = np.asarray(animation.times, dtype=float)
-    fractions = np.empty(len(vertices))
-    for k, (v, t) in enumerate(zip(vertices, times, strict=True)):
-        off = np.abs(field.value(v, t)) > distance
-        frame = None if points is None else points[k]
-        if frame is not None and len(frame) and off.any():
-            near, _ = cKDTree(frame).query(v[off], distance_upper_bound=distance, workers=-1)
-            off[np.flatnonzero(off)[np.isfinite(near)]] = False
-        fractions[k] = off.mean()
-    return fractions
+    ``distance``; [T] (:func:`off_surface_fraction` per frame)."""
+    return np.array([
+        off_surface_fraction(v, field, float(t), distance, None if points is None else points[k])
+        for k, (v, t) in enumerate(zip(animation.vertices, animation.times, strict=True))
+    ])
+
+
+def off_surface_fraction(
+    vertices: np.ndarray, field, time: float, distance: float, points: np.ndarray | None = None
+) -> float:
+    """The fraction of ``vertices`` [N, 3] where ``|field|`` at ``time`` exceeds ``distance``
+    and no one of ``points`` ([P, 3] or None) lies within ``distance``."""
+    vertices = np.asarray(vertices, dtype=float)
+    off = np.abs(field.value(vertices, time)) > distance
+    if points is not None and len(points) and off.any():
+        near, _ = cKDTree(points).query(vertices[off], distance_upper_bound=distance, workers=-1)
+        off[np.flatnonzero(off)[np.isfinite(near)]] = False
+    return float(off.mean())
 
 
 class Closing(NamedTuple):
