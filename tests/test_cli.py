@@ -892,7 +892,7 @@ def test_missing_or_wrong_image_is_exit_2_naming_it(filmed, capsys):
 def test_stream_writes_a_npz_read_a_window_at_a_time(tmp_path, capsys):
     folder = _folder(tmp_path, frames=5)
     out = tmp_path / "out.npz"
-    argv = ["reconstruct", str(folder), "-o", str(out), "--stream", "-q",
+    argv = ["reconstruct", str(folder), "-o", str(out), "--stream", "-q", "--method", "kinematic",
             "--set", "window=2", "--set", "template_vertices=400"]
     assert main(argv) == 0
     from fourd.io.results import load_result
@@ -904,7 +904,7 @@ def test_stream_writes_a_npz_read_a_window_at_a_time(tmp_path, capsys):
         radius = np.linalg.norm(result.vertices[t] - [0.05 * t] * 3, axis=1)
         assert np.abs(np.median(radius) - 1.0) < 0.05, t
     _run_bad(capsys, argv[:3] + [str(tmp_path / "out.glb"), "--stream"], "out.glb", ".npz")
-    _run_bad(capsys, argv + ["--method", "perframe"], "--stream", "kinematic and flow")
+    _run_bad(capsys, argv[:-6] + ["--method", "perframe"], "--stream", "auto, kinematic and flow")
     _run_bad(capsys, argv + ["--times", "0.5"], "--stream", "--times")
 
 

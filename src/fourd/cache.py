@@ -42,7 +42,7 @@ from fourd.io.atomic import atomic_path
 log = logging.getLogger("fourd.cache")
 
 #: The layout of keys and entries; raise it when they change, so old entries are not read.
-CACHE_FORMAT = 2
+CACHE_FORMAT = 3
 
 
 def _version() -> str:

@@ -6,7 +6,7 @@ import pytest
 
 import fourd
 from fourd.errors import InputError
-from fourd.io.npz import npz_frames, npz_meshes, read_npz, write_npz
+from fourd.io.npz import npz_frame_reader, npz_frames, npz_meshes, read_npz, write_npz
 
 
 def _animation():
@@ -80,3 +80,33 @@ def test_a_mesh_sequence_missing_a_frame_leaves_nothing(tmp_path):
             for vertices, faces in seq.meshes + seq.meshes[:1]:
                 out.write(vertices, faces)
     assert not list(tmp_path.iterdir())
+
+
+def test_the_frame_reader_gives_the_frames_of_either_writer_one_at_a_time(tmp_path):
+    anim = _animation()
+    write_npz(tmp_path / "whole.npz", anim)
+    with npz_frames(tmp_path / "frames.npz", faces=anim.faces, times=anim.times) as out:
+        out.write(anim.vertices, anim.observed)
+    for name in ("whole.npz", "frames.npz"):
+        with npz_frame_reader(tmp_path / name) as reader:
+            frames = list(reader.frames())
+            np.testing.assert_array_equal(reader.observed, anim.observed)
+            np.testing.assert_array_equal(reader.faces, anim.faces)
+            np.testing.assert_array_equal(reader.times, anim.times)
+        assert all(f.shape == (5, 3) and f.dtype == np.float64 for f in frames)
+        np.testing.assert_allclose(np.stack(frames), anim.vertices, atol=1e-6)  # float32 file
+    assert reader.rest is None
+
+
+def test_the_frame_reader_names_the_file_it_cannot_read(tmp_path):
+    with pytest.raises(InputError, match="missing.npz"):
+        with npz_frame_reader(tmp_path / "missing.npz"):
+            pass
+    (tmp_path / "text.npz").write_text("not a zip")
+    with pytest.raises(InputError, match="text.npz.*not a readable"):
+        with npz_frame_reader(tmp_path / "text.npz"):
+            pass
+    write_npz(tmp_path / "meshes.npz", fourd.MeshSequence(((np.eye(3), np.array([[0, 1, 2]])),)))
+    with pytest.raises(InputError, match="not a fourd animated mesh"):
+        with npz_frame_reader(tmp_path / "meshes.npz"):
+            pass

@@ -218,3 +218,57 @@ def _write_entry(archive: zipfile.ZipFile, name: str, array: np.ndarray) -> None
     """``array`` as the archive's ``name.npy`` (zip64: entries may pass 4 GB)."""
     with archive.open(f"{name}.npy", "w", force_zip64=True) as entry:
         np.lib.format.write_array(entry, array, allow_pickle=False)
+
+
+class FrameReader:
+    """An AnimatedMesh ``.npz`` open for reading frame by frame (:func:`npz_frame_reader`):
+    ``faces``, ``times``, ``observed`` [T, N] and ``rest`` (or None) in memory, the vertices
+    read on demand by :meth:`frames`."""
+
+    def __init__(self, archive: zipfile.ZipFile, path: Path, arrays: dict):
+        self._archive, self._path = archive, path
+        self.faces, self.times = arrays["faces"], arrays["times"]
+        self.observed, self.rest = arrays["observed"], arrays.get("rest")
+        self.vertex_count = len(self.observed[0]) if len(self.observed) else 0
+
+    def frames(self) -> Iterator[np.ndarray]:
+        """Every frame's vertices, float64 [N, 3], in order, one at a time in memory."""
+        with self._archive.open("vertices.npy") as entry:
+            version = np.lib.format.read_magic(entry)
+            read_header = (np.lib.format.read_array_header_1_0 if version == (1, 0)
+                           else np.lib.format.read_array_header_2_0)
+            shape, fortran, dtype = read_header(entry)
+            if fortran or len(shape) != 3 or shape[1:] != (self.vertex_count, 3):
+                raise InputError(f"vertices of shape {list(shape)} do not match its observed flags",
+                                 self._path)
+            size = self.vertex_count * 3 * dtype.itemsize
+            for _ in range(shape[0]):
+                data = entry.read(size)
+                if len(data) != size:
+                    raise InputError("is truncated (vertices end early)", self._path)
+                yield np.frombuffer(data, dtype=dtype).reshape(-1, 3).astype(np.float64)
+
+
+@contextmanager
+def npz_frame_reader(path: str | os.PathLike) -> Iterator[FrameReader]:
+    """Open an AnimatedMesh ``.npz`` (:func:`write_npz`'s or :func:`npz_frames`' layout) to
+    read its frames one at a time (:class:`FrameReader`): memory holds one frame of vertices
+    (and the observed flags), not the whole animation."""
+    path = Path(path)
+    try:
+        archive = zipfile.ZipFile(path)
+    except FileNotFoundError:
+        raise InputError("does not exist", path) from None
+    except (zipfile.BadZipFile, OSError) as error:
+        raise InputError(f"is not a readable .npz result ({error})", path) from None
+    with archive:
+        names = set(archive.namelist())
+        missing = [n for n in ("vertices", "faces", "times", "observed") if f"{n}.npy" not in names]
+        if missing:
+            raise InputError(f"is not a fourd animated mesh: no {', '.join(missing)} array", path)
+        arrays = {}
+        for name in ("faces", "times", "observed", "rest"):
+            if f"{name}.npy" in names:
+                with archive.open(f"{name}.npy") as entry:
+                    arrays[name] = np.lib.format.read_array(entry, allow_pickle=False)
+        yield FrameReader(archive, path, arrays)

@@ -97,6 +97,30 @@ def test_redistanced_is_a_signed_distance_without_pockets():
     assert np.allclose(np.linalg.norm(gradient, axis=1), 1.0, atol=0.1)
 
 
+def test_mesh_distance_signs_a_hollow_ball_from_its_mesh_alone():
+    """Two nested spheres (a hollow ball: the inner one faces inward): the grid's pieces are
+    signed from the meshes alone, the shell's inside negative, the hollow positive."""
+    from fourd.methods.flow.post import mesh_distance
+
+    outer = trimesh.creation.icosphere(subdivisions=4, radius=0.6)
+    inner = trimesh.creation.icosphere(subdivisions=4, radius=0.3)
+    inner.invert()
+    both = trimesh.util.concatenate([outer, inner])
+    h = 0.04  # more than the meshes' edges (0.02-0.04)
+    field = mesh_distance(both.vertices, both.faces, 2.0, h)
+    assert field.times.tolist() == [2.0] and field.spacing == h
+    nodes = field.nodes()
+    radius = np.linalg.norm(nodes, axis=1)
+    truth = np.maximum(radius - 0.6, 0.3 - radius)  # negative only between the spheres
+    values = field.values[0].ravel()
+    near = np.abs(truth) < 2 * h
+    assert np.abs(values[near] - truth[near]).max() < 0.15 * h
+    assert np.abs(values - truth).max() < 0.6 * h  # far: distance to the nearest vertex
+    clear = np.abs(truth) > 0.15 * h
+    assert np.array_equal(values[clear] < 0, truth[clear] < 0)
+    assert (field.bounds()[0] <= -0.6 - 4 * h + 1e-9).all()
+
+
 def test_a_flat_piece_touching_the_solid_is_dropped():
     """Closed pieces enclosing nothing that touch a sphere at one vertex (four coplanar
     points) or on one edge (a doubled flat triangle; marching cubes once left a doubled quad on

@@ -42,9 +42,9 @@ from fourd.methods.flow.pipeline import (
     run,
     surface_distance,
 )
-from fourd.methods.flow.post import FlowField
+from fourd.methods.flow.post import FlowField, mesh_distance
 from fourd.methods.flow.saddle import SaddleSolution, solve_saddle
-from fourd.methods.flow.windows import reconstruct_streamed, window_ranges
+from fourd.methods.flow.windows import STREAM_WINDOW, reconstruct_streamed, window_ranges
 
 __all__ = [
     "COMMON_OPTIONS",
@@ -55,8 +55,10 @@ __all__ = [
     "FlowResult",
     "Options",
     "SaddleSolution",
+    "STREAM_WINDOW",
     "estimate_peak_bytes",
     "mass_conservation_error",
+    "mesh_distance",
     "reconstruct",
     "reconstruct_with_diagnostics",
     "RESULT",

@@ -427,3 +427,59 @@ def redistanced(
         values = np.where(inside.ravel(), -distance, distance)
         out[i] = np.where(band.ravel(), plane, values).reshape(shape)
     return FlowField(out, field.origin, field.spacing, field.times[slice_index])
+
+
+def mesh_distance(
+    vertices: np.ndarray,
+    faces: np.ndarray,
+    time: float,
+    spacing: float,
+    *,
+    near: float = 2.0,
+    padding: int = 4,
+    workers: int = -1,
+) -> FlowField:
+    """A signed distance to one closed mesh, on a grid of its own: :func:`redistanced` for a
+    frame whose flow solve is no longer in memory (a streamed run keeps only its meshes).
+
+    Within ``near`` grid spacings of the mesh, the distance to the tangent plane of the
+    nearest mesh vertex (its area-weighted normal); farther, the distance to that vertex.
+    The sign there comes from the mesh alone: the band of nodes near it separates the grid
+    into pieces (the mesh's vertices lie less than ``spacing`` apart, as a marching-cubes
+    mesh of a grid of that spacing does); a piece that reaches the grid's border is outside,
+    another is inside when most of its nodes lie behind their nearest vertex's tangent plane.
+
+    Parameters
+    ----------
+    vertices : [N, 3]; faces : [F, 3], closed and outward oriented.
+    time : float, the one slice's time.
+    spacing : float, the grid's spacing (input units; the flow grid's, or finer).
+    near : float, the band's half-width in grid spacings.
+    padding : int, grid nodes beyond the mesh's box on every side (more than ``near``).
+
+    Returns
+    -------
+    FlowField with one slice at ``time``, negative inside.
+    """
+    vertices = np.asarray(vertices, dtype=np.float64)
+    if len(faces) == 0:
+        raise ValueError("mesh_distance needs a mesh with faces")
+    origin = vertices.min(axis=0) - padding * spacing
+    shape = tuple(np.ceil((vertices.max(axis=0) - origin) / spacing).astype(int) + padding + 1)
+    nodes = origin + spacing * np.indices(shape).reshape(3, -1).T
+    normals = vertex_normals(vertices, faces)
+    distance, nearest = cKDTree(vertices).query(nodes, workers=workers)
+    plane = np.einsum("ij,ij->i", nodes - vertices[nearest], normals[nearest])
+    band = distance < near * spacing
+    labels, count = ndimage.label(~band.reshape(shape))
+    border = np.zeros(shape, dtype=bool)
+    border[[0, -1]], border[:, [0, -1]], border[:, :, [0, -1]] = True, True, True
+    outside = np.zeros(count + 1, dtype=bool)
+    outside[np.unique(labels[border])] = True
+    behind = np.bincount(labels.ravel(), weights=np.sign(plane), minlength=count + 1)
+    inside = ~outside & (behind < 0)
+    inside[0] = False  # label 0: the band, signed by its planes
+    values = np.where(band, plane, np.where(inside[labels.ravel()], -distance, distance))
+    return FlowField(
+        values.reshape(1, *shape).astype(np.float32), origin, spacing, np.array([float(time)])
+    )

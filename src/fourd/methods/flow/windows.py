@@ -82,12 +82,13 @@ def window_ranges(count: int, window: int, overlap: int) -> list[tuple[int, int]
 
 class WindowedFlow(NamedTuple):
     """What :func:`solve_windows` did: the ``windows`` (``resumed`` of them loaded from the
-    cache), every frame's ``mass`` (input units^3, as :class:`~.pipeline.FlowResult`'s) and the
-    wall ``seconds``."""
+    cache), every frame's ``mass`` (input units^3, as :class:`~.pipeline.FlowResult`'s), the
+    median of the windows' grid ``spacing`` (input units) and the wall ``seconds``."""
 
     windows: list
     resumed: int
     mass: np.ndarray
+    spacing: float
     seconds: float
 
 
@@ -110,6 +111,7 @@ def solve_windows(
     mass = np.zeros(len(source))
     shared = None  # the previous window's signed distances over the frames it shares
     volumes = np.zeros(2)  # sum and count of the windows' contoured volumes
+    spacings = []
     resumed = 0
     for index, (first, last) in enumerate(ranges):
         seq = source.read(first, last + 1)
@@ -129,6 +131,7 @@ def solve_windows(
         meshes = list(zip(unpack_list(entry, "vertices"), unpack_list(entry, "faces"), strict=True))
         done = int(entry["first_written"])
         mass[done : done + len(meshes)] = entry["mass"]
+        spacings.append(float(entry["grid_spacing"]))
         for vertices, faces in meshes:
             write(vertices, faces)
         shared, volumes = _Shared.of(entry), entry["volumes"]
@@ -138,7 +141,9 @@ def solve_windows(
         )
     if resumed == len(ranges):
         report_resumed(log, f"all {resumed} windows")
-    return WindowedFlow(ranges, resumed, mass, _time.perf_counter() - started)
+    return WindowedFlow(
+        ranges, resumed, mass, float(np.median(spacings)), _time.perf_counter() - started
+    )
 
 
 class _Shared(NamedTuple):
@@ -204,6 +209,7 @@ def _window(seq, first: int, following: int, shared: _Shared | None, volumes: np
         **pack_list("vertices", [v for v, _ in meshes[:own]]),
         **pack_list("faces", [f for _, f in meshes[:own]]),
         "volumes": volumes,
+        "grid_spacing": np.array(result.grid.h),
         "shared_mass": mass[own:],
         "shared_values": distances.values[later],
         "shared_origin": distances.origin,
@@ -248,13 +254,15 @@ def reconstruct_windowed(seq, options: Options) -> WindowedResult:
 class StreamSummary(NamedTuple):
     """What :func:`reconstruct_streamed` did: ``frames`` written to ``output``, the number of
     ``windows`` (``resumed`` of them loaded from the cache), the mass conservation error over
-    the whole sequence and the wall ``seconds``."""
+    the whole sequence, the median of the windows' grid ``spacing`` (input units) and the
+    wall ``seconds``."""
 
     output: Path
     frames: int
     windows: int
     resumed: int
     mass_error: float
+    spacing: float
     seconds: float
 
 
@@ -287,5 +295,5 @@ def reconstruct_streamed(source: FrameSource, output, options: Options | None = 
     log.info("flow, streamed: %d frames in %.1f s, mass conservation error %.2f%%",
              len(source), solved.seconds, 100 * error)
     return StreamSummary(output, len(source), len(solved.windows), solved.resumed, error,
-                         solved.seconds)
+                         solved.spacing, solved.seconds)
 

@@ -72,19 +72,15 @@ def test_a_sheet_is_an_open_surface_and_gives_the_kinematic_animation():
 
 
 @pytest.mark.slow
-def test_a_closed_object_gives_one_closed_animated_mesh_on_the_kinematic_result():
+def test_a_closed_object_gives_one_closed_animated_mesh_on_the_kinematic_result(closed_squash):
     """Closed and manifold in every frame, the vertices bound to the kinematic result on its
     surface, and holes filled: completeness-95 better than the per-frame baseline's."""
     from fourd.methods import kinematic, reconstruct
 
-    truth = synth.scene("squash-ball", frames=4)
-    scans = synth.scan(truth, resolution=96, seed=0)
-    result, diagnostics = reconstruct_with_diagnostics(
-        scans, options=Options(resolution=20, fit_frames=False)
-    )
+    truth, scans, memory, metrics, _ = closed_squash
+    result, diagnostics = memory
     assert isinstance(result, AnimatedMesh)
     assert (diagnostics.open_surface, diagnostics.split) == (0.0, 0.0)
-    metrics = evaluate(result, truth, samples=10000)
     assert metrics["closed_manifold"] == 1.0
     baseline = evaluate(reconstruct(scans, "perframe"), truth, samples=10000)
     assert metrics["completeness_95"] < baseline["completeness_95"]

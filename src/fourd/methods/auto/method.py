@@ -36,16 +36,20 @@ from __future__ import annotations
 
 import dataclasses
 import logging
+import tempfile
+from pathlib import Path
 from typing import Literal
 
 import numpy as np
 
 from fourd.animation import AnimatedMesh, MeshSequence
 from fourd.cache import subfolder
+from fourd.frame_source import FrameSource
 from fourd.geometry.meshes import vertex_components
 from fourd.geometry.neighbors import point_spacing
 from fourd.geometry.outliers import distance_ratio_inliers
 from fourd.geometry.surface_fit import fit_along_normals
+from fourd.io.npz import read_npz
 from fourd.methods import flow, kinematic, watertight
 from fourd.methods.base import Reconstruction
 from fourd.methods.kinematic.options import OUTLIER_NEIGHBOURS
@@ -67,6 +71,8 @@ __all__ = [
     "AutoDiagnostics",
     "MEMORY_OPTIONS",
     "Options",
+    "fit_points",
+    "fit_scales",
     "fit_to_frames",
     "RESULT",
     "estimate_peak_bytes",
@@ -114,6 +120,13 @@ class Options:
         vertex farther, in point spacings (4).
     seed : int
         Seed of the kinematic method's sampling (0).
+    window : int
+        0 (default): the kinematic and flow stages each see the whole sequence at once. Set,
+        the run goes window by window as ``fourd reconstruct --stream`` does
+        (:func:`fourd.methods.auto.reconstruct_streamed`): both stages in windows of this many
+        frames, the closing and the fit a chunk of frames at a time, so memory is bounded by
+        the window (and the result); the input's video (colour guide, video anchors) is not
+        used then. ``--stream`` with 0 takes 20.
     cache_dir : str or None
         Folder where the finished stages are kept: the ``kinematic`` run's in its subfolder
         ``kinematic``, the ``flow`` run's in ``flow`` (see those methods' ``cache_dir``); a
@@ -130,6 +143,7 @@ class Options:
     fit_radius: float = 2.0
     fit_reach: float = 4.0
     seed: int = 0
+    window: int = 0
     cache_dir: str | None = None
 
     def __post_init__(self):
@@ -139,6 +153,8 @@ class Options:
             raise ValueError(f"open_area must be in (0, 1], got {self.open_area}")
         if not 0 < self.split_part < 1:
             raise ValueError(f"split_part must be between 0 and 1, got {self.split_part}")
+        if self.window < 0 or self.window == 1:
+            raise ValueError(f"window must be 0 or at least 2 frames, got {self.window}")
         if self.fit_radius <= 0 or self.fit_reach <= 0:
             raise ValueError(
                 f"fit_radius and fit_reach must be positive, got {self.fit_radius}, {self.fit_reach}"
@@ -233,23 +249,31 @@ def fit_to_frames(seq: PointCloudSequence, animation: AnimatedMesh, options: Opt
     as it is."""
     if not options.fit_frames or len(animation.vertices) != len(seq.frames):
         return animation
-    # the outliers kinematic's frame preparation removes (its test and its threshold)
-    factor, k = kinematic.Options().outlier_factor, OUTLIER_NEIGHBOURS
-    frames = [
-        frame.points[distance_ratio_inliers(frame.points, k=k, factor=factor)]
-        if len(frame.points) > k + 1 else frame.points
-        for frame in seq.frames
-    ]
-    spacing = point_spacing(frames[0])
-    fit = fit_along_normals(
-        animation.vertices, animation.faces, frames,
-        radius=options.fit_radius * spacing, reach=options.fit_reach * spacing,
-    )
+    frames = fit_points([frame.points for frame in seq.frames])
+    radius, reach = fit_scales(frames[0], options)
+    fit = fit_along_normals(animation.vertices, animation.faces, frames, radius=radius, reach=reach)
     log.info(
         "auto: fitted to the frames along the normals (median |offset| %.2g, %.0f%% of the "
         "vertices near points)", float(np.median(np.abs(fit.offsets))), 100 * fit.supported.mean(),
     )
     return dataclasses.replace(animation, vertices=fit.vertices)
+
+
+def fit_points(frames: list[np.ndarray]) -> list[np.ndarray]:
+    """The points [P, 3] of each frame that step 5 fits to: without the outliers
+    ``kinematic``'s frame preparation removes (its test and its threshold)."""
+    factor, k = kinematic.Options().outlier_factor, OUTLIER_NEIGHBOURS
+    return [
+        points[distance_ratio_inliers(points, k=k, factor=factor)] if len(points) > k + 1 else points
+        for points in frames
+    ]
+
+
+def fit_scales(first: np.ndarray, options: Options) -> tuple[float, float]:
+    """Step 5's radius and reach (input units): ``fit_radius`` and ``fit_reach`` point
+    spacings of the first frame's points ``first`` [P, 3] (:func:`fit_points`)."""
+    spacing = point_spacing(first)
+    return options.fit_radius * spacing, options.fit_reach * spacing
 
 
 def estimate_peak_bytes(seq: PointCloudSequence, options: Options | None = None) -> int:
@@ -259,7 +283,9 @@ def estimate_peak_bytes(seq: PointCloudSequence, options: Options | None = None)
     options = Options() if options is None else options
     if options.surface == "open":
         return 0
-    return flow.estimate_peak_bytes(seq, flow.Options(resolution=options.resolution))
+    return flow.estimate_peak_bytes(
+        seq, flow.Options(resolution=options.resolution, window=options.window)
+    )
 
 
 def reconstruct_with_diagnostics(
@@ -267,6 +293,8 @@ def reconstruct_with_diagnostics(
 ) -> Reconstruction:
     """:func:`reconstruct` and :class:`AutoDiagnostics`."""
     options = Options() if options is None else options
+    if options.window:
+        return _windowed(seq, options)
     opened = kinematic.reconstruct(
         seq,
         kinematic.Options(
@@ -328,3 +356,14 @@ def reconstruct(
 ) -> AnimatedMesh | MeshSequence:
     """One animated mesh from ``seq`` by the rule of the module docstring."""
     return reconstruct_with_diagnostics(seq, options).result
+
+
+def _windowed(seq: PointCloudSequence, options: Options) -> Reconstruction:
+    """``options.window`` set: the streamed run (:mod:`fourd.methods.auto.stream`) over
+    ``seq``, its result read back."""
+    from fourd.methods.auto.stream import reconstruct_streamed
+
+    with tempfile.TemporaryDirectory(prefix="fourd-auto-") as folder:
+        summary = reconstruct_streamed(FrameSource.of(seq), Path(folder) / "result.npz", options)
+        result = read_npz(summary.output)
+    return Reconstruction(result, summary.diagnostics)

@@ -1,0 +1,371 @@
+"""The default method over a whole capture with memory bounded by a window of frames (issue
+56): the rule of :mod:`fourd.methods.auto.method`, each of its stages streamed.
+
+1. ``kinematic`` streamed (:func:`fourd.methods.kinematic.reconstruct_streamed`) to a work
+   file; an open surface (the vector area of its urshape) ends in step 5 with it.
+2. ``flow`` streamed (:func:`fourd.methods.flow.reconstruct_streamed`) to a work file of
+   closed meshes; where their number of parts changes over the capture (a split or a merge),
+   that file is the result.
+3. The closed template: the flow's surface at the first frame, as a signed distance to its
+   mesh (:func:`fourd.methods.flow.mesh_distance`: the flow's solve is no longer in memory),
+   bound to the kinematic first frame (:func:`fourd.methods.watertight.closed_template`);
+   when the flow lacks more than ``lost_limit`` of it, the kinematic result goes to step 5.
+4. Frame by frame, the template carried with the kinematic frame and its free vertices
+   projected onto that frame's flow surface (:func:`~fourd.methods.watertight.carry_frame`,
+   :func:`~fourd.methods.watertight.free_offsets`), the projections smoothed over time
+   [1, 2, 1] as in memory (one frame of lag).
+5. The fit to the frames along the normals (:func:`fourd.geometry.surface_fit.fit_along_normals`)
+   over chunks of :data:`FIT_CHUNK` frames with :data:`FIT_MARGIN` frames on both sides: its
+   two passes of a [1, 2, 1] filter over time reach two frames, so every written frame is
+   the one a fit of the whole capture gives.
+
+Memory holds a window of frames in steps 1-2 and a chunk in steps 4-5, plus the output's
+observed flags; the work files lie in a temporary folder next to the output and go when the
+run ends. With ``cache_dir`` the kinematic and flow stages resume window by window; steps 3-5
+run again (a fraction of the time).
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import tempfile
+import time as _time
+from collections.abc import Iterator
+from pathlib import Path
+from typing import NamedTuple
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from fourd.animation import MeshSequence
+from fourd.cache import subfolder
+from fourd.errors import InputError
+from fourd.frame_source import FrameSource
+from fourd.geometry.meshes import median_edge_length
+from fourd.geometry.neighbors import point_spacing
+from fourd.geometry.surface_fit import fit_along_normals
+from fourd.io.npz import npz_frame_reader, npz_frames, streamed_output
+from fourd.methods import flow, kinematic, watertight
+from fourd.methods.auto.method import (
+    MIN_FRAMES,
+    AutoDiagnostics,
+    Options,
+    fit_points,
+    fit_scales,
+    part_counts,
+    splits,
+    vector_area_fraction,
+)
+
+log = logging.getLogger("fourd.methods.auto")
+
+#: Frames fitted at once in step 5 (and read at once in steps 4-5).
+FIT_CHUNK = 20
+#: Frames fitted on both sides of a chunk and not written from it: the fit's reach in time.
+FIT_MARGIN = 2
+
+
+class StreamSummary(NamedTuple):
+    """What :func:`reconstruct_streamed` did: ``frames`` written to ``output`` (an animated
+    mesh of ``vertices`` vertices, or the flow's meshes where the shape splits, then 0), the
+    ``windows`` of the kinematic and flow stages together (``resumed`` of them loaded from
+    the cache), the decision's figures (``diagnostics``) and the wall ``seconds``."""
+
+    output: Path
+    frames: int
+    vertices: int
+    windows: int
+    resumed: int
+    diagnostics: AutoDiagnostics
+    seconds: float
+
+
+def reconstruct_streamed(
+    source: FrameSource, output, options: Options | None = None
+) -> StreamSummary:
+    """The default method's result for ``source``, window by window, written to ``output`` (a
+    fourd ``.npz``, atomically: it appears when every frame is written).
+
+    Parameters
+    ----------
+    source : FrameSource
+        The capture, read a window at a time (:func:`fourd.io.frames.open_sequence`).
+    output : path-like
+        The ``.npz`` to write: an animated mesh, or the flow's closed meshes (a
+        MeshSequence) where the shape splits or merges.
+    options : Options
+        ``window`` frames per window of the kinematic and flow stages (0: their streamed
+        defaults, 20); ``cache_dir`` keeps their finished windows.
+
+    Raises
+    ------
+    InputError
+        Too few frames, an output that is not ``.npz``, a bad frame.
+
+    References
+    ----------
+    000_00387fefe94cc850.txt and 002_382acf333feb7a6e.txt as :mod:`fourd.methods.auto`;
+    the windows are this project's (issue 56).
+    """
+    options = options or Options()
+    output = streamed_output(output)
+    if len(source) < MIN_FRAMES:
+        raise InputError(f"auto needs at least {MIN_FRAMES} frames, got {len(source)}")
+    started = _time.perf_counter()
+    with tempfile.TemporaryDirectory(dir=output.parent, prefix=".fourd-auto-") as work:
+        summary = _Run(source, output, options, Path(work)).run()
+    seconds = _time.perf_counter() - started
+    log.info("auto, streamed: %d frames in %.1f s", len(source), seconds)
+    return summary._replace(seconds=seconds)
+
+
+class _Run:
+    """One streamed run: the stages of the module docstring over ``source``."""
+
+    def __init__(self, source: FrameSource, output: Path, options: Options, work: Path):
+        self.source, self.output, self.options, self.work = source, output, options, work
+        self.windows = self.resumed = 0
+
+    def run(self) -> StreamSummary:
+        options = self.options
+        opened = self._kinematic()
+        with npz_frame_reader(opened) as reader:
+            openness = vector_area_fraction(reader.rest, reader.faces)
+        if options.surface == "open" or (
+            options.surface == "auto" and openness > options.open_area
+        ):
+            log.info(
+                "auto: an open surface (the first frame's vector area is %.2f of its area, "
+                "over %.2f): the kinematic result", openness, options.open_area,
+            )
+            return self._open(opened, AutoDiagnostics(1.0, openness, 0.0))
+        meshes, flowed = self._flow()
+        with np.load(meshes, allow_pickle=False) as data:
+            parts = np.concatenate([
+                part_counts(
+                    MeshSequence(((data[f"vertices_{t}"], data[f"faces_{t}"]),)),
+                    options.split_part,
+                )
+                for t in range(len(self.source))
+            ])
+        if splits(parts):
+            log.warning(
+                "auto: the shape splits or merges (parts per frame %s): one connectivity cannot "
+                "follow it, so the result is the flow's closed meshes, one per frame, without "
+                "correspondences", " ".join(map(str, parts)),
+            )
+            os.replace(meshes, self.output)
+            return self._summary(0, AutoDiagnostics(0.0, openness, 1.0, flowed.mass_error))
+        template, lost = self._template(opened, meshes, flowed.spacing)
+        if lost > options.lost_limit:
+            log.warning(
+                "auto: the flow's surface lacks %.1f%% of the tracked first frame (over %.1f%%; "
+                "a thin, fast part it lags), so the result is the kinematic one, open where no "
+                "frame saw (method watertight closes it anyway)", 100 * lost,
+                100 * options.lost_limit,
+            )
+            return self._open(
+                opened, AutoDiagnostics(1.0, openness, 0.0, flowed.mass_error, None, lost)
+            )
+        log.info(
+            "auto: a closed object (vector area %.2f of the area): the kinematic result closed "
+            "by the flow's surfaces", openness,
+        )
+        off_surface = []
+        with npz_frame_reader(opened) as reader, np.load(meshes, allow_pickle=False) as data:
+            flow_meshes = ((data[f"vertices_{t}"], data[f"faces_{t}"]) for t in range(len(self.source)))
+            closed = _closed_frames(
+                template, reader, flow_meshes, self._frames(), self.source.times,
+                flowed.spacing / flow.Options().refine, off_surface,
+            )
+            self._write(closed, template.faces, template.rest)
+        if max(off_surface) > watertight.OFF_SURFACE_WARNING:
+            log.warning(
+                "auto: in some frames more than %.1f%% of the closed mesh lies far from both the "
+                "flow's surface and the frame's points (at most %.1f%%, frame %d): the tracking "
+                "lost part of it", 100 * watertight.OFF_SURFACE_WARNING, 100 * max(off_surface),
+                int(np.argmax(off_surface)),
+            )
+        diagnostics = AutoDiagnostics(
+            0.0, openness, 0.0, flowed.mass_error, float(max(off_surface)), lost
+        )
+        return self._summary(len(template.rest), diagnostics)
+
+    def _kinematic(self) -> Path:
+        path = self.work / "kinematic.npz"
+        summary = kinematic.reconstruct_streamed(
+            self.source, path,
+            kinematic.Options(
+                seed=self.options.seed, window=self.options.window,
+                cache_dir=subfolder(self.options.cache_dir, "kinematic"),
+            ),
+        )
+        self.windows += summary.windows
+        self.resumed += summary.resumed
+        return path
+
+    def _flow(self):
+        path = self.work / "flow.npz"
+        window = self.options.window or flow.STREAM_WINDOW
+        summary = flow.reconstruct_streamed(
+            self.source, path,
+            flow.Options(
+                resolution=self.options.resolution, window=window,
+                window_overlap=min(flow.Options().window_overlap, window // 2),
+                cache_dir=subfolder(self.options.cache_dir, "flow"),
+            ),
+        )
+        self.windows += summary.windows
+        self.resumed += summary.resumed
+        return path, summary
+
+    def _template(self, opened: Path, meshes: Path, spacing: float):
+        """The closed template (step 3) and the fraction of the kinematic first frame it
+        lacks (:class:`fourd.methods.watertight.Closing`'s ``lost``)."""
+        first = next(
+            (f.points for f in self._frames() if len(f.points) >= 4), None
+        )
+        if first is None:
+            raise InputError("no frame has points")
+        cell = kinematic.template_cell_size(
+            first, point_spacing(first), kinematic.Options().template_vertices
+        )
+        with np.load(meshes, allow_pickle=False) as data:
+            mesh = data["vertices_0"], data["faces_0"]
+        field = flow.mesh_distance(*mesh, float(self.source.times[0]), spacing / flow.Options().refine)
+        with npz_frame_reader(opened) as reader:
+            start = next(reader.frames())
+            faces = reader.faces
+        template = watertight.closed_template(
+            start, faces, field, float(self.source.times[0]), bounds=field.bounds(),
+            cell_size=cell, reach=0.5 * spacing,
+        )
+        edge = median_edge_length(start, faces)
+        distance, _ = cKDTree(template.rest).query(start, distance_upper_bound=2.0 * edge)
+        return template, float(np.mean(~np.isfinite(distance)))
+
+    def _open(self, opened: Path, diagnostics: AutoDiagnostics) -> StreamSummary:
+        """Step 5 on the kinematic result."""
+        with npz_frame_reader(opened) as reader:
+            frames = (
+                (vertices, seen, frame.points)
+                for vertices, seen, frame in zip(
+                    reader.frames(), reader.observed, self._frames(), strict=True
+                )
+            )
+            self._write(frames, reader.faces, reader.rest)
+            return self._summary(reader.vertex_count, diagnostics)
+
+    def _write(self, frames: Iterator, faces: np.ndarray, rest: np.ndarray) -> None:
+        """Step 5 on ``frames`` ((vertices [N, 3], observed [N], points [P, 3]) in order), to
+        the output."""
+        with npz_frames(self.output, faces=faces, times=self.source.times, rest=rest) as out:
+            for vertices, observed in _fitted(
+                frames, faces, len(self.source), self.options, self._scales()
+            ):
+                out.write(vertices, observed)
+
+    def _scales(self) -> tuple[float, float] | None:
+        if not self.options.fit_frames:
+            return None
+        first = fit_points([f.points for f in self.source.read(0, 1).frames])[0]
+        return fit_scales(first, self.options)
+
+    def _frames(self) -> Iterator:
+        """The source's frames in order, read :data:`FIT_CHUNK` at a time."""
+        for start in range(0, len(self.source), FIT_CHUNK):
+            yield from self.source.read(start, start + FIT_CHUNK).frames
+
+    def _summary(self, vertices: int, diagnostics: AutoDiagnostics) -> StreamSummary:
+        return StreamSummary(
+            self.output, len(self.source), vertices, self.windows, self.resumed, diagnostics, 0.0
+        )
+
+
+def _closed_frames(
+    template: watertight.ClosedTemplate,
+    opened,
+    meshes: Iterator,
+    frames: Iterator,
+    times: np.ndarray,
+    spacing: float,
+    off_surface: list,
+) -> Iterator[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    """Step 4: the closed template at every frame, in order, as (vertices [N, 3], observed
+    [N], the frame's points [P, 3]); the off-surface fraction of every frame
+    (:func:`fourd.methods.watertight.off_surface_fraction`) appended to ``off_surface``.
+
+    ``opened`` is the kinematic result's reader, ``meshes`` the flow's (vertices, faces) per
+    frame, ``frames`` the input frames, ``spacing`` the signed distances' grid spacing."""
+    before = current = None  # frames k - 2 and k - 1, waiting for their neighbour in time
+    smooth = len(times) > 2
+    for k, (vertices, seen, mesh, frame) in enumerate(
+        zip(opened.frames(), opened.observed, meshes, frames, strict=True)
+    ):
+        carried, observed = watertight.carry_frame(template, vertices, seen)
+        field = flow.mesh_distance(*mesh, float(times[k]), spacing) if len(mesh[1]) else None
+        offsets = (
+            watertight.free_offsets(template, carried, field, float(times[k]))
+            if field is not None else np.zeros((len(template.free), 3))
+        )
+        frame_k = _Carried(carried, observed, offsets, field, float(times[k]), frame.points)
+        if current is not None:
+            yield _placed(current, before if smooth else None, frame_k, template, spacing, off_surface)
+        before, current = current, frame_k
+    yield _placed(current, None, None, template, spacing, off_surface)
+
+
+class _Carried(NamedTuple):
+    """One frame of step 4 before the smoothing over time."""
+
+    vertices: np.ndarray
+    observed: np.ndarray
+    offsets: np.ndarray
+    field: object
+    time: float
+    points: np.ndarray
+
+
+def _placed(frame: _Carried, before: _Carried | None, after: _Carried | None,
+            template: watertight.ClosedTemplate, spacing: float, off_surface: list):
+    """``frame`` with its free vertices moved by its offsets, smoothed [1, 2, 1] with its
+    neighbours' (the first and last frames keep theirs), and its off-surface fraction."""
+    offsets = frame.offsets
+    if before is not None and after is not None:
+        offsets = 0.25 * before.offsets + 0.5 * offsets + 0.25 * after.offsets
+    vertices = frame.vertices.copy()
+    vertices[template.free] += offsets
+    off_surface.append(
+        0.0 if frame.field is None else watertight.off_surface_fraction(
+            vertices, frame.field, frame.time,
+            watertight.OFF_SURFACE_CELLS * spacing, frame.points,
+        )
+    )
+    return vertices, frame.observed, frame.points
+
+
+def _fitted(frames: Iterator, faces: np.ndarray, count: int, options: Options,
+            scales: tuple[float, float] | None) -> Iterator[tuple[np.ndarray, np.ndarray]]:
+    """Step 5: ``frames`` ((vertices [N, 3], observed [N], points [P, 3]), ``count`` of them
+    in order) fitted along their normals onto their points with ``scales`` (radius, reach;
+    None: not fitted), as (vertices [k, N, 3], observed [k, N]) chunks in order."""
+    buffer, first, written = [], 0, 0  # frames first.. held, frames before written are out
+    for vertices, observed, points in frames:
+        buffer.append((vertices, observed, points))
+        end = first + len(buffer)
+        if end < count and end - written < FIT_CHUNK + FIT_MARGIN:
+            continue
+        last = end if end == count else end - FIT_MARGIN
+        vertices = np.stack([v for v, _, _ in buffer])
+        if scales is not None:
+            vertices = fit_along_normals(
+                vertices, faces, fit_points([p for _, _, p in buffer]),
+                radius=scales[0], reach=scales[1],
+            ).vertices
+        yield vertices[written - first : last - first], np.stack(
+            [o for _, o, _ in buffer[written - first : last - first]]
+        )
+        written = last
+        drop = max(0, written - FIT_MARGIN - first)
+        buffer, first = buffer[drop:], first + drop
