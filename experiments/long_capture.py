@@ -98,7 +98,7 @@ class _WindowMemory(logging.Handler):
             self.peaks.append(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024)
 
 
-def score(frames: int) -> dict:
+def score(frames: int, out: Path = OUT) -> dict:
     from fourd.animation import AnimatedMesh
     from fourd.io.results import load_result
     from fourd.metrics import evaluate
@@ -107,7 +107,7 @@ def score(frames: int) -> dict:
     from fourd.synth.whole_capture import long_capture
 
     capture = long_capture(frames, resolution=RESOLUTION)
-    result = load_result(OUT / f"{frames}.npz")
+    result = load_result(out / f"{frames}.npz")
     truth = capture.truth
     diagonal = truth.diagonal()
     rng = np.random.default_rng(0)

@@ -224,7 +224,9 @@ class _Run:
         """The closed template (step 3) and the fraction of the kinematic first frame it
         lacks (:class:`fourd.methods.watertight.Closing`'s ``lost``)."""
         first = next(
-            (f.points for f in self._frames() if len(f.points) >= 4), None
+            (points for k in range(len(self.source))
+             if len(points := self.source.read(k, k + 1).frames[0].points) >= 4),
+            None,
         )
         if first is None:
             raise InputError("no frame has points")
@@ -260,11 +262,16 @@ class _Run:
     def _write(self, frames: Iterator, faces: np.ndarray, rest: np.ndarray) -> None:
         """Step 5 on ``frames`` ((vertices [N, 3], observed [N], points [P, 3]) in order), to
         the output."""
+        started = _time.perf_counter()
         with npz_frames(self.output, faces=faces, times=self.source.times, rest=rest) as out:
             for vertices, observed in _fitted(
                 frames, faces, len(self.source), self.options, self._scales()
             ):
                 out.write(vertices, observed)
+                log.info(
+                    "auto: frames %d-%d of %d written (%.1f s)", out.written - len(vertices),
+                    out.written - 1, len(self.source), _time.perf_counter() - started,
+                )
 
     def _scales(self) -> tuple[float, float] | None:
         if not self.options.fit_frames:

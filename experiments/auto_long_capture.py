@@ -1,0 +1,75 @@
+"""Issue 56 for the default method: does ``auto``, streamed (kinematic and flow window by
+window, the closing and the fit a chunk of frames at a time), keep its peak memory and its
+time per frame as the capture grows?
+
+The capture of ``experiments/long_capture.py`` (the crane played ping-pong, three virtual depth
+cameras at 700 rays per side, about 50,000 points per frame; :func:`fourd.synth.long_capture`),
+reconstructed by :func:`fourd.methods.auto.reconstruct_streamed` (windows of 20 frames,
+default options otherwise), the result written frame by frame to a ``.npz``. Each length runs
+in a fresh process (peak resident memory from ``getrusage``; the time includes scanning,
+about 0.23 s per frame). Then each result is scored as ``long_capture.py`` scores it:
+correspondence per frame, Chamfer and completeness-95 on every 25th frame (fractions of the
+crane's diagonal).
+
+Answer: see the table in ``benchmarks/METHODS.md`` ("`auto` streamed").
+
+Run from the repository root::
+
+    .venv/bin/python experiments/auto_long_capture.py            # 40 and 200 frames
+    .venv/bin/python experiments/auto_long_capture.py run 40     # one length
+    .venv/bin/python experiments/auto_long_capture.py score 40   # score a finished run
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import resource
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from long_capture import score
+
+FRAMES = (40, 200)
+RESOLUTION = 700
+WINDOW = 20
+OUT = Path(tempfile.gettempdir()) / "fourd-auto-long-capture"
+
+
+def run(frames: int) -> dict:
+    from fourd.methods.auto import Options, reconstruct_streamed
+    from fourd.synth.whole_capture import long_capture
+
+    OUT.mkdir(exist_ok=True)
+    capture = long_capture(frames, resolution=RESOLUTION)
+    before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    started = time.perf_counter()
+    summary = reconstruct_streamed(capture.source, OUT / f"{frames}.npz", Options(window=WINDOW))
+    seconds = time.perf_counter() - started
+    row = {
+        "frames": frames,
+        "windows": summary.windows,
+        "vertices": summary.vertices,
+        "s_per_frame": seconds / frames,
+        "peak_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
+        "before_mb": before,
+        "diagnostics": dataclasses.asdict(summary.diagnostics),
+    }
+    print(json.dumps(row), flush=True)
+    return row
+
+
+if __name__ == "__main__":
+    if len(sys.argv) == 3:
+        if sys.argv[1] == "run":
+            run(int(sys.argv[2]))
+        else:
+            score(int(sys.argv[2]), OUT)
+    else:
+        for count in FRAMES:
+            subprocess.run([sys.executable, __file__, "run", str(count)], check=True)
+        for count in FRAMES:
+            subprocess.run([sys.executable, __file__, "score", str(count)], check=True)
