@@ -4,12 +4,14 @@ streamed run is the in-memory one, in one window and over several."""
 from __future__ import annotations
 
 import dataclasses
+import logging
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
 import trimesh
 
-from fourd import AnimatedMesh
+from fourd import AnimatedMesh, Frame, MeshSequence
 from fourd.frame_source import FrameSource
 from fourd.geometry.surface_fit import fit_along_normals
 from fourd.io.npz import read_npz
@@ -81,3 +83,71 @@ def test_streamed_over_windows_stays_closed_and_fitted(closed_squash, tmp_path):
     assert metrics["accuracy"] < theirs["accuracy"]
     assert metrics["completeness_95"] < 1.25 * theirs["completeness_95"]
     assert metrics["correspondence_mean"] < 1.25 * theirs["correspondence_mean"]
+
+
+SPHERE = trimesh.creation.icosphere(subdivisions=3)
+
+
+def _fake_stages(monkeypatch, opened_faces, flow_meshes):
+    """The kinematic and flow stages replaced by writers of known results: :data:`SPHERE`
+    (``opened_faces`` of it) shrunk to radius 0.98 and moving by 0.05 per frame, and
+    ``flow_meshes`` per frame; the frames are 2,000 points on the moving unit sphere."""
+    from fourd.io.npz import write_npz
+    from fourd.methods import flow, kinematic
+
+    count = len(flow_meshes)
+    vertices = np.stack([0.98 * SPHERE.vertices + 0.05 * t for t in range(count)])
+
+    def opened(source, path, options):
+        write_npz(path, AnimatedMesh(opened_faces, vertices, times=source.times, rest=vertices[0]))
+        return SimpleNamespace(windows=1, resumed=0)
+
+    def flowed(source, path, options):
+        write_npz(path, MeshSequence(tuple(flow_meshes), source.times))
+        return SimpleNamespace(windows=1, resumed=0, mass_error=0.01, spacing=0.1)
+
+    monkeypatch.setattr(kinematic, "reconstruct_streamed", opened)
+    monkeypatch.setattr(flow, "reconstruct_streamed", flowed)
+    rng = np.random.default_rng(0)
+    frames = []
+    for t in range(count):
+        directions = rng.normal(size=(2000, 3))
+        directions /= np.linalg.norm(directions, axis=1, keepdims=True)
+        frames.append(Frame(directions + 0.05 * t, time=float(t)))
+    return vertices, FrameSource.of_frames(frames)
+
+
+def test_an_open_surface_streamed_is_the_kinematic_result_fitted(monkeypatch, tmp_path):
+    upper = SPHERE.faces[SPHERE.vertices[SPHERE.faces].mean(axis=1)[:, 2] > 0]
+    vertices, source = _fake_stages(monkeypatch, upper, [None] * 5)
+    summary = auto.reconstruct_streamed(source, tmp_path / "out.npz")
+    result = read_npz(summary.output)
+    assert summary.diagnostics.open_surface == 1.0 and summary.diagnostics.vector_area > 0.5
+    np.testing.assert_array_equal(result.faces, upper)
+    radius = np.linalg.norm(result.vertices - 0.05 * np.arange(5)[:, None, None], axis=2)
+    assert np.abs(radius[:, np.unique(upper)] - 1.0).max() < 3e-3  # onto the points' sphere
+    unfitted = auto.reconstruct_streamed(source, tmp_path / "b.npz", auto.Options(fit_frames=False))
+    np.testing.assert_allclose(read_npz(unfitted.output).vertices, vertices, atol=1e-6)
+
+
+def test_a_split_streamed_gives_the_flow_meshes(monkeypatch, tmp_path, caplog):
+    one = trimesh.creation.icosphere(subdivisions=2)
+    two = trimesh.util.concatenate([one, one.copy().apply_translation([3, 0, 0])])
+    meshes = [(one.vertices, one.faces)] * 4 + [(two.vertices, two.faces)] * 4
+    _, source = _fake_stages(monkeypatch, SPHERE.faces, meshes)
+    with caplog.at_level(logging.WARNING, logger="fourd.methods.auto"):
+        summary = auto.reconstruct_streamed(source, tmp_path / "out.npz")
+    assert "splits or merges" in caplog.text and summary.diagnostics.split == 1.0
+    result = read_npz(summary.output)
+    assert isinstance(result, MeshSequence) and result.frame_count == 8
+    assert len(result.meshes[-1][1]) == 2 * len(one.faces)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out.npz"]
+
+
+def test_a_flow_that_lacks_a_part_streamed_gives_the_kinematic_result(monkeypatch, tmp_path):
+    """The flow's surface is half the sphere's size: it lacks the tracked first frame."""
+    small = trimesh.creation.icosphere(subdivisions=3, radius=0.5)
+    _, source = _fake_stages(monkeypatch, SPHERE.faces, [(small.vertices, small.faces)] * 4)
+    summary = auto.reconstruct_streamed(source, tmp_path / "out.npz", auto.Options(surface="closed"))
+    assert summary.diagnostics.open_surface == 1.0 and summary.diagnostics.lost > 0.9
+    np.testing.assert_array_equal(read_npz(summary.output).faces, SPHERE.faces)
