@@ -188,3 +188,29 @@ def test_check_input_runs_every_check(monkeypatch, caplog):
     messages = " | ".join(r.getMessage() for r in caplog.records)
     assert "frame 1 (frame_1, time 1) has 6 points" in messages
     assert "output times 3 lie outside" in messages
+
+
+def test_memory_refusal_suggests_windows_where_they_fit(monkeypatch):
+    from fourd.methods import flow
+
+    seq = _sequence([400] * 60)
+    options = method_options("flow")
+    whole = flow.estimate_peak_bytes(seq, options)
+    windowed = flow.estimate_peak_bytes(seq, flow.Options(window=preflight.SUGGESTED_WINDOW))
+    assert windowed < 0.5 * whole
+    monkeypatch.setattr(preflight, "available_memory", lambda: (whole + windowed) // 2)
+    with pytest.raises(InputError) as info:
+        check_memory(seq, "flow", method_module("flow"), options)
+    assert str(info.value).endswith(
+        "reconstruct fewer frames, or run it window by window (--stream, or --set window=20: "
+        f"about {preflight._size(windowed)})"
+    )
+    monkeypatch.setattr(preflight, "available_memory", lambda: windowed // 2)
+    with pytest.raises(InputError) as info:
+        check_memory(seq, "flow", method_module("flow"), options)
+    assert str(info.value).endswith("reconstruct fewer frames")  # windows would not fit either
+    # watertight solves its flow in one piece: no windows to suggest
+    monkeypatch.setattr(preflight, "available_memory", lambda: (whole + windowed) // 2)
+    with pytest.raises(InputError) as info:
+        check_memory(seq, "watertight", method_module("watertight"), method_options("watertight"))
+    assert "window" not in str(info.value)

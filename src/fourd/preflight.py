@@ -166,7 +166,8 @@ def check_memory(seq: PointCloudSequence, method: str, module: ModuleType, optio
     """Refuse a run whose estimated peak memory (the method's ``estimate_peak_bytes``)
     exceeds the memory available (:func:`available_memory`), naming the option to lower
     (the first of the method's ``MEMORY_OPTIONS``, with the others set away from their
-    defaults). Returns the estimate; None (no check) for a method without the hook or when
+    defaults), and suggesting windows where the method streams and they would fit. Returns
+    the estimate; None (no check) for a method without the hook or when
     the available memory cannot be read."""
     estimate = getattr(module, "estimate_peak_bytes", None)
     if estimate is None:
@@ -188,7 +189,30 @@ def check_memory(seq: PointCloudSequence, method: str, module: ModuleType, optio
         f"method {method!r} would need about {_size(needed)} of memory "
         f"({settings + ', ' if settings else ''}{len(seq)} frames; an estimate) but "
         f"{_size(available)} is available: {lower} reconstruct fewer frames"
+        + (_windowed_hint(seq, estimate, options, available)
+           if hasattr(module, "reconstruct_streamed") else "")
     )
+
+
+#: The window :func:`check_memory` suggests: the streamed runs' default (``--stream``).
+SUGGESTED_WINDOW = 20
+
+
+def _windowed_hint(seq, estimate, options, available: int) -> str:
+    """``, or run it window by window (...)`` for a method that streams, when its option
+    ``window`` is unset and windows of :data:`SUGGESTED_WINDOW` frames would fit; else
+    nothing."""
+    fields = {f.name for f in dataclasses.fields(options)} if dataclasses.is_dataclass(options) else set()
+    if "window" not in fields or options.window or len(seq) <= SUGGESTED_WINDOW:
+        return ""
+    try:
+        windowed = int(estimate(seq, dataclasses.replace(options, window=SUGGESTED_WINDOW)))
+    except ValueError:  # the method's other options do not allow that window
+        return ""
+    if windowed > available:
+        return ""
+    return (f", or run it window by window (--stream, or --set window={SUGGESTED_WINDOW}: "
+            f"about {_size(windowed)})")
 
 
 def available_memory() -> int | None:
