@@ -126,6 +126,12 @@ class _Run:
     def __init__(self, source: FrameSource, output: Path, options: Options, work: Path):
         self.source, self.output, self.options, self.work = source, output, options, work
         self.windows = self.resumed = 0
+        window = options.window or flow.STREAM_WINDOW
+        self.flow_options = flow.Options(
+            resolution=options.resolution, window=window,
+            window_overlap=min(flow.Options().window_overlap, window // 2),
+            cache_dir=subfolder(options.cache_dir, "flow"),
+        )
 
     def run(self) -> StreamSummary:
         options = self.options
@@ -143,11 +149,8 @@ class _Run:
         meshes, flowed = self._flow()
         with np.load(meshes, allow_pickle=False) as data:
             parts = np.concatenate([
-                part_counts(
-                    MeshSequence(((data[f"vertices_{t}"], data[f"faces_{t}"]),)),
-                    options.split_part,
-                )
-                for t in range(len(self.source))
+                part_counts(MeshSequence((mesh,)), options.split_part)
+                for mesh in _meshes(data, len(self.source))
             ])
         if splits(parts):
             log.warning(
@@ -174,10 +177,9 @@ class _Run:
         )
         off_surface = []
         with npz_frame_reader(opened) as reader, np.load(meshes, allow_pickle=False) as data:
-            flow_meshes = ((data[f"vertices_{t}"], data[f"faces_{t}"]) for t in range(len(self.source)))
             closed = _closed_frames(
-                template, reader, flow_meshes, self._frames(), self.source.times,
-                flowed.spacing / flow.Options().refine, off_surface,
+                template, reader, _meshes(data, len(self.source)), self._frames(),
+                self.source.times, flowed.spacing / self.flow_options.refine, off_surface,
             )
             self._write(closed, template.faces, template.rest)
         if max(off_surface) > watertight.OFF_SURFACE_WARNING:
@@ -207,15 +209,7 @@ class _Run:
 
     def _flow(self):
         path = self.work / "flow.npz"
-        window = self.options.window or flow.STREAM_WINDOW
-        summary = flow.reconstruct_streamed(
-            self.source, path,
-            flow.Options(
-                resolution=self.options.resolution, window=window,
-                window_overlap=min(flow.Options().window_overlap, window // 2),
-                cache_dir=subfolder(self.options.cache_dir, "flow"),
-            ),
-        )
+        summary = flow.reconstruct_streamed(self.source, path, self.flow_options)
         self.windows += summary.windows
         self.resumed += summary.resumed
         return path, summary
@@ -234,8 +228,10 @@ class _Run:
             first, point_spacing(first), kinematic.Options().template_vertices
         )
         with np.load(meshes, allow_pickle=False) as data:
-            mesh = data["vertices_0"], data["faces_0"]
-        field = flow.mesh_distance(*mesh, float(self.source.times[0]), spacing / flow.Options().refine)
+            mesh = next(_meshes(data, 1))
+        field = flow.mesh_distance(
+            *mesh, float(self.source.times[0]), spacing / self.flow_options.refine
+        )
         with npz_frame_reader(opened) as reader:
             start = next(reader.frames())
             faces = reader.faces
@@ -288,6 +284,12 @@ class _Run:
         return StreamSummary(
             self.output, len(self.source), vertices, self.windows, self.resumed, diagnostics, 0.0
         )
+
+
+def _meshes(data, count: int) -> Iterator[tuple[np.ndarray, np.ndarray]]:
+    """The first ``count`` (vertices, faces) of an open MeshSequence ``.npz``, one at a time."""
+    for t in range(count):
+        yield data[f"vertices_{t}"], data[f"faces_{t}"]
 
 
 def _closed_frames(
