@@ -363,6 +363,11 @@ def _windowed(seq: PointCloudSequence, options: Options) -> Reconstruction:
     ``seq``, its result read back."""
     from fourd.methods.auto.stream import reconstruct_streamed
 
+    if seq.video is not None:
+        log.warning(
+            "auto: window=%d runs window by window without the capture's video (no colour "
+            "guide or video anchors); window=0 uses it", options.window,
+        )
     with tempfile.TemporaryDirectory(prefix="fourd-auto-") as folder:
         summary = reconstruct_streamed(FrameSource.of(seq), Path(folder) / "result.npz", options)
         result = read_npz(summary.output)
