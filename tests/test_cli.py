@@ -908,6 +908,28 @@ def test_stream_writes_a_npz_read_a_window_at_a_time(tmp_path, capsys):
     _run_bad(capsys, argv + ["--times", "0.5"], "--stream", "--times")
 
 
+def test_stream_runs_the_default_method_with_its_options(tmp_path, monkeypatch):
+    """``--stream`` without ``--method`` streams ``auto``, with the options set and the
+    cache folder given."""
+    from fourd.methods import auto
+
+    seen = {}
+
+    def streamed(source, output, options):
+        seen.update(frames=len(source), output=output, options=options)
+        return auto.StreamSummary(Path(output), len(source), 3, 2, 0, None, 1.0)
+
+    monkeypatch.setattr(auto, "reconstruct_streamed", streamed)
+    folder = _folder(tmp_path, frames=3)
+    out = tmp_path / "out.npz"
+    argv = ["reconstruct", str(folder), "-o", str(out), "--stream", "-q",
+            "--set", "window=2", "--set", "resolution=24", "--cache", str(tmp_path / "cache")]
+    assert main(argv) == 0
+    assert seen["frames"] == 3 and Path(seen["output"]) == out
+    assert (seen["options"].window, seen["options"].resolution) == (2, 24)
+    assert seen["options"].cache_dir == str(tmp_path / "cache")
+
+
 @pytest.mark.slow
 def test_stream_runs_flow_in_windows(tmp_path):
     folder = _folder(tmp_path, frames=5)
