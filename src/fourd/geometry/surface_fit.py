@@ -32,6 +32,7 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
+import numba
 import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
@@ -114,48 +115,101 @@ def normal_offsets(
     tree = cKDTree(points) if tree is None else tree
     n = len(vertices)
     reach = np.broadcast_to(np.asarray(reach, dtype=np.float64), (n,))
-    lists = tree.query_ball_point(vertices, 2.0 * radius, workers=-1, return_sorted=False)
-    counts = np.fromiter((len(item) for item in lists), dtype=np.int64, count=n)
     offsets, support = np.zeros(n), np.zeros(n)
-    if counts.sum() == 0:
+    if n == 0 or tree.n == 0:
         return offsets, support
-    rows = np.repeat(np.arange(n), counts)
-    cols = np.fromiter((j for item in lists for j in item), dtype=np.int64, count=counts.sum())
+    pairs = cKDTree(vertices).sparse_distance_matrix(tree, 2.0 * radius, output_type="ndarray")
+    if len(pairs) == 0:
+        return offsets, support
+    rows, cols = pairs["i"].astype(np.int64), pairs["j"].astype(np.int64)
     e1, e2 = _tangent_frames(normals)
-    delta = points[cols] - vertices[rows]
-    u = np.einsum("ij,ij->i", delta, e1[rows])
-    w = np.einsum("ij,ij->i", delta, e2[rows])
-    d = np.einsum("ij,ij->i", delta, normals[rows])
-    spread = np.exp(-(u * u + w * w) / radius**2) * (np.abs(d) <= reach[rows])
-    basis = np.stack([np.ones_like(u), u / radius, w / radius, (u / radius) ** 2,
-                      (u * w) / radius**2, (w / radius) ** 2], axis=1)
-    height = np.zeros(n)
-    scale = np.maximum(reach[rows] / 3.0, 1e-12)
-    for _ in range(2):  # mean shift: points far from the last fit (first: the vertex) count less
-        weight = spread * np.exp(-(((d - height[rows]) / scale) ** 2))
-        support = np.bincount(rows, weight, minlength=n)
-        height = _weighted_quadric_heights(rows, basis, d, weight, n)
-        height = np.where(support >= MIN_SUPPORT, height, 0.0)
+    height, support = _mean_shift_quadrics(
+        rows, cols, vertices, normals, e1, e2, np.asarray(points, dtype=np.float64),
+        np.ascontiguousarray(reach), float(radius),
+    )
     ok = support >= MIN_SUPPORT
     offsets[ok] = np.clip(height[ok], -reach[ok], reach[ok])
     return offsets, np.where(ok, support, 0.0)
 
 
-def _weighted_quadric_heights(rows, basis, d, weight, n) -> np.ndarray:
-    """Per row, ``a`` of the weighted least-squares fit of ``d ~ basis @ coefficients``."""
-    k = basis.shape[1]
-    normal = np.zeros((n, k, k))
-    rhs = np.zeros((n, k))
+@numba.njit(cache=True)
+def _mean_shift_quadrics(rows, cols, vertices, normals, e1, e2, points, reach, radius):
+    """Per vertex, the height ``a`` of the weighted quadric fit of its points (pairs
+    ``rows``, ``cols``) and the sum of the weights, after two mean-shift steps (see
+    :func:`normal_offsets`); ([N], [N]), 0 where the support is under :data:`MIN_SUPPORT`."""
+    n, count = len(vertices), len(rows)
+    u, w, d, spread = np.empty(count), np.empty(count), np.empty(count), np.empty(count)
+    for p in range(count):
+        r, c = rows[p], cols[p]
+        dx = points[c, 0] - vertices[r, 0]
+        dy = points[c, 1] - vertices[r, 1]
+        dz = points[c, 2] - vertices[r, 2]
+        u[p] = (dx * e1[r, 0] + dy * e1[r, 1] + dz * e1[r, 2]) / radius
+        w[p] = (dx * e2[r, 0] + dy * e2[r, 1] + dz * e2[r, 2]) / radius
+        d[p] = dx * normals[r, 0] + dy * normals[r, 1] + dz * normals[r, 2]
+        spread[p] = np.exp(-(u[p] * u[p] + w[p] * w[p])) if abs(d[p]) <= reach[r] else 0.0
+    height, support = np.zeros(n), np.zeros(n)
+    basis = np.empty(6)
+    for _ in range(2):  # mean shift: points far from the last fit (first: the vertex) count less
+        normal, rhs = np.zeros((n, 6, 6)), np.zeros((n, 6))
+        support[:] = 0.0
+        for p in range(count):
+            r = rows[p]
+            scale = max(reach[r] / 3.0, 1e-12)
+            shift = (d[p] - height[r]) / scale
+            weight = spread[p] * np.exp(-shift * shift)
+            support[r] += weight
+            basis[0], basis[1], basis[2] = 1.0, u[p], w[p]
+            basis[3], basis[4], basis[5] = u[p] * u[p], u[p] * w[p], w[p] * w[p]
+            for i in range(6):
+                rhs[r, i] += weight * basis[i] * d[p]
+                for j in range(i, 6):
+                    normal[r, i, j] += weight * basis[i] * basis[j]
+        for r in range(n):
+            if support[r] < MIN_SUPPORT:
+                height[r] = 0.0
+                continue
+            system = normal[r]
+            for i in range(6):
+                for j in range(i):
+                    system[i, j] = system[j, i]
+            # a small ridge on the slope and curvature terms keeps sparse neighbourhoods solvable
+            ridge = 1e-3 * max(system[0, 0], 1e-12)
+            for i in range(1, 6):
+                system[i, i] += ridge
+            system[0, 0] += 1e-12
+            height[r] = _first_of_solution(system, rhs[r])
+    return height, support
+
+
+@numba.njit(cache=True, inline="always")
+def _first_of_solution(system, rhs) -> float:
+    """``x[0]`` of ``system @ x = rhs`` for a small symmetric positive definite ``system``
+    (overwritten), by Cholesky: ``system = L L^T``, then the two triangular solves."""
+    k = len(rhs)
+    for j in range(k):
+        total = system[j, j]
+        for m in range(j):
+            total -= system[j, m] * system[j, m]
+        pivot = np.sqrt(max(total, 1e-300))
+        system[j, j] = pivot
+        for i in range(j + 1, k):
+            total = system[i, j]
+            for m in range(j):
+                total -= system[i, m] * system[j, m]
+            system[i, j] = total / pivot
+    y = np.empty(k)
     for i in range(k):
-        rhs[:, i] = np.bincount(rows, weight * basis[:, i] * d, minlength=n)
-        for j in range(i, k):
-            value = np.bincount(rows, weight * basis[:, i] * basis[:, j], minlength=n)
-            normal[:, i, j] = normal[:, j, i] = value
-    # a small ridge on the slope and curvature terms keeps sparse neighbourhoods solvable
-    ridge = 1e-3 * np.maximum(normal[:, 0, 0], 1e-12)
-    normal[:, np.arange(1, k), np.arange(1, k)] += ridge[:, None]
-    normal[:, 0, 0] += 1e-12
-    return np.linalg.solve(normal, rhs[..., None])[:, 0, 0]
+        total = rhs[i]
+        for m in range(i):
+            total -= system[i, m] * y[m]
+        y[i] = total / system[i, i]
+    for i in range(k - 1, -1, -1):
+        total = y[i]
+        for m in range(i + 1, k):
+            total -= system[m, i] * y[m]
+        y[i] = total / system[i, i]
+    return y[0]
 
 
 def _smooth_offsets(laplacian, offsets, support, smoothness) -> np.ndarray:
