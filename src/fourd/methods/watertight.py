@@ -17,6 +17,7 @@ from __future__ import annotations
 import dataclasses
 import logging
 import time
+from collections.abc import Iterable, Iterator
 from typing import NamedTuple
 
 import numpy as np
@@ -76,6 +77,8 @@ __all__ = [
     "closed_template",
     "carry_frame",
     "free_offsets",
+    "closed_frames",
+    "lost_fraction",
     "reconstruct",
     "reconstruct_with_diagnostics",
     "close_animation",
@@ -185,17 +188,14 @@ def close_animation(
         opened.vertices[0], opened.faces, field, float(times[0]), bounds=bounds,
         cell_size=cell_size, target_vertices=target_vertices, reach=reach,
     )
+    frames = (
+        (opened.vertices[k], opened.observed[k], field, float(t), None)
+        for k, t in enumerate(times)
+    )
     out = np.empty((len(times), len(template.rest), 3))
     observed = np.zeros((len(times), len(template.rest)), dtype=bool)
-    offsets = np.zeros((len(times), len(template.free), 3))
-    for k, t in enumerate(times):
-        out[k], observed[k] = carry_frame(template, opened.vertices[k], opened.observed[k])
-        offsets[k] = free_offsets(template, out[k], field, float(t))
-    if len(times) > 2:
-        # the flow's surface moves by a fraction of a cell from frame to frame in the filled
-        # parts; one [1, 2, 1] pass over time keeps that from showing as flicker
-        offsets[1:-1] = 0.25 * offsets[:-2] + 0.5 * offsets[1:-1] + 0.25 * offsets[2:]
-    out[:, template.free] += offsets
+    for k, (vertices, seen, _) in enumerate(closed_frames(template, frames, len(times))):
+        out[k], observed[k] = vertices, seen
     return AnimatedMesh(
         faces=template.faces, vertices=out, times=times, observed=observed, rest=template.rest
     )
@@ -287,6 +287,53 @@ def carry_frame(
             template.rest[template.free],
         )
     return out, seen
+
+
+def closed_frames(
+    template: ClosedTemplate, frames: Iterable, count: int
+) -> Iterator[tuple[np.ndarray, np.ndarray, object]]:
+    """The closed template at each of ``count`` frames, in order and one frame behind its
+    input: ``frames`` gives (open vertices [V, 3], observed [V], field, time, payload) per
+    frame, each carried (:func:`carry_frame`) and its free vertices moved onto ``field``
+    (:func:`free_offsets`; a field of None moves none); yields (vertices [N, 3], observed
+    [N], payload).
+
+    The flow's surface moves by a fraction of a cell from frame to frame in the filled parts:
+    the moves are smoothed over time by one [1, 2, 1] pass (the first and last frames, and a
+    sequence of two, keep theirs), which keeps that from showing as flicker."""
+    before = current = None  # frames k - 2 and k - 1, waiting for their neighbour in time
+    for vertices, seen, field, at, payload in frames:
+        carried, observed = carry_frame(template, vertices, seen)
+        offsets = (
+            free_offsets(template, carried, field, at) if field is not None
+            else np.zeros((len(template.free), 3))
+        )
+        frame = (carried, observed, offsets, payload)
+        if current is not None:
+            yield _moved(template, current, before if count > 2 else None, frame)
+        before, current = current, frame
+    if current is not None:
+        yield _moved(template, current, None, None)
+
+
+def _moved(template: ClosedTemplate, frame, before, after):
+    """``frame`` (carried, observed, offsets, payload) with its free vertices moved by its
+    offsets, smoothed with its neighbours' when it has both."""
+    carried, observed, offsets, payload = frame
+    if before is not None and after is not None:
+        offsets = 0.25 * before[2] + 0.5 * offsets + 0.25 * after[2]
+    carried = carried.copy()
+    carried[template.free] += offsets
+    return carried, observed, payload
+
+
+def lost_fraction(rest: np.ndarray, first: np.ndarray, faces: np.ndarray) -> float:
+    """The fraction of the open mesh's first-frame vertices (``first`` [V, 3], ``faces``)
+    farther than two of its median edges from the closed template ``rest`` [N, 3]: parts the
+    flow does not have (:class:`Closing` ``lost``)."""
+    edge = median_edge_length(first, faces)
+    distance, _ = cKDTree(rest).query(first, distance_upper_bound=2.0 * edge, workers=-1)
+    return float(np.mean(~np.isfinite(distance)))
 
 
 def free_offsets(template: ClosedTemplate, vertices: np.ndarray, field, time: float) -> np.ndarray:
@@ -401,10 +448,7 @@ def close_on_flow(
             "sound", len(lost), len(off_surface), lost[0], 100 * OFF_SURFACE_WARNING,
             100 * off_surface.max(), int(off_surface.argmax()),
         )
-    start = np.asarray(opened.vertices[0])
-    edge = median_edge_length(start, opened.faces)
-    distance, _ = cKDTree(animation.rest).query(start, distance_upper_bound=2.0 * edge, workers=-1)
-    lost = float(np.mean(~np.isfinite(distance)))
+    lost = lost_fraction(animation.rest, np.asarray(opened.vertices[0]), opened.faces)
     if lost > LOST_WARNING:
         log.warning(
             "watertight: the flow's surface lacks %.1f%% of the tracked first frame (a thin "

@@ -27,6 +27,7 @@ run again (a fraction of the time).
 
 from __future__ import annotations
 
+import functools
 import logging
 import os
 import tempfile
@@ -36,13 +37,11 @@ from pathlib import Path
 from typing import NamedTuple
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from fourd.animation import MeshSequence
 from fourd.cache import subfolder
 from fourd.errors import InputError
 from fourd.frame_source import FrameSource
-from fourd.geometry.meshes import median_edge_length
 from fourd.geometry.neighbors import point_spacing
 from fourd.geometry.surface_fit import fit_along_normals
 from fourd.io.npz import npz_frame_reader, npz_frames, streamed_output
@@ -217,13 +216,7 @@ class _Run:
     def _template(self, opened: Path, meshes: Path, spacing: float):
         """The closed template (step 3) and the fraction of the kinematic first frame it
         lacks (:class:`fourd.methods.watertight.Closing`'s ``lost``)."""
-        first = next(
-            (points for k in range(len(self.source))
-             if len(points := self.source.read(k, k + 1).frames[0].points) >= 4),
-            None,
-        )
-        if first is None:
-            raise InputError("no frame has points")
+        first = self._first_points
         cell = kinematic.template_cell_size(
             first, point_spacing(first), kinematic.Options().template_vertices
         )
@@ -239,9 +232,7 @@ class _Run:
             start, faces, field, float(self.source.times[0]), bounds=field.bounds(),
             cell_size=cell, reach=0.5 * spacing,
         )
-        edge = median_edge_length(start, faces)
-        distance, _ = cKDTree(template.rest).query(start, distance_upper_bound=2.0 * edge)
-        return template, float(np.mean(~np.isfinite(distance)))
+        return template, watertight.lost_fraction(template.rest, start, faces)
 
     def _open(self, opened: Path, diagnostics: AutoDiagnostics) -> StreamSummary:
         """Step 5 on the kinematic result."""
@@ -272,8 +263,16 @@ class _Run:
     def _scales(self) -> tuple[float, float] | None:
         if not self.options.fit_frames:
             return None
-        first = fit_points([f.points for f in self.source.read(0, 1).frames])[0]
-        return fit_scales(first, self.options)
+        return fit_scales(fit_points([self._first_points])[0], self.options)
+
+    @functools.cached_property
+    def _first_points(self) -> np.ndarray:
+        """The points [P, 3] of the first frame with at least four."""
+        for k in range(len(self.source)):
+            points = self.source.read(k, k + 1).frames[0].points
+            if len(points) >= 4:
+                return points
+        raise InputError("no frame has points")
 
     def _frames(self) -> Iterator:
         """The source's frames in order, read :data:`FIT_CHUNK` at a time."""
@@ -302,56 +301,29 @@ def _closed_frames(
     off_surface: list,
 ) -> Iterator[tuple[np.ndarray, np.ndarray, np.ndarray]]:
     """Step 4: the closed template at every frame, in order, as (vertices [N, 3], observed
-    [N], the frame's points [P, 3]); the off-surface fraction of every frame
-    (:func:`fourd.methods.watertight.off_surface_fraction`) appended to ``off_surface``.
+    [N], the frame's points [P, 3]) (:func:`fourd.methods.watertight.closed_frames`); the
+    off-surface fraction of every frame (:func:`fourd.methods.watertight.off_surface_fraction`)
+    appended to ``off_surface``.
 
     ``opened`` is the kinematic result's reader, ``meshes`` the flow's (vertices, faces) per
     frame, ``frames`` the input frames, ``spacing`` the signed distances' grid spacing."""
-    before = current = None  # frames k - 2 and k - 1, waiting for their neighbour in time
-    smooth = len(times) > 2
-    for k, (vertices, seen, mesh, frame) in enumerate(
-        zip(opened.frames(), opened.observed, meshes, frames, strict=True)
+    def inputs():
+        for k, (vertices, seen, mesh, frame) in enumerate(
+            zip(opened.frames(), opened.observed, meshes, frames, strict=True)
+        ):
+            at = float(times[k])
+            field = flow.mesh_distance(*mesh, at, spacing) if len(mesh[1]) else None
+            yield vertices, seen, field, at, (field, at, frame.points)
+
+    for vertices, observed, (field, at, points) in watertight.closed_frames(
+        template, inputs(), len(times)
     ):
-        carried, observed = watertight.carry_frame(template, vertices, seen)
-        field = flow.mesh_distance(*mesh, float(times[k]), spacing) if len(mesh[1]) else None
-        offsets = (
-            watertight.free_offsets(template, carried, field, float(times[k]))
-            if field is not None else np.zeros((len(template.free), 3))
+        off_surface.append(
+            0.0 if field is None else watertight.off_surface_fraction(
+                vertices, field, at, watertight.OFF_SURFACE_CELLS * spacing, points
+            )
         )
-        frame_k = _Carried(carried, observed, offsets, field, float(times[k]), frame.points)
-        if current is not None:
-            yield _placed(current, before if smooth else None, frame_k, template, spacing, off_surface)
-        before, current = current, frame_k
-    yield _placed(current, None, None, template, spacing, off_surface)
-
-
-class _Carried(NamedTuple):
-    """One frame of step 4 before the smoothing over time."""
-
-    vertices: np.ndarray
-    observed: np.ndarray
-    offsets: np.ndarray
-    field: object
-    time: float
-    points: np.ndarray
-
-
-def _placed(frame: _Carried, before: _Carried | None, after: _Carried | None,
-            template: watertight.ClosedTemplate, spacing: float, off_surface: list):
-    """``frame`` with its free vertices moved by its offsets, smoothed [1, 2, 1] with its
-    neighbours' (the first and last frames keep theirs), and its off-surface fraction."""
-    offsets = frame.offsets
-    if before is not None and after is not None:
-        offsets = 0.25 * before.offsets + 0.5 * offsets + 0.25 * after.offsets
-    vertices = frame.vertices.copy()
-    vertices[template.free] += offsets
-    off_surface.append(
-        0.0 if frame.field is None else watertight.off_surface_fraction(
-            vertices, frame.field, frame.time,
-            watertight.OFF_SURFACE_CELLS * spacing, frame.points,
-        )
-    )
-    return vertices, frame.observed, frame.points
+        yield vertices, observed, points
 
 
 def _fitted(frames: Iterator, faces: np.ndarray, count: int, options: Options,

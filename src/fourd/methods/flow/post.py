@@ -414,9 +414,7 @@ def redistanced(
         if len(faces) == 0:
             out[i] = field.values[s]
             continue
-        normals = vertex_normals(vertices, faces)
-        distance, nearest = cKDTree(vertices).query(nodes, workers=workers)
-        plane = np.einsum("ij,ij->i", nodes - vertices[nearest], normals[nearest])
+        distance, plane = _nearest_vertex_distances(vertices, faces, nodes, workers)
         band = (distance < near * field.spacing).reshape(shape)
         inside = field.values[s] < 0
         for phase in (inside, ~inside):
@@ -467,9 +465,7 @@ def mesh_distance(
     origin = vertices.min(axis=0) - padding * spacing
     shape = tuple(np.ceil((vertices.max(axis=0) - origin) / spacing).astype(int) + padding + 1)
     nodes = origin + spacing * np.indices(shape).reshape(3, -1).T
-    normals = vertex_normals(vertices, faces)
-    distance, nearest = cKDTree(vertices).query(nodes, workers=workers)
-    plane = np.einsum("ij,ij->i", nodes - vertices[nearest], normals[nearest])
+    distance, plane = _nearest_vertex_distances(vertices, faces, nodes, workers)
     band = distance < near * spacing
     labels, count = ndimage.label(~band.reshape(shape))
     border = np.zeros(shape, dtype=bool)
@@ -483,3 +479,11 @@ def mesh_distance(
     return FlowField(
         values.reshape(1, *shape).astype(np.float32), origin, spacing, np.array([float(time)])
     )
+
+
+def _nearest_vertex_distances(vertices, faces, nodes, workers) -> tuple[np.ndarray, np.ndarray]:
+    """Per node [M, 3], the distance to the mesh's nearest vertex and the signed distance to
+    that vertex's tangent plane (its area-weighted normal); ([M], [M])."""
+    normals = vertex_normals(vertices, faces)
+    distance, nearest = cKDTree(vertices).query(nodes, workers=workers)
+    return distance, np.einsum("ij,ij->i", nodes - vertices[nearest], normals[nearest])
