@@ -51,9 +51,15 @@ def test_a_turning_blob_comes_out_on_its_scans_and_turning_with_them():
     anim = reconstruct(scans, method="surfels", **QUICK)
     assert isinstance(anim, AnimatedMesh)
     assert anim.vertices.shape[0] == frames and anim.vertices.shape[1] > 500
-    assert np.array_equal(anim.rest, anim.vertices[0])
     spacing = point_spacing(scans.frames[0].points)
     sampling = Options().sampling * spacing
+    # the rest is the urshape: the mesh carried to it, the shape of every frame
+    assert not np.allclose(anim.rest, anim.vertices[0])
+    for t in range(frames):
+        fit = procrustes(anim.rest, anim.vertices[t])
+        gap = np.linalg.norm(anim.rest @ fit.rotation.T + fit.translation - anim.vertices[t], axis=1)
+        # measured: 0.007-0.009 eps_sampl mean, 95th percentile 0.017
+        assert gap.mean() < 0.03 * sampling
     for t in range(frames):
         points, vertices = scans.frames[t].points, anim.vertices[t]
         chamfer = 0.5 * (

@@ -68,15 +68,27 @@ def _terms(state, graph, data):
         "laplace": lambda s, d: laplace_term(s, graph, 0.2, derivatives=d),
         "rigid": lambda s, d: rigid_term(s, graph, 0.9, 0.4, derivatives=d),
         "accel": lambda s, d: accel_term(s, 0.6, 0.25, derivatives=d),
+        "rigid_urshape": lambda s, d: rigid_term(s, graph, 0.9, 0.4, derivatives=d, urshape=True),
+        "accel_after_urshape": lambda s, d: accel_term(s, 0.6, 0.25, derivatives=d, first=1),
     }
 
 
 @pytest.mark.parametrize(
     "name",
-    ["match", "match_alignment", "smooth_position", "smooth_normal", "laplace", "rigid", "accel"],
+    [
+        "match",
+        "match_alignment",
+        "smooth_position",
+        "smooth_normal",
+        "laplace",
+        "rigid",
+        "accel",
+        "rigid_urshape",
+        "accel_after_urshape",
+    ],
 )
 def test_jacobian_and_gradient_match_central_differences(name):
-    state, graph, data = _problem()
+    state, graph, data = _problem(frames=4)
     evaluate = _terms(state, graph, data)[name]
     at = evaluate(state, True)
     size = layout(state).size

@@ -22,11 +22,12 @@ by a statistical model and assembled frame range by frame range (Wand et al. 200
    (non-rigid ICP both ways, the one with less stretch kept), stitching with the stretch filter, hole filling by region growing in time,
    greedy resampling and global optimisation, then a final global optimisation with
    increased rigidity and acceleration weights;
-8. :mod:`.pipeline` -- all of it, and the mesh of :mod:`.meshing`.
-
-Not yet as in the paper: the urshape (a data-free frame tied to every frame by the rigidity
-prior) is not computed, the mesh is carried from one frame (``reference``) of the
-trajectories and that frame's mesh is the result's ``rest``.
+8. :mod:`.urshape` -- the urshape (sec. 3.2): a data-free frame tied to every frame by the
+   rigidity prior, optimised with the trajectories after the final global optimisation
+   (``Options.urshape`` "final") or after every merge's as well (``"merges"``, the paper's
+   schedule);
+9. :mod:`.pipeline` -- all of it, and the mesh of :mod:`.meshing`: one frame's mesh carried
+   to every frame and to the urshape, which is the result's ``rest``.
 
 Beyond the paper (measured in benchmarks/METHODS.md): the alignment pulls towards the right
 frame's measured points (not its surfels) and starts from a rigid point-to-plane ICP
@@ -88,6 +89,7 @@ from fourd.methods.surfels.topology import (
     sample_surfels,
     sampling_distance,
 )
+from fourd.methods.surfels.urshape import Urshape, UrshapeFit, fit_urshape, with_urshape
 
 __all__ = [
     "COMMON_OPTIONS",
@@ -109,6 +111,8 @@ __all__ = [
     "SurfelState",
     "Term",
     "Topology",
+    "Urshape",
+    "UrshapeFit",
     "Weights",
     "accel_term",
     "build_topology",
@@ -116,6 +120,7 @@ __all__ = [
     "bind_vertices",
     "carry",
     "fit_rotations",
+    "fit_urshape",
     "frame_data",
     "gauss_newton",
     "laplace_term",
@@ -136,4 +141,5 @@ __all__ = [
     "surfel_state",
     "tangent_basis",
     "total_energy",
+    "with_urshape",
 ]

@@ -11,11 +11,9 @@ until one model spans every frame. One merge:
 4. *resampling* to ``eps_sampl`` (:func:`.resample.redundant_surfels`) and the topology
    rebuilt with the stretch filter (edges whose length changes by more than ``max_stretch``
    over the trajectories are rejected);
-5. *global optimisation* of all trajectories of the merged range with the full energy.
-
-Not (yet) done as in the paper: the urshape (a data-free frame joined to every frame by the
-rigidity prior) is not computed; the mesh is carried from one frame of the trajectories
-instead.
+5. *global optimisation* of all trajectories of the merged range with the full energy, then,
+   when the schedule asks, of the trajectories together with the range's urshape (computed
+   from scratch at each level, :mod:`.urshape`).
 
 References
 ----------
@@ -41,6 +39,7 @@ from fourd.methods.surfels.optimizer import GaussNewtonOptions, gauss_newton
 from fourd.methods.surfels.resample import redundant_surfels
 from fourd.methods.surfels.state import SurfelState
 from fourd.methods.surfels.topology import build_topology
+from fourd.methods.surfels.urshape import fit_urshape
 
 log = logging.getLogger("fourd.methods.surfels.assembly")
 
@@ -61,6 +60,8 @@ class Schedule(NamedTuple):
         frame.
     match : MatchOptions
         The data term's association outside the alignment (the ``"global"`` regime).
+    urshape : bool
+        Each merge ends with the urshape's optimisation (the paper's schedule).
     """
 
     sampling: float
@@ -71,6 +72,7 @@ class Schedule(NamedTuple):
     optimize: GaussNewtonOptions
     fill: GaussNewtonOptions
     match: MatchOptions
+    urshape: bool = False
 
 
 def range_data(frames: list, start: int, stop: int):
@@ -87,8 +89,12 @@ def optimize_model(
     weights: Weights,
     options: GaussNewtonOptions,
     match: MatchOptions | None = None,
+    *,
+    urshape: bool = False,
 ) -> Model:
-    """Global optimisation of all trajectories of ``model`` against its frames' data."""
+    """Global optimisation of all trajectories of ``model`` against its frames' data; with
+    ``urshape``, then of the trajectories together with the urshape (:func:`.fit_urshape`,
+    the same weights and options; the model's earlier urshape is not used)."""
     data = range_data(frames, model.start, model.stop)
     result = gauss_newton(model.state, model.topology, data, weights, match, options)
     log.debug(
@@ -101,8 +107,14 @@ def optimize_model(
         len(result.cg_iterations),
         result.cg_iterations.tolist(),
     )
-    observed = observed_surfels(result.state, data, model.topology.radius)
-    return Model(result.state, model.topology, model.start, observed)
+    state, rest = result.state, None
+    if urshape:
+        fitted = fit_urshape(state, model.topology, data, weights, match, options)
+        state, rest = fitted.state, fitted.urshape
+        energies = fitted.optimization.energies
+        log.debug("urshape: energy %.4g -> %.4g", energies[0], energies[-1])
+    observed = observed_surfels(state, data, model.topology.radius)
+    return Model(state, model.topology, model.start, observed, rest)
 
 
 def merge(left: Model, right: Model, frames: list, schedule: Schedule) -> Model:
@@ -204,7 +216,10 @@ def merge(left: Model, right: Model, frames: list, schedule: Schedule) -> Model:
         len(topology.edges),
     )
     model = Model(resampled, topology, left.start, observed[:, keep])
-    return optimize_model(model, frames, schedule.weights, schedule.optimize, schedule.match)
+    return optimize_model(
+        model, frames, schedule.weights, schedule.optimize, schedule.match,
+        urshape=schedule.urshape,
+    )
 
 
 def _first_frame(model: Model) -> Model:

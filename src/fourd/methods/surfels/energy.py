@@ -78,9 +78,14 @@ def total_energy(
     *,
     derivatives: bool = True,
     columns: np.ndarray | None = None,
+    urshape: bool = False,
 ) -> Energy:
     """Eq. (3) with the association ``matches`` held fixed (default weights and options:
     :class:`Weights`, :class:`~.match.MatchOptions`).
+
+    With ``urshape`` frame 0 is the urshape (sec. 3.2): a frame without data that the
+    rigidity prior ties to every other frame (:func:`~.motion.rigid_term`), in place of the
+    ties between consecutive frames; the acceleration prior leaves it out.
 
     ``columns`` (int [k], sorted unknowns of the layout) restricts the gradient [k] and
     Hessian [k, k] to those unknowns (the others held fixed): the Jacobians lose the other
@@ -100,9 +105,12 @@ def total_energy(
     if w.laplace > 0:
         parts["laplace"] = laplace_term(state, topology, w.laplace, derivatives=d)
     if (w.rigid > 0 or w.rigid_normal > 0) and state.frames > 1:
-        parts["rigid"] = rigid_term(state, topology, w.rigid, w.rigid_normal, derivatives=d)
-    if (w.accel > 0 or w.accel_normal > 0) and state.frames > 2:
-        parts["accel"] = accel_term(state, w.accel, w.accel_normal, derivatives=d)
+        parts["rigid"] = rigid_term(
+            state, topology, w.rigid, w.rigid_normal, derivatives=d, urshape=urshape
+        )
+    first = 1 if urshape else 0
+    if (w.accel > 0 or w.accel_normal > 0) and state.frames - first > 2:
+        parts["accel"] = accel_term(state, w.accel, w.accel_normal, derivatives=d, first=first)
     values = {name: part.value for name, part in parts.items()}
     total = float(sum(values.values()))
     if not derivatives:

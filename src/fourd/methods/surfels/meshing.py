@@ -55,6 +55,7 @@ from fourd.geometry.grid import Grid, fit_grid
 from fourd.geometry.implicit import imls_grid
 from fourd.geometry.marching import compact, marching_cubes
 from fourd.methods.surfels.state import SurfelState, tangent_basis
+from fourd.methods.surfels.urshape import Urshape, with_urshape
 
 log = logging.getLogger("fourd.methods.surfels.meshing")
 
@@ -377,6 +378,7 @@ def surfel_mesh(
     *,
     reference: int = 0,
     observed: np.ndarray | None = None,
+    urshape: Urshape | None = None,
     times: np.ndarray | None = None,
     options: MeshingOptions | None = None,
 ) -> AnimatedMesh:
@@ -391,18 +393,22 @@ def surfel_mesh(
     sampling : float
         ``eps_sampl`` (input units).
     reference : int
-        The frame that is meshed; its mesh is the result's ``rest``.
+        The frame that is meshed; without ``urshape`` its mesh is the result's ``rest``.
     observed : ndarray bool [T, S], optional
         Surfels with data in each frame (default all). A vertex is observed in frame ``t``
         when the weight of that frame's observed surfels at it reaches the border clipping
         threshold (``clip`` times the median weight sum at the surfels).
+    urshape : Urshape, optional
+        The trajectories' urshape (:mod:`.urshape`): the mesh is carried to it too, and that
+        is the result's ``rest``.
     times : ndarray [T], optional
     options : MeshingOptions, optional
 
     Returns
     -------
     AnimatedMesh
-        ``vertices[reference]`` is ``rest``, exactly.
+        ``vertices[reference]`` is the reference frame's mesh, exactly; ``rest`` is that mesh
+        or, with ``urshape``, the mesh carried to the urshape.
     """
     options = MeshingOptions() if options is None else options
     if not -state.frames <= reference < state.frames:
@@ -414,6 +420,21 @@ def surfel_mesh(
     if observed.shape != (state.frames, state.count):
         raise ValueError(
             f"observed must have shape [{state.frames}, {state.count}], got {list(observed.shape)}"
+        )
+    if urshape is not None:
+        joined = surfel_mesh(
+            with_urshape(state, urshape),
+            sampling,
+            reference=reference + 1,
+            observed=np.concatenate([np.ones((1, state.count), dtype=bool), observed]),
+            options=options,
+        )
+        return AnimatedMesh(
+            faces=joined.faces,
+            vertices=joined.vertices[1:],
+            times=times,
+            observed=joined.observed[1:],
+            rest=joined.vertices[0],
         )
     positions, normals = state.positions[reference], state.normals[reference]
     mesh = mesh_frame(positions, normals, sampling, options=options)

@@ -16,6 +16,7 @@ import numpy as np
 from fourd.methods.surfels.match import Data, associate
 from fourd.methods.surfels.state import SurfelState
 from fourd.methods.surfels.topology import Topology
+from fourd.methods.surfels.urshape import Urshape
 
 
 @dataclass(frozen=True)
@@ -30,12 +31,15 @@ class Model:
         Sequence index of the first frame.
     observed : bool [T, S]
         Surfels with data in each frame (the nearest surfel of some point within ``eps_top``).
+    urshape : Urshape or None
+        The range's urshape, when it was computed (:mod:`.urshape`).
     """
 
     state: SurfelState
     topology: Topology
     start: int
     observed: np.ndarray
+    urshape: Urshape | None = None
 
     def __post_init__(self):
         shape = (self.state.frames, self.state.count)
@@ -45,6 +49,8 @@ class Model:
             )
         if self.topology.count != self.state.count:
             raise ValueError("the topology must have one node per surfel")
+        if self.urshape is not None and self.urshape.rotations.shape[:2] != shape:
+            raise ValueError("the urshape must reach every frame of the model's surfels")
 
     @property
     def stop(self) -> int:
@@ -54,7 +60,14 @@ class Model:
 
 def pack_model(model: Model) -> dict[str, np.ndarray]:
     """``model`` as arrays for :mod:`fourd.cache`."""
-    return {
+    urshape = {}
+    if model.urshape is not None:
+        urshape = {
+            "urshape_positions": model.urshape.positions,
+            "urshape_normals": model.urshape.normals,
+            "urshape_rotations": model.urshape.rotations,
+        }
+    return urshape | {
         "positions": model.state.positions,
         "normals": model.state.normals,
         "rotations": model.state.rotations,
@@ -69,7 +82,14 @@ def unpack_model(arrays: dict) -> Model:
     """The :class:`Model` of :func:`pack_model`'s arrays."""
     state = SurfelState(arrays["positions"], arrays["normals"], arrays["rotations"])
     topology = Topology(arrays["edges"].astype(np.int64), state.count, float(arrays["radius"]))
-    return Model(state, topology, int(arrays["start"]), arrays["observed"].astype(bool))
+    urshape = None
+    if "urshape_positions" in arrays:
+        urshape = Urshape(
+            arrays["urshape_positions"], arrays["urshape_normals"], arrays["urshape_rotations"]
+        )
+    return Model(
+        state, topology, int(arrays["start"]), arrays["observed"].astype(bool), urshape
+    )
 
 
 def observed_surfels(state: SurfelState, data: Data, radius: float) -> np.ndarray:

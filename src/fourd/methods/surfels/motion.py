@@ -1,6 +1,7 @@
 """The 4D priors: local rigidity between consecutive frames (eq. 9, on the neighbour offsets
-and on the normals) and little acceleration along the trajectories (eq. 10, positions and
-normals); and the initial local rotations (a least-squares fit per neighbourhood).
+and on the normals), or between the urshape and every frame (sec. 3.2 "Global Optimization and
+the Urshape"), and little acceleration along the trajectories (eq. 10, positions and normals);
+and the initial local rotations (a least-squares fit per neighbourhood).
 
 Each term returns a :class:`~.term.Term` over the unknowns of :class:`~.state.Layout`.
 
@@ -29,32 +30,39 @@ def rigid_term(
     normal_weight: float = 0.0,
     *,
     derivatives: bool = True,
+    urshape: bool = False,
 ) -> Term:
     """Eq. (9): ``w sum_{t < T-1} sum_i sum_{j in N(i)} |A_i^t (s_i^t - s_j^t) - (s_i^{t+1} -
     s_j^{t+1})|^2`` plus the same potential on the normals, ``w_n sum |A_i^t n_i^t -
     n_i^{t+1}|^2`` (each surfel's own normal). Residuals ``[T-1, 2E, 3]`` then
-    ``[T-1, S, 3]``; the rotations enter as ``(I + C) A`` (eq. 12)."""
+    ``[T-1, S, 3]``; the rotations enter as ``(I + C) A`` (eq. 12).
+
+    With ``urshape`` frame 0 is the urshape and ``A_i^t`` maps it to frame ``t + 1``: every
+    pair is ``(0, t + 1)`` instead of ``(t, t + 1)``, and consecutive frames are not tied
+    (sec. 3.2, "Global Optimization and the Urshape")."""
     lay = layout(state)
     steps = state.frames - 1
     i, j = topology.directed.T
     root, root_n = np.sqrt(weight), np.sqrt(normal_weight)
+    origin = np.zeros(steps, dtype=np.int64) if urshape else np.arange(steps)
     rotations = state.rotations[:, i]
-    before = state.positions[:-1, i] - state.positions[:-1, j]
+    before = state.positions[origin][:, i] - state.positions[origin][:, j]
     after = state.positions[1:, i] - state.positions[1:, j]
     predicted = np.einsum("teab,teb->tea", rotations, before)
     edge_residuals = root * (predicted - after)
-    turned = np.einsum("tsab,tsb->tsa", state.rotations, state.normals[:-1])
+    turned = np.einsum("tsab,tsb->tsa", state.rotations, state.normals[origin])
     normal_residuals = root_n * (turned - state.normals[1:])
     residuals = np.concatenate([edge_residuals.ravel(), normal_residuals.ravel()])
     if not derivatives:
         return term(residuals, None)
     blocks = Blocks(residuals.size, lay.size)
     t = np.arange(steps)[:, None]
+    o = origin[:, None]
     rows = 3 * np.arange(steps * len(i)).reshape(steps, len(i))
     eye = np.eye(3)
     blocks.add(rows, lay.rotation(t, i), -root * skew(predicted))
-    blocks.add(rows, lay.position(t, i), root * rotations)
-    blocks.add(rows, lay.position(t, j), -root * rotations)
+    blocks.add(rows, lay.position(o, i), root * rotations)
+    blocks.add(rows, lay.position(o, j), -root * rotations)
     blocks.add(rows, lay.position(t + 1, i), -root * eye)
     blocks.add(rows, lay.position(t + 1, j), root * eye)
     if normal_weight > 0 and steps > 0:
@@ -62,20 +70,26 @@ def rigid_term(
         rows = edge_residuals.size + 3 * (t * state.count + surfels)
         basis = tangent_basis(state.normals)
         blocks.add(rows, lay.rotation(t, surfels), -root_n * skew(turned))
-        blocks.add(rows, lay.normal(t, surfels), root_n * state.rotations @ basis[:-1])
+        blocks.add(rows, lay.normal(o, surfels), root_n * state.rotations @ basis[origin])
         blocks.add(rows, lay.normal(t + 1, surfels), -root_n * basis[1:])
     return term(residuals, blocks)
 
 
 def accel_term(
-    state: SurfelState, weight: float, normal_weight: float = 0.0, *, derivatives: bool = True
+    state: SurfelState,
+    weight: float,
+    normal_weight: float = 0.0,
+    *,
+    derivatives: bool = True,
+    first: int = 0,
 ) -> Term:
-    """Eq. (10): ``w sum_{0 < t < T-1} sum_i |s_i^{t-1} - 2 s_i^t + s_i^{t+1}|^2`` plus the
-    same on the normals with ``normal_weight``; residuals ``[T-2, S, 3]`` twice."""
+    """Eq. (10): ``w sum_{first < t < T-1} sum_i |s_i^{t-1} - 2 s_i^t + s_i^{t+1}|^2`` plus the
+    same on the normals with ``normal_weight``; residuals ``[T-2-first, S, 3]`` twice.
+    ``first`` 1 leaves out frame 0 when it is the urshape (not a point in time)."""
     lay = layout(state)
     root, root_n = np.sqrt(weight), np.sqrt(normal_weight)
-    p, n = state.positions, state.normals
-    inner = max(state.frames - 2, 0)
+    p, n = state.positions[first:], state.normals[first:]
+    inner = max(state.frames - first - 2, 0)
     position_residuals = root * (p[:-2] - 2 * p[1:-1] + p[2:])
     normal_residuals = root_n * (n[:-2] - 2 * n[1:-1] + n[2:])
     residuals = np.concatenate([position_residuals.ravel(), normal_residuals.ravel()])
@@ -85,11 +99,12 @@ def accel_term(
     t = np.arange(1, inner + 1)[:, None]
     surfels = np.arange(state.count)
     rows = 3 * ((t - 1) * state.count + surfels)
+    t = t + first
     eye = np.eye(3)
     for shift, factor in ((-1, 1.0), (0, -2.0), (1, 1.0)):
         blocks.add(rows, lay.position(t + shift, surfels), root * factor * eye)
     if normal_weight > 0 and inner > 0:
-        basis = tangent_basis(n)
+        basis = tangent_basis(state.normals)
         rows = rows + position_residuals.size
         for shift, factor in ((-1, 1.0), (0, -2.0), (1, 1.0)):
             blocks.add(
@@ -98,12 +113,16 @@ def accel_term(
     return term(residuals, blocks)
 
 
-def fit_rotations(positions: np.ndarray, topology: Topology) -> np.ndarray:
+def fit_rotations(
+    positions: np.ndarray, topology: Topology, *, urshape: bool = False
+) -> np.ndarray:
     """The rotations [T-1, S, 3, 3] best mapping each surfel's neighbour offsets from frame
-    ``t`` to ``t + 1`` (eq. 9 minimised over ``A`` alone); identity without neighbours."""
+    ``t`` (frame 0, the urshape, with ``urshape``) to ``t + 1`` (eq. 9 minimised over ``A``
+    alone); identity without neighbours."""
     positions = np.asarray(positions, dtype=np.float64)
     i, j = topology.directed.T
-    before = positions[:-1, i] - positions[:-1, j]
+    origin = np.zeros(len(positions) - 1, dtype=np.int64) if urshape else np.arange(len(positions) - 1)
+    before = positions[origin][:, i] - positions[origin][:, j]
     after = positions[1:, i] - positions[1:, j]
     covariances = np.zeros((len(positions) - 1, topology.count, 3, 3))
     np.add.at(covariances, (slice(None), i), before[..., :, None] * after[..., None, :])

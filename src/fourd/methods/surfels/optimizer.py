@@ -87,6 +87,7 @@ def gauss_newton(
     options: GaussNewtonOptions | None = None,
     *,
     free: np.ndarray | None = None,
+    urshape: bool = False,
 ) -> Optimization:
     """Minimise eq. (3) from ``state``; the data term's scale is ``topology.radius``
     (defaults: :class:`~.energy.Weights`, :class:`~.match.MatchOptions`,
@@ -94,7 +95,8 @@ def gauss_newton(
 
     ``free`` (bool [:attr:`~.state.Layout.size`], see :func:`free_unknowns`) restricts the
     steps to those unknowns, the others held as boundary conditions (the assembly's
-    alignment of one frame and its hole filling of new surfels only, sec. 3.2); None: all."""
+    alignment of one frame and its hole filling of new surfels only, sec. 3.2); None: all.
+    ``urshape``: frame 0 of ``state`` is the urshape (:func:`~.energy.total_energy`)."""
     weights = weights or Weights()
     match = match or MatchOptions()
     options = options or GaussNewtonOptions()
@@ -104,7 +106,9 @@ def gauss_newton(
     columns = None if free is None else np.flatnonzero(free)
     for _ in range(options.iterations + 1):
         matches = associate(state, data, topology.radius, match)
-        current = total_energy(state, topology, data, matches, weights, match, columns=columns)
+        current = total_energy(
+            state, topology, data, matches, weights, match, columns=columns, urshape=urshape
+        )
         energies.append(current.value)
         if len(energies) > options.iterations:
             break
@@ -118,7 +122,7 @@ def gauss_newton(
             trial = retract(state, scale * step)
             again = associate(trial, data, topology.radius, match)
             value = total_energy(
-                trial, topology, data, again, weights, match, derivatives=False
+                trial, topology, data, again, weights, match, derivatives=False, urshape=urshape
             ).value
             if value < current.value:
                 accepted = trial
@@ -132,7 +136,8 @@ def gauss_newton(
             matches = associate(state, data, topology.radius, match)
             energies.append(
                 total_energy(
-                    state, topology, data, matches, weights, match, derivatives=False
+                    state, topology, data, matches, weights, match, derivatives=False,
+                    urshape=urshape,
                 ).value
             )
             converged = True

@@ -13,6 +13,7 @@ MIN_FRAMES = 2
 #: One connectivity: one frame's mesh carried to every frame by the surfels (sec. 3.3).
 RESULT = AnimatedMesh
 #: The options users change first (``fourd options surfels``).
+URSHAPE_STAGES = ("final", "merges", "off")
 COMMON_OPTIONS = ("sampling", "noise", "rigid", "accel", "iterations", "final_iterations")
 
 
@@ -81,7 +82,13 @@ class Options:
     fill_iterations : int
         Gauss-Newton steps of the local optimisation of each frame filled in.
     final_iterations : int
-        Gauss-Newton steps of the final global optimisation of all frames.
+        Gauss-Newton steps of the final global optimisation of all frames (0: no final
+        pass, and no urshape unless the merges computed one).
+    urshape : str
+        When the urshape is computed (sec. 3.2, :mod:`.urshape`): ``"final"`` after the final
+        global optimisation; ``"merges"`` as the paper does, after the global optimisation of
+        every merge (from scratch at each level) and after the final one; ``"off"``: none,
+        and the reference frame's mesh is the result's ``rest``.
     cg_tolerance : float
         Relative residual at which each step's conjugate gradients stop.
     cg_iterations : int
@@ -95,8 +102,8 @@ class Options:
     mesh_clip : float
         Meshing: border clipping threshold (:class:`~.meshing.MeshingOptions` ``clip``).
     reference : int
-        The frame whose surfels are meshed and carried to every other frame (its mesh is the
-        result's ``rest``).
+        The frame whose surfels are meshed and carried to every other frame and to the
+        urshape (the result's ``rest``; without an urshape, this frame's mesh).
     normals_k : int
         Neighbours for PCA normals when the input has none.
     cache_dir : str or None
@@ -125,6 +132,7 @@ class Options:
     iterations: int = 4
     fill_iterations: int = 2
     final_iterations: int = 4
+    urshape: str = "final"
     cg_tolerance: float = 1e-3
     cg_iterations: int = 50
     mesh_sigma: float = 0.75
@@ -164,6 +172,8 @@ class Options:
         ):
             if getattr(self, name) < 0:
                 raise ValueError(f"{name} must not be negative")
+        if self.urshape not in URSHAPE_STAGES:
+            raise ValueError(f"urshape must be one of {', '.join(URSHAPE_STAGES)}, got {self.urshape!r}")
         if self.normals_k < 3:
             raise ValueError(f"normals_k must be at least 3, got {self.normals_k}")
 

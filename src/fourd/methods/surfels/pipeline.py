@@ -1,7 +1,7 @@
 """The ``surfels`` pipeline (Wand et al. 2007, fig. 1): preprocessing of every frame (tensor
 voting, normals), a seed model per frame, the iterative model assembly in a binary scheme,
-a final global optimisation with increased rigidity and acceleration weights, and the
-animated mesh (sec. 3.3).
+a final global optimisation with increased rigidity and acceleration weights and the
+urshape, and the animated mesh (sec. 3.3).
 """
 
 from __future__ import annotations
@@ -32,8 +32,9 @@ def reconstruct(seq: PointCloudSequence, options: Options | None = None) -> Anim
     et al. (SGP 2007).
 
     Returns an :class:`AnimatedMesh`, one frame per input frame, one connectivity: the mesh of
-    frame ``options.reference``'s surfels carried to every frame by the surfel trajectories;
-    ``observed`` is false where no surfel near a vertex had data in that frame. Raises
+    frame ``options.reference``'s surfels carried to every frame by the surfel trajectories,
+    and to the urshape, which is its ``rest`` (``options.urshape``); ``observed`` is false
+    where no surfel near a vertex had data in that frame. Raises
     :class:`InputError` for a sequence too short or without a surface.
 
     References
@@ -120,6 +121,7 @@ def reconstruct(seq: PointCloudSequence, options: Options | None = None) -> Anim
         optimize=optimize,
         fill=fill,
         match=match,
+        urshape=options.urshape == "merges",
     )
     without = (
         "mesh_sigma",
@@ -146,7 +148,12 @@ def reconstruct(seq: PointCloudSequence, options: Options | None = None) -> Anim
     )
     if options.final_iterations:
         model = optimize_model(
-            model, frames, energy_weights(options, noise, sampling, final=True), final, match
+            model,
+            frames,
+            energy_weights(options, noise, sampling, final=True),
+            final,
+            match,
+            urshape=options.urshape != "off",
         )
     optimized = _time.perf_counter()
     mesh = surfel_mesh(
@@ -154,6 +161,7 @@ def reconstruct(seq: PointCloudSequence, options: Options | None = None) -> Anim
         sampling,
         reference=options.reference,
         observed=model.observed,
+        urshape=model.urshape,
         times=np.asarray(seq.times, dtype=np.float64),
         options=MeshingOptions(
             sigma=options.mesh_sigma, cell=options.mesh_cell, clip=options.mesh_clip
