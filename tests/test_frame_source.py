@@ -46,3 +46,25 @@ def test_slices_and_bad_sources():
         FrameSource(np.array([0.0, 1.0, 1.0]), (), seq.frames.__getitem__)
     with pytest.raises(InputError, match="not a fourd.Frame"):
         FrameSource(np.arange(2.0), (), lambda i: np.zeros((3, 3))).read(0, 1)
+
+
+def test_a_folders_video_comes_with_its_frames_and_its_windows(tmp_path):
+    filmed = fourd.synth.scan(
+        fourd.synth.scene("rigid-turn", frames=4), resolution=24, video=True, video_resolution=16
+    )
+    write_frames(filmed, tmp_path)
+    source = open_sequence(tmp_path)
+    assert source.video is not None and source.video.frame_count == 4
+    part = source.read(1, 3)
+    assert part.video.frame_count == 2
+    np.testing.assert_array_equal(part.video.image(0, 1), filmed.video.image(0, 2))
+    np.testing.assert_array_equal(source[2:].video.image(1, 0), filmed.video.image(1, 2))
+    assert FrameSource.of(filmed).read(0, 2).video.frame_count == 2
+    # the cache key: the same for a rereading of the folder, another for another image
+    from fourd.cache import stage_key
+
+    key = stage_key(source.video.fingerprint())
+    assert stage_key(open_sequence(tmp_path).video.fingerprint()) == key
+    assert stage_key(source.video.select(slice(1, None)).fingerprint()) != key
+    with pytest.raises(InputError, match="the video has 4 images per camera but there are 3"):
+        FrameSource(source.times[:3], source.names[:3], source.read_frame, source.video)

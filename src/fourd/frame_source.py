@@ -3,7 +3,8 @@
 A whole capture (hundreds of frames, tens of thousands of points each) does not fit in memory
 as a :class:`~fourd.PointCloudSequence`; the streamed methods (:mod:`fourd.methods.kinematic.stream`)
 read it a window of frames at a time. A source knows every frame's time and name up front and
-reads a frame's points only when :meth:`FrameSource.read` asks for them.
+reads a frame's points only when :meth:`FrameSource.read` asks for them; its video, when it
+has one, is read the same way (a folder's images are decoded when used).
 """
 
 from __future__ import annotations
@@ -14,6 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from fourd.errors import InputError
+from fourd.io.video import Video
 from fourd.sequence import Frame, PointCloudSequence, check_increasing
 
 
@@ -29,11 +31,14 @@ class FrameSource:
         Where each frame comes from (file names), for messages.
     read_frame : callable(int) -> Frame
         Reads frame ``i`` (its ``time`` is replaced by ``times[i]``); a pure function of ``i``.
+    video : fourd.io.video.Video or None
+        The capture's calibrated video, one image per camera and frame.
     """
 
     times: np.ndarray
     names: tuple[str, ...]
     read_frame: Callable[[int], Frame]
+    video: Video | None = None
 
     def __post_init__(self):
         times = np.asarray(self.times, dtype=np.float64).ravel()
@@ -45,6 +50,11 @@ class FrameSource:
         if len(names) != len(times):
             raise InputError(f"{len(names)} names for {len(times)} frames")
         check_increasing(times, names)
+        if self.video is not None and self.video.frame_count != len(times):
+            raise InputError(
+                f"the video has {self.video.frame_count} images per camera but there are "
+                f"{len(times)} frames"
+            )
         object.__setattr__(self, "times", times)
         object.__setattr__(self, "names", names)
 
@@ -57,7 +67,10 @@ class FrameSource:
             raise TypeError("a FrameSource is sliced; read(i, i + 1) reads one frame")
         chosen = range(len(self))[index]
         return FrameSource(
-            self.times[index], self.names[index], lambda i: self.read_frame(chosen[i])
+            self.times[index],
+            self.names[index],
+            lambda i: self.read_frame(chosen[i]),
+            None if self.video is None else self.video.select(index),
         )
 
     def read(self, start: int, stop: int) -> PointCloudSequence:
@@ -82,12 +95,14 @@ class FrameSource:
                     frame.faces,
                 )
             )
-        return PointCloudSequence(tuple(frames), self.names[start:stop])
+        video = None if self.video is None else self.video.select(slice(start, stop))
+        return PointCloudSequence(tuple(frames), self.names[start:stop], video)
 
     @classmethod
     def of(cls, sequence: PointCloudSequence) -> FrameSource:
-        """The frames of a sequence already in memory (for tests and small captures)."""
-        return cls(sequence.times, sequence.names, sequence.frames.__getitem__)
+        """The frames (and video) of a sequence already in memory (for tests and small
+        captures)."""
+        return cls(sequence.times, sequence.names, sequence.frames.__getitem__, sequence.video)
 
     @classmethod
     def of_frames(cls, frames: Sequence[Frame], names: Sequence[str] = ()) -> FrameSource:

@@ -460,20 +460,24 @@ def load_sequence(path: str | os.PathLike) -> PointCloudSequence:
     with_normals = sum(f.normals is not None for f in frames)
     if 0 < with_normals < len(frames):
         log.warning("%s: %d of %d frames have normals", path, with_normals, len(frames))
-    video = None
+    return PointCloudSequence(tuple(frames), tuple(f.name for f in files), _folder_video(path, count))
+
+
+def _folder_video(path: Path, count: int):
+    """The video of the scan folder ``path`` of ``count`` frames, or None."""
     if (path / CAMERAS_FILE).exists():
-        video = read_video(path, frame_count=count)
-    elif (path / VIDEO_FOLDER).is_dir():
+        return read_video(path, frame_count=count)
+    if (path / VIDEO_FOLDER).is_dir():
         log.warning("%s: a %s/ folder without %s; ignoring the video", path, VIDEO_FOLDER, CAMERAS_FILE)
-    return PointCloudSequence(tuple(frames), tuple(f.name for f in files), video)
+    return None
 
 
 def open_sequence(path: str | os.PathLike) -> FrameSource:
     """A sequence of frames read when asked (:class:`~fourd.frame_source.FrameSource`): a
     folder's frame files are listed now (with ``times.txt`` and ``sensors.json``) and each is
     read when a streamed method asks for it, so a whole capture need not fit in memory. A
-    ``.npz`` or a single frame file is read whole (:func:`load_sequence`). Video is not read
-    (the streamed methods do not use it).
+    ``.npz`` or a single frame file is read whole (:func:`load_sequence`). A folder's video
+    (``cameras.json`` and ``video/``) comes with it, its images decoded when used.
 
     Raises
     ------
@@ -491,7 +495,7 @@ def open_sequence(path: str | os.PathLike) -> FrameSource:
         raw = _read_guarded(files[i])
         return _make_frame(files[i], raw.points, raw.normals, raw.colors, sensors[i], times[i], raw.faces)
 
-    return FrameSource(times, tuple(f.name for f in files), read)
+    return FrameSource(times, tuple(f.name for f in files), read, _folder_video(path, len(files)))
 
 
 def write_frames(

@@ -127,6 +127,21 @@ class Video:
         """The frames ``index`` (a slice) of every camera."""
         return Video(self.cameras, tuple(row[index] for row in self.images))
 
+    def fingerprint(self) -> tuple:
+        """What identifies the video for a cache key (:func:`fourd.cache.stage_key`): the
+        cameras, and every image held in memory or its file's path, size and modification
+        time (a folder's images are not read for it)."""
+        images = []
+        for row in self.images:
+            for item in row:
+                if isinstance(item, np.ndarray):
+                    images.append(item)
+                else:
+                    stat = os.stat(item)
+                    images.append((str(item), stat.st_size, stat.st_mtime_ns))
+        cameras = [(c.name, c.K, c.R, c.t, c.width, c.height) for c in self.cameras]
+        return (cameras, images)
+
 
 def _checked(image: np.ndarray, camera: Camera, where) -> np.ndarray:
     if image.ndim == 2:

@@ -1,6 +1,8 @@
 """``kinematic`` streamed window by window (issue 56): the same animated mesh as the windowed
 run in memory, no jump at the seams, and nothing written when a frame is bad."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -96,3 +98,31 @@ def test_an_interrupted_run_resumes_after_its_last_window(scans, tmp_path):
     np.testing.assert_array_equal(resumed.vertices, whole.vertices)
     np.testing.assert_array_equal(resumed.observed, whole.observed)
     assert reconstruct_streamed(FrameSource.of(scans), tmp_path / "b.npz", options).resumed == 3
+
+
+@pytest.mark.slow
+def test_windows_track_the_videos_anchors_as_the_run_in_memory(tmp_path):
+    """With video, each window tracks the anchors of its frame pairs (the seam's included):
+    the streamed run is the windowed run in memory with the same anchors, and the anchors
+    change it."""
+    frames, window = 8, 4
+    truth = fourd.synth.scene("bending-arm", frames=frames)
+    filmed = fourd.synth.scan(
+        truth, resolution=96, seed=0, appearance="cloth", video=True, video_resolution=64
+    )
+    options = K.Options(
+        template_vertices=800, window=window, temporal_smoothing=0, color_guide=False
+    )
+    memory = K.reconstruct(filmed, options)
+    summary = reconstruct_streamed(FrameSource.of(filmed), tmp_path / "v.npz", options)
+    assert summary.windows == 2
+    streamed = read_npz(summary.output)
+    np.testing.assert_allclose(streamed.vertices, memory.vertices, atol=1e-5)  # float32 file
+    np.testing.assert_array_equal(streamed.observed, memory.observed)
+    plain = reconstruct_streamed(
+        FrameSource.of(filmed),
+        tmp_path / "p.npz",
+        dataclasses.replace(options, video_anchors=False),
+    )
+    moved = np.linalg.norm(read_npz(plain.output).vertices - streamed.vertices, axis=2)
+    assert moved[-1].mean() > 0.01 * median_edge_length(memory.rest, memory.faces)

@@ -125,8 +125,8 @@ class Options:
         the run goes window by window as ``fourd reconstruct --stream`` does
         (:func:`fourd.methods.auto.reconstruct_streamed`): both stages in windows of this many
         frames, the closing and the fit a chunk of frames at a time, so memory is bounded by
-        the window (and the result); the input's video (colour guide, video anchors) is not
-        used then. ``--stream`` with 0 takes 20.
+        the window (and the result); the kinematic stage tracks the input video's anchors
+        window by window then, but has no colour guide. ``--stream`` with 0 takes 20.
     cache_dir : str or None
         Folder where the finished stages are kept: the ``kinematic`` run's in its subfolder
         ``kinematic``, the ``flow`` run's in ``flow`` (see those methods' ``cache_dir``); a
@@ -365,8 +365,8 @@ def _windowed(seq: PointCloudSequence, options: Options) -> Reconstruction:
 
     if seq.video is not None:
         log.warning(
-            "auto: window=%d runs window by window without the capture's video (no colour "
-            "guide or video anchors); window=0 uses it", options.window,
+            "auto: window=%d runs window by window without the colour guide (the video's "
+            "anchors are used); window=0 uses both", options.window,
         )
     with tempfile.TemporaryDirectory(prefix="fourd-auto-") as folder:
         summary = reconstruct_streamed(FrameSource.of(seq), Path(folder) / "result.npz", options)

@@ -11,7 +11,9 @@ a margin of already slid frames on both sides (:class:`_SeamSmoother`), so no fr
 smoothed against a cut; only the motion test's scale (a median over the frames at hand, not
 the whole sequence) differs. What is decided from "the frames" is decided from the first
 window's: the template's size and whether sparse frames are densified (and at which density).
-The colour guide and video anchors are not used (the source has no video).
+With video (``video_anchors``) each window tracks the anchors of its own frame pairs, the
+seam's pair from the previous window's last frame included, on the frames as prepared: the
+pairs, hence the steps, of the run in memory. The colour guide is not used streamed.
 
 Memory holds the frames of about two windows, two 4D fits, the urshape and the output's
 observed flags (one byte per vertex and frame); the positions go to the output as they are
@@ -45,10 +47,10 @@ from fourd.methods.kinematic.field import SpaceTimeField, space_time_points, win
 from fourd.methods.kinematic.frames import densify_density, densify_frames, prepare_frames
 from fourd.methods.kinematic.mpu4d import fit_mpu4d, mpu_arrays, mpu_from_arrays
 from fourd.methods.kinematic.options import MIN_FRAMES, Options
-from fourd.methods.kinematic.pipeline import fit_options
+from fourd.methods.kinematic.pipeline import ANCHOR_SOURCES, fit_options
 from fourd.methods.kinematic.sliding import slide
 from fourd.methods.kinematic.trajectories import smooth_trajectories
-from fourd.sequence import PointCloudSequence
+from fourd.sequence import Frame, PointCloudSequence
 
 log = logging.getLogger("fourd.methods.kinematic")
 
@@ -107,7 +109,8 @@ def reconstruct_streamed(
     cache = StageCache(options.cache_dir)
     spans = window_spans(source.times, options.window or STREAM_WINDOW, options.window_overlap)
     run = _Run(source, options)
-    key = stage_key(STAGE, options, source.times) if cache.enabled else ""
+    video = run.video.fingerprint() if run.video is not None else None
+    key = stage_key(STAGE, options, source.times, video) if cache.enabled else ""
     resumed = 0
     with ExitStack() as stack:
         writer = None
@@ -131,7 +134,8 @@ def reconstruct_streamed(
             writer.write(*written)
             if index + 1 < len(spans):
                 after = spans[index + 1]
-                run.frames.forget_before(min(after.fit_first, after.first - 1))
+                # the sliding starts from the frame before, the anchors' tracking one earlier
+                run.frames.forget_before(min(after.fit_first, after.first - 2))
             log.info(
                 "window %d of %d (frames %d-%d): %.1f s so far",
                 index + 1,
@@ -153,6 +157,7 @@ class _Run:
 
     def __init__(self, source: FrameSource, options: Options):
         self.options, self.times = options, source.times
+        self.video = source.video if options.video_anchors else None
         self.time_unit = float(np.median(np.diff(self.times)))
         self.frames = _Frames(source, options)
         self.smoother = _SeamSmoother(options)
@@ -219,6 +224,7 @@ class _Run:
             ),
             return_steps=True,
             start=self.state,
+            anchors=self._anchors(slid),
         )
         self.state, self.fit = result.state, fits[-1]
         new = slice(0, None) if index == 0 else slice(1, None)
@@ -228,6 +234,32 @@ class _Run:
             times[span.first : span.last + 1],
             final=final,
         )
+
+    def _anchors(self, slid: range) -> list | None:
+        """The sliding's anchors over frames ``slid`` from the video (None without), one entry
+        per frame: the tracks from the frame before (None for the first). The tracking starts
+        a frame earlier where there is one: a pair reuses its first frame's images as the
+        pair before left them, so this is how the run in memory tracks them."""
+        if self.video is None:
+            return None
+        from fourd.appearance import anchors as track_anchors
+
+        first = max(slid.start - 1, 0)
+        tracked = track_anchors(
+            PointCloudSequence(
+                tuple(Frame(self.frames.points(i), time=self.times[i]) for i in range(first, slid.stop)),
+                video=self.video.select(slice(first, slid.stop)),
+            ),
+            texture=self.options.anchor_texture,
+            sources=ANCHOR_SOURCES,
+            remove_outliers=False,
+        )
+        pairs = tracked.pairs[slid.start - first :]
+        log.info(
+            "anchors from the video: %d over %d frame pairs",
+            sum(len(p.source) for p in pairs), len(pairs),
+        )
+        return [None] + [(p.source, p.target, p.confidence) for p in pairs]
 
     def entry(self, written) -> dict[str, np.ndarray]:
         """The cache entry of a finished window: the frames it gave out and everything
