@@ -105,3 +105,24 @@ def test_the_mesh_is_carried_to_the_urshape_as_its_rest():
     one_frame = Urshape(fit.urshape.positions, fit.urshape.normals, fit.urshape.rotations[:1])
     with pytest.raises(ValueError, match="reaches 1 frames"):
         with_urshape(fit.state, one_frame)
+
+
+def test_an_urshape_fitted_alone_leaves_the_trajectories_as_they_were():
+    truth, normals, data = _folding_sheet(3)
+    topology = build_topology(truth, 2.2 * SPACING, reference=0, max_stretch=None)
+    state = surfel_state(truth, normals, fit_rotations(truth, topology))
+    fit = fit_urshape(
+        state,
+        topology,
+        frame_data(data),
+        energy_weights(Options(), NOISE, SPACING),
+        MatchOptions(tangential=0.05),
+        GaussNewtonOptions(iterations=2, cg_tolerance=1e-3, cg_iterations=50),
+        joint=False,
+    )
+    assert fit.state is state
+    assert fit.optimization.energies[-1] < fit.optimization.energies[0]
+    right = truth[0, :, 0] > 2 * SPACING
+    relative = fit.urshape.rotations[2, right] @ fit.urshape.rotations[0, right].swapaxes(1, 2)
+    turned = np.degrees(np.arccos(np.clip((np.trace(relative, axis1=1, axis2=2) - 1) / 2, -1, 1)))
+    assert np.median(np.abs(turned - 40.0)) < 2.0

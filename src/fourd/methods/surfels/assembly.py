@@ -90,11 +90,12 @@ def optimize_model(
     options: GaussNewtonOptions,
     match: MatchOptions | None = None,
     *,
-    urshape: bool = False,
+    urshape: str = "off",
 ) -> Model:
-    """Global optimisation of all trajectories of ``model`` against its frames' data; with
-    ``urshape``, then of the trajectories together with the urshape (:func:`.fit_urshape`,
-    the same weights and options; the model's earlier urshape is not used)."""
+    """Global optimisation of all trajectories of ``model`` against its frames' data; then,
+    with ``urshape`` ``"joint"``, of the trajectories together with the urshape, or with
+    ``"rest"`` of the urshape alone (:func:`.fit_urshape`, the same weights and options; the
+    model's earlier urshape is not used); ``"off"``: none."""
     data = range_data(frames, model.start, model.stop)
     result = gauss_newton(model.state, model.topology, data, weights, match, options)
     log.debug(
@@ -108,8 +109,10 @@ def optimize_model(
         result.cg_iterations.tolist(),
     )
     state, rest = result.state, None
-    if urshape:
-        fitted = fit_urshape(state, model.topology, data, weights, match, options)
+    if urshape != "off":
+        fitted = fit_urshape(
+            state, model.topology, data, weights, match, options, joint=urshape == "joint"
+        )
         state, rest = fitted.state, fitted.urshape
         energies = fitted.optimization.energies
         log.debug("urshape: energy %.4g -> %.4g", energies[0], energies[-1])
@@ -218,7 +221,7 @@ def merge(left: Model, right: Model, frames: list, schedule: Schedule) -> Model:
     model = Model(resampled, topology, left.start, observed[:, keep])
     return optimize_model(
         model, frames, schedule.weights, schedule.optimize, schedule.match,
-        urshape=schedule.urshape,
+        urshape="joint" if schedule.urshape else "off",
     )
 
 

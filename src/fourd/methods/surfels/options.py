@@ -13,7 +13,7 @@ MIN_FRAMES = 2
 #: One connectivity: one frame's mesh carried to every frame by the surfels (sec. 3.3).
 RESULT = AnimatedMesh
 #: The options users change first (``fourd options surfels``).
-URSHAPE_STAGES = ("final", "merges", "off")
+URSHAPE_STAGES = ("final", "merges", "rest", "off")
 COMMON_OPTIONS = ("sampling", "noise", "rigid", "accel", "iterations", "final_iterations")
 
 
@@ -85,10 +85,12 @@ class Options:
         Gauss-Newton steps of the final global optimisation of all frames (0: no final
         pass, and no urshape unless the merges computed one).
     urshape : str
-        When the urshape is computed (sec. 3.2, :mod:`.urshape`): ``"final"`` after the final
-        global optimisation; ``"merges"`` as the paper does, after the global optimisation of
-        every merge (from scratch at each level) and after the final one; ``"off"``: none,
-        and the reference frame's mesh is the result's ``rest``.
+        When the urshape is computed (sec. 3.2, :mod:`.urshape`): ``"final"`` optimised with
+        the trajectories after the final global optimisation; ``"merges"`` as the paper does,
+        with the trajectories after the global optimisation of every merge (from scratch at
+        each level) and after the final one; ``"rest"`` after the final one, the trajectories
+        held (the frames are those of ``"off"``); ``"off"``: none, and the reference frame's
+        mesh is the result's ``rest``.
     cg_tolerance : float
         Relative residual at which each step's conjugate gradients stop.
     cg_iterations : int

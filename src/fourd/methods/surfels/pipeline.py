@@ -153,7 +153,7 @@ def reconstruct(seq: PointCloudSequence, options: Options | None = None) -> Anim
             energy_weights(options, noise, sampling, final=True),
             final,
             match,
-            urshape=options.urshape != "off",
+            urshape={"off": "off", "rest": "rest"}.get(options.urshape, "joint"),
         )
     optimized = _time.perf_counter()
     mesh = surfel_mesh(

@@ -25,8 +25,13 @@ import numpy as np
 from fourd.methods.surfels.energy import Weights
 from fourd.methods.surfels.match import Data, MatchOptions
 from fourd.methods.surfels.motion import fit_rotations
-from fourd.methods.surfels.optimizer import GaussNewtonOptions, Optimization, gauss_newton
-from fourd.methods.surfels.state import SurfelState
+from fourd.methods.surfels.optimizer import (
+    GaussNewtonOptions,
+    Optimization,
+    free_unknowns,
+    gauss_newton,
+)
+from fourd.methods.surfels.state import SurfelState, layout
 from fourd.methods.surfels.topology import Topology
 
 
@@ -76,20 +81,33 @@ def fit_urshape(
     weights: Weights | None = None,
     match: MatchOptions | None = None,
     options: GaussNewtonOptions | None = None,
+    *,
+    joint: bool = True,
 ) -> UrshapeFit:
     """The urshape of ``state``'s trajectories and the trajectories optimised with it (module
     docstring). ``data`` holds the points of ``state``'s frames (frame indices
     ``0 .. T - 1``); ``weights``, ``match`` and ``options`` as for
-    :func:`~.optimizer.gauss_newton`."""
+    :func:`~.optimizer.gauss_newton`. ``joint`` False holds the trajectories: only the
+    urshape and its rotations move (the rest shape of trajectories taken as final)."""
     positions = np.concatenate([state.positions[:1], state.positions])
     normals = np.concatenate([state.normals[:1], state.normals])
     joined = SurfelState(positions, normals, fit_rotations(positions, topology, urshape=True))
     shifted = Data(data.points, data.frames + 1, data.weights, data.normals)
-    result = gauss_newton(joined, topology, shifted, weights, match, options, urshape=True)
+    free = None
+    if not joint:
+        surfels = np.zeros((joined.frames, joined.count), dtype=bool)
+        surfels[0] = True
+        rotations = np.ones((joined.frames - 1, joined.count), dtype=bool)
+        free = free_unknowns(layout(joined), surfels, rotations)
+    result = gauss_newton(
+        joined, topology, shifted, weights, match, options, free=free, urshape=True
+    )
     fitted = result.state
     reach = fitted.rotations
     consecutive = reach[1:] @ np.swapaxes(reach[:-1], -1, -2)
     trajectories = SurfelState(fitted.positions[1:], fitted.normals[1:], consecutive)
+    if not joint:
+        trajectories = state
     return UrshapeFit(
         trajectories, Urshape(fitted.positions[0], fitted.normals[0], reach), result
     )
