@@ -132,6 +132,8 @@ def reconstruct(seq: PointCloudSequence, options: Options | None = None) -> Anim
         "final_accel",
         "final_iterations",
     )
+    if options.urshape != "merges":  # the merges do not use it
+        without = (*without, "urshape")
     seed_keys = [
         stage_key(key, option_values(options, without=without)) if cache.enabled else ""
         for key in keys
