@@ -23,9 +23,10 @@ by a statistical model and assembled frame range by frame range (Wand et al. 200
    greedy resampling and global optimisation, then a final global optimisation with
    increased rigidity and acceleration weights;
 8. :mod:`.urshape` -- the urshape (sec. 3.2): a data-free frame tied to every frame by the
-   rigidity prior, optimised with the trajectories after the final global optimisation
-   (``Options.urshape`` "final") or after every merge's as well (``"merges"``, the paper's
-   schedule);
+   rigidity prior; by default fitted to the final trajectories (``Options.urshape``
+   ``"rest"``), or optimised with them after the final global optimisation (``"final"``) or
+   after every merge's as well (``"merges"``, the paper's schedule; measured in
+   benchmarks/METHODS.md);
 9. :mod:`.pipeline` -- all of it, and the mesh of :mod:`.meshing`: one frame's mesh carried
    to every frame and to the urshape, which is the result's ``rest``.
 

@@ -134,7 +134,7 @@ class Options:
     iterations: int = 4
     fill_iterations: int = 2
     final_iterations: int = 4
-    urshape: str = "final"
+    urshape: str = "rest"
     cg_tolerance: float = 1e-3
     cg_iterations: int = 50
     mesh_sigma: float = 0.75
