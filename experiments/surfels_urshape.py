@@ -16,7 +16,7 @@ Answer (2-core machine, one run each; Chamfer / completeness-95 / correspondence
 
 | urshape | Chamfer | compl. 95% | corr mean | corr last | vertices | final stage s |
 |---|---|---|---|---|---|---|
-| off | 0.0060 | 0.0285 | 0.0127 | 0.0210 | 5,271 | 64 |
+| off | 0.0060 | 0.0285 | 0.0127 | 0.0210 | 5,271 | 60 |
 | final | 0.0069 | 0.0321 | 0.0124 | 0.0203 | 4,554 | 120 |
 | rest | 0.0060 | 0.0285 | 0.0127 | 0.0210 | 5,271 | 95 |
 
