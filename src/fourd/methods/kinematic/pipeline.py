@@ -81,18 +81,7 @@ def reconstruct(
 
     anchors = None
     if options.video_anchors and getattr(seq, "video", None) is not None:
-        from fourd.appearance import anchors as track_anchors
-
-        # on the frames as cleaned above: the anchors' own outlier removal would repeat it
-        cleaned = PointCloudSequence(
-            tuple(Frame(p, time=f.time) for f, p in zip(seq.frames, points, strict=True)),
-            seq.names,
-            seq.video,
-        )
-        anchors = track_anchors(
-            cleaned, texture=options.anchor_texture, sources=ANCHOR_SOURCES, remove_outliers=False
-        )
-        log.info("anchors from the video: %d over %d frame pairs", anchors.total, len(anchors))
+        anchors = video_anchors(points, times, seq.video, options, seq.names)
     colors = None
     if options.color_guide:
         colors = _guide_colors(seq, points, normals)
@@ -109,6 +98,23 @@ def reconstruct(
         finished - fitted,
     )
     return result
+
+
+def video_anchors(points, times, video, options: Options, names=()):
+    """The anchor tracks between consecutive frames (:func:`fourd.appearance.anchors`) of
+    the frames ``points`` (list of [P_k, 3], as prepared: the anchors' own outlier removal
+    would repeat the cleaning) at ``times``, filmed by ``video`` (one image per camera and
+    frame)."""
+    from fourd.appearance import anchors as track_anchors
+
+    cleaned = PointCloudSequence(
+        tuple(Frame(p, time=t) for p, t in zip(points, times, strict=True)), tuple(names), video
+    )
+    anchors = track_anchors(
+        cleaned, texture=options.anchor_texture, sources=ANCHOR_SOURCES, remove_outliers=False
+    )
+    log.info("anchors from the video: %d over %d frame pairs", anchors.total, len(anchors))
+    return anchors
 
 
 def fit_options(options: Options, spacing: float) -> MPUOptions:

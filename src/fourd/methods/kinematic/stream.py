@@ -47,10 +47,10 @@ from fourd.methods.kinematic.field import SpaceTimeField, space_time_points, win
 from fourd.methods.kinematic.frames import densify_density, densify_frames, prepare_frames
 from fourd.methods.kinematic.mpu4d import fit_mpu4d, mpu_arrays, mpu_from_arrays
 from fourd.methods.kinematic.options import MIN_FRAMES, Options
-from fourd.methods.kinematic.pipeline import ANCHOR_SOURCES, fit_options
+from fourd.methods.kinematic.pipeline import fit_options, video_anchors
 from fourd.methods.kinematic.sliding import slide
 from fourd.methods.kinematic.trajectories import smooth_trajectories
-from fourd.sequence import Frame, PointCloudSequence
+from fourd.sequence import PointCloudSequence
 
 log = logging.getLogger("fourd.methods.kinematic")
 
@@ -242,23 +242,15 @@ class _Run:
         pair before left them, so this is how the run in memory tracks them."""
         if self.video is None:
             return None
-        from fourd.appearance import anchors as track_anchors
-
         first = max(slid.start - 1, 0)
-        tracked = track_anchors(
-            PointCloudSequence(
-                tuple(Frame(self.frames.points(i), time=self.times[i]) for i in range(first, slid.stop)),
-                video=self.video.select(slice(first, slid.stop)),
-            ),
-            texture=self.options.anchor_texture,
-            sources=ANCHOR_SOURCES,
-            remove_outliers=False,
+        frames = range(first, slid.stop)
+        tracked = video_anchors(
+            [self.frames.points(i) for i in frames],
+            self.times[first : slid.stop],
+            self.video.select(slice(first, slid.stop)),
+            self.options,
         )
         pairs = tracked.pairs[slid.start - first :]
-        log.info(
-            "anchors from the video: %d over %d frame pairs",
-            sum(len(p.source) for p in pairs), len(pairs),
-        )
         return [None] + [(p.source, p.target, p.confidence) for p in pairs]
 
     def entry(self, written) -> dict[str, np.ndarray]:

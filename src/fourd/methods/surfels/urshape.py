@@ -104,10 +104,10 @@ def fit_urshape(
     )
     fitted = result.state
     reach = fitted.rotations
-    consecutive = reach[1:] @ np.swapaxes(reach[:-1], -1, -2)
-    trajectories = SurfelState(fitted.positions[1:], fitted.normals[1:], consecutive)
-    if not joint:
-        trajectories = state
+    trajectories = state
+    if joint:
+        consecutive = reach[1:] @ np.swapaxes(reach[:-1], -1, -2)
+        trajectories = SurfelState(fitted.positions[1:], fitted.normals[1:], consecutive)
     return UrshapeFit(
         trajectories, Urshape(fitted.positions[0], fitted.normals[0], reach), result
     )
