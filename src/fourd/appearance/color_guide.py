@@ -56,6 +56,10 @@ class PhotometricGuides(Sequence):
         Per sliding time, the input frame whose points are the data term (-1: none).
     reference_frame : int
         The input frame the template lies on, whose colours it takes.
+    reference : float64 [N, 3], optional
+        The template's (log) colours when known already (a run that goes on after an
+        earlier part of the sequence, :attr:`reference` of that part's guides); then
+        ``reference_frame`` is not read.
     points, normals, colors : lists of per-frame arrays [P_k, 3] (colors may be None)
     radius : float
         Patch radius of the Lucas-Kanade (input units).
@@ -65,14 +69,15 @@ class PhotometricGuides(Sequence):
     """
 
     def __init__(self, template, faces, frames, points, normals, colors, *, radius: float, scale: float,
-                 reference_frame: int = 0):
+                 reference_frame: int = 0, reference=None):
         self.frames = [int(k) for k in frames]
         self.vertex_count = len(template)
         self.faces = np.asarray(faces, dtype=np.int64)
         self.points, self.normals, self.colors = points, normals, colors
         self.radius, self.scale = float(radius), float(scale)
-        has = self._has(reference_frame)
-        self.reference = self._field(reference_frame).sample(template) if has else None
+        if reference is None and self._has(reference_frame):
+            reference = self._field(reference_frame).sample(template)
+        self.reference = reference
 
     def _has(self, k: int) -> bool:
         return k >= 0 and self.colors[k] is not None and len(self.points[k]) >= 8

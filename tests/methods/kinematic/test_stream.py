@@ -101,28 +101,56 @@ def test_an_interrupted_run_resumes_after_its_last_window(scans, tmp_path):
 
 
 @pytest.mark.slow
-def test_windows_track_the_videos_anchors_as_the_run_in_memory(tmp_path):
-    """With video, each window tracks the anchors of its frame pairs (the seam's included):
-    the streamed run is the windowed run in memory with the same anchors, and the anchors
-    change it."""
+def test_windows_use_the_videos_anchors_and_colours_as_the_run_in_memory(tmp_path):
+    """With video and points without colours, each window tracks the anchors of its frame
+    pairs (the seam's included) and colours its points from the video, with the urshape's
+    colours carried from the first window (through the cache too): the streamed run is the
+    windowed run in memory, and the video changes it."""
     frames, window = 8, 4
     truth = fourd.synth.scene("bending-arm", frames=frames)
     filmed = fourd.synth.scan(
         truth, resolution=96, seed=0, appearance="cloth", video=True, video_resolution=64
     )
-    options = K.Options(
-        template_vertices=800, window=window, temporal_smoothing=0, color_guide=False
+    filmed = dataclasses.replace(
+        filmed, frames=tuple(dataclasses.replace(f, colors=None) for f in filmed.frames)
     )
+    options = K.Options(template_vertices=800, window=window, temporal_smoothing=0)
     memory = K.reconstruct(filmed, options)
-    summary = reconstruct_streamed(FrameSource.of(filmed), tmp_path / "v.npz", options)
+    cached = dataclasses.replace(options, cache_dir=str(tmp_path / "cache"))
+    summary = reconstruct_streamed(FrameSource.of(filmed), tmp_path / "v.npz", cached)
     assert summary.windows == 2
     streamed = read_npz(summary.output)
     np.testing.assert_allclose(streamed.vertices, memory.vertices, atol=1e-5)  # float32 file
     np.testing.assert_array_equal(streamed.observed, memory.observed)
+    last = max((tmp_path / "cache").iterdir(), key=lambda p: p.stat().st_mtime_ns)
+    last.unlink()  # the second window again, after the first from the cache
+    again = reconstruct_streamed(FrameSource.of(filmed), tmp_path / "r.npz", cached)
+    assert again.resumed == 1
+    np.testing.assert_array_equal(read_npz(again.output).vertices, streamed.vertices)
     plain = reconstruct_streamed(
         FrameSource.of(filmed),
         tmp_path / "p.npz",
-        dataclasses.replace(options, video_anchors=False),
+        dataclasses.replace(options, video_anchors=False, color_guide=False),
     )
     moved = np.linalg.norm(read_npz(plain.output).vertices - streamed.vertices, axis=2)
     assert moved[-1].mean() > 0.01 * median_edge_length(memory.rest, memory.faces)
+
+
+@pytest.mark.slow
+def test_the_colour_guide_streams_with_the_points_own_colours(tmp_path):
+    """Coloured points and no video: the urshape's colours come from the first frame's points
+    and guide every window as in memory; without them the result differs."""
+    truth = fourd.synth.scene("bending-arm", frames=8)
+    coloured = fourd.synth.scan(truth, resolution=96, seed=0, appearance="cloth")
+    options = K.Options(template_vertices=600, window=4, temporal_smoothing=0)
+    memory = K.reconstruct(coloured, options)
+    streamed = read_npz(
+        reconstruct_streamed(FrameSource.of(coloured), tmp_path / "c.npz", options).output
+    )
+    np.testing.assert_allclose(streamed.vertices, memory.vertices, atol=1e-5)
+    blind = dataclasses.replace(options, color_guide=False)
+    plain = read_npz(
+        reconstruct_streamed(FrameSource.of(coloured), tmp_path / "p.npz", blind).output
+    )
+    moved = np.linalg.norm(plain.vertices - streamed.vertices, axis=2)
+    assert moved[-1].mean() > 0.1 * median_edge_length(memory.rest, memory.faces)

@@ -136,17 +136,23 @@ def _guide_colors(seq: PointCloudSequence, points, normals) -> list | None:
         if not any(f.colors is not None for f in seq.frames):
             return None
         return [colors_of_cleaned(f.points, f.colors, p) for f, p in zip(seq.frames, points, strict=True)]
+    started = _time.perf_counter()
+    colors = [
+        frame_colors_from_video(seq, t, p, n)
+        for t, (p, n) in enumerate(zip(points, normals, strict=True))
+    ]
+    log.info("point colours from the video: %.2f s", _time.perf_counter() - started)
+    return colors
+
+
+def frame_colors_from_video(seq: PointCloudSequence, index: int, points, normals) -> np.ndarray:
+    """The colours ``[P, 3]`` of frame ``index``'s cleaned ``points`` (with their ``normals``)
+    from ``seq.video``, for the colour guide; InputError saying how to go without."""
     from fourd.appearance.point_colors import colors_from_video
 
-    started = _time.perf_counter()
     try:
-        colors = [
-            colors_from_video(seq, t, points=p, normals=n)
-            for t, (p, n) in enumerate(zip(points, normals, strict=True))
-        ]
+        return colors_from_video(seq, index, points=points, normals=normals)
     except InputError as error:
         raise InputError(
             f"colour guide from the video: {error.problem} (color_guide=false goes without)", error.path
         ) from None
-    log.info("point colours from the video: %.2f s", _time.perf_counter() - started)
-    return colors

@@ -13,7 +13,10 @@ the whole sequence) differs. What is decided from "the frames" is decided from t
 window's: the template's size and whether sparse frames are densified (and at which density).
 With video (``video_anchors``) each window tracks the anchors of its own frame pairs, the
 seam's pair from the previous window's last frame included, on the frames as prepared: the
-pairs, hence the steps, of the run in memory. The colour guide is not used streamed.
+pairs, hence the steps, of the run in memory. The colour guide (``color_guide``) takes the
+urshape's colours from the first frame once and carries them across windows; each frame's
+point colours are taken when it is prepared, from its own colours when the first window's
+frames all have them, else from the video (the run in memory decides from all frames).
 
 Memory holds the frames of about two windows, two 4D fits, the urshape and the output's
 observed flags (one byte per vertex and frame); the positions go to the output as they are
@@ -32,9 +35,11 @@ from typing import NamedTuple
 
 import numpy as np
 
+from fourd.appearance.color_guide import PhotometricGuides, colors_of_cleaned
 from fourd.cache import StageCache, report_resumed, stage_key
 from fourd.errors import InputError
 from fourd.frame_source import FrameSource
+from fourd.geometry.meshes import median_edge_length
 from fourd.geometry.neighbors import point_spacing
 from fourd.io.npz import npz_frames, streamed_output
 from fourd.methods.kinematic.animate import (
@@ -47,7 +52,7 @@ from fourd.methods.kinematic.field import SpaceTimeField, space_time_points, win
 from fourd.methods.kinematic.frames import densify_density, densify_frames, prepare_frames
 from fourd.methods.kinematic.mpu4d import fit_mpu4d, mpu_arrays, mpu_from_arrays
 from fourd.methods.kinematic.options import MIN_FRAMES, Options
-from fourd.methods.kinematic.pipeline import fit_options, video_anchors
+from fourd.methods.kinematic.pipeline import fit_options, frame_colors_from_video, video_anchors
 from fourd.methods.kinematic.sliding import slide
 from fourd.methods.kinematic.trajectories import smooth_trajectories
 from fourd.sequence import PointCloudSequence
@@ -109,7 +114,7 @@ def reconstruct_streamed(
     cache = StageCache(options.cache_dir)
     spans = window_spans(source.times, options.window or STREAM_WINDOW, options.window_overlap)
     run = _Run(source, options)
-    video = run.video.fingerprint() if run.video is not None else None
+    video = source.video.fingerprint() if run.uses_video else None
     key = stage_key(STAGE, options, source.times, video) if cache.enabled else ""
     resumed = 0
     with ExitStack() as stack:
@@ -162,9 +167,16 @@ class _Run:
         self.frames = _Frames(source, options)
         self.smoother = _SeamSmoother(options)
         self.rest = self.faces = None
+        self.colour_reference = None  # the urshape's log colours (the colour guide)
         self.spacing = self.bandwidth = 0.0
         self.fit = None  # (span, MPU4D) of the previous window
         self.state = None
+
+    @property
+    def uses_video(self) -> bool:
+        """Whether the video can change the result (its anchors or its colours)."""
+        video = self.frames.source.video is not None
+        return video and (self.options.video_anchors or self.options.color_guide)
 
     @property
     def delta(self) -> float:
@@ -212,6 +224,7 @@ class _Run:
         data = [frames.points(i) for i in slid]
         with_surface = [k if options.data_term and len(data[k]) else -1 for k in range(len(data))]
         with_surface[0] = -1  # the urshape, or the previous window's last frame
+        normals = [frames.normals(i) for i in slid]
         result = slide(
             self.rest,
             self.faces,
@@ -219,12 +232,11 @@ class _Run:
             times[slid.start : slid.stop],
             options=slide_settings(options, self.rest, self.faces, self.spacing),
             data=data,
-            surfaces=FrameSurfaces(
-                with_surface, data, [frames.normals(i) for i in slid], self.bandwidth
-            ),
+            surfaces=FrameSurfaces(with_surface, data, normals, self.bandwidth),
             return_steps=True,
             start=self.state,
             anchors=self._anchors(slid),
+            colour_guides=self._colour_guides(index, slid, with_surface, data, normals),
         )
         self.state, self.fit = result.state, fits[-1]
         new = slice(0, None) if index == 0 else slice(1, None)
@@ -253,6 +265,31 @@ class _Run:
         pairs = tracked.pairs[slid.start - first :]
         return [None] + [(p.source, p.target, p.confidence) for p in pairs]
 
+    def _colour_guides(self, index: int, slid: range, with_surface, data, normals):
+        """The colour guides of the sliding over frames ``slid`` (None without colours): the
+        urshape's colours from the first frame's in the first window, kept for the rest."""
+        if not self.options.color_guide:
+            return None
+        colors = [self.frames.colors(i) for i in slid]
+        if index == 0 and colors[0] is None:
+            return None
+        if index > 0 and self.colour_reference is None:
+            return None
+        edge = median_edge_length(self.rest, self.faces)
+        guides = PhotometricGuides(
+            self.rest,
+            self.faces,
+            with_surface,
+            data,
+            normals,
+            colors,
+            radius=self.options.color_radius * edge,
+            scale=self.options.color_scale * edge,
+            reference=self.colour_reference,
+        )
+        self.colour_reference = guides.reference
+        return guides
+
     def entry(self, written) -> dict[str, np.ndarray]:
         """The cache entry of a finished window: the frames it gave out and everything
         :meth:`restore` needs to go on after it."""
@@ -262,6 +299,10 @@ class _Run:
             "rest": self.rest,
             "faces": self.faces,
             "settings": np.array([self.spacing, self.bandwidth, self.frames.density]),
+            "colour_source": np.array(self.frames.colour_source or ""),
+            **(
+                {} if self.colour_reference is None else {"colour_reference": self.colour_reference}
+            ),
             **{f"state_{k}": v for k, v in self.state.items()},
             **{f"fit_{k}": v for k, v in mpu_arrays(self.fit[1]).items()},
             **{f"smoother_{k}": v for k, v in self.smoother.buffer().items()},
@@ -272,6 +313,8 @@ class _Run:
         """Go on after the window whose :meth:`entry` is ``entry``; its written frames."""
         self.rest, self.faces = entry["rest"], entry["faces"]
         self.spacing, self.bandwidth, self.frames.density = (float(v) for v in entry["settings"])
+        self.frames.colour_source = str(entry["colour_source"]) or None
+        self.colour_reference = entry.get("colour_reference")
         self.state = {k[6:]: v for k, v in entry.items() if k.startswith("state_")}
         self.fit = (
             span,
@@ -291,8 +334,13 @@ class _Frames:
         self.source, self.options = source, options
         self.raw: dict = {}
         self.prepared: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+        self.colored: dict[int, np.ndarray | None] = {}
         self.next = 0
         self.density: float | None = None
+        #: Where the colour guide's point colours come from: "own", "video" or None (no
+        #: colours, or no colour guide); the first window's frames decide.
+        self.colour_source: str | None = None
+        self.colour_decided = not options.color_guide
 
     def read_through(self, last: int, *, keys: bool) -> list[str]:
         """Read frames up to ``last``; the cache keys of those read now (when ``keys``)."""
@@ -305,7 +353,7 @@ class _Frames:
         return [stage_key(f.points, f.normals, f.sensors) for f in part] if keys else []
 
     def forget_before(self, first: int) -> None:
-        for store in (self.raw, self.prepared):
+        for store in (self.raw, self.prepared, self.colored):
             for index in [i for i in store if i < first]:
                 del store[index]
 
@@ -321,9 +369,26 @@ class _Frames:
         points, normals = densify_frames(
             points, normals, self.options, density=self.density, first=indices[0], surface=surface
         )
+        if not self.colour_decided:
+            self.colour_source = _colour_source([self.raw[i] for i in indices], self.source.video)
+            self.colour_decided = True
         for i, p, n in zip(indices, points, normals, strict=True):
             self.prepared[i] = (p, n)
+            self.colored[i] = self._colors(i, p, n)
         self.raw.clear()
+
+    def _colors(self, index: int, points, normals) -> np.ndarray | None:
+        """The colours [P, 3] of frame ``index``'s prepared ``points`` (as the run in memory
+        takes them, :func:`fourd.methods.kinematic.pipeline.frame_colors_from_video`)."""
+        if self.colour_source == "own":
+            frame = self.raw[index]
+            return colors_of_cleaned(frame.points, frame.colors, points)
+        if self.colour_source == "video":
+            one = PointCloudSequence(
+                (self.raw[index],), (), self.source.video.select(slice(index, index + 1))
+            )
+            return frame_colors_from_video(one, 0, points, normals)
+        return None
 
     def points(self, index: int) -> np.ndarray:
         if index not in self.prepared:
@@ -334,6 +399,20 @@ class _Frames:
         if index not in self.prepared:
             self._prepare()
         return self.prepared[index][1]
+
+    def colors(self, index: int) -> np.ndarray | None:
+        if index not in self.prepared:
+            self._prepare()
+        return self.colored[index]
+
+
+def _colour_source(frames, video) -> str | None:
+    """Where the point colours of a run whose first frames are ``frames`` come from: their
+    own when they all have colours or there is no video, else the video; None when neither."""
+    own = [f.colors is not None for f in frames]
+    if all(own) or video is None:
+        return "own" if any(own) else None
+    return "video"
 
 
 class _SeamSmoother:
