@@ -126,7 +126,7 @@ class Options:
         (:func:`fourd.methods.auto.reconstruct_streamed`): both stages in windows of this many
         frames, the closing and the fit a chunk of frames at a time, so memory is bounded by
         the window (and the result); the kinematic stage tracks the input video's anchors
-        window by window then, but has no colour guide. ``--stream`` with 0 takes 20.
+        and keeps its colour guide window by window then. ``--stream`` with 0 takes 20.
     cache_dir : str or None
         Folder where the finished stages are kept: the ``kinematic`` run's in its subfolder
         ``kinematic``, the ``flow`` run's in ``flow`` (see those methods' ``cache_dir``); a
@@ -363,11 +363,6 @@ def _windowed(seq: PointCloudSequence, options: Options) -> Reconstruction:
     ``seq``, its result read back."""
     from fourd.methods.auto.stream import reconstruct_streamed
 
-    if seq.video is not None:
-        log.warning(
-            "auto: window=%d runs window by window without the colour guide (the video's "
-            "anchors are used); window=0 uses both", options.window,
-        )
     with tempfile.TemporaryDirectory(prefix="fourd-auto-") as folder:
         summary = reconstruct_streamed(FrameSource.of(seq), Path(folder) / "result.npz", options)
         result = read_npz(summary.output)
