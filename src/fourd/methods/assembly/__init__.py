@@ -20,14 +20,14 @@ Frames that are meshes are used as they are; point clouds are meshed per frame f
 - :mod:`.pair`: those steps chained, one source mesh mapped onto one target mesh;
 - :mod:`.hierarchy`: the hierarchical assembly (5.3) and the propagation of each merge through
   the right sub-sequence, unmapped vertices placed by Laplacian registration (5.6);
+- :mod:`.completion`: geometry only the later frame has glued into the union mesh along a
+  zipped seam, placed in the earlier frames by Laplacian coordinates (5.6, second half);
 - :mod:`.method`: the pipeline (``reconstruct``), :mod:`.options` its ``Options``.
 
 - :mod:`.analysis`: the pair map checked against the gradual change assumption (5.5),
   inconsistent vertices flagged and clustered; the method's ``correct`` option unmaps them.
 
-Not yet: trying the target's geometry in place of an inconsistent source region (5.5), and
-pasting geometry only a later frame has into the union mesh (second half of 5.6): the result
-keeps the first frame's connectivity.
+Not yet: trying the target's geometry in place of an inconsistent source region (5.5).
 """
 
 from fourd.methods.assembly.alignment import Alignment, geometric_anchors
@@ -44,6 +44,7 @@ from fourd.methods.assembly.anchors import (
     returned_points,
     spread_anchors,
 )
+from fourd.methods.assembly.completion import Paste, paste_target_only, place_pasted, zip_loops
 from fourd.methods.assembly.crossparam import (
     CrossParameterization,
     PatchMap,
@@ -84,6 +85,10 @@ __all__ = [
     "Anchors",
     "AssemblyDiagnostics",
     "Block",
+    "Paste",
+    "paste_target_only",
+    "place_pasted",
+    "zip_loops",
     "MergeReport",
     "Options",
     "assemble",

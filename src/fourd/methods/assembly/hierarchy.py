@@ -23,9 +23,13 @@ With ``correct`` on, the map is first analysed (5.5,
 :func:`~fourd.methods.assembly.analysis.inconsistent_regions`) and the vertices of its
 inconsistent regions unmapped, so the registration places them from the source's geometry
 (the thesis' "source region pasted into the target"; off by default, see
-``benchmarks/METHODS.md``). Not done here: geometry only the target has is not pasted into
-the union mesh (the second half of 5.6), nor is the target's geometry tried in place of the
-source's for an inconsistent region: the result's connectivity is the first frame's mesh.
+``benchmarks/METHODS.md``).
+
+With ``paste`` on, geometry only the target has (a hole of the source's scan) is glued into
+the union mesh (the second half of 5.6, :mod:`~fourd.methods.assembly.completion`): its
+positions in the right frames are the right block's own, in the left frames placed by the
+Laplacian coordinates of the union in the target frame, unobserved. Not done here: the
+target's geometry tried in place of the source's for an inconsistent region (5.5).
 
 Merges of one level are independent (5.3) and run side by side in processes when asked.
 """
@@ -43,6 +47,7 @@ import trimesh
 from fourd.geometry.rotations import procrustes
 from fourd.methods.assembly.alignment import geometric_anchors
 from fourd.methods.assembly.analysis import inconsistent_regions
+from fourd.methods.assembly.completion import paste_target_only, place_pasted
 from fourd.methods.assembly.options import Options
 from fourd.methods.assembly.pair import cross_parameterize_pair
 from fourd.methods.assembly.registration import register_by_laplacian
@@ -77,12 +82,15 @@ class MergeReport(NamedTuple):
         Fraction left to the rigid fallback (pieces with no mapped vertex).
     flagged : int
         Mapped vertices unmapped by the analysis (``correct``).
+    pasted : int
+        Vertices of target-only geometry glued into the union mesh (``paste``).
     """
 
     anchors: int
     mapped: float
     rigid: float
     flagged: int = 0
+    pasted: int = 0
 
 
 def _closest_map(aligned, target_vertices, target_faces):
@@ -106,7 +114,8 @@ def merge_blocks(left: Block, right: Block, options: Options | None = None) -> t
     Returns
     -------
     Block
-        ``left.faces``, with ``len(left) + len(right)`` frames of positions.
+        ``left.faces`` (the pasted patches' faces after them), with ``len(left) + len(right)``
+        frames of positions.
     MergeReport
     """
     options = Options() if options is None else options
@@ -157,8 +166,26 @@ def merge_blocks(left: Block, right: Block, options: Options | None = None) -> t
             placed[lost] = source[lost] @ fit.rotation.T + fit.translation
             rigid |= lost
         vertices[t] = placed
-    merged = Block(faces, np.concatenate([left.vertices, vertices]), np.concatenate([left.observed, observed]))
-    return merged, MergeReport(len(alignment.anchors.source), float(mapped.mean()), float(rigid.mean()), flagged)
+    left_vertices, left_observed, pasted = left.vertices, left.observed, 0
+    if options.paste:
+        paste = paste_target_only(vertices[0], faces, target, target_faces, gap=options.paste_gap)
+        pasted = len(paste.target)
+        if pasted:
+            faces = paste.faces
+            vertices = np.concatenate([vertices, right.vertices[:, paste.target]], axis=1)
+            observed = np.concatenate([observed, right.observed[:, paste.target]], axis=1)
+            known = np.arange(count + pasted) < count
+            left_vertices = np.stack([
+                place_pasted(vertices[0], faces, known, np.vstack([frame, np.zeros((pasted, 3))]),
+                             iterations=options.registration_iterations)
+                for frame in left.vertices
+            ])
+            left_observed = np.concatenate([left.observed, np.zeros((len(left.observed), pasted), bool)], axis=1)
+            log.debug("pasted %d target-only vertices in %d patches (%d left out)", pasted, paste.patches,
+                      paste.skipped)
+    merged = Block(faces, np.concatenate([left_vertices, vertices]), np.concatenate([left_observed, observed]))
+    return merged, MergeReport(len(alignment.anchors.source), float(mapped.mean()), float(rigid.mean()), flagged,
+                               pasted)
 
 
 def _merge_pair(args):
@@ -181,7 +208,7 @@ def assemble(blocks: list[Block], options: Options | None = None, *, on_merge=No
     Returns
     -------
     Block
-        The whole sequence, with the first block's connectivity.
+        The whole sequence, with the first block's connectivity and the patches pasted in.
     list of MergeReport
         One per merge, level by level.
     """

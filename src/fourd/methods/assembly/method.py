@@ -7,7 +7,7 @@ assembly of :mod:`~fourd.methods.assembly.hierarchy`.
    cached per frame when ``cache_dir`` is set. A frame whose mesh comes out empty (too few
    points) takes the nearest non-empty frame's mesh, every vertex unobserved.
 2. The binary hierarchy merges consecutive sub-sequences into one consistent sequence with the
-   first frame's connectivity (5.3, 5.6).
+   first frame's connectivity, grown by the geometry only later frames have (5.3, 5.6).
 """
 
 from __future__ import annotations
@@ -106,7 +106,7 @@ def reconstruct_with_diagnostics(seq: PointCloudSequence, options: Options | Non
 
 def reconstruct(seq: PointCloudSequence, options: Options | None = None) -> AnimatedMesh:
     """Assemble ``seq`` into one animated mesh (module docstring); one output frame per input
-    frame, the first frame's connectivity.
+    frame, the first frame's connectivity grown by what only later frames have.
 
     Parameters
     ----------

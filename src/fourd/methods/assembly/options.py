@@ -216,6 +216,14 @@ class Options(SurfaceSettings):
         Edge-length ratio beyond which (or below its inverse) a mapped triangle is stretched.
     correct_motion : float
         Motion deviation from the one-ring's mean (edges) that flags a vertex.
+    paste : bool
+        Glue geometry only the later frame of a merge has (a hole of the earlier frame's scan)
+        into the union mesh (thesis 5.6, :mod:`fourd.methods.assembly.completion`): the result
+        gains those vertices, unobserved in the frames before. Off: the result's connectivity
+        is the first frame's mesh, its holes kept.
+    paste_gap : float
+        A later frame's triangle is geometry the union lacks when its corners lie farther than
+        this many edges from the union placed in that frame; the seam band is this wide.
     workers : int
         Merges of one level of the hierarchy run in this many processes (they are
         independent, 5.3); 1 runs them one after the other (8 frames of about 360 vertices
@@ -243,6 +251,8 @@ class Options(SurfaceSettings):
     correct: bool = False
     correct_stretch: float = 2.0
     correct_motion: float = 1.5
+    paste: bool = True
+    paste_gap: float = 2.0
     workers: int = 1
     scheduler: str = "sync"
     cache_dir: str | None = None
