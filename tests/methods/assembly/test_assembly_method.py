@@ -172,6 +172,40 @@ def test_a_region_missing_from_the_first_frame_is_pasted_in_from_the_next():
     assert report.pasted == 0 and len(kept.faces) == len(source_faces)
 
 
+def _two_spheres(apart: float, blend: float):
+    """Two spheres of radius 0.5 centred at x = +-``apart``, glued by a smooth minimum of
+    width ``blend`` (marching cubes, outward faces)."""
+    from skimage.measure import marching_cubes
+
+    grid = np.linspace(-1.6, 1.6, 48)
+    x, y, z = np.meshgrid(grid, grid, grid, indexing="ij")
+    a = np.sqrt((x - apart) ** 2 + y**2 + z**2) - 0.5
+    b = np.sqrt((x + apart) ** 2 + y**2 + z**2) - 0.5
+    h = np.clip(0.5 + 0.5 * (b - a) / blend, 0.0, 1.0)
+    field = b * (1.0 - h) + a * h - blend * h * (1.0 - h)
+    vertices, faces, _, _ = marching_cubes(field, 0.0, spacing=(grid[1] - grid[0],) * 3)
+    return vertices - 1.6, faces.astype(np.int64)
+
+
+@pytest.mark.slow
+def test_a_bridge_the_next_frame_breaks_is_found_and_cut():
+    """Two spheres glued by a neck in the source frame, apart in the target (a topology change,
+    thesis 5.5): the analysis finds the inconsistent regions, the neck's placement fails the
+    stretch test and the merged sequence is two pieces; without the correction it stays one."""
+    from fourd.geometry.meshes import vertex_components
+
+    glued, apart = _two_spheres(0.52, 0.08), _two_spheres(0.58, 1e-6)
+    assert vertex_components(glued[1], len(glued[0]))[0] == 1
+    left = Block(glued[1], glued[0][None], np.ones((1, len(glued[0])), dtype=bool))
+    right = Block(apart[1], apart[0][None], np.ones((1, len(apart[0])), dtype=bool))
+    merged, report = merge_blocks(left, right, Options(correct=True))
+    # measured: 4 regions, 1 deleted from both (the neck), 2 pieces
+    assert report.regions >= 1 and report.replaced + report.deleted >= 1
+    assert vertex_components(merged.faces, merged.vertices.shape[1])[0] == 2
+    kept, report = merge_blocks(left, right, Options(correct=False))
+    assert report.regions == 0 and vertex_components(kept.faces, kept.vertices.shape[1])[0] == 1
+
+
 def test_point_cloud_frames_are_meshed_first_and_bad_input_is_named():
     count = 1500
     i = np.arange(count) + 0.5

@@ -25,9 +25,8 @@ Frames that are meshes are used as they are; point clouds are meshed per frame f
 - :mod:`.method`: the pipeline (``reconstruct``), :mod:`.options` its ``Options``.
 
 - :mod:`.analysis`: the pair map checked against the gradual change assumption (5.5),
-  inconsistent vertices flagged and clustered; the method's ``correct`` option unmaps them.
-
-Not yet: trying the target's geometry in place of an inconsistent source region (5.5).
+  inconsistent vertices flagged and clustered; the method's ``correct`` option tries the
+  source's geometry, then the target's, in each region's place (:mod:`.hierarchy`).
 """
 
 from fourd.methods.assembly.alignment import Alignment, geometric_anchors

@@ -13,8 +13,10 @@ the target's into the source, and keeps the one that passes a stretch test (over
 within 0.9-1.1, at most 15% of the area outside), or deletes the region when neither does.
 With one connectivity kept from the source (:mod:`~fourd.methods.assembly.hierarchy`), the
 source's geometry pasted into the target is what the Laplacian registration does for unmapped
-vertices; so the correction here unmaps the flagged regions and lets the registration place
-them, and :func:`passes_stretch_test` tells whether the result keeps the gradual change.
+vertices; so the correction unmaps the flagged regions and lets the registration place them,
+and :func:`passes_stretch_test` tells whether the result keeps the gradual change; a region
+that fails is deleted and the target's geometry pasted in its place
+(:mod:`~fourd.methods.assembly.completion`), tested the same way.
 """
 
 from __future__ import annotations

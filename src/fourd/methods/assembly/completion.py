@@ -51,6 +51,8 @@ class Paste(NamedTuple):
         The union's faces first, then the patches' and the seams'.
     target : int64 [M]
         The target vertex each new vertex is (new vertex ``N + k`` is ``target[k]``).
+    patch : int64 [M]
+        The patch each new vertex belongs to (0 to ``patches - 1``).
     patches : int
         Patches glued in.
     skipped : int
@@ -59,6 +61,7 @@ class Paste(NamedTuple):
 
     faces: np.ndarray
     target: np.ndarray
+    patch: np.ndarray
     patches: int
     skipped: int
 
@@ -141,7 +144,8 @@ def paste_target_only(
     faces = np.asarray(faces, dtype=np.int64)
     target_faces = np.asarray(target_faces, dtype=np.int64)
     count = len(union)
-    empty = Paste(faces, np.zeros(0, dtype=np.int64), 0, 0)
+    none = np.zeros(0, dtype=np.int64)
+    empty = Paste(faces, none, none, 0, 0)
     if not len(target_faces) or not len(faces):
         return empty
     edge = max(median_edge_length(target, target_faces), median_edge_length(union, faces))
@@ -198,8 +202,9 @@ def paste_target_only(
         next_id += len(vertices)
         patches += 1
     if not patches:
-        return Paste(faces, np.zeros(0, dtype=np.int64), 0, skipped)
-    return Paste(np.vstack([faces, *new_faces]), np.concatenate(new_target), patches, skipped)
+        return Paste(faces, none, none, 0, skipped)
+    patch = np.concatenate([np.full(len(v), k, dtype=np.int64) for k, v in enumerate(new_target)])
+    return Paste(np.vstack([faces, *new_faces]), np.concatenate(new_target), patch, patches, skipped)
 
 
 def place_pasted(

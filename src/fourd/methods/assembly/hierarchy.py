@@ -22,14 +22,17 @@ that best fits the mapped vertices (also unobserved).
 With ``correct`` on, the map is first analysed (5.5,
 :func:`~fourd.methods.assembly.analysis.inconsistent_regions`) and the vertices of its
 inconsistent regions unmapped, so the registration places them from the source's geometry
-(the thesis' "source region pasted into the target"; off by default, see
-``benchmarks/METHODS.md``).
+(the thesis' first scenario, the source region pasted into the target). A region whose
+placement fails the stretch test (:func:`~fourd.methods.assembly.analysis.passes_stretch_test`)
+is deleted from the union, so the target's geometry there is pasted in its place (below; the
+second scenario), kept if the pasted patch passes the same test from the target frame to the
+source frame, else removed too: the region is then deleted from both. Off by default, see
+``benchmarks/METHODS.md``.
 
 With ``paste`` on, geometry only the target has (a hole of the source's scan) is glued into
 the union mesh (the second half of 5.6, :mod:`~fourd.methods.assembly.completion`): its
 positions in the right frames are the right block's own, in the left frames placed by the
-Laplacian coordinates of the union in the target frame, unobserved. Not done here: the
-target's geometry tried in place of the source's for an inconsistent region (5.5).
+Laplacian coordinates of the union in the target frame, unobserved.
 
 Merges of one level are independent (5.3) and run side by side in processes when asked.
 """
@@ -43,11 +46,13 @@ from typing import NamedTuple
 
 import numpy as np
 import trimesh
+from scipy.spatial import cKDTree
 
+from fourd.geometry.meshes import median_edge_length
 from fourd.geometry.rotations import procrustes
 from fourd.methods.assembly.alignment import geometric_anchors
-from fourd.methods.assembly.analysis import inconsistent_regions
-from fourd.methods.assembly.completion import paste_target_only, place_pasted
+from fourd.methods.assembly.analysis import inconsistent_regions, passes_stretch_test
+from fourd.methods.assembly.completion import Paste, paste_target_only, place_pasted
 from fourd.methods.assembly.options import Options
 from fourd.methods.assembly.pair import cross_parameterize_pair
 from fourd.methods.assembly.registration import register_by_laplacian
@@ -83,7 +88,15 @@ class MergeReport(NamedTuple):
     flagged : int
         Mapped vertices unmapped by the analysis (``correct``).
     pasted : int
-        Vertices of target-only geometry glued into the union mesh (``paste``).
+        Vertices of target-only geometry glued into the union mesh (``paste``), replacements
+        of inconsistent regions included.
+    regions : int
+        Inconsistent regions the analysis found (``correct``).
+    replaced : int
+        Of those, regions whose source geometry failed the stretch test and whose target
+        geometry, pasted in their place, passed it.
+    deleted : int
+        Regions where neither passed: deleted from both.
     """
 
     anchors: int
@@ -91,6 +104,9 @@ class MergeReport(NamedTuple):
     rigid: float
     flagged: int = 0
     pasted: int = 0
+    regions: int = 0
+    replaced: int = 0
+    deleted: int = 0
 
 
 def _closest_map(aligned, target_vertices, target_faces):
@@ -134,6 +150,7 @@ def merge_blocks(left: Block, right: Block, options: Options | None = None) -> t
         map_faces, bary = np.full(count, -1), np.zeros((count, 3))
     mapped = map_faces >= 0
     flagged = 0
+    analysis = None
     if options.correct and mapped.sum() >= 3:
         points = np.full((count, 3), np.nan)
         points[mapped] = np.einsum("nk,nkd->nd", bary[mapped], target[target_faces[map_faces[mapped]]])
@@ -166,26 +183,101 @@ def merge_blocks(left: Block, right: Block, options: Options | None = None) -> t
             placed[lost] = source[lost] @ fit.rotation.T + fit.translation
             rigid |= lost
         vertices[t] = placed
-    left_vertices, left_observed, pasted = left.vertices, left.observed, 0
+    union = _Union(faces, left.vertices, left.observed, vertices, observed)
+    drop = np.zeros(count, dtype=bool)
+    regions = 0
+    if analysis is not None and analysis.regions:
+        # scenario 1 of 5.5: the source's region placed in the target frame (the registration)
+        regions = analysis.regions
+        for r in range(regions):
+            region = analysis.region == r
+            if not passes_stretch_test(source, faces, vertices[0], region):
+                drop |= region
+        union = _keep(union, ~drop)
+    pasted = replaced = 0
     if options.paste:
-        paste = paste_target_only(vertices[0], faces, target, target_faces, gap=options.paste_gap)
+        union, paste = _paste(union, target, target_faces, right, options)
+        if drop.any():
+            union, paste, replaced = _test_replacements(union, paste, vertices[0], analysis.region, drop, options)
         pasted = len(paste.target)
-        if pasted:
-            faces = paste.faces
-            vertices = np.concatenate([vertices, right.vertices[:, paste.target]], axis=1)
-            observed = np.concatenate([observed, right.observed[:, paste.target]], axis=1)
-            known = np.arange(count + pasted) < count
-            left_vertices = np.stack([
-                place_pasted(vertices[0], faces, known, np.vstack([frame, np.zeros((pasted, 3))]),
-                             iterations=options.registration_iterations)
-                for frame in left.vertices
-            ])
-            left_observed = np.concatenate([left.observed, np.zeros((len(left.observed), pasted), bool)], axis=1)
-            log.debug("pasted %d target-only vertices in %d patches (%d left out)", pasted, paste.patches,
-                      paste.skipped)
-    merged = Block(faces, np.concatenate([left_vertices, vertices]), np.concatenate([left_observed, observed]))
+    deleted = len(np.unique(analysis.region[drop])) - replaced if drop.any() else 0
+    merged = Block(union.faces, np.concatenate([union.left_vertices, union.right_vertices]),
+                   np.concatenate([union.left_observed, union.right_observed]))
     return merged, MergeReport(len(alignment.anchors.source), float(mapped.mean()), float(rigid.mean()), flagged,
-                               pasted)
+                               pasted, regions, replaced, deleted)
+
+
+class _Union(NamedTuple):
+    """The union mesh of a merge: its faces and its positions (and observed flags) in the left
+    block's frames and in the right block's."""
+
+    faces: np.ndarray
+    left_vertices: np.ndarray
+    left_observed: np.ndarray
+    right_vertices: np.ndarray
+    right_observed: np.ndarray
+
+
+def _keep(union: _Union, keep: np.ndarray) -> _Union:
+    """``union`` without the vertices not in ``keep`` (nor those no kept face uses)."""
+    faces = union.faces[keep[union.faces].all(axis=1)]
+    used = np.zeros(len(keep), dtype=bool)
+    used[faces.ravel()] = True
+    index = np.cumsum(used) - 1
+    return _Union(index[faces], union.left_vertices[:, used], union.left_observed[:, used],
+                  union.right_vertices[:, used], union.right_observed[:, used])
+
+
+def _paste(union: _Union, target, target_faces, right: Block, options: Options) -> tuple[_Union, Paste]:
+    """``union`` with the target-only patches glued in (:func:`paste_target_only`): the right
+    block's own positions in its frames, Laplacian placements in the left block's."""
+    paste = paste_target_only(union.right_vertices[0], union.faces, target, target_faces, gap=options.paste_gap)
+    added = len(paste.target)
+    if not added:
+        return union, paste
+    count = union.right_vertices.shape[1]
+    right_vertices = np.concatenate([union.right_vertices, right.vertices[:, paste.target]], axis=1)
+    known = np.arange(count + added) < count
+    left_vertices = np.stack([
+        place_pasted(right_vertices[0], paste.faces, known, np.vstack([frame, np.zeros((added, 3))]),
+                     iterations=options.registration_iterations)
+        for frame in union.left_vertices
+    ])
+    frames = len(union.left_observed)
+    log.debug("pasted %d target-only vertices in %d patches (%d left out)", added, paste.patches, paste.skipped)
+    return _Union(
+        paste.faces, left_vertices,
+        np.concatenate([union.left_observed, np.zeros((frames, added), dtype=bool)], axis=1),
+        right_vertices, np.concatenate([union.right_observed, right.observed[:, paste.target]], axis=1),
+    ), paste
+
+
+def _test_replacements(union: _Union, paste: Paste, placed, region, drop, options: Options):
+    """Scenario 2 of 5.5 for the dropped regions (their source geometry failed the stretch
+    test): the target's patch pasted in their place kept when it passes the stretch test from
+    the target frame to the source frame, else removed, so the region is deleted from both.
+    Returns the union, the paste without the removed patches and the regions replaced."""
+    count = union.right_vertices.shape[1] - len(paste.target)
+    if not len(paste.target):
+        return union, paste, 0
+    edge = median_edge_length(union.right_vertices[0], union.faces)
+    near = cKDTree(placed[drop]).query(union.right_vertices[0, count:])[0] < (options.paste_gap + 2.0) * edge
+    dropped_region = region[drop]
+    owner = cKDTree(placed[drop]).query(union.right_vertices[0, count:])[1]
+    keep = np.ones(count + len(paste.target), dtype=bool)
+    replaced = set()
+    for patch in np.unique(paste.patch[near]):
+        members = count + np.flatnonzero(paste.patch == patch)
+        in_patch = np.zeros(len(keep), dtype=bool)
+        in_patch[members] = True
+        if passes_stretch_test(union.right_vertices[0], union.faces, union.left_vertices[-1], in_patch):
+            replaced.update(dropped_region[owner[members - count]].tolist())
+        else:
+            keep[members] = False
+    if keep.all():
+        return union, paste, len(replaced)
+    kept_new = keep[count:]
+    return _keep(union, keep), paste._replace(target=paste.target[kept_new], patch=paste.patch[kept_new]), len(replaced)
 
 
 def _merge_pair(args):

@@ -209,7 +209,9 @@ class Options(SurfaceSettings):
         Analyse each pair map (thesis 5.5) and unmap the vertices of its inconsistent regions
         (triangles stretched beyond ``correct_stretch``, vertices moving unlike their
         neighbours by over ``correct_motion`` edges), so the Laplacian registration places
-        them from the source's geometry. Off: on frames remeshed apart it flags 28-53% of the
+        them from the source's geometry; a region whose placement fails the thesis' stretch
+        test is replaced by the target's geometry (with ``paste``) when that passes it, else
+        deleted from both. Off: on frames remeshed apart it flags 28-53% of the
         vertices (the maps' edge-length noise) and raises the error's 95th percentile (crane
         0 -> 4: 1.75 -> 4.01 edges, bending-arm 0 -> 3: 6.7 -> 8.8; see ``benchmarks/METHODS.md``).
     correct_stretch : float
