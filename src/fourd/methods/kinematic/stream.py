@@ -313,7 +313,9 @@ class _Run:
         """Go on after the window whose :meth:`entry` is ``entry``; its written frames."""
         self.rest, self.faces = entry["rest"], entry["faces"]
         self.spacing, self.bandwidth, self.frames.density = (float(v) for v in entry["settings"])
-        self.frames.colour_source = str(entry["colour_source"]) or None
+        if "colour_source" in entry:  # entries written before the colour guide streamed lack it
+            self.frames.colour_source = str(entry["colour_source"]) or None
+            self.frames.colour_decided = True
         self.colour_reference = entry.get("colour_reference")
         self.state = {k[6:]: v for k, v in entry.items() if k.startswith("state_")}
         self.fit = (
