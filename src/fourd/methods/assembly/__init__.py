@@ -43,7 +43,7 @@ from fourd.methods.assembly.anchors import (
     returned_points,
     spread_anchors,
 )
-from fourd.methods.assembly.completion import Paste, paste_target_only, place_pasted, zip_loops
+from fourd.methods.assembly.completion import Paste, paste_target_only, place_pasted, zip_strip
 from fourd.methods.assembly.crossparam import (
     CrossParameterization,
     PatchMap,
@@ -87,7 +87,7 @@ __all__ = [
     "Paste",
     "paste_target_only",
     "place_pasted",
-    "zip_loops",
+    "zip_strip",
     "MergeReport",
     "Options",
     "assemble",

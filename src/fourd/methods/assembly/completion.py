@@ -35,11 +35,13 @@ from fourd.geometry.boundary_loops import boundary_loops
 from fourd.geometry.meshes import median_edge_length, vertex_adjacency, vertex_components
 from fourd.methods.assembly.registration import register_by_laplacian
 
-__all__ = ["Paste", "paste_target_only", "place_pasted", "zip_loops"]
+__all__ = ["Paste", "paste_target_only", "place_pasted", "zip_strip"]
 
 #: A patch loop and a union rim match when every point of each lies within the gap plus this
 #: many edges of the other.
 RIM_SLACK = 3.0
+#: Fewest vertices of a patch boundary's run beside a rim that are glued to it.
+MIN_RUN = 4
 #: The rings of union vertices around a patch that its Laplacian placement reads.
 PLACEMENT_RINGS = 3
 
@@ -74,30 +76,20 @@ def _surface_samples(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     return np.vstack([vertices, midpoints.reshape(-1, 3), corners.mean(axis=1)])
 
 
-def zip_loops(rim: np.ndarray, loop: np.ndarray, positions: np.ndarray) -> np.ndarray | None:
-    """Triangles ``[K, 3]`` of the band between two closed loops of vertex ids: ``rim`` as the
-    union's faces run along it, ``loop`` as the patch's faces run along it (so the two run
-    opposite ways around the band). Each step adds the triangle whose new diagonal is shorter
-    (``positions [V, 3]``); every rim and loop edge is used once, against its own face's
-    direction, so the glued mesh stays consistently oriented. None when the loops are not
-    side by side (they run the same way around the band)."""
-    along = loop[::-1]  # now parallel to the rim
-    p_rim, p_along = positions[rim], positions[along]
-    start = int(cKDTree(p_along).query(p_rim[0])[1])
-    along = np.roll(along, -start)
-    p_along = np.roll(p_along, -start, axis=0)
-    # parallel loops: their tangents at nearest points agree
-    t_rim = np.roll(p_rim, -1, axis=0) - p_rim
-    t_along = np.roll(p_along, -1, axis=0) - p_along
-    nearest = cKDTree(p_along).query(p_rim)[1]
-    if np.sum(t_rim * t_along[nearest]) <= 0.0:
-        return None
-    m, n = len(rim), len(along)
+def zip_strip(rim: np.ndarray, along: np.ndarray, positions: np.ndarray, *, closed: bool) -> np.ndarray:
+    """Triangles ``[K, 3]`` of the band between two runs of vertex ids that go side by side in
+    the same direction: ``rim`` as the union's faces run along it, ``along`` the patch's
+    boundary against its faces' direction. ``closed``: both are whole loops (wrapping round);
+    else open runs whose first and last vertices face each other. Each step adds the triangle
+    whose new diagonal is shorter (``positions [V, 3]``); every rim and patch edge of the runs
+    is used once, against its own face's direction, so the glued mesh stays consistently
+    oriented."""
+    m, n = (len(rim), len(along)) if closed else (len(rim) - 1, len(along) - 1)
     faces = []
     i = j = 0
     while i < m or j < n:
-        u0, u1 = rim[i % m], rim[(i + 1) % m]
-        t0, t1 = along[j % n], along[(j + 1) % n]
+        u0, u1 = rim[i % len(rim)], rim[(i + 1) % len(rim)]
+        t0, t1 = along[j % len(along)], along[(j + 1) % len(along)]
         advance_rim = j >= n or (
             i < m
             and np.linalg.norm(positions[u1] - positions[t0]) <= np.linalg.norm(positions[u0] - positions[t1])
@@ -111,10 +103,75 @@ def zip_loops(rim: np.ndarray, loop: np.ndarray, positions: np.ndarray) -> np.nd
     return np.asarray(faces, dtype=np.int64)
 
 
-def _loop_distance(a: np.ndarray, b: np.ndarray) -> float:
-    """The larger directed distance between two point sets (their Hausdorff distance over the
-    points)."""
-    return max(float(cKDTree(b).query(a)[0].max()), float(cKDTree(a).query(b)[0].max()))
+def _parallel(p_rim: np.ndarray, p_along: np.ndarray) -> bool:
+    """Whether two runs of points go the same way: their tangents at nearest points agree."""
+    t_rim = np.diff(p_rim, axis=0)
+    t_along = np.diff(p_along, axis=0)
+    if not len(t_rim) or not len(t_along):
+        return False
+    nearest = np.minimum(cKDTree(p_along).query(p_rim[:-1])[1], len(t_along) - 1)
+    return bool(np.sum(t_rim * t_along[nearest]) > 0.0)
+
+
+def _runs(flags: np.ndarray) -> list[np.ndarray]:
+    """The maximal runs of True in a cyclic sequence, as index arrays in order (one run
+    covering everything when all are True)."""
+    count = len(flags)
+    if flags.all():
+        return [np.arange(count)]
+    if not flags.any():
+        return []
+    start = int(np.flatnonzero(~flags)[0]) + 1  # begin just after a False
+    order = (start + np.arange(count)) % count
+    runs, current = [], []
+    for k in order:
+        if flags[k]:
+            current.append(k)
+        elif current:
+            runs.append(np.array(current))
+            current = []
+    if current:
+        runs.append(np.array(current))
+    return runs
+
+
+def _seams(along, rims, rim_of, place, tree, positions, used, limit, min_run):
+    """The seams ``(rim run, along run, closed)`` that glue one patch boundary ``along`` (ids,
+    against the patch's face direction) to the union's rims: the whole loop to a whole rim
+    that runs beside it, else each run of at least ``min_run`` of its vertices within
+    ``limit`` of one rim to the stretch of that rim beside it. Rim vertices in ``used`` are
+    not glued twice."""
+    distance, nearest = tree.query(positions[along])
+    near = distance <= limit
+    rim_id = rim_of[nearest]
+    if near.all() and (rim_id == rim_id[0]).all():
+        rim = rims[rim_id[0]]
+        if not used[rim].any():
+            back = cKDTree(positions[along]).query(positions[rim])[0]
+            if back.max() <= limit:
+                start = int(cKDTree(positions[along]).query(positions[rim[0]])[1])
+                rolled = np.roll(along, -start)
+                if _parallel(positions[np.r_[rim, rim[:1]]], positions[np.r_[rolled, rolled[:1]]]):
+                    return [(rim, rolled, True)]
+                return []
+    seams = []
+    for run in _runs(near):
+        # split where the nearest rim changes
+        cuts = np.flatnonzero(np.diff(rim_id[run])) + 1
+        for piece in np.split(run, cuts):
+            if len(piece) < min_run:
+                continue
+            rim = rims[rim_id[piece[0]]]
+            first, last = place[nearest[piece[0]]], place[nearest[piece[-1]]]
+            span = (last - first) % len(rim)
+            if span < 1 or span > 2 * len(piece) + 4:  # not side by side, or going the other way
+                continue
+            segment = rim[(first + np.arange(span + 1)) % len(rim)]
+            if used[segment].any() or not _parallel(positions[segment], positions[along[piece]]):
+                continue
+            seams.append((segment, along[piece], False))
+            used[segment] = True
+    return seams
 
 
 def paste_target_only(
@@ -152,12 +209,17 @@ def paste_target_only(
     distance, _ = cKDTree(_surface_samples(union, faces)).query(target, workers=-1)
     far = distance > gap * edge
     patch_faces = target_faces[far[target_faces].all(axis=1)]
-    if len(patch_faces) < min_faces:
+    rims = boundary_loops(faces, count)
+    if len(patch_faces) < min_faces or not rims:
         return empty
     _, piece = vertex_components(patch_faces, len(target))
     face_piece = piece[patch_faces[:, 0]]
-    rims = boundary_loops(faces, count)
-    taken = np.zeros(len(rims), dtype=bool)
+    rim_vertices = np.concatenate(rims)
+    rim_of = np.repeat(np.arange(len(rims)), [len(r) for r in rims])
+    place = np.concatenate([np.arange(len(r)) for r in rims])
+    tree = cKDTree(union[rim_vertices])
+    used = np.zeros(count, dtype=bool)
+    limit = (gap + RIM_SLACK) * edge
     new_faces, new_target = [], []
     patches = skipped = 0
     next_id = count
@@ -165,39 +227,22 @@ def paste_target_only(
         own = patch_faces[face_piece == label]
         if len(own) < min_faces:
             continue
-        loops = boundary_loops(own, len(target))
-        matched = []
-        for loop in loops:
-            best, best_distance = -1, np.inf
-            for r, rim in enumerate(rims):
-                if taken[r] or r in {m for m, _ in matched}:
-                    continue
-                d = _loop_distance(target[loop], union[rim])
-                if d < best_distance:
-                    best, best_distance = r, d
-            if best < 0 or best_distance > (gap + RIM_SLACK) * edge:
-                break
-            matched.append((best, loop))
-        if len(matched) != len(loops) or not loops:
-            skipped += 1
-            continue
         vertices = np.unique(own)
         ids = np.full(len(target), -1, dtype=np.int64)
         ids[vertices] = next_id + np.arange(len(vertices))
         # the union's positions, then the patches' so far and this one's (the ids' order)
-        full = np.vstack([union, *[target[v] for v in new_target], target[vertices]])
+        positions = np.vstack([union, *[target[v] for v in new_target], target[vertices]])
+        trial = used.copy()
         seams = []
-        for r, loop in matched:
-            seam = zip_loops(rims[r], ids[loop], full)
-            if seam is None:
-                break
-            seams.append(seam)
-        if len(seams) != len(matched):
+        for loop in boundary_loops(own, len(target)):
+            seams += _seams(ids[loop[::-1]], rims, rim_of, place, tree, positions, trial, limit, MIN_RUN)
+        if not seams:
             skipped += 1
             continue
-        for r, _ in matched:
-            taken[r] = True
-        new_faces += [ids[own], *seams]
+        used = trial
+        for seam in seams:
+            used[seam[0]] = True
+        new_faces += [ids[own]] + [zip_strip(rim, along, positions, closed=closed) for rim, along, closed in seams]
         new_target.append(vertices)
         next_id += len(vertices)
         patches += 1
