@@ -3,15 +3,15 @@
 After a pair map the union mesh (the source's connectivity) has a position in the target frame
 for every vertex. A target triangle whose three corners lie farther than ``gap`` from that
 placed union mesh is geometry the source lacks (a hole of the source's scan that the target
-saw); connected such triangles form a patch. Each boundary loop of a patch is matched to the
-boundary loop of the union mesh (the hole's rim) that runs beside it, and the band between the
-two loops is triangulated, so the two connectivities become one (:func:`zip_loops`). The
-thesis maps the union's rim onto the target, cuts the target's triangles along it and remeshes
-the seam in the plane; here the seam band is the triangles of ``gap`` width that the patch
-leaves out, and it is triangulated by the shortest-diagonal zipper (the strip triangulation of
-Fuchs, Kedem and Uselton 1977) between the two loops: the same union of connectivities, with a
-band one triangle wide. A patch whose loops do not all find a rim of their own shape (a partial
-overlap, a sheet's border) is left out and counted.
+saw); connected such triangles form a patch. A patch boundary that runs beside a boundary loop
+of the union (a hole's rim) all the way round is glued to the whole rim; otherwise each run of
+its vertices beside one rim is glued to the stretch of the rim beside it, so a hole the target
+fills only in part keeps the rest open (:func:`zip_strip`). The thesis maps the union's rim
+onto the target, cuts the target's triangles along it and remeshes the seam in the plane; here
+the seam band is the triangles of ``gap`` width that the patch leaves out, triangulated by the
+shortest-diagonal zipper (the strip triangulation of Fuchs, Kedem and Uselton 1977) between the
+two runs: the same union of connectivities, with a band one triangle wide. A patch with no run
+beside any rim is left out and counted (it would float).
 
 The patch's positions in the target's frames are the target's own; in the source's frames they
 are placed by the Laplacian coordinates of the union mesh in the target frame with the union's
@@ -37,8 +37,8 @@ from fourd.methods.assembly.registration import register_by_laplacian
 
 __all__ = ["Paste", "paste_target_only", "place_pasted", "zip_strip"]
 
-#: A patch loop and a union rim match when every point of each lies within the gap plus this
-#: many edges of the other.
+#: A patch boundary vertex is beside a rim when it lies within the gap plus this many edges
+#: of it.
 RIM_SLACK = 3.0
 #: Fewest vertices of a patch boundary's run beside a rim that are glued to it.
 MIN_RUN = 4
@@ -58,7 +58,7 @@ class Paste(NamedTuple):
     patches : int
         Patches glued in.
     skipped : int
-        Patches left out (no matching rim, or a rim already taken).
+        Patches left out (no run of their boundary beside a rim not glued already).
     """
 
     faces: np.ndarray
