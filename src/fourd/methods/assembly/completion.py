@@ -147,9 +147,9 @@ def _seams(along, rims, rim_of, place, tree, positions, used, limit, min_run):
     if near.all() and (rim_id == rim_id[0]).all():
         rim = rims[rim_id[0]]
         if not used[rim].any():
-            back = cKDTree(positions[along]).query(positions[rim])[0]
+            back, facing = cKDTree(positions[along]).query(positions[rim])
             if back.max() <= limit:
-                start = int(cKDTree(positions[along]).query(positions[rim[0]])[1])
+                start = int(facing[0])
                 rolled = np.roll(along, -start)
                 if _parallel(positions[np.r_[rim, rim[:1]]], positions[np.r_[rolled, rolled[:1]]]):
                     return [(rim, rolled, True)]

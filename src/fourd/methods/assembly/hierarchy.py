@@ -261,9 +261,9 @@ def _test_replacements(union: _Union, paste: Paste, placed, region, drop, option
     if not len(paste.target):
         return union, paste, 0
     edge = median_edge_length(union.right_vertices[0], union.faces)
-    near = cKDTree(placed[drop]).query(union.right_vertices[0, count:])[0] < (options.paste_gap + 2.0) * edge
+    distance, owner = cKDTree(placed[drop]).query(union.right_vertices[0, count:])
+    near = distance < (options.paste_gap + 2.0) * edge
     dropped_region = region[drop]
-    owner = cKDTree(placed[drop]).query(union.right_vertices[0, count:])[1]
     keep = np.ones(count + len(paste.target), dtype=bool)
     replaced = set()
     for patch in np.unique(paste.patch[near]):
