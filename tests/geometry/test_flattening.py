@@ -107,3 +107,22 @@ def test_pins_and_bad_patches():
         lscm(np.concatenate([vertices, [[9.0, 9.0, 9.0]]]), faces)
     with pytest.raises(ValueError, match="method"):
         flatten(vertices, faces, method="arap")
+
+
+
+def test_the_disk_check_names_what_is_wrong():
+    box = trimesh.creation.box()
+    with pytest.raises(ValueError, match="Euler characteristic 2"):
+        boundary_loop_vertices(box.faces, 8)
+    with pytest.raises(ValueError, match="three or more faces"):
+        boundary_loop_vertices(np.array([[0, 1, 2], [0, 2, 3], [0, 2, 4]]), 5)
+    z = box.vertices[box.faces, 2]
+    tube = box.faces[np.ptp(z, axis=1) > 0]  # the box without top and bottom: Euler characteristic 0
+    with pytest.raises(ValueError, match="2 connected pieces"):
+        boundary_loop_vertices(np.vstack([tube, [[8, 9, 10]]]), 11)  # and a triangle beside it: 1
+    with pytest.raises(ValueError, match="touches itself"):
+        boundary_loop_vertices(np.array([[0, 1, 2], [0, 3, 4]]), 5)  # two triangles meeting at a vertex
+    assert boundary_loop_vertices(np.array([[0, 1, 2], [1, 3, 2]]), 4).all()
+    s, t, faces = _sheet(n=13)
+    inside = (s > s.min()) & (s < s.max()) & (t > t.min()) & (t < t.max())
+    assert np.array_equal(~boundary_loop_vertices(faces, len(s)), inside)

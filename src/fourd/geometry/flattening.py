@@ -37,6 +37,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import NamedTuple
 
+import numba
 import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.linalg import spsolve
@@ -135,27 +136,74 @@ def boundary_loop_vertices(faces: np.ndarray, count: int) -> np.ndarray:
     """Whether each of ``count`` vertices lies on the boundary (an edge of one face), bool
     ``[count]``; raises ``ValueError`` unless the faces form one disk (connected, Euler
     characteristic 1, manifold edges, a boundary that never touches itself)."""
-    faces = np.asarray(faces, dtype=np.int64)
-    keys, shared = _edges(faces, count)
-    if shared.max() > 2:
+    faces = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
+    problem, euler, parts, boundary = _disk_check(faces, int(count))
+    if problem == 1:
         raise ValueError("the patch has an edge of three or more faces (not a manifold disk)")
-    edge_count = len(np.unique(keys))
-    if count - edge_count + len(faces) != 1:
-        raise ValueError(
-            f"the patch is not a disk (Euler characteristic {count - edge_count + len(faces)}, "
-            "a disk has 1)"
-        )
-    from fourd.geometry.meshes import vertex_components
-
-    parts, _ = vertex_components(faces, count)
-    if parts != 1:
+    if problem == 2:
+        raise ValueError(f"the patch is not a disk (Euler characteristic {euler}, a disk has 1)")
+    if problem == 3:
         raise ValueError(f"the patch has {parts} connected pieces, a disk has 1")
-    sides = shared == 1
-    ends = np.concatenate([faces[sides], np.roll(faces, -1, axis=1)[sides]])
-    boundary_edges = np.bincount(ends, minlength=count)
-    if np.any(boundary_edges > 2):
+    if problem == 4:
         raise ValueError("the patch's boundary touches itself at a vertex (not a disk)")
-    return boundary_edges > 0
+    return boundary
+
+
+@numba.njit(cache=True, nogil=True)
+def _disk_check(faces, count):
+    """The checks of :func:`boundary_loop_vertices` in one pass: ``(problem, euler, parts,
+    boundary)``, problem 0 for a disk, else the first check failed (1 non-manifold edge,
+    2 Euler characteristic, 3 pieces, 4 boundary touching itself)."""
+    sides = len(faces) * 3
+    keys = np.empty(sides, dtype=np.int64)
+    for f in range(len(faces)):
+        for k in range(3):
+            a, b = faces[f, k], faces[f, (k + 1) % 3]
+            keys[3 * f + k] = min(a, b) * count + max(a, b)
+    keys.sort()
+    ends = np.zeros(count, dtype=np.int64)
+    boundary = np.zeros(count, dtype=np.bool_)
+    edges = 0
+    widest = 0
+    i = 0
+    while i < sides:
+        j = i
+        while j < sides and keys[j] == keys[i]:
+            j += 1
+        edges += 1
+        widest = max(widest, j - i)
+        if j - i == 1:
+            ends[keys[i] // count] += 1
+            ends[keys[i] % count] += 1
+        i = j
+    if widest > 2:
+        return 1, 0, 0, boundary
+    euler = count - edges + len(faces)
+    if euler != 1:
+        return 2, euler, 0, boundary
+    parent = np.arange(count)
+    for f in range(len(faces)):
+        for k in range(3):
+            a, b = faces[f, k], faces[f, (k + 1) % 3]
+            while parent[a] != a:
+                parent[a] = parent[parent[a]]
+                a = parent[a]
+            while parent[b] != b:
+                parent[b] = parent[parent[b]]
+                b = parent[b]
+            if a != b:
+                parent[max(a, b)] = min(a, b)
+    parts = 0
+    for v in range(count):
+        if parent[v] == v:
+            parts += 1
+    if parts != 1:
+        return 3, euler, parts, boundary
+    for v in range(count):
+        if ends[v] > 2:
+            return 4, euler, parts, boundary
+        boundary[v] = ends[v] > 0
+    return 0, euler, parts, boundary
 
 
 def corner_angles(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:

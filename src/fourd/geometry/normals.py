@@ -18,6 +18,7 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from fourd.geometry.eigen3 import DEGENERATE, smallest_eigenpair
+from fourd.geometry.heap import heap_pop, sift_up
 from fourd.geometry.neighbors import knn
 
 
@@ -116,50 +117,6 @@ def _reverse_adjacency(indices):
     return pointer, members
 
 
-@numba.njit(cache=True)
-def _sift_up(keys, heap, where, i):
-    """Move ``heap[i]`` up the binary heap of node ids ordered by ``keys`` (``where``: each
-    node's heap position)."""
-    node = heap[i]
-    key = keys[node]
-    while i > 0:
-        up = (i - 1) >> 1
-        if keys[heap[up]] <= key:
-            break
-        heap[i] = heap[up]
-        where[heap[i]] = i
-        i = up
-    heap[i] = node
-    where[node] = i
-
-
-@numba.njit(cache=True)
-def _heap_pop(keys, heap, where, size):
-    """Remove the node of smallest key; returns it and the new size."""
-    top = heap[0]
-    where[top] = -1
-    size -= 1
-    if size == 0:
-        return top, size
-    node = heap[size]
-    key = keys[node]
-    i = 0
-    while True:
-        child = 2 * i + 1
-        if child >= size:
-            break
-        if child + 1 < size and keys[heap[child + 1]] < keys[heap[child]]:
-            child += 1
-        if key <= keys[heap[child]]:
-            break
-        heap[i] = heap[child]
-        where[heap[i]] = i
-        i = child
-    heap[i] = node
-    where[node] = i
-    return top, size
-
-
 @numba.njit(cache=True, nogil=True)
 def _propagate_over_spanning_tree(normals, indices, pointer, members, signs, labels):
     """Prim's minimum spanning tree of the symmetric neighbour graph (weights
@@ -182,7 +139,7 @@ def _propagate_over_spanning_tree(normals, indices, pointer, members, signs, lab
         where[seed] = 0
         size = 1
         while size > 0:
-            node, size = _heap_pop(keys, heap, where, size)
+            node, size = heap_pop(keys, heap, where, size)
             reached[node] = True
             labels[node] = part
             up = parent[node]
@@ -212,7 +169,7 @@ def _propagate_over_spanning_tree(normals, indices, pointer, members, signs, lab
                         heap[size] = j
                         where[j] = size
                         size += 1
-                    _sift_up(keys, heap, where, where[j])
+                    sift_up(keys, heap, where, where[j])
         part += 1
     return part
 

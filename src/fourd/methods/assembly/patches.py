@@ -24,11 +24,12 @@ from __future__ import annotations
 import logging
 from typing import NamedTuple
 
+import numba
 import numpy as np
 import scipy.sparse as sp
-from scipy.sparse.csgraph import connected_components, dijkstra
 
 from fourd.geometry.flattening import boundary_loop_vertices
+from fourd.geometry.geodesic import edge_length_graph, geodesic_distances
 from fourd.geometry.meshes import face_adjacency
 from fourd.methods.assembly.anchors import Anchors
 from fourd.methods.assembly.options import CrossParamOptions
@@ -98,6 +99,7 @@ class _Mesh(NamedTuple):
     incidence: sp.csr_matrix  # vertex -> faces [N, F]
     face_graph: sp.csr_matrix  # face -> edge-adjacent faces [F, F]
     degree: np.ndarray  # edge-adjacent faces of each face [F] (below 3: on the mesh's own boundary)
+    first_face: np.ndarray  # a face of each vertex [N] (F for a vertex of no face)
 
 
 def _mesh(vertices, faces) -> _Mesh:
@@ -112,27 +114,15 @@ def _mesh(vertices, faces) -> _Mesh:
         shape=(count, count),
     )
     degree = np.bincount(adjacency.ravel(), minlength=count)
-    return _Mesh(vertices, faces, _edge_lengths(vertices, faces), adjacency, incidence, face_graph, degree)
-
-
-def _edge_lengths(vertices: np.ndarray, faces: np.ndarray) -> sp.csr_matrix:
-    """Symmetric ``[N, N]`` graph of the edges' lengths (an edge of two faces counted once)."""
-    i, j = faces.ravel(), np.roll(faces, -1, axis=1).ravel()
-    a, b = np.minimum(i, j), np.maximum(i, j)
-    _, first = np.unique(a * np.int64(len(vertices)) + b, return_index=True)
-    a, b = a[first], b[first]
-    length = np.linalg.norm(vertices[a] - vertices[b], axis=1)
-    count = len(vertices)
-    graph = sp.csr_matrix((np.r_[length, length], (np.r_[a, b], np.r_[b, a])), shape=(count, count))
-    graph.sum_duplicates()  # canonical (sorted, no duplicates): Dijkstra then takes it as it is
-    return graph
+    first_face = np.full(len(vertices), count, dtype=np.int64)
+    np.minimum.at(first_face, faces.ravel(), rows)
+    return _Mesh(vertices, faces, edge_length_graph(vertices, faces), adjacency, incidence, face_graph, degree,
+                 first_face)
 
 
 def _distances(mesh: _Mesh, seeds: np.ndarray, offsets: np.ndarray, limit: float) -> np.ndarray:
     """Geodesic distance ``[N]`` from the nearest seed plus its offset (inf beyond ``limit``)."""
-    # the graph holds each edge both ways: as directed, Dijkstra skips symmetrising it
-    rows = dijkstra(mesh.graph, directed=True, indices=np.asarray(seeds), limit=limit)
-    return np.min(np.atleast_2d(rows) + np.asarray(offsets, dtype=np.float64)[:, None], axis=0)
+    return geodesic_distances(mesh.graph, seeds, offsets, limit)
 
 
 def _disk(mesh: _Mesh, distance: np.ndarray, radius: float, seed_face: int) -> Patch | None:
@@ -141,31 +131,11 @@ def _disk(mesh: _Mesh, distance: np.ndarray, radius: float, seed_face: int) -> P
 
     Works on the faces near the ball only (a corner within ``HOLE_REACH * radius``): a piece of
     the rest of the mesh that leaves them reaches farther than that, so it is not a hole."""
-    near_vertices = np.flatnonzero(distance <= HOLE_REACH * radius)
-    local = np.unique(mesh.incidence[near_vertices].indices)  # sorted global face indices
-    at = np.searchsorted(local, seed_face)
-    if at >= len(local) or local[at] != seed_face:
+    faces = _disk_faces(mesh.faces, mesh.face_graph.indptr, mesh.face_graph.indices, mesh.degree,
+                        mesh.incidence.indptr, mesh.incidence.indices, distance, float(radius),
+                        HOLE_REACH * float(radius), int(seed_face))
+    if not len(faces):
         return None
-    corner_distance = distance[mesh.faces[local]]
-    face_in = (corner_distance <= radius).all(axis=1)
-    if not face_in[at]:
-        return None
-    graph = mesh.face_graph[local][:, local].tocoo()
-    face_in = _piece(graph, face_in, at)
-    # pieces of the rest that stay near the centre are holes; a piece that touches a face
-    # beyond the local faces, or the mesh's own border, is the outside
-    rest = ~face_in
-    keep = rest[graph.row] & rest[graph.col]
-    _, label = connected_components(
-        sp.coo_matrix((np.ones(keep.sum()), (graph.row[keep], graph.col[keep])), shape=graph.shape), directed=False
-    )
-    reach = np.zeros(label.max() + 1)
-    np.maximum.at(reach, label[rest], corner_distance[rest].max(axis=1))
-    leaves = mesh.degree[local] > np.bincount(graph.row, minlength=len(local))
-    outside = np.zeros(label.max() + 1, dtype=bool)
-    outside[label[rest & ((mesh.degree[local] < 3) | leaves)]] = True
-    hole = rest & (reach[label] <= HOLE_REACH * radius) & ~outside[label]
-    faces = local[face_in | hole]
     vertices = np.unique(mesh.faces[faces])
     local_faces = np.searchsorted(vertices, mesh.faces[faces])
     try:
@@ -175,25 +145,100 @@ def _disk(mesh: _Mesh, distance: np.ndarray, radius: float, seed_face: int) -> P
     return Patch(faces, vertices, distance[vertices], float(radius))
 
 
-def _piece(graph: sp.coo_matrix, face_in: np.ndarray, seed: int) -> np.ndarray:
-    """The faces of ``face_in`` edge-connected (``graph``, local) to face ``seed``."""
-    keep = face_in[graph.row] & face_in[graph.col]
-    _, label = connected_components(
-        sp.coo_matrix((np.ones(keep.sum()), (graph.row[keep], graph.col[keep])), shape=graph.shape), directed=False
-    )
-    return face_in & (label == label[seed])
+@numba.njit(cache=True, nogil=True)
+def _disk_faces(faces, graph_start, graph_faces, degree, incident_start, incident_faces, distance, radius,
+                reach, seed_face):
+    """The faces of :func:`_disk` (sorted; none when the seed face is not in the ball): the
+    faces near the ball (a corner within ``reach``); among them the edge-connected piece of
+    faces with every corner within ``radius`` that holds the seed; and the pieces of the other
+    near faces that stay within ``reach`` and touch neither a face beyond the near ones nor
+    the mesh's own border (holes)."""
+    # 0 far, 1 near, 2 in the piece, 3 rest, 4 hole, 5 rest that is not a hole
+    state = np.zeros(len(faces), dtype=np.int8)
+    near = np.empty(len(faces), dtype=np.int64)
+    count = 0
+    for v in range(len(distance)):
+        if distance[v] <= reach:
+            for e in range(incident_start[v], incident_start[v + 1]):
+                f = incident_faces[e]
+                if state[f] == 0:
+                    state[f] = 1
+                    near[count] = f
+                    count += 1
+    empty = np.empty(0, dtype=np.int64)
+    if state[seed_face] == 0:
+        return empty
+    for k in range(3):
+        if not distance[faces[seed_face, k]] <= radius:
+            return empty
+    queue = np.empty(count, dtype=np.int64)
+    queue[0] = seed_face
+    state[seed_face] = 2
+    head, tail = 0, 1
+    while head < tail:
+        f = queue[head]
+        head += 1
+        for e in range(graph_start[f], graph_start[f + 1]):
+            g = graph_faces[e]
+            if (state[g] == 1 and distance[faces[g, 0]] <= radius and distance[faces[g, 1]] <= radius
+                    and distance[faces[g, 2]] <= radius):
+                state[g] = 2
+                queue[tail] = g
+                tail += 1
+    for i in range(count):
+        if state[near[i]] == 1:
+            state[near[i]] = 3
+    for i in range(count):
+        start = near[i]
+        if state[start] != 3:
+            continue
+        # one piece of the rest: a hole unless it leaves the near faces, meets the mesh's
+        # border or reaches farther than ``reach``
+        begin = tail
+        queue[tail] = start
+        tail += 1
+        state[start] = 4
+        head = begin
+        farthest = 0.0
+        outside = False
+        while head < tail:
+            f = queue[head]
+            head += 1
+            farthest = max(farthest, distance[faces[f, 0]], distance[faces[f, 1]], distance[faces[f, 2]])
+            neighbours = 0
+            for e in range(graph_start[f], graph_start[f + 1]):
+                g = graph_faces[e]
+                if state[g] != 0:
+                    neighbours += 1
+                if state[g] == 3:
+                    state[g] = 4
+                    queue[tail] = g
+                    tail += 1
+            if degree[f] < 3 or degree[f] > neighbours:
+                outside = True
+        if outside or not farthest <= reach:
+            for j in range(begin, tail):
+                state[queue[j]] = 5
+    kept = 0
+    for i in range(count):
+        if state[near[i]] == 2 or state[near[i]] == 4:
+            near[kept] = near[i]
+            kept += 1
+    result = near[:kept].copy()
+    result.sort()
+    return result
 
 
-def _pair(source: _Mesh, target: _Mesh, anchors: Anchors, centre: int, ds: np.ndarray,
+def _pair(source: _Mesh, target: _Mesh, anchors: Anchors, support: np.ndarray, centre: int, ds: np.ndarray,
           dt: np.ndarray, target_face: int, options: CrossParamOptions,
           largest: float) -> PatchPair | None:
     """Grow the pair around ``centre`` (source) and the target point of ``dt``'s origin (in
-    ``target_face``) with one radius until it holds ``patch_anchors`` matching anchors."""
-    support = anchors.target_corners(target.faces)
+    ``target_face``) with one radius until it holds ``patch_anchors`` matching anchors
+    (``support``: :meth:`Anchors.target_corners`)."""
     radius = _radius(anchors, support, ds, dt, options, largest)
     if radius is None:
         return None
-    src = _disk(source, ds, radius, _face_at(source.faces, centre))
+    src = _disk(source, ds, radius, int(source.first_face[centre]))
     tgt = _disk(target, dt, radius, target_face)
     if src is None or tgt is None:
         return None
@@ -218,13 +263,12 @@ def _radius(anchors: Anchors, support: np.ndarray, ds: np.ndarray, dt: np.ndarra
     return min(entry[min(options.patch_anchors, len(entry)) - 1] / (1.0 - options.boundary_band), largest)
 
 
-def _near_distances(source: _Mesh, target: _Mesh, anchors: Anchors, centre: int, seeds, offsets,
+def _near_distances(source: _Mesh, target: _Mesh, anchors: Anchors, support: np.ndarray, centre: int, seeds, offsets,
                     options: CrossParamOptions, largest: float) -> tuple[np.ndarray, np.ndarray]:
     """The geodesic distances ``(ds, dt)`` a pair around ``centre`` and the target ``seeds``
     needs, searched no farther than it needs: from a quarter of ``largest``, doubled until
     the pair's radius times ``HOLE_REACH`` lies within the search (then every distance
     :func:`_pair` reads is the same as with the search to ``largest``)."""
-    support = anchors.target_corners(target.faces)
     limit = largest / 4.0
     while True:
         ds = _distances(source, [centre], [0.0], limit)
@@ -241,17 +285,34 @@ def _image(target: _Mesh, corners: np.ndarray, offsets: np.ndarray, reach: np.nd
            limit: float) -> int:
     """The target vertex whose geodesic distances from the given anchors' target points best
     match the source vertex's distances ``reach [K]`` from those anchors (least squares over
-    the vertices all of them reach); -1 when none does."""
-    cost = np.zeros(len(target.vertices))
-    for k in range(len(reach)):
-        cost += (_distances(target, corners[k], offsets[k], limit) - reach[k]) ** 2
-    if not np.isfinite(cost).any():
-        return -1
-    return int(np.argmin(cost))
+    the vertices all of them reach within ``limit``); -1 when none does.
+
+    Searched from twice the largest ``reach``, doubled while a vertex beyond the search could
+    cost less than the best one found (its cost is at least ``(search - max(reach))^2``), so
+    the answer is that of the search to ``limit``."""
+    farthest = float(np.max(reach))
+    search = min(limit, 2.0 * farthest) if farthest > 0 else limit
+    while True:
+        cost = np.zeros(len(target.vertices))
+        for k in range(len(reach)):
+            cost += (_distances(target, corners[k], offsets[k], search) - reach[k]) ** 2
+        best = int(np.argmin(cost))
+        if search >= limit or cost[best] < (search - farthest) ** 2:
+            return best if np.isfinite(cost[best]) else -1
+        search = min(limit, 2.0 * search)
 
 
-def _face_at(faces: np.ndarray, vertex: int) -> int:
-    return int(np.flatnonzero((faces == vertex).any(axis=1))[0])
+def _nearest_anchors(source: _Mesh, anchors: Anchors, centre: int, count: int, largest: float):
+    """The ``count`` anchors nearest ``centre`` along the source (those within ``largest``)
+    and the distances of every anchor (inf beyond the search), searched from a quarter of
+    ``largest``, doubled until ``count`` anchors lie within it."""
+    search = largest / 4.0
+    while True:
+        reach = _distances(source, [centre], [0.0], search)[anchors.source]
+        if np.isfinite(reach).sum() >= count or search >= largest:
+            near = np.argsort(reach, kind="stable")[:count]
+            return near[np.isfinite(reach[near])], reach
+        search = min(largest, 2.0 * search)
 
 
 def grow_patches(
@@ -285,6 +346,7 @@ def grow_patches(
     largest = options.max_radius * diagonal
     anchor_points = anchors.target_points(target.vertices, target.faces)
     corners = target.faces[anchors.target_faces]  # [A, 3]
+    support = anchors.target_corners(target.faces)
     offsets = np.linalg.norm(target.vertices[corners] - anchor_points[:, None], axis=2)
     covered = np.zeros(len(source.vertices), dtype=bool)
     used = np.zeros(len(source.vertices), dtype=bool)
@@ -301,9 +363,9 @@ def grow_patches(
         covered[pair.source.vertices[inner]] = True
 
     for a in range(len(anchors.source)):
-        ds, dt = _near_distances(source, target, anchors, anchors.source[a], corners[a], offsets[a],
+        ds, dt = _near_distances(source, target, anchors, support, anchors.source[a], corners[a], offsets[a],
                                  options, largest)
-        keep(_pair(source, target, anchors, anchors.source[a], ds, dt,
+        keep(_pair(source, target, anchors, support, anchors.source[a], ds, dt,
                    int(anchors.target_faces[a]), options, largest))
         used[anchors.source[a]] = True
     while True:
@@ -312,10 +374,7 @@ def grow_patches(
             break
         centre = int(left[0])
         used[centre] = True
-        ds = _distances(source, [centre], [0.0], largest)
-        reach = ds[anchors.source]
-        near = np.argsort(reach)[: options.patch_anchors]
-        near = near[np.isfinite(reach[near])]
+        near, reach = _nearest_anchors(source, anchors, centre, options.patch_anchors, largest)
         if len(near) < options.min_anchors:
             discarded += 1
             continue
@@ -323,8 +382,8 @@ def grow_patches(
         if image < 0:
             discarded += 1
             continue
-        dt = _distances(target, [image], [0.0], largest)
-        keep(_pair(source, target, anchors, centre, ds, dt, _face_at(target.faces, image),
+        ds, dt = _near_distances(source, target, anchors, support, centre, [image], [0.0], options, largest)
+        keep(_pair(source, target, anchors, support, centre, ds, dt, int(target.first_face[image]),
                    options, largest))
     log.debug("patches: %d kept, %d discarded, %.1f%% of the source covered",
               len(pairs), discarded, 100.0 * covered.mean())
