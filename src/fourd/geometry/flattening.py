@@ -300,29 +300,30 @@ def _conformal_layout(
     weights = np.roll(local, -2, axis=1) - np.roll(local, -1, axis=1)
     double_area = np.abs((np.conj(local[:, 1] - local[:, 0]) * (local[:, 2] - local[:, 0])).imag)
     weights = weights / np.sqrt(np.maximum(double_area, 1e-300))[:, None]
-    a, b = weights.real.ravel(), weights.imag.ravel()
-    rows = np.repeat(np.arange(len(faces)), 3)
-    columns = faces.ravel()
-    # W U = (a u - b v) + i (b u + a v): a real row and an imaginary row per triangle
-    matrix = sp.csr_matrix(
-        (
-            np.concatenate([a, -b, b, a]),
-            (
-                np.concatenate([2 * rows, 2 * rows, 2 * rows + 1, 2 * rows + 1]),
-                np.concatenate([columns, count + columns, columns, count + columns]),
-            ),
-        ),
-        shape=(2 * len(faces), 2 * count),
-    )
+    a, b = weights.real, weights.imag
+    # W U = (a u - b v) + i (b u + a v): a real row and an imaginary row per triangle over its
+    # six unknowns (u then v of its corners); the normal equations summed triangle by triangle
+    real = np.concatenate([a, -b], axis=1)  # [F, 6]
+    imaginary = np.concatenate([b, a], axis=1)
+    blocks = real[:, :, None] * real[:, None, :] + imaginary[:, :, None] * imaginary[:, None, :]  # [F, 6, 6]
+    unknowns = np.concatenate([faces, count + faces], axis=1)  # [F, 6]
+    rows = np.broadcast_to(unknowns[:, :, None], blocks.shape).ravel()
+    columns = np.broadcast_to(unknowns[:, None, :], blocks.shape).ravel()
+    blocks = blocks.ravel()
     fixed = np.array([pinned[0], pinned[1], count + pinned[0], count + pinned[1]])
-    values = np.array([0.0, distance, 0.0, 0.0])
-    free = np.setdiff1d(np.arange(2 * count), fixed)
-    free_part = matrix[:, free].tocsc()
-    normal = (free_part.T @ free_part).tocsc()
-    rhs = -(free_part.T @ (matrix[:, fixed] @ values))
-    solution = np.zeros(2 * count)
-    solution[fixed] = values
-    solution[free] = spsolve(normal, rhs)
+    values = np.zeros(2 * count)
+    values[pinned[1]] = distance
+    is_fixed = np.zeros(2 * count, dtype=bool)
+    is_fixed[fixed] = True
+    index = np.cumsum(~is_fixed) - 1
+    free_rows = ~is_fixed[rows]
+    both = free_rows & ~is_fixed[columns]
+    size = 2 * count - len(fixed)
+    normal = sp.csc_matrix((blocks[both], (index[rows[both]], index[columns[both]])), shape=(size, size))
+    moved = free_rows & is_fixed[columns]
+    rhs = -np.bincount(index[rows[moved]], weights=blocks[moved] * values[columns[moved]], minlength=size)
+    solution = values.copy()
+    solution[~is_fixed] = spsolve(normal, rhs)
     return np.stack([solution[:count], solution[count:]], axis=1)
 
 

@@ -105,6 +105,7 @@ def walk_on_surface(
     displacement: np.ndarray,
     *,
     neighbours: np.ndarray | None = None,
+    normals: np.ndarray | None = None,
     max_crossings: int = 64,
 ) -> Walked:
     """Move points on a mesh by tangent displacements, across edges (module docstring).
@@ -121,6 +122,8 @@ def walk_on_surface(
         Input units; the part along the start face's normal is dropped.
     neighbours : int array [F, 3], optional
         :func:`face_neighbours` of ``faces`` (computed when not given).
+    normals : array [F, 3], optional
+        :func:`face_unit_normals` of the mesh (computed when not given).
     max_crossings : int
         Edges a point may cross; one still under way after that stops where it is.
 
@@ -134,7 +137,7 @@ def walk_on_surface(
     face = np.array(start_faces, dtype=np.int64).reshape(-1)
     bary = np.clip(np.array(start_barycentric, dtype=np.float64).reshape(-1, 3), 0.0, None)
     bary /= bary.sum(axis=1, keepdims=True)
-    normal = face_unit_normals(vertices, faces)
+    normal = face_unit_normals(vertices, faces) if normals is None else np.asarray(normals, dtype=np.float64)
     step = np.array(displacement, dtype=np.float64).reshape(-1, 3)
     step -= np.einsum("kd,kd->k", step, normal[face])[:, None] * normal[face]
     stopped = np.zeros(len(face), dtype=bool)

@@ -50,6 +50,7 @@ from __future__ import annotations
 import logging
 from typing import NamedTuple
 
+import numba
 import numpy as np
 import scipy.sparse as sp
 
@@ -194,16 +195,46 @@ def _energy(problem: _Problem, source_vertices: np.ndarray, points: np.ndarray) 
 def _ring_flips(problem: _Problem, batch, points, faces, candidate_points, candidate_faces) -> np.ndarray:
     """Flipped triangles around each batch vertex ``[B, K]`` with the vertex at each of its
     ``K`` candidate points (target triangles ``candidate_faces [B, K]``)."""
-    incident = problem.incident[batch]  # [B, D]
-    triangles = problem.source_faces[np.maximum(incident, 0)]  # [B, D, 3]
-    counted = (incident >= 0) & problem.face_ok[np.maximum(incident, 0)]
-    is_vertex = (triangles == batch[:, None, None])[:, None, :, :, None]  # [B, 1, D, 3, 1]
-    corners = np.where(is_vertex, candidate_points[:, :, None, None, :], points[triangles][:, None])
-    normals = problem.target_normals[faces[triangles]][:, None]
-    normals = np.where(is_vertex, problem.target_normals[candidate_faces][:, :, None, None, :], normals)
-    mapped = np.cross(corners[..., 1, :] - corners[..., 0, :], corners[..., 2, :] - corners[..., 0, :])
-    flipped = ~(np.einsum("bkdx,bkdx->bkd", mapped, normals.sum(axis=3)) > 0)
-    return (flipped & counted[:, None]).sum(axis=2)
+    return _count_ring_flips(problem.incident, problem.face_ok, problem.source_faces, problem.target_normals,
+                             np.asarray(batch, dtype=np.int64), points, faces,
+                             np.ascontiguousarray(candidate_points, dtype=np.float64),
+                             np.ascontiguousarray(candidate_faces, dtype=np.int64))
+
+
+@numba.njit(cache=True, nogil=True)
+def _count_ring_flips(incident, face_ok, source_faces, target_normals, batch, points, faces, candidate_points,
+                      candidate_faces):
+    """:func:`_ring_flips`: a triangle counts when every corner is mapped; it is flipped when
+    the normal of its mapped corners does not point along the sum of the target normals at
+    them (the moved vertex's taken at its candidate)."""
+    count, tries = candidate_faces.shape
+    flips = np.zeros((count, tries), dtype=np.int64)
+    corners = np.empty((3, 3))
+    for b in range(count):
+        vertex = batch[b]
+        for d in range(incident.shape[1]):
+            triangle = incident[vertex, d]
+            if triangle < 0 or not face_ok[triangle]:
+                continue
+            for k in range(tries):
+                nx = ny = nz = 0.0
+                for c in range(3):
+                    corner = source_faces[triangle, c]
+                    if corner == vertex:
+                        at, face = candidate_points[b, k], candidate_faces[b, k]
+                    else:
+                        at, face = points[corner], faces[corner]
+                    for x in range(3):
+                        corners[c, x] = at[x]
+                    nx += target_normals[face, 0]
+                    ny += target_normals[face, 1]
+                    nz += target_normals[face, 2]
+                ax, ay, az = corners[1, 0] - corners[0, 0], corners[1, 1] - corners[0, 1], corners[1, 2] - corners[0, 2]
+                bx, by, bz = corners[2, 0] - corners[0, 0], corners[2, 1] - corners[0, 1], corners[2, 2] - corners[0, 2]
+                dot = (ay * bz - az * by) * nx + (az * bx - ax * bz) * ny + (ax * by - ay * bx) * nz
+                if not dot > 0:
+                    flips[b, k] += 1
+    return flips
 
 
 def _move(problem, batch, faces, bary, points, residual, rng, options: RelaxOptions) -> int:
@@ -231,7 +262,8 @@ def _move(problem, batch, faces, bary, points, residual, rng, options: RelaxOpti
         steps = np.concatenate([towards[:, None], length[..., None] * direction], axis=1)  # [B, K, 3]
         tries = steps.shape[1]
         walked = walk_on_surface(tv, tf, np.repeat(face, tries), np.repeat(bary[batch], tries, axis=0),
-                                 steps.reshape(-1, 3), neighbours=problem.target_neighbours)
+                                 steps.reshape(-1, 3), neighbours=problem.target_neighbours,
+                                 normals=problem.target_normals)
         end = walked.points.reshape(len(batch), tries, 3)
         end_face = walked.faces.reshape(len(batch), tries)
         gain = np.sum((end - goal[:, None]) ** 2, axis=2) - np.sum((here - goal) ** 2, axis=1)[:, None]
