@@ -17,6 +17,7 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
+import numba
 import numpy as np
 
 from fourd.geometry.meshes import face_adjacency
@@ -133,70 +134,102 @@ def walk_on_surface(
     """
     vertices = np.asarray(vertices, dtype=np.float64)
     faces = np.asarray(faces, dtype=np.int64)
-    neighbours = face_neighbours(faces) if neighbours is None else np.asarray(neighbours)
+    neighbours = face_neighbours(faces) if neighbours is None else np.asarray(neighbours, dtype=np.int64)
     face = np.array(start_faces, dtype=np.int64).reshape(-1)
     bary = np.clip(np.array(start_barycentric, dtype=np.float64).reshape(-1, 3), 0.0, None)
     bary /= bary.sum(axis=1, keepdims=True)
     normal = face_unit_normals(vertices, faces) if normals is None else np.asarray(normals, dtype=np.float64)
     step = np.array(displacement, dtype=np.float64).reshape(-1, 3)
-    step -= np.einsum("kd,kd->k", step, normal[face])[:, None] * normal[face]
-    stopped = np.zeros(len(face), dtype=bool)
-    active = np.flatnonzero(np.einsum("kd,kd->k", step, step) > 0)
-    for _ in range(max_crossings + 1):
-        if len(active) == 0:
-            break
-        f = face[active]
-        corners = vertices[faces[f]]
-        # what is left of a step at the rounding level of the face's size is no step (its
-        # barycentric change is all noise, which would spin the point round a vertex)
-        size = np.einsum("kd,kd->k", corners[:, 1] - corners[:, 0], corners[:, 1] - corners[:, 0])
-        going = np.einsum("kd,kd->k", step[active], step[active]) > (TINY_STEP**2) * size
-        active, f, corners = active[going], f[going], corners[going]
-        here = bary[active]
-        there = plane_barycentric(corners, np.einsum("kc,kcd->kd", here, corners) + step[active])
-        bad = ~np.isfinite(there).all(axis=1)
-        change = np.where(bad[:, None], 0.0, there - here)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            exit_at = np.where(change < 0, np.maximum(here, 0.0) / -change, np.inf)
-        corner = np.argmin(exit_at, axis=1)
-        rows = np.arange(len(active))
-        t = exit_at[rows, corner]
-        inside = (t >= 1.0) & ~bad
-        bary[active[inside]] = there[inside]
-        stopped[active[bad]] = True
-        leave = np.flatnonzero(~inside & ~bad)
-        if len(leave) == 0:
-            active = active[:0]
-            break
-        moving, k, t = active[leave], corner[leave], t[leave]
-        edge_bary = here[leave] + t[:, None] * change[leave]
-        edge_bary[np.arange(len(leave)), k] = 0.0
-        edge_bary = np.clip(edge_bary, 0.0, None)
-        edge_bary /= edge_bary.sum(axis=1, keepdims=True)
-        bary[moving] = edge_bary
-        rest = (1.0 - t)[:, None] * step[moving]
-        old = face[moving]
-        new = neighbours[old, k]
-        border = new < 0
-        stopped[moving[border]] = True
-        cross = ~border
-        moving, k, old, new, rest = moving[cross], k[cross], old[cross], new[cross], rest[cross]
-        a = faces[old, (k + 1) % 3]
-        b = faces[old, (k + 2) % 3]
-        axis = vertices[b] - vertices[a]
-        axis /= np.linalg.norm(axis, axis=1, keepdims=True)
-        along = np.einsum("kd,kd->k", rest, axis)[:, None]
-        across = np.einsum("kd,kd->k", rest, np.cross(normal[old], axis))[:, None]
-        step[moving] = along * axis + across * np.cross(normal[new], axis)
-        weight_a = bary[moving, (k + 1) % 3]
-        weight_b = bary[moving, (k + 2) % 3]
-        target = faces[new]
-        bary[moving] = (target == a[:, None]) * weight_a[:, None] + (target == b[:, None]) * weight_b[:, None]
-        face[moving] = new
-        active = moving
-    else:
-        stopped[active] = True
+    stopped = _walk(vertices, faces, neighbours, normal, face, bary, step, int(max_crossings), TINY_STEP)
     bary = np.clip(bary, 0.0, None)
     bary /= bary.sum(axis=1, keepdims=True)
     points = np.einsum("kc,kcd->kd", bary, vertices[faces[face]])
     return Walked(face, bary, points, stopped)
+
+
+@numba.njit(cache=True, nogil=True)
+def _walk(vertices, faces, neighbours, normals, face, bary, step, max_crossings, tiny):
+    """Each point's walk (module docstring), one face at a time: ``face`` and ``bary`` are
+    updated in place; returns which points stopped short."""
+    stopped = np.zeros(len(face), dtype=np.bool_)
+    here = np.empty(3)
+    there = np.empty(3)
+    change = np.empty(3)
+    for p in range(len(face)):
+        f = face[p]
+        sx, sy, sz = step[p, 0], step[p, 1], step[p, 2]
+        along = sx * normals[f, 0] + sy * normals[f, 1] + sz * normals[f, 2]
+        sx, sy, sz = sx - along * normals[f, 0], sy - along * normals[f, 1], sz - along * normals[f, 2]
+        if not sx * sx + sy * sy + sz * sz > 0:
+            continue
+        for crossing in range(max_crossings + 2):
+            if crossing == max_crossings + 1:
+                stopped[p] = True
+                break
+            i0, i1, i2 = faces[f, 0], faces[f, 1], faces[f, 2]
+            e1x, e1y, e1z = vertices[i1, 0] - vertices[i0, 0], vertices[i1, 1] - vertices[i0, 1], vertices[i1, 2] - vertices[i0, 2]
+            e2x, e2y, e2z = vertices[i2, 0] - vertices[i0, 0], vertices[i2, 1] - vertices[i0, 1], vertices[i2, 2] - vertices[i0, 2]
+            # what is left of a step at the rounding level of the face's size is no step (its
+            # barycentric change is all noise, which would spin the point round a vertex)
+            if not sx * sx + sy * sy + sz * sz > tiny * tiny * (e1x * e1x + e1y * e1y + e1z * e1z):
+                break
+            for c in range(3):
+                here[c] = bary[p, c]
+            # the point moved, in the plane of the face, as barycentric coordinates
+            rx = here[1] * e1x + here[2] * e2x + sx
+            ry = here[1] * e1y + here[2] * e2y + sy
+            rz = here[1] * e1z + here[2] * e2z + sz
+            d11 = e1x * e1x + e1y * e1y + e1z * e1z
+            d12 = e1x * e2x + e1y * e2y + e1z * e2z
+            d22 = e2x * e2x + e2y * e2y + e2z * e2z
+            r1 = rx * e1x + ry * e1y + rz * e1z
+            r2 = rx * e2x + ry * e2y + rz * e2z
+            det = d11 * d22 - d12 * d12
+            if not det > 1e-14 * max(d11 * d22, 1e-300):
+                stopped[p] = True
+                break
+            there[1] = (d22 * r1 - d12 * r2) / det
+            there[2] = (d11 * r2 - d12 * r1) / det
+            there[0] = 1.0 - there[1] - there[2]
+            corner = 0
+            t = np.inf
+            for c in range(3):
+                change[c] = there[c] - here[c]
+                if change[c] < 0:
+                    leave = max(here[c], 0.0) / -change[c]
+                    if leave < t:
+                        t, corner = leave, c
+            if t >= 1.0:
+                for c in range(3):
+                    bary[p, c] = there[c]
+                break
+            total = 0.0
+            for c in range(3):
+                value = 0.0 if c == corner else max(here[c] + t * change[c], 0.0)
+                bary[p, c] = value
+                total += value
+            for c in range(3):
+                bary[p, c] /= total
+            new = neighbours[f, corner]
+            if new < 0:
+                stopped[p] = True
+                break
+            # the rest of the step, unfolded about the crossed edge onto the next face
+            a, b = faces[f, (corner + 1) % 3], faces[f, (corner + 2) % 3]
+            ax, ay, az = vertices[b, 0] - vertices[a, 0], vertices[b, 1] - vertices[a, 1], vertices[b, 2] - vertices[a, 2]
+            length = np.sqrt(ax * ax + ay * ay + az * az)
+            ax, ay, az = ax / length, ay / length, az / length
+            rest = 1.0 - t
+            sx, sy, sz = rest * sx, rest * sy, rest * sz
+            ox, oy, oz = normals[f, 1] * az - normals[f, 2] * ay, normals[f, 2] * ax - normals[f, 0] * az, normals[f, 0] * ay - normals[f, 1] * ax
+            nx, ny, nz = normals[new, 1] * az - normals[new, 2] * ay, normals[new, 2] * ax - normals[new, 0] * az, normals[new, 0] * ay - normals[new, 1] * ax
+            forward = sx * ax + sy * ay + sz * az
+            across = sx * ox + sy * oy + sz * oz
+            sx, sy, sz = forward * ax + across * nx, forward * ay + across * ny, forward * az + across * nz
+            weight_a, weight_b = bary[p, (corner + 1) % 3], bary[p, (corner + 2) % 3]
+            for c in range(3):
+                vertex = faces[new, c]
+                bary[p, c] = weight_a if vertex == a else (weight_b if vertex == b else 0.0)
+            f = new
+        face[p] = f
+    return stopped
