@@ -126,3 +126,12 @@ def test_the_disk_check_names_what_is_wrong():
     s, t, faces = _sheet(n=13)
     inside = (s > s.min()) & (s < s.max()) & (t > t.min()) & (t < t.max())
     assert np.array_equal(~boundary_loop_vertices(faces, len(s)), inside)
+
+
+def test_small_patches_solved_dense_flatten_as_the_sparse_solve_does(monkeypatch):
+    import fourd.geometry.flattening as flattening
+
+    vertices, faces = _cap(height=0.3)
+    dense = lscm(vertices, faces).uv
+    monkeypatch.setattr(flattening, "DENSE_UNKNOWNS", 0)
+    assert np.allclose(lscm(vertices, faces).uv, dense, rtol=0, atol=1e-9)

@@ -25,6 +25,13 @@ def test_registration_recovers_a_rigid_motion_exactly():
     placed = register_by_laplacian(pair.source_vertices, pair.source_faces, ~hole, pair.truth)
     np.testing.assert_array_equal(placed[~hole], pair.truth[~hole])
     assert np.abs(placed - pair.truth).max() < 1e-9 * pair.edge  # measured: 3e-13 edges
+    # several frames at once (one factorisation): each as it comes alone
+    moved = pair.truth + np.array([0.0, 0.0, 0.3])
+    both = register_by_laplacian(pair.source_vertices, pair.source_faces, ~hole, np.stack([pair.truth, moved]))
+    assert both.shape == (2,) + pair.truth.shape
+    np.testing.assert_allclose(both[0], placed, rtol=0, atol=1e-12)
+    single = register_by_laplacian(pair.source_vertices, pair.source_faces, ~hole, moved)
+    np.testing.assert_allclose(both[1], single, rtol=0, atol=1e-12)
 
 
 def test_registration_fills_a_hole_in_a_bent_frame_near_the_truth():

@@ -255,10 +255,11 @@ def paste_target_only(
 def place_pasted(
     reference: np.ndarray, faces: np.ndarray, known: np.ndarray, points: np.ndarray, *, iterations: int = 16
 ) -> np.ndarray:
-    """Positions ``[V, 3]`` of the pasted vertices (``known`` False) in another frame whose
-    union positions are ``points`` (rows of ``known`` vertices), by the Laplacian coordinates
-    of ``reference [V, 3]`` (the union with its patches in the target frame), solved over the
-    patches and :data:`PLACEMENT_RINGS` rings of union vertices around them."""
+    """Positions ``[V, 3]`` (or ``[T, V, 3]``, the frames sharing one factorisation) of the
+    pasted vertices (``known`` False) in another frame whose union positions are ``points``
+    (rows of ``known`` vertices), by the Laplacian coordinates of ``reference [V, 3]`` (the
+    union with its patches in the target frame), solved over the patches and
+    :data:`PLACEMENT_RINGS` rings of union vertices around them."""
     count = len(reference)
     adjacency = vertex_adjacency(faces, count)
     near = ~known
@@ -268,11 +269,12 @@ def place_pasted(
     ids = np.flatnonzero(near)
     index = np.full(count, -1, dtype=np.int64)
     index[ids] = np.arange(len(ids))
-    local_points = np.zeros((len(ids), 3))
-    local_points[known[ids]] = points[ids[known[ids]]]
+    points = np.asarray(points, dtype=np.float64)
+    local_points = np.zeros(points.shape[:-2] + (len(ids), 3))
+    local_points[..., known[ids], :] = points[..., ids[known[ids]], :]
     placed = register_by_laplacian(
         reference[ids], index[local], known[ids], local_points, iterations=iterations
     )
-    result = np.array(points, dtype=np.float64)
-    result[~known] = placed[index[~known]]
+    result = points.copy()
+    result[..., ~known, :] = placed[..., index[~known], :]
     return result

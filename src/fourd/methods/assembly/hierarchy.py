@@ -170,19 +170,16 @@ def merge_blocks(left: Block, right: Block, options: Options | None = None) -> t
     observed = np.zeros((frames, count), dtype=bool)
     observed[:, mapped] = right.observed[:, corners].all(axis=2)
     rigid = np.zeros(count, dtype=bool)
+    vertices[:] = 0.0
+    vertices[:, mapped] = carried
+    if not mapped.all():
+        vertices = register_by_laplacian(source, faces, mapped, vertices, iterations=options.registration_iterations)
     for t in range(frames):
-        points = np.zeros((count, 3))
-        points[mapped] = carried[t]
-        if mapped.all():
-            placed = points
-        else:
-            placed = register_by_laplacian(source, faces, mapped, points, iterations=options.registration_iterations)
-        lost = np.isnan(placed).any(axis=1)
+        lost = np.isnan(vertices[t]).any(axis=1)
         if lost.any():
-            fit = procrustes(source[mapped], points[mapped])
-            placed[lost] = source[lost] @ fit.rotation.T + fit.translation
+            fit = procrustes(source[mapped], vertices[t, mapped])
+            vertices[t, lost] = source[lost] @ fit.rotation.T + fit.translation
             rigid |= lost
-        vertices[t] = placed
     union = _Union(faces, left.vertices, left.observed, vertices, observed)
     drop = np.zeros(count, dtype=bool)
     regions = 0
@@ -238,12 +235,10 @@ def _paste(union: _Union, target, target_faces, right: Block, options: Options) 
     count = union.right_vertices.shape[1]
     right_vertices = np.concatenate([union.right_vertices, right.vertices[:, paste.target]], axis=1)
     known = np.arange(count + added) < count
-    left_vertices = np.stack([
-        place_pasted(right_vertices[0], paste.faces, known, np.vstack([frame, np.zeros((added, 3))]),
-                     iterations=options.registration_iterations)
-        for frame in union.left_vertices
-    ])
-    frames = len(union.left_observed)
+    frames = len(union.left_vertices)
+    left_vertices = place_pasted(right_vertices[0], paste.faces, known,
+                                 np.concatenate([union.left_vertices, np.zeros((frames, added, 3))], axis=1),
+                                 iterations=options.registration_iterations)
     log.debug("pasted %d target-only vertices in %d patches (%d left out)", added, paste.patches, paste.skipped)
     return _Union(
         paste.faces, left_vertices,

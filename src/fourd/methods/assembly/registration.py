@@ -50,8 +50,8 @@ def register_by_laplacian(
     source_faces : int array [F, 3]
     known : bool array [N]
         Vertices with a position in the target's frame (the mapped ones).
-    points : array [N, 3]
-        Those positions (other rows ignored).
+    points : array [N, 3] or [T, N, 3]
+        Those positions (other rows ignored); several frames at once share one factorisation.
     laplacian : {"uniform", "cotangent"}
     iterations : int
         Rotation fits after the first solve (a hole of 130 of 642 vertices in a rigidly
@@ -63,7 +63,7 @@ def register_by_laplacian(
 
     Returns
     -------
-    ndarray float64 [N, 3]
+    ndarray float64, the shape of ``points``
         Every vertex's position; the known ones exactly ``points``; NaN where no known vertex
         shares the vertex's connected piece (and for vertices of no face).
     """
@@ -71,10 +71,12 @@ def register_by_laplacian(
     faces = np.asarray(source_faces, dtype=np.int64)
     known = np.asarray(known, dtype=bool).reshape(-1)
     count = len(vertices)
-    if len(known) != count or np.shape(points) != (count, 3):
+    points = np.asarray(points, dtype=np.float64)
+    if len(known) != count or points.shape[-2:] != (count, 3) or points.ndim not in (2, 3):
         raise ValueError(f"known and points must have one row per source vertex ({count})")
-    result = np.full((count, 3), np.nan)
-    result[known] = np.asarray(points, dtype=np.float64)[known]
+    frames = points.reshape(-1, count, 3)
+    result = np.full(frames.shape, np.nan)
+    result[:, known] = frames[:, known]
     _, piece = vertex_components(faces, count)
     in_faces = np.zeros(count, dtype=bool)
     in_faces[faces.ravel()] = True
@@ -82,17 +84,18 @@ def register_by_laplacian(
     anchored[piece[known & in_faces]] = True
     free = np.flatnonzero(~known & in_faces & anchored[piece])
     if len(free) == 0:
-        return result
+        return result.reshape(points.shape)
     held = np.flatnonzero(known)
     L = source_laplacian(vertices, faces, laplacian)
     L_free, L_held = L[:, free].tocsc(), L[:, held].tocsc()
-    fixed_part = L_held @ result[held]  # [N, 3]
     normal = splu((L_free.T @ L_free).tocsc())
     edges = abs(L - sp.diags(L.diagonal())).tocsr()
     delta = L @ vertices
-    result[free] = normal.solve(L_free.T @ (delta - fixed_part))
-    for _ in range(iterations):
-        placed = np.where(np.isnan(result), 0.0, result)
-        goal = np.einsum("nab,nb->na", one_ring_rotations(edges, vertices, placed), delta)
-        result[free] = normal.solve(L_free.T @ (goal - fixed_part))
-    return result
+    for frame in result:
+        fixed_part = L_held @ frame[held]  # [N, 3]
+        frame[free] = normal.solve(L_free.T @ (delta - fixed_part))
+        for _ in range(iterations):
+            placed = np.where(np.isnan(frame), 0.0, frame)
+            goal = np.einsum("nab,nb->na", one_ring_rotations(edges, vertices, placed), delta)
+            frame[free] = normal.solve(L_free.T @ (goal - fixed_part))
+    return result.reshape(points.shape)
