@@ -144,7 +144,7 @@ def map_patch(
     source_local, source_uv = _flat(source_vertices, source_faces, pair.source, options.flattening)
     target_local, target_uv = _flat(target_vertices, target_faces, pair.target, options.flattening)
     anchor_source = source_uv[np.searchsorted(pair.source.vertices, anchors.source[pair.anchors])]
-    support = anchors.target_corners(target_faces)[pair.anchors]
+    support = anchors.subset(pair.anchors).target_corners(target_faces)
     corner = np.searchsorted(pair.target.vertices, np.maximum(support, 0))
     weight = np.where(support >= 0, anchors.target_barycentric[pair.anchors], 0.0)
     anchor_target = np.einsum("ak,akd->ad", weight, target_uv[np.minimum(corner, len(target_uv) - 1)])

@@ -255,12 +255,33 @@ def _radius(anchors: Anchors, support: np.ndarray, ds: np.ndarray, dt: np.ndarra
     """The pair's radius: the one at which ``patch_anchors`` anchors lie in both patches (an
     anchor enters at the larger of its source and target distances), widened by the ignored
     boundary band, at most ``largest``; None when fewer than ``min_anchors`` enter by then."""
-    reach = np.where(support >= 0, dt[np.maximum(support, 0)], -np.inf).max(axis=1)
-    entry = np.maximum(ds[anchors.source], reach)
-    entry = np.sort(entry[entry <= largest])
-    if len(entry) < options.min_anchors:
+    entered, entry = _nearest_entries(anchors.source, support, ds, dt, float(largest), int(options.patch_anchors))
+    if entered < options.min_anchors:
         return None
-    return min(entry[min(options.patch_anchors, len(entry)) - 1] / (1.0 - options.boundary_band), largest)
+    return min(entry / (1.0 - options.boundary_band), largest)
+
+
+@numba.njit(cache=True, nogil=True)
+def _nearest_entries(source, support, ds, dt, largest, wanted):
+    """How many anchors enter by ``largest`` and the radius at which the ``wanted``-th (or the
+    last, when fewer) enters (:func:`_radius`)."""
+    smallest = np.full(wanted, np.inf)
+    entered = 0
+    for a in range(len(source)):
+        entry = ds[source[a]]
+        for c in range(3):
+            if support[a, c] >= 0 and dt[support[a, c]] > entry:
+                entry = dt[support[a, c]]
+        if not entry <= largest:
+            continue
+        entered += 1
+        if entry < smallest[wanted - 1]:
+            i = wanted - 1
+            while i > 0 and smallest[i - 1] > entry:
+                smallest[i] = smallest[i - 1]
+                i -= 1
+            smallest[i] = entry
+    return entered, smallest[min(wanted, entered) - 1] if entered else np.inf
 
 
 def _near_distances(source: _Mesh, target: _Mesh, anchors: Anchors, support: np.ndarray, centre: int, seeds, offsets,
