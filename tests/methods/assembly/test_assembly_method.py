@@ -3,6 +3,8 @@ each output frame on its own input mesh; a rigidly moving shape maps vertices to
 
 from __future__ import annotations
 
+import os
+
 import numpy as np
 import pytest
 import trimesh
@@ -19,6 +21,7 @@ from fourd.methods.assembly import (
     reconstruct,
     reconstruct_with_diagnostics,
 )
+from fourd.methods.assembly.options import PARALLEL_VERTICES
 from fourd.methods.base import check_method_module
 from fourd.sequence import Frame, PointCloudSequence
 
@@ -74,6 +77,12 @@ def test_the_method_keeps_the_contract_and_is_registered():
         Options(anchor_spacing=0.0)
     with pytest.raises(ValueError, match="flattening"):
         Options(flattening="cones")
+    with pytest.raises(ValueError, match="workers"):
+        Options(workers=-1)
+    # by default, processes only for frames big enough to pay for starting them
+    assert Options().merge_workers(PARALLEL_VERTICES - 1) == 1
+    assert Options().merge_workers(PARALLEL_VERTICES) == (os.cpu_count() or 1)
+    assert Options(workers=3).merge_workers(10) == 3
 
 
 def test_a_rigidly_moving_mesh_maps_every_vertex_to_itself():
@@ -231,7 +240,7 @@ def test_point_cloud_frames_are_meshed_first_and_bad_input_is_named():
 @pytest.mark.slow
 def test_merges_of_a_level_run_in_processes_with_the_same_result():
     seq, _ = _remeshed_sequence(4)
-    serial = reconstruct(seq, Options(relax_sweeps=1))
+    serial = reconstruct(seq, Options(relax_sweeps=1, workers=1))
     parallel = reconstruct(seq, Options(relax_sweeps=1, workers=2))
     np.testing.assert_array_equal(parallel.vertices, serial.vertices)
     np.testing.assert_array_equal(parallel.observed, serial.observed)

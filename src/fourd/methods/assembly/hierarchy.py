@@ -39,6 +39,7 @@ Merges of one level are independent (5.3) and run side by side in processes when
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import multiprocessing
 from concurrent.futures import ProcessPoolExecutor
@@ -56,6 +57,7 @@ from fourd.methods.assembly.completion import Paste, paste_target_only, place_pa
 from fourd.methods.assembly.options import Options
 from fourd.methods.assembly.pair import cross_parameterize_pair
 from fourd.methods.assembly.registration import register_by_laplacian
+from fourd.pipeline.worker_threads import threads_per_worker
 
 log = logging.getLogger("fourd.methods.assembly.hierarchy")
 
@@ -288,7 +290,8 @@ def assemble(blocks: list[Block], options: Options | None = None, *, on_merge=No
     ----------
     blocks : list of Block
     options : Options, optional
-        ``workers`` > 1 runs the merges of a level in that many processes.
+        Its :meth:`~Options.merge_workers` > 1 runs the merges of a level in that many
+        processes.
     on_merge : callable, optional
         Called with no argument after each merge (progress).
 
@@ -304,29 +307,33 @@ def assemble(blocks: list[Block], options: Options | None = None, *, on_merge=No
         raise ValueError("nothing to assemble")
     reports: list[MergeReport] = []
     blocks = list(blocks)
-    # spawned, not forked: a fork after OpenMP (numba, BLAS) has started aborts the child
-    pool = (ProcessPoolExecutor(max_workers=options.workers, mp_context=multiprocessing.get_context("spawn"))
-            if options.workers > 1 else None)
-    try:
-        while len(blocks) > 1:
-            jobs = [(blocks[i], blocks[i + 1], options) for i in range(0, len(blocks) - 1, 2)]
-            results = []
-            if pool is not None and len(jobs) > 1:
-                for result in pool.map(_merge_pair, jobs):
-                    results.append(result)
-                    if on_merge:
-                        on_merge()
-            else:
-                for job in jobs:
-                    results.append(_merge_pair(job))
-                    if on_merge:
-                        on_merge()
-            merged = [block for block, _ in results]
-            reports += [report for _, report in results]
-            if len(blocks) % 2:
-                merged.append(blocks[-1])
-            blocks = merged
-    finally:
-        if pool is not None:
-            pool.shutdown()
+    # spawned, not forked: a fork after OpenMP (numba, BLAS) has started aborts the child;
+    # their thread pools sized to share the cores (fourd.pipeline.worker_threads)
+    workers = options.merge_workers(blocks[0].vertices.shape[1])
+    pool = None
+    with threads_per_worker(workers) if workers > 1 else contextlib.nullcontext():
+        if workers > 1:
+            pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"))
+        try:
+            while len(blocks) > 1:
+                jobs = [(blocks[i], blocks[i + 1], options) for i in range(0, len(blocks) - 1, 2)]
+                results = []
+                if pool is not None and len(jobs) > 1:
+                    for result in pool.map(_merge_pair, jobs):
+                        results.append(result)
+                        if on_merge:
+                            on_merge()
+                else:
+                    for job in jobs:
+                        results.append(_merge_pair(job))
+                        if on_merge:
+                            on_merge()
+                merged = [block for block, _ in results]
+                reports += [report for _, report in results]
+                if len(blocks) % 2:
+                    merged.append(blocks[-1])
+                blocks = merged
+        finally:
+            if pool is not None:
+                pool.shutdown()
     return blocks[0], reports

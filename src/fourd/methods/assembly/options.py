@@ -3,11 +3,17 @@ method's own :class:`Options` (5.3, 5.6)."""
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 
 import numpy as np
 
 from fourd.geometry.frame_surface import SurfaceSettings
+
+#: Frames of at least this many vertices have their merges run one per core by default
+#: (``Options.workers`` 0): a crane frame (35,000 vertices) merges in about 25 s, where
+#: starting a worker process costs a few seconds.
+PARALLEL_VERTICES = 5000
 
 
 @dataclass(frozen=True)
@@ -228,9 +234,9 @@ class Options(SurfaceSettings):
         this many edges from the union placed in that frame; the seam band is this wide.
     workers : int
         Merges of one level of the hierarchy run in this many processes (they are
-        independent, 5.3); 1 runs them one after the other (8 frames of about 360 vertices
-        on the shared 2-core machine: 36.9 / 35.6 s serial, 36.8 / 35.7 s with 2, the same
-        result).
+        independent, 5.3), with the same result; 1 runs them one after the other; 0 (the
+        default) one per core when the frames have :data:`PARALLEL_VERTICES` vertices or
+        more, else 1 (starting a process costs more than a small merge).
     scheduler : str
         Where the frames' own surfaces are made (``fourd reconstruct --scheduler``): ``sync``
         here, ``processes`` side by side in local processes, or a ``dask.distributed``
@@ -255,7 +261,7 @@ class Options(SurfaceSettings):
     correct_motion: float = 1.5
     paste: bool = True
     paste_gap: float = 2.0
-    workers: int = 1
+    workers: int = 0
     scheduler: str = "sync"
     cache_dir: str | None = None
 
@@ -271,12 +277,18 @@ class Options(SurfaceSettings):
             value = getattr(self, name)
             if int(value) != value or value < 0:
                 raise ValueError(f"{name} must be a non-negative integer, got {value!r}")
-        for name in ("relax_walks", "workers"):
-            value = getattr(self, name)
-            if int(value) != value or value < 1:
-                raise ValueError(f"{name} must be a positive integer, got {value!r}")
+        if int(self.relax_walks) != self.relax_walks or self.relax_walks < 1:
+            raise ValueError(f"relax_walks must be a positive integer, got {self.relax_walks!r}")
+        if int(self.workers) != self.workers or self.workers < 0:
+            raise ValueError(f"workers must be a non-negative integer (0: one per core), got {self.workers!r}")
         # the pair map's own checks (radius, flattening)
         self.pair_options()
+
+    def merge_workers(self, vertices: int) -> int:
+        """The processes the merges of frames of ``vertices`` vertices run in."""
+        if self.workers:
+            return int(self.workers)
+        return (os.cpu_count() or 1) if vertices >= PARALLEL_VERTICES else 1
 
     def pair_options(self) -> PairOptions:
         """The :class:`PairOptions` of each merge's pair map."""
