@@ -243,20 +243,30 @@ def one_ring_rotations(weights: sp.spmatrix, rest: np.ndarray, deformed: np.ndar
         Proper rotations with ``R_i (r_j - r_i) ~ d_j - d_i``; the identity where a vertex
         has no weighted edge.
     """
-    rest = np.asarray(rest, dtype=np.float64)
-    deformed = np.asarray(deformed, dtype=np.float64)
-    edges = sp.coo_matrix(weights)
-    i, j, w = edges.row, edges.col, edges.data
-    before = rest[j] - rest[i]
-    after = deformed[j] - deformed[i]
-    count = len(rest)
-    covariance = np.empty((count, 3, 3))
-    for a in range(3):
-        for b in range(3):
-            covariance[:, a, b] = np.bincount(i, weights=w * before[:, a] * after[:, b], minlength=count)
+    rest = np.ascontiguousarray(rest, dtype=np.float64)
+    deformed = np.ascontiguousarray(deformed, dtype=np.float64)
+    edges = weights if sp.issparse(weights) and weights.format == "csr" else sp.csr_matrix(weights)
+    covariance = _one_ring_covariances(edges.indptr, edges.indices, np.asarray(edges.data, dtype=np.float64),
+                                       rest, deformed)
     rotations = best_rotations(covariance)
-    rotations[np.bincount(i, minlength=count) == 0] = np.eye(3)
+    rotations[np.diff(edges.indptr) == 0] = np.eye(3)
     return rotations
+
+
+@numba.njit(cache=True, nogil=True)
+def _one_ring_covariances(indptr, indices, weights, rest, deformed):
+    """``sum_j w_ij (r_j - r_i) (d_j - d_i)^T`` per row ``i`` of the CSR weights ``[N, 3, 3]``."""
+    count = len(indptr) - 1
+    covariance = np.zeros((count, 3, 3))
+    for i in range(count):
+        for e in range(indptr[i], indptr[i + 1]):
+            j = indices[e]
+            w = weights[e]
+            for a in range(3):
+                before = w * (rest[j, a] - rest[i, a])
+                for b in range(3):
+                    covariance[i, a, b] += before * (deformed[j, b] - deformed[i, b])
+    return covariance
 
 
 def procrustes(

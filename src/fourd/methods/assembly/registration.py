@@ -88,7 +88,11 @@ def register_by_laplacian(
     held = np.flatnonzero(known)
     L = source_laplacian(vertices, faces, laplacian)
     L_free, L_held = L[:, free].tocsc(), L[:, held].tocsc()
-    normal = splu((L_free.T @ L_free).tocsc())
+    # symmetric positive definite (every free vertex's piece holds a known vertex): minimum
+    # degree on its own structure, no pivoting (crane, 31,000 unknowns: 4.5 instead of 7.2
+    # million factor entries, 0.46 instead of 0.59 s, solves twice as fast as COLAMD's)
+    normal = splu((L_free.T @ L_free).tocsc(), permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
+                  options={"SymmetricMode": True})
     edges = abs(L - sp.diags(L.diagonal())).tocsr()
     delta = L @ vertices
     for frame in result:
