@@ -84,7 +84,9 @@ def run_case(kind: str, name: str, scans, *, repeats: int = 1, timeout: float | 
             return {"error": f"{type(error).__name__}: {error}"}
     context = multiprocessing.get_context("spawn")
     receiver, sender = context.Pipe(duplex=False)
-    process = context.Process(target=_case, args=(sender, kind, name, scans, repeats, level), daemon=True)
+    # not a daemon, so a method may start worker processes of its own (assembly's merges);
+    # the finally below stops it whatever happens here
+    process = context.Process(target=_case, args=(sender, kind, name, scans, repeats, level))
     process.start()
     sender.close()
     try:

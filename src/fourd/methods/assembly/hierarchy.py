@@ -310,6 +310,9 @@ def assemble(blocks: list[Block], options: Options | None = None, *, on_merge=No
     # spawned, not forked: a fork after OpenMP (numba, BLAS) has started aborts the child;
     # their thread pools sized to share the cores (fourd.pipeline.worker_threads)
     workers = options.merge_workers(blocks[0].vertices.shape[1])
+    if workers > 1 and multiprocessing.current_process().daemon:
+        log.info("merging in this process: a daemonic process (a Dask worker's) may not start others")
+        workers = 1
     pool = None
     with threads_per_worker(workers) if workers > 1 else contextlib.nullcontext():
         if workers > 1:
