@@ -34,6 +34,7 @@ SIGGRAPH 2001 (section 3: stretch as the singular values of the map's Jacobian).
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 from typing import NamedTuple
 
@@ -41,7 +42,7 @@ import numba
 import numpy as np
 import scipy.linalg
 import scipy.sparse as sp
-from scipy.sparse.linalg import spsolve
+from scipy.sparse.linalg import MatrixRankWarning, spsolve
 
 __all__ = [
     "AbfOptions",
@@ -342,7 +343,9 @@ def _solve_normal(rows: np.ndarray, columns: np.ndarray, values: np.ndarray, rhs
             return scipy.linalg.solve(matrix, rhs, assume_a="pos", check_finite=False)
         except np.linalg.LinAlgError:
             pass  # singular (a degenerate patch): the sparse solve says so as it always did
-    return spsolve(sp.csc_matrix((values, (rows, columns)), shape=(size, size)), rhs)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", MatrixRankWarning)  # singular: NaN, which callers test
+        return spsolve(sp.csc_matrix((values, (rows, columns)), shape=(size, size)), rhs)
 
 
 def _pins(vertices, faces, pinned) -> np.ndarray:

@@ -136,13 +136,16 @@ def map_patch(
     Returns
     -------
     PatchMap or None
-        None when the anchors fix no orientation-keeping affine map (collinear anchors, or a
-        mirror image) or their aligned positions stay more than ``max_residual`` of the radius
-        apart: the patches do not match.
+        None when a patch has no finite flattening (degenerate triangles), or the anchors fix
+        no orientation-keeping affine map (collinear anchors, or a mirror image), or their
+        aligned positions stay more than ``max_residual`` of the radius apart: the patches do
+        not match.
     """
     options = CrossParamOptions() if options is None else options
     source_local, source_uv = _flat(source_vertices, source_faces, pair.source, options.flattening)
     target_local, target_uv = _flat(target_vertices, target_faces, pair.target, options.flattening)
+    if not (np.isfinite(source_uv).all() and np.isfinite(target_uv).all()):
+        return None  # a degenerate patch (its layout's system singular): no map from it
     anchor_source = source_uv[np.searchsorted(pair.source.vertices, anchors.source[pair.anchors])]
     support = anchors.subset(pair.anchors).target_corners(target_faces)
     corner = np.searchsorted(pair.target.vertices, np.maximum(support, 0))
