@@ -34,7 +34,8 @@ the union mesh (the second half of 5.6, :mod:`~fourd.methods.assembly.completion
 positions in the right frames are the right block's own, in the left frames placed by the
 Laplacian coordinates of the union in the target frame, unobserved.
 
-Merges of one level are independent (5.3) and run side by side in processes when asked.
+Merges of one level are independent (5.3) and run side by side in processes
+(``Options.workers``; by default one per core for frames big enough to pay for it).
 """
 
 from __future__ import annotations
