@@ -49,7 +49,7 @@ def test_the_readme_lists_the_scenes_of_the_synth_registry():
 def test_the_readme_says_how_long_the_main_commands_take_and_what_they_need():
     readme = " ".join((ROOT / "README.md").read_text().split())
     assert "measured on the 2-core development machine: `make demo` about 1-2 minutes" in readme
-    assert "`make test` about 7 minutes (the full CI run, installs included)" in readme
+    assert "`make test` about 18 minutes (the full CI run, installs included; the slow tests run too)" in readme
     assert "needs the package index" in readme
     browser_tests = "tests/viz/test_viewer_browser.py"
     assert f"Without Chromium, `make test` skips the viewer's browser tests (`{browser_tests}`" in readme
