@@ -161,7 +161,7 @@ def test_a_region_missing_from_the_first_frame_is_pasted_in_from_the_next():
     source_ids = np.flatnonzero(np.isin(np.arange(len(vertices)), faces[~holed]))
     left = Block(source_faces, source_vertices[None], np.ones((1, len(source_vertices)), dtype=bool))
     right = Block(faces, moved[None], np.ones((1, len(vertices)), dtype=bool))
-    merged, report = merge_blocks(left, right, Options(relax_sweeps=1))
+    merged, report = merge_blocks(left, right, Options(relax_sweeps=1, paste=True))
     count = len(source_vertices)
     assert report.pasted > 0 and merged.vertices.shape == (2, count + report.pasted, 3)
     union = trimesh.Trimesh(merged.vertices[1], merged.faces, process=False)
@@ -208,7 +208,7 @@ def test_a_bridge_the_next_frame_breaks_is_found_and_cut():
     assert vertex_components(glued[1], len(glued[0]))[0] == 1
     left = Block(glued[1], glued[0][None], np.ones((1, len(glued[0])), dtype=bool))
     right = Block(apart[1], apart[0][None], np.ones((1, len(apart[0])), dtype=bool))
-    merged, report = merge_blocks(left, right, Options(correct=True))
+    merged, report = merge_blocks(left, right, Options(correct=True, paste=True))
     # measured: 4 regions, 1 deleted from both (the neck), 2 pieces
     assert report.regions >= 1 and report.replaced + report.deleted >= 1
     assert vertex_components(merged.faces, merged.vertices.shape[1])[0] == 2

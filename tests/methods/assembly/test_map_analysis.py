@@ -54,7 +54,7 @@ def test_the_merge_can_unmap_inconsistent_regions():
     left = Block(pair.source_faces, pair.source_vertices[None], np.ones((1, len(pair.source_vertices)), dtype=bool))
     right = Block(pair.source_faces, (pair.source_vertices + [0.01, 0.0, 0.0])[None],
                   np.ones((1, len(pair.source_vertices)), dtype=bool))
-    merged, report = merge_blocks(left, right, Options(relax_sweeps=1, correct=True))
+    merged, report = merge_blocks(left, right, Options(relax_sweeps=1, correct=True, paste=True))
     # a clean map: nothing to correct, the shift recovered
     assert report.flagged == 0
     np.testing.assert_allclose(merged.vertices[1], pair.source_vertices + [0.01, 0.0, 0.0], atol=1e-6)
