@@ -95,7 +95,6 @@ class _Mesh(NamedTuple):
     vertices: np.ndarray
     faces: np.ndarray
     graph: sp.csr_matrix  # edge lengths
-    adjacency: np.ndarray  # face pairs sharing an edge [E, 2]
     incidence: sp.csr_matrix  # vertex -> faces [N, F]
     face_graph: sp.csr_matrix  # face -> edge-adjacent faces [F, F]
     degree: np.ndarray  # edge-adjacent faces of each face [F] (below 3: on the mesh's own boundary)
@@ -116,8 +115,7 @@ def _mesh(vertices, faces) -> _Mesh:
     degree = np.bincount(adjacency.ravel(), minlength=count)
     first_face = np.full(len(vertices), count, dtype=np.int64)
     np.minimum.at(first_face, faces.ravel(), rows)
-    return _Mesh(vertices, faces, edge_length_graph(vertices, faces), adjacency, incidence, face_graph, degree,
-                 first_face)
+    return _Mesh(vertices, faces, edge_length_graph(vertices, faces), incidence, face_graph, degree, first_face)
 
 
 def _distances(mesh: _Mesh, seeds: np.ndarray, offsets: np.ndarray, limit: float) -> np.ndarray:
