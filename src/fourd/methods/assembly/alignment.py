@@ -6,9 +6,11 @@ its anchors from optical flow, 5.4.1, which scans without video do not have).
 1. Rigid ICP: the source is moved by the trimmed point-to-plane ICP of
    :func:`fourd.geometry.icp.rigid_icp` (pairs whose normals disagree or that lie beyond the
    85th percentile of the gaps left out), from two starts.
-2. Non-rigid ICP: a spread of control vertices jumps to its nearest target vertices and the
-   rest follows by the source's Laplacian coordinates
-   (:func:`~fourd.methods.assembly.registration.register_by_laplacian`), a few times.
+2. Non-rigid ICP (:func:`nonrigid_icp`): as-rigid-as-possible ICP with correspondences both
+   ways and a search radius shrinking from far beyond a limb's step, so that a limb that moved
+   several of its widths moves as a whole instead of its vertices sliding onto the nearest
+   surface (the recipe of ``kinematic``'s large-motion registration, after Sorkine and Alexa
+   2007 and Li, Sumner and Pauly 2008).
 3. Anchors: spread source vertices (about one per ``spacing`` source edges) whose aligned
    position lies within ``gap`` edges of the target, each matched to its closest target point
    on the triangles; then the forward-backward check of 5.4.1
@@ -22,19 +24,26 @@ from __future__ import annotations
 from typing import NamedTuple
 
 import numpy as np
+import scipy.sparse as sp
 import trimesh
+from scipy.sparse.linalg import splu
 from scipy.spatial import cKDTree
 
+from fourd.geometry.boundary_loops import boundary_edges
 from fourd.geometry.icp import rigid_icp as point_to_plane_icp
+from fourd.geometry.laplacian import uniform_laplacian
 from fourd.geometry.meshes import median_edge_length, mesh_arrays
 from fourd.geometry.normals import vertex_normals
+from fourd.geometry.rotations import one_ring_rotations
 from fourd.methods.assembly.anchors import (
     Anchors,
     consistent_anchors,
     returned_points,
     spread_anchors,
 )
-from fourd.methods.assembly.registration import register_by_laplacian
+
+#: Least cosine between a source and a target normal for their vertices to match.
+NORMAL_AGREEMENT = 0.3
 
 
 class Alignment(NamedTuple):
@@ -56,7 +65,7 @@ def _pairs(points, normals, tree, target_normals):
     """Nearest target vertex of each point, and whether the pair is usable (normals within
     about 70 degrees, gap under three times the median)."""
     gap, nearest = tree.query(points, workers=-1)
-    agree = np.einsum("ij,ij->i", normals, target_normals[nearest]) > 0.3
+    agree = np.einsum("ij,ij->i", normals, target_normals[nearest]) > NORMAL_AGREEMENT
     usable = agree & (gap <= 3.0 * np.median(gap[agree]) + 1e-12) if agree.any() else agree
     return gap, nearest, usable
 
@@ -80,6 +89,96 @@ def rigid_icp(source, source_normals, target, target_normals, *, iterations: int
     return best
 
 
+def _rim(faces: np.ndarray, count: int) -> np.ndarray:
+    """Boundary vertices, bool ``[count]``."""
+    rim = np.zeros(count, dtype=bool)
+    rim[boundary_edges(faces, count).ravel()] = True
+    return rim
+
+
+def _targets(x, normals, target, target_normals, tree, limit, source_rim):
+    """Each vertex's goal ``[N, 3]``: the mean of the tangent-plane projection of its nearest
+    target vertex and of the target vertices whose nearest vertex it is, all within ``limit``
+    with normals that agree (its own position when it has none). A target vertex whose nearest
+    vertex is on the source's boundary (``source_rim``, bool ``[N]``) does not pull: it lies
+    past a hole of the source, and its pull would drag the hole's rim over the target's surface
+    (Turk and Levoy 1994). The other way, leaving out the pairs with the target's rim too cost
+    crane's correspondence 0.0077 / 0.0108 -> 0.0092 / 0.0140 (``benchmarks/METHODS.md``)."""
+    count = len(x)
+    gap, nearest = tree.query(x, distance_upper_bound=limit, workers=-1)
+    found = np.isfinite(gap)
+    nearest = np.where(found, nearest, 0)
+    n = target_normals[nearest]
+    found &= (np.einsum("ij,ij->i", normals, n) > NORMAL_AGREEMENT)
+    projected = x + np.einsum("ij,ij->i", target[nearest] - x, n)[:, None] * n
+    total = np.where(found[:, None], projected, 0.0)
+    weights = found.astype(np.float64)
+    back_gap, back = cKDTree(x).query(target, distance_upper_bound=limit, workers=-1)
+    pulls = np.isfinite(back_gap)
+    back = np.where(pulls, back, 0)
+    pulls &= (np.einsum("ij,ij->i", normals[back], target_normals) > NORMAL_AGREEMENT) & ~source_rim[back]
+    for d in range(3):
+        total[:, d] += np.bincount(back[pulls], weights=target[pulls, d], minlength=count)
+    weights += np.bincount(back[pulls], minlength=count)
+    return np.where(weights[:, None] > 0, total / np.maximum(weights, 1.0)[:, None], x)
+
+
+def nonrigid_icp(
+    source: np.ndarray,
+    faces: np.ndarray,
+    target: np.ndarray,
+    target_normals: np.ndarray,
+    start: np.ndarray,
+    *,
+    iterations: int = 50,
+    weight: float = 0.001,
+    start_radius: float = 40.0,
+    end_radius: float = 3.0,
+    relaxation: float = 0.8,
+    refine_iterations: int = 3,
+    refine_weight: float = 0.03,
+) -> np.ndarray:
+    """The source ``[N, 3]`` (mesh ``faces``) registered onto the target's vertices ``[M, 3]``
+    with unit ``target_normals``, from the positions ``start [N, 3]``: as-rigid-as-possible
+    ICP (step 2 of the module docstring). Returns the registered positions ``[N, 3]``.
+
+    Each iteration, with the search radius shrinking geometrically from ``start_radius`` to
+    ``end_radius`` (source median edges), every vertex takes the goal of :func:`_targets` and
+    the positions minimise ``E_ARAP + w sum_i |x_i - y_i|^2`` (uniform edge weights, the
+    rotations of the current positions), over-relaxed by ``relaxation`` (a stiff template
+    creeps towards a limb's new place by a near-constant step). ``weight`` is ``w`` relative
+    to the Laplacian's mean diagonal: small, so a limb moves as a whole. Then
+    ``refine_iterations`` at ``end_radius`` with the softer ``refine_weight`` follow what did
+    not move rigidly. Measured in ``benchmarks/METHODS.md`` ("Where the 20-frame crane drifts").
+    """
+    count = len(source)
+    laplacian = uniform_laplacian(count, faces).tocsr()
+    edges = abs(laplacian - sp.diags(laplacian.diagonal())).tocsr()
+    pairs = edges.tocoo()
+    rest_edges = source[pairs.row] - source[pairs.col]
+    scale = float(laplacian.diagonal().mean())
+    edge = median_edge_length(source, faces)
+    tree = cKDTree(target)
+    source_rim = _rim(faces, count)
+    factors = {}
+    schedule = [(start_radius * (end_radius / start_radius) ** (k / max(iterations - 1, 1)), weight, k > 0)
+                for k in range(iterations)]
+    schedule += [(end_radius, refine_weight, False)] * refine_iterations
+    x = np.array(start, dtype=np.float64)
+    for radius, relative, relax in schedule:
+        w = relative * scale
+        if w not in factors:
+            factors[w] = splu((laplacian + w * sp.identity(count)).tocsc(), permc_spec="MMD_AT_PLUS_A",
+                              diag_pivot_thresh=0.0, options={"SymmetricMode": True})
+        goal = _targets(x, vertex_normals(x, faces), target, target_normals, tree, radius * edge, source_rim)
+        rotations = one_ring_rotations(edges, source, x)
+        turned = 0.5 * np.einsum("eab,eb->ea", rotations[pairs.row] + rotations[pairs.col], rest_edges)
+        rhs = np.stack([np.bincount(pairs.row, weights=turned[:, d], minlength=count) for d in range(3)], axis=1)
+        step = factors[w].solve(rhs + w * goal)
+        x = step + relaxation * (step - x) if relax else step
+    return x
+
+
 def geometric_anchors(
     source_vertices: np.ndarray,
     source_faces: np.ndarray,
@@ -90,8 +189,8 @@ def geometric_anchors(
     gap: float = 1.0,
     tolerance: float = 1.5,
     rigid_iterations: int = 10,
-    iterations: int = 3,
-    registration_iterations: int = 4,
+    iterations: int = 50,
+    weight: float = 0.001,
     seed: int = 0,
 ) -> Alignment:
     """Anchors from the source to the target by a coarse non-rigid alignment (module docstring).
@@ -113,9 +212,9 @@ def geometric_anchors(
     tolerance : float
         Forward-backward tolerance (source edges).
     rigid_iterations, iterations : int
-        Rigid and non-rigid ICP steps.
-    registration_iterations : int
-        Rotation fits of each non-rigid step.
+        Rigid and non-rigid (:func:`nonrigid_icp`) ICP iterations.
+    weight : float
+        Data weight of the non-rigid ICP's stiff iterations (:func:`nonrigid_icp`).
     seed : int
         Seed of the anchors' spreading.
 
@@ -129,20 +228,8 @@ def geometric_anchors(
     target_normals = vertex_normals(target, tfaces)
     source_normals = vertex_normals(source, sfaces)
     aligned = rigid_icp(source, source_normals, target, target_normals, iterations=rigid_iterations)
+    aligned = nonrigid_icp(source, sfaces, target, target_normals, aligned, iterations=iterations, weight=weight)
     tree = cKDTree(target)
-    ids = np.arange(len(source))
-    controls = ids[spread_anchors(Anchors(ids, ids, np.zeros((len(ids), 3))), source, 2.0 * edge, seed=seed)]
-    for _ in range(iterations):
-        normals = vertex_normals(aligned, sfaces)
-        _, nearest, usable = _pairs(aligned[controls], normals[controls], tree, target_normals)
-        if usable.sum() < 3:
-            break
-        known = np.zeros(len(source), dtype=bool)
-        known[controls[usable]] = True
-        points = np.zeros_like(source)
-        points[controls[usable]] = target[nearest[usable]]
-        placed = register_by_laplacian(source, sfaces, known, points, iterations=registration_iterations)
-        aligned = np.where(np.isnan(placed), aligned, placed)
 
     # anchors: near candidates, oversampled, checked, then spread to the final density
     normals = vertex_normals(aligned, sfaces)

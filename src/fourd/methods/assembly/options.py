@@ -196,7 +196,13 @@ class Options(SurfaceSettings):
     anchor_tolerance : float
         Forward-backward tolerance of the anchors (edges, thesis 5.4.1).
     alignment_iterations : int
-        Non-rigid ICP steps of the coarse alignment the anchors come from.
+        As-rigid-as-possible ICP iterations of the coarse alignment the anchors come from
+        (:func:`~fourd.methods.assembly.alignment.nonrigid_icp`; the 3 nearest-point steps it
+        replaced left 0.023 of crane's 0.028 mean step between its bench frames 9 and 10
+        unrecovered, see ``benchmarks/METHODS.md``).
+    alignment_weight : float
+        Its data weight relative to the Laplacian's mean diagonal: smaller is stiffer, a limb
+        moving as a whole.
     max_radius : float
         Largest geodesic patch radius, a fraction of the source's bounding-box diagonal
         (thesis 5.4.2).
@@ -253,7 +259,8 @@ class Options(SurfaceSettings):
     anchor_spacing: float = 2.0
     anchor_gap: float = 1.0
     anchor_tolerance: float = 1.5
-    alignment_iterations: int = 3
+    alignment_iterations: int = 50
+    alignment_weight: float = 0.001
     max_radius: float = 0.2
     flattening: str = "lscm"
     relax_sweeps: int = 6
@@ -272,7 +279,7 @@ class Options(SurfaceSettings):
         super().__post_init__()
         if not self.correct_stretch > 1:
             raise ValueError(f"correct_stretch must be > 1, got {self.correct_stretch!r}")
-        for name in ("anchor_spacing", "anchor_gap", "anchor_tolerance", "correct_motion"):
+        for name in ("anchor_spacing", "anchor_gap", "anchor_tolerance", "correct_motion", "alignment_weight"):
             value = getattr(self, name)
             if not (np.isfinite(value) and value > 0):
                 raise ValueError(f"{name} must be positive, got {value!r}")

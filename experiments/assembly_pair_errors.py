@@ -1,0 +1,59 @@
+"""Question: the 20-frame crane bench of `assembly` drifts little over frames 0-7 (0.001-0.006)
+and then climbs to 0.054 by frame 12. Is that one bad pair map, several, or the hierarchy
+compounding small ones? What distinguishes the bad pairs (motion, anchors, mapped fraction)?
+
+Setup: the bench's crane (20 frames, every 2nd capture frame, standard scan, each frame meshed
+as the method does). For each consecutive pair (t, t+1) given in ``PAIRS`` (all by default),
+one merge of the two single-frame blocks (`hierarchy.merge_blocks`, default options); the
+source's vertices bound to the truth's frame t and followed along the true motion to t+1;
+error of the merged block's frame t+1 against that, fractions of the diagonal, over the mapped
+vertices and over all. Also: the truth's motion between the two frames (mean and 95th
+percentile of the truth vertices' displacement), the anchors and the mapped fraction.
+
+Run: ``.venv/bin/python experiments/assembly_pair_errors.py [PAIRS...]`` (nothing else running).
+
+Answer: see ``benchmarks/METHODS.md``, "Where the 20-frame crane drifts".
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+
+import numpy as np
+
+
+def main() -> None:
+    import fourd.bench.suite as suite
+    from fourd import synth
+    from fourd.methods.assembly import Options
+    from fourd.methods.assembly.hierarchy import merge_blocks
+    from fourd.methods.assembly.method import base_blocks, frame_meshes
+    from fourd.metrics.sampling import bind_to_surface, bound_positions, sample_surface
+
+    frames = 20
+    pairs = [int(a) for a in sys.argv[1:]] or list(range(frames - 1))
+    truth = synth.scene("crane", frames=frames, seed=0, start=0, step=2)
+    scans = synth.scan(truth, resolution=256, seed=0, **suite.PROTOCOL)
+    options = Options(workers=1)
+    blocks = base_blocks(scans, frame_meshes(scans, options))
+    diagonal = truth.diagonal()
+    rng = np.random.default_rng(0)
+    print("pair  motion_mean motion_95  anchors mapped  err_mapped err_all err_95  seconds")
+    for t in pairs:
+        started = time.perf_counter()
+        merged, report = merge_blocks(blocks[t], blocks[t + 1], options)
+        seconds = time.perf_counter() - started
+        samples = sample_surface(truth.vertices[t], truth.faces, 20000, rng)
+        binding = bind_to_surface(merged.vertices[0], truth.vertices[t], truth.faces, samples)
+        followed = bound_positions(binding, truth.vertices[t:t + 2], truth.faces)
+        error = np.linalg.norm(merged.vertices[1] - followed[1], axis=1) / diagonal
+        seen = merged.observed[1]
+        motion = np.linalg.norm(truth.vertices[t + 1] - truth.vertices[t], axis=1) / diagonal
+        print(f"{t:2d}->{t + 1:<2d} {motion.mean():.4f}      {np.percentile(motion, 95):.4f}     "
+              f"{report.anchors:5d}  {report.mapped:.3f}   {error[seen].mean():.4f}     {error.mean():.4f}  "
+              f"{np.percentile(error, 95):.4f}  {seconds:6.1f}", flush=True)
+
+
+if __name__ == "__main__":
+    main()
