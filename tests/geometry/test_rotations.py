@@ -1,8 +1,15 @@
 import numpy as np
 import pytest
+import trimesh
 from scipy.spatial.transform import Rotation
 
-from fourd.geometry.rotations import best_rotations, one_ring_rotations, procrustes
+from fourd.geometry.laplacian import cotangent_weights, weights_laplacian
+from fourd.geometry.rotations import (
+    arap_right_hand_side,
+    best_rotations,
+    one_ring_rotations,
+    procrustes,
+)
 
 
 def test_best_rotations_recovers_known_rotations_batched():
@@ -86,3 +93,16 @@ def test_one_ring_rotations_recover_a_rigid_motion_and_a_bend():
     assert np.abs(found[far & ~upper] - other).max() < 1e-9
     lonely = one_ring_rotations(sp.csr_matrix((len(rest), len(rest))), rest, rest)
     assert np.abs(lonely - np.eye(3)).max() == 0
+
+
+def test_arap_right_hand_side_is_the_laplacian_of_the_rest_turned():
+    """With every rotation R, ``b = R (L r)`` (L the weighted Laplacian): the global step then
+    puts the rigidly turned shape back where it was."""
+    sphere = trimesh.creation.icosphere(subdivisions=2)
+    rest = np.asarray(sphere.vertices) * [1.0, 0.7, 0.5]
+    weights = cotangent_weights(rest, np.asarray(sphere.faces), clamp_negative=True)
+    turn = Rotation.from_rotvec([0.2, -0.4, 0.7]).as_matrix()
+    rotations = np.repeat(turn[None], len(rest), axis=0)
+    laplacian = weights_laplacian(weights)
+    b = arap_right_hand_side(weights, rest, rotations)
+    np.testing.assert_allclose(b, (laplacian @ rest) @ turn.T, atol=1e-12)

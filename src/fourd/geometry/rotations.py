@@ -253,6 +253,24 @@ def one_ring_rotations(weights: sp.spmatrix, rest: np.ndarray, deformed: np.ndar
     return rotations
 
 
+def arap_right_hand_side(weights: sp.spmatrix, rest: np.ndarray, rotations: np.ndarray) -> np.ndarray:
+    """The right-hand side of as-rigid-as-possible modelling's global step (Sorkine and Alexa
+    2007, eq. 9): ``b_i = sum_j w_ij / 2 (R_i + R_j) (r_i - r_j)``, ``[N, 3]``.
+
+    Parameters
+    ----------
+    weights : sparse [N, N]
+        The edge weights ``w_ij`` of :func:`one_ring_rotations`.
+    rest : array [N, 3]
+    rotations : array [N, 3, 3]
+        Each vertex's rotation (:func:`one_ring_rotations`).
+    """
+    pairs = sp.coo_matrix(weights)
+    i, j = pairs.row, pairs.col
+    rotated = 0.5 * np.einsum("eab,eb->ea", rotations[i] + rotations[j], rest[i] - rest[j]) * pairs.data[:, None]
+    return np.stack([np.bincount(i, rotated[:, k], len(rest)) for k in range(3)], axis=1)
+
+
 @numba.njit(cache=True, nogil=True)
 def _one_ring_covariances(indptr, indices, weights, rest, deformed):
     """``sum_j w_ij (r_j - r_i) (d_j - d_i)^T`` per row ``i`` of the CSR weights ``[N, 3, 3]``."""

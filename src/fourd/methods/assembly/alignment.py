@@ -34,7 +34,7 @@ from fourd.geometry.icp import rigid_icp as point_to_plane_icp
 from fourd.geometry.laplacian import uniform_laplacian
 from fourd.geometry.meshes import median_edge_length, mesh_arrays
 from fourd.geometry.normals import vertex_normals
-from fourd.geometry.rotations import one_ring_rotations
+from fourd.geometry.rotations import arap_right_hand_side, one_ring_rotations
 from fourd.methods.assembly.anchors import (
     Anchors,
     consistent_anchors,
@@ -154,8 +154,6 @@ def nonrigid_icp(
     count = len(source)
     laplacian = uniform_laplacian(count, faces).tocsr()
     edges = abs(laplacian - sp.diags(laplacian.diagonal())).tocsr()
-    pairs = edges.tocoo()
-    rest_edges = source[pairs.row] - source[pairs.col]
     scale = float(laplacian.diagonal().mean())
     edge = median_edge_length(source, faces)
     tree = cKDTree(target)
@@ -171,9 +169,7 @@ def nonrigid_icp(
             factors[w] = splu((laplacian + w * sp.identity(count)).tocsc(), permc_spec="MMD_AT_PLUS_A",
                               diag_pivot_thresh=0.0, options={"SymmetricMode": True})
         goal = _targets(x, vertex_normals(x, faces), target, target_normals, tree, radius * edge, source_rim)
-        rotations = one_ring_rotations(edges, source, x)
-        turned = 0.5 * np.einsum("eab,eb->ea", rotations[pairs.row] + rotations[pairs.col], rest_edges)
-        rhs = np.stack([np.bincount(pairs.row, weights=turned[:, d], minlength=count) for d in range(3)], axis=1)
+        rhs = arap_right_hand_side(edges, source, one_ring_rotations(edges, source, x))
         step = factors[w].solve(rhs + w * goal)
         x = step + relaxation * (step - x) if relax else step
     return x

@@ -25,7 +25,7 @@ from scipy.spatial import cKDTree
 
 from fourd.geometry.laplacian import cotangent_weights, weights_laplacian
 from fourd.geometry.normals import vertex_normals
-from fourd.geometry.rotations import one_ring_rotations, procrustes
+from fourd.geometry.rotations import arap_right_hand_side, one_ring_rotations, procrustes
 
 __all__ = ["FitOptions", "align_template", "fit_template"]
 
@@ -104,8 +104,6 @@ def fit_template(
     cosine = np.cos(np.radians(options.normal_angle))
     count = len(rest)
     x = np.array(start, dtype=np.float64)
-    coo = sp.coo_matrix(weights)
-    wi, wj, ww = coo.row, coo.col, coo.data
     for _ in range(options.iterations):
         normals = vertex_normals(x, faces)
         pull = np.zeros(count)
@@ -136,10 +134,7 @@ def fit_template(
             strength = options.anchor_weight * np.asarray(guide.weight, dtype=np.float64)
             np.add.at(pull, guide.vertices, strength)
             np.add.at(goal, guide.vertices, strength[:, None] * guide.positions)
-        rotations = one_ring_rotations(weights, rest, x)
-        edge_rest = rest[wi] - rest[wj]
-        rotated = 0.5 * np.einsum("eab,eb->ea", rotations[wi] + rotations[wj], edge_rest) * ww[:, None]
-        rhs = np.stack([np.bincount(wi, rotated[:, k], count) for k in range(3)], axis=1)
+        rhs = arap_right_hand_side(weights, rest, one_ring_rotations(weights, rest, x))
         if not pull.any():  # nothing holds it: keep the position (the rotations alone are free)
             break
         system = (laplacian + sp.diags(pull * stiffness)).tocsr()
