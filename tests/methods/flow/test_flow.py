@@ -108,13 +108,13 @@ def test_automatic_substeps_follow_fast_motion():
 
 @pytest.mark.slow
 def test_missing_frame_reconstructed():
-    seq, volumes = _squash_sequence(5)
+    seq, volumes = _squash_sequence(4)
     result = run(seq, Options(**FAST, missing_frames=(2,)))
     vertices, faces = result.meshes.meshes[2]
     mesh = _check_closed_manifold(vertices, faces)
     assert abs(mesh.volume / volumes[2] - 1) < 0.2
     # surface close to the truth ellipsoid of frame 2 (within a flow cell)
-    a = np.exp(0.3 * np.sin(2 * np.pi * 2 / 5))
+    a = np.exp(0.3 * np.sin(2 * np.pi * 2 / 4))
     radii = 0.5 * np.array([1 / np.sqrt(a), a, 1 / np.sqrt(a)])
     level = np.linalg.norm(vertices / radii, axis=1)
     assert np.median(np.abs(level - 1)) * radii.min() < result.grid.h
@@ -126,7 +126,7 @@ def test_missing_frame_reconstructed():
 def test_splitting_blob_components():
     from fourd.synth import scan, scene
 
-    truth = scene("splitting-blob", frames=8)
+    truth = scene("splitting-blob", frames=6)
     scans = scan(truth, cameras=3, noise=0.002, outliers=0.02)  # the standard scan
     # the default iso-level (mass_levels adds pockets at this resolution, see its option)
     result = reconstruct(scans, Options(resolution=24, max_iterations=8))
@@ -149,7 +149,7 @@ def test_splitting_blob_components():
 def squash_scene_volumes():
     from fourd.synth import scan, scene
 
-    truth = scene("squash-ball", frames=5)
+    truth = scene("squash-ball", frames=4)
     scans = scan(truth, cameras=3, resolution=96, noise=0.002, outliers=0.02)
     # the default mass_levels="auto" finds the ball incompressible and sets its volumes
     result = reconstruct(scans, Options(resolution=24, max_iterations=8))
