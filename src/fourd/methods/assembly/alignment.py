@@ -26,7 +26,7 @@ from typing import NamedTuple
 import numpy as np
 import scipy.sparse as sp
 import trimesh
-from scipy.sparse.linalg import splu
+from scipy.sparse.linalg import LinearOperator, cg, splu
 from scipy.spatial import cKDTree
 
 from fourd.geometry.boundary_loops import boundary_edges
@@ -96,31 +96,38 @@ def _rim(faces: np.ndarray, count: int) -> np.ndarray:
     return rim
 
 
-def _targets(x, normals, target, target_normals, tree, limit, source_rim):
-    """Each vertex's goal ``[N, 3]``: the mean of the tangent-plane projection of its nearest
-    target vertex and of the target vertices whose nearest vertex it is, all within ``limit``
-    with normals that agree (its own position when it has none). A target vertex whose nearest
-    vertex is on the source's boundary (``source_rim``, bool ``[N]``) does not pull: it lies
-    past a hole of the source, and its pull would drag the hole's rim over the target's surface
-    (Turk and Levoy 1994). The other way, leaving out the pairs with the target's rim too cost
-    crane's correspondence 0.0077 / 0.0108 -> 0.0092 / 0.0140 (``benchmarks/METHODS.md``)."""
+def _data_terms(x, normals, target, target_normals, tree, limit, source_rim, point_to_point):
+    """Each vertex's data term ``|Q_i^(1/2) (x_i - y_i)|^2`` as ``Q [N, 3, 3]`` and
+    ``Q y [N, 3]``: the mean over its nearest target vertex and the target vertices whose
+    nearest vertex it is, all within ``limit`` with normals that agree, of
+    ``(1 - point_to_point) n n^T + point_to_point I`` (``n`` the target vertex's normal; zero
+    for a vertex without pairs). The point-to-plane part lets a surface slide along itself: a
+    goal fixed at the projection onto the tangent plane pins the vertex's tangential position,
+    and a trunk that rises by a hop then follows only at its top and bottom. A target vertex
+    whose nearest vertex is on the source's boundary (``source_rim``, bool ``[N]``) does not
+    pull: it lies past a hole of the source, and its pull would drag the hole's rim over the
+    target's surface (Turk and Levoy 1994). The other way, leaving out the pairs with the
+    target's rim too cost crane's correspondence 0.0077 / 0.0108 -> 0.0092 / 0.0140
+    (``benchmarks/METHODS.md``)."""
     count = len(x)
     gap, nearest = tree.query(x, distance_upper_bound=limit, workers=-1)
     found = np.isfinite(gap)
     nearest = np.where(found, nearest, 0)
-    n = target_normals[nearest]
-    found &= (np.einsum("ij,ij->i", normals, n) > NORMAL_AGREEMENT)
-    projected = x + np.einsum("ij,ij->i", target[nearest] - x, n)[:, None] * n
-    total = np.where(found[:, None], projected, 0.0)
-    weights = found.astype(np.float64)
+    found &= np.einsum("ij,ij->i", normals, target_normals[nearest]) > NORMAL_AGREEMENT
     back_gap, back = cKDTree(x).query(target, distance_upper_bound=limit, workers=-1)
     pulls = np.isfinite(back_gap)
     back = np.where(pulls, back, 0)
     pulls &= (np.einsum("ij,ij->i", normals[back], target_normals) > NORMAL_AGREEMENT) & ~source_rim[back]
-    for d in range(3):
-        total[:, d] += np.bincount(back[pulls], weights=target[pulls, d], minlength=count)
-    weights += np.bincount(back[pulls], minlength=count)
-    return np.where(weights[:, None] > 0, total / np.maximum(weights, 1.0)[:, None], x)
+    owner = np.concatenate([np.flatnonzero(found), back[pulls]])
+    paired = np.concatenate([nearest[found], np.flatnonzero(pulls)])
+    n, y = target_normals[paired], target[paired]
+    q = (1.0 - point_to_point) * n[:, :, None] * n[:, None, :] + point_to_point * np.eye(3)
+    qy = np.einsum("kij,kj->ki", q, y)
+    pairs = np.maximum(np.bincount(owner, minlength=count), 1).astype(np.float64)
+    quadric = np.stack([np.bincount(owner, weights=q[:, i, j], minlength=count)
+                        for i in range(3) for j in range(3)], axis=1).reshape(count, 3, 3)
+    goal = np.stack([np.bincount(owner, weights=qy[:, i], minlength=count) for i in range(3)], axis=1)
+    return quadric / pairs[:, None, None], goal / pairs[:, None]
 
 
 def nonrigid_icp(
@@ -130,26 +137,31 @@ def nonrigid_icp(
     target_normals: np.ndarray,
     start: np.ndarray,
     *,
-    iterations: int = 50,
+    iterations: int = 30,
     weight: float = 0.001,
     start_radius: float = 40.0,
     end_radius: float = 3.0,
     relaxation: float = 0.8,
     refine_iterations: int = 3,
     refine_weight: float = 0.03,
+    point_to_point: float = 0.1,
 ) -> np.ndarray:
     """The source ``[N, 3]`` (mesh ``faces``) registered onto the target's vertices ``[M, 3]``
     with unit ``target_normals``, from the positions ``start [N, 3]``: as-rigid-as-possible
     ICP (step 2 of the module docstring). Returns the registered positions ``[N, 3]``.
 
     Each iteration, with the search radius shrinking geometrically from ``start_radius`` to
-    ``end_radius`` (source median edges), every vertex takes the goal of :func:`_targets` and
-    the positions minimise ``E_ARAP + w sum_i |x_i - y_i|^2`` (uniform edge weights, the
-    rotations of the current positions), over-relaxed by ``relaxation`` (a stiff template
-    creeps towards a limb's new place by a near-constant step). ``weight`` is ``w`` relative
-    to the Laplacian's mean diagonal: small, so a limb moves as a whole. Then
+    ``end_radius`` (source median edges), every vertex takes the data term of
+    :func:`_data_terms` (``point_to_point`` of the squared distance to its pairs, the rest the
+    squared distance along their normals: the mix of Li, Sumner and Pauly 2008) and the
+    positions minimise ``E_ARAP + w sum_i |Q_i^(1/2) (x_i - y_i)|^2`` (uniform edge weights, the
+    rotations of the current positions; conjugate gradients on the ``3N`` unknowns,
+    preconditioned by the factorisation of ``L + w I``), over-relaxed by ``relaxation`` (a
+    stiff template creeps towards a limb's new place by a near-constant step). ``weight`` is
+    ``w`` relative to the Laplacian's mean diagonal: small, so a limb moves as a whole. Then
     ``refine_iterations`` at ``end_radius`` with the softer ``refine_weight`` follow what did
-    not move rigidly. Measured in ``benchmarks/METHODS.md`` ("Where the 20-frame crane drifts").
+    not move rigidly. Measured in ``benchmarks/METHODS.md`` ("Where the 20-frame crane drifts"
+    and "Where dfaust-hopping drifts").
     """
     count = len(source)
     laplacian = uniform_laplacian(count, faces).tocsr()
@@ -163,14 +175,26 @@ def nonrigid_icp(
                 for k in range(iterations)]
     schedule += [(end_radius, refine_weight, False)] * refine_iterations
     x = np.array(start, dtype=np.float64)
+    shape = (3 * count, 3 * count)
     for radius, relative, relax in schedule:
         w = relative * scale
         if w not in factors:
             factors[w] = splu((laplacian + w * sp.identity(count)).tocsc(), permc_spec="MMD_AT_PLUS_A",
                               diag_pivot_thresh=0.0, options={"SymmetricMode": True})
-        goal = _targets(x, vertex_normals(x, faces), target, target_normals, tree, radius * edge, source_rim)
-        rhs = arap_right_hand_side(edges, source, one_ring_rotations(edges, source, x))
-        step = factors[w].solve(rhs + w * goal)
+        quadric, goal = _data_terms(x, vertex_normals(x, faces), target, target_normals, tree, radius * edge,
+                                    source_rim, point_to_point)
+        rhs = arap_right_hand_side(edges, source, one_ring_rotations(edges, source, x)) + w * goal
+
+        def apply(v, w=w, quadric=quadric):
+            v = v.reshape(count, 3)
+            return (laplacian @ v + w * np.einsum("nij,nj->ni", quadric, v)).ravel()
+
+        solve = factors[w].solve
+        step, _ = cg(LinearOperator(shape, matvec=apply, dtype=np.float64), rhs.ravel(), x0=x.ravel(),
+                     rtol=1e-6, maxiter=100,
+                     M=LinearOperator(shape, matvec=lambda v, solve=solve: solve(v.reshape(count, 3)).ravel(),
+                                      dtype=np.float64))
+        step = step.reshape(count, 3)
         x = step + relaxation * (step - x) if relax else step
     return x
 
@@ -185,7 +209,7 @@ def geometric_anchors(
     gap: float = 1.0,
     tolerance: float = 1.5,
     rigid_iterations: int = 10,
-    iterations: int = 50,
+    iterations: int = 30,
     weight: float = 0.001,
     seed: int = 0,
 ) -> Alignment:

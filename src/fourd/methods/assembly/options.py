@@ -259,7 +259,7 @@ class Options(SurfaceSettings):
     anchor_spacing: float = 2.0
     anchor_gap: float = 1.0
     anchor_tolerance: float = 1.5
-    alignment_iterations: int = 50
+    alignment_iterations: int = 30
     alignment_weight: float = 0.001
     max_radius: float = 0.2
     flattening: str = "lscm"
