@@ -54,11 +54,17 @@ class Alignment(NamedTuple):
         The source vertices after the coarse non-rigid alignment (target's frame).
     edge : float
         The source's median edge length (input units).
+    past_rim : bool [N]
+        Source vertices whose aligned position lies past a hole of the target: the nearest
+        target vertex is on the target's boundary and more than ``gap`` source edges away.
+        No map may place them (the target has no surface for them; a patch map near a hole
+        pressed them into the rim's triangles, up to 4.6 edges off).
     """
 
     anchors: Anchors
     aligned: np.ndarray
     edge: float
+    past_rim: np.ndarray
 
 
 def _pairs(points, normals, tree, target_normals):
@@ -137,7 +143,7 @@ def nonrigid_icp(
     target_normals: np.ndarray,
     start: np.ndarray,
     *,
-    iterations: int = 30,
+    iterations: int = 50,
     weight: float = 0.001,
     start_radius: float = 40.0,
     end_radius: float = 3.0,
@@ -209,7 +215,7 @@ def geometric_anchors(
     gap: float = 1.0,
     tolerance: float = 1.5,
     rigid_iterations: int = 10,
-    iterations: int = 30,
+    iterations: int = 50,
     weight: float = 0.001,
     seed: int = 0,
 ) -> Alignment:
@@ -254,10 +260,11 @@ def geometric_anchors(
     # anchors: near candidates, oversampled, checked, then spread to the final density
     normals = vertex_normals(aligned, sfaces)
     distance, nearest, usable = _pairs(aligned, normals, tree, target_normals)
+    past_rim = _rim(tfaces, len(target))[nearest] & (distance > gap * edge)
     candidates = np.flatnonzero(usable & (distance <= gap * edge + edge))
     empty = Anchors(np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros((0, 3)))
     if len(candidates) < 3:
-        return Alignment(empty, aligned, edge)
+        return Alignment(empty, aligned, edge, past_rim)
     dense = Anchors(candidates, candidates, np.zeros((len(candidates), 3)))
     candidates = candidates[spread_anchors(dense, source, 0.5 * spacing * edge, priority=-distance[candidates],
                                            seed=seed)]
@@ -272,4 +279,4 @@ def geometric_anchors(
     ok = near & consistent_anchors(anchors, source, returned_points(anchors, tfaces, source[back]), tolerance * edge)
     anchors = anchors.subset(ok)
     kept = spread_anchors(anchors, source, spacing * edge, priority=-exact[ok], seed=seed)
-    return Alignment(anchors.subset(kept), aligned, edge)
+    return Alignment(anchors.subset(kept), aligned, edge, past_rim)

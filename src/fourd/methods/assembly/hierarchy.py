@@ -151,7 +151,9 @@ def merge_blocks(left: Block, right: Block, options: Options | None = None) -> t
         map_faces, bary = pair.faces, pair.barycentric
     else:
         map_faces, bary = np.full(count, -1), np.zeros((count, 3))
-    mapped = map_faces >= 0
+    mapped = (map_faces >= 0) & ~alignment.past_rim
+    image = np.einsum("nk,nkd->nd", bary[mapped], target[target_faces[map_faces[mapped]]])
+    mapped[mapped] = np.linalg.norm(image - alignment.aligned[mapped], axis=1) <= options.map_agreement * alignment.edge
     flagged = 0
     analysis = None
     if options.correct and mapped.sum() >= 3:
