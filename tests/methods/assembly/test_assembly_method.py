@@ -81,6 +81,8 @@ def test_the_method_keeps_the_contract_and_is_registered():
         Options(workers=-1)
     with pytest.raises(ValueError, match="alignment_weight must be positive"):
         Options(alignment_weight=0.0)
+    with pytest.raises(ValueError, match="map_agreement must be positive"):
+        Options(map_agreement=-1.0)
     # by default, processes only for frames big enough to pay for starting them
     assert Options().merge_workers(PARALLEL_VERTICES - 1) == 1
     assert Options().merge_workers(PARALLEL_VERTICES) == (os.cpu_count() or 1)
