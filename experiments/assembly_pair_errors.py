@@ -18,6 +18,12 @@ step of 0.0016, mapped vertices 0.0017 off; 8 -> 9, 9 -> 10, 10 -> 11: steps of 
 mapped vertices 0.0145, 0.0183, 0.0142 off. The anchors' coarse alignment hardly moved the
 leg; with ARAP-ICP (f6b8f5f) 0.0039, 0.0051, 0.0045. Tables in ``benchmarks/METHODS.md``,
 "Where the 20-frame crane drifts".
+
+dfaust-hopping (at 96cfe67): every pair loses most of its tangential step (pair 8 -> 9: step
+0.0038, error 0.0030 of which 0.0028 tangential); the coarse alignment pinned sliding surfaces.
+Now the truth's displacement is added to the vertex (a point truth binds to its nearest point,
+up to half its spacing away). Fixed by the point-to-plane ARAP-ICP; ``benchmarks/METHODS.md``,
+"Where dfaust-hopping drifts".
 """
 
 from __future__ import annotations
