@@ -7,10 +7,11 @@ its anchors from optical flow, 5.4.1, which scans without video do not have).
    :func:`fourd.geometry.icp.rigid_icp` (pairs whose normals disagree or that lie beyond the
    85th percentile of the gaps left out), from two starts.
 2. Non-rigid ICP (:func:`nonrigid_icp`): as-rigid-as-possible ICP with correspondences both
-   ways and a search radius shrinking from far beyond a limb's step, so that a limb that moved
-   several of its widths moves as a whole instead of its vertices sliding onto the nearest
-   surface (the recipe of ``kinematic``'s large-motion registration, after Sorkine and Alexa
-   2007 and Li, Sumner and Pauly 2008).
+   ways, mostly point-to-plane so that a surface can slide along itself, and a search radius
+   shrinking from far beyond a limb's step, so that a limb that moved several of its widths
+   moves as a whole instead of its vertices sliding onto the nearest surface (the recipe of
+   ``kinematic``'s large-motion registration, after Sorkine and Alexa 2007 and Li, Sumner and
+   Pauly 2008).
 3. Anchors: spread source vertices (about one per ``spacing`` source edges) whose aligned
    position lies within ``gap`` edges of the target, each matched to its closest target point
    on the triangles; then the forward-backward check of 5.4.1
@@ -115,12 +116,11 @@ def _data_terms(x, normals, target, target_normals, tree, limit, source_rim, poi
     and a trunk that rises by a hop then follows only at its top and bottom. A source rim
     vertex's own pair is point-to-point: across a hole there is no plane to slide in (with
     0.03 everywhere a cap pasted into a hole was placed 0.37-0.50 edges off instead of 0.14).
-    A target vertex
-    whose nearest vertex is on the source's boundary (``source_rim``, bool ``[N]``) does not
-    pull: it lies past a hole of the source, and its pull would drag the hole's rim over the
-    target's surface (Turk and Levoy 1994). The other way, leaving out the pairs with the
-    target's rim too cost crane's correspondence 0.0077 / 0.0108 -> 0.0092 / 0.0140
-    (``benchmarks/METHODS.md``)."""
+    A target vertex whose nearest vertex is on the source's boundary (``source_rim``, bool
+    ``[N]``) does not pull: it lies past a hole of the source, and its pull would drag the
+    hole's rim over the target's surface (Turk and Levoy 1994). The other way, leaving out the
+    pairs with the target's rim too cost crane's correspondence 0.0077 / 0.0108 -> 0.0092 /
+    0.0140 (``benchmarks/METHODS.md``)."""
     count = len(x)
     gap, nearest = tree.query(x, distance_upper_bound=limit, workers=-1)
     found = np.isfinite(gap)
@@ -133,8 +133,8 @@ def _data_terms(x, normals, target, target_normals, tree, limit, source_rim, poi
     owner = np.concatenate([np.flatnonzero(found), back[pulls]])
     paired = np.concatenate([nearest[found], np.flatnonzero(pulls)])
     n, y = target_normals[paired], target[paired]
-    # a rim vertex's own pair point-to-point: across the hole the surface has no plane to slide in
-    share = np.where(source_rim[owner] & (np.arange(len(owner)) < found.sum()), 1.0, point_to_point)
+    own_pair = np.arange(len(owner)) < found.sum()  # the vertex's nearest, not a pull back
+    share = np.where(source_rim[owner] & own_pair, 1.0, point_to_point)
     q = (1.0 - share)[:, None, None] * n[:, :, None] * n[:, None, :] + share[:, None, None] * np.eye(3)
     qy = np.einsum("kij,kj->ki", q, y)
     pairs = np.maximum(np.bincount(owner, minlength=count), 1).astype(np.float64)
