@@ -168,7 +168,7 @@ def nonrigid_icp(
     ``end_radius`` (source median edges), every vertex takes the data term of
     :func:`_data_terms` (``point_to_point`` of the squared distance to its pairs, the rest the
     squared distance along their normals: the mix of Li, Sumner and Pauly 2008; at 0.1 a tube
-    3 radii long followed 0.69 of a slide along its axis, at 0.05 all of it) and the
+    9 radii long followed 0.69 of a slide along its axis, at 0.05 all of it) and the
     positions minimise ``E_ARAP + w sum_i |Q_i^(1/2) (x_i - y_i)|^2`` (uniform edge weights, the
     rotations of the current positions; conjugate gradients on the ``3N`` unknowns,
     preconditioned by the factorisation of ``L + w I``), over-relaxed by ``relaxation`` (a
