@@ -80,13 +80,14 @@ def _pairs(points, normals, tree, target_normals):
     return gap, nearest, usable
 
 
-def rigid_icp(source, source_normals, target, target_normals, *, iterations: int = 10) -> np.ndarray:
+def rigid_icp(source, source_normals, target, target_normals, *, iterations: int = 10,
+              tree: cKDTree | None = None) -> np.ndarray:
     """``source [N, 3]`` moved rigidly onto the target's vertices ``[M, 3]`` (step 1 of the
     module docstring, :func:`fourd.geometry.icp.rigid_icp`); returns the moved points
     ``[N, 3]``. ICP runs twice, from where the source is and with its centroid moved onto the
     target's, and the fit with the smaller median gap wins (a part that moves alone, an arm
-    bending, drags the centroid away)."""
-    tree = cKDTree(target)
+    bending, drags the centroid away). ``tree``: the target's k-d tree, when the caller has it."""
+    tree = cKDTree(target) if tree is None else tree
     best, best_gap = source, np.inf
     for start in (source, source - source.mean(axis=0) + target.mean(axis=0)):
         fit = point_to_plane_icp(start, target, target_normals, source_normals=source_normals,
@@ -159,6 +160,7 @@ def nonrigid_icp(
     refine_iterations: int = 3,
     refine_weight: float = 0.03,
     point_to_point: float = 0.05,
+    tree: cKDTree | None = None,
 ) -> np.ndarray:
     """The source ``[N, 3]`` (mesh ``faces``) registered onto the target's vertices ``[M, 3]``
     with unit ``target_normals``, from the positions ``start [N, 3]``: as-rigid-as-possible
@@ -176,14 +178,14 @@ def nonrigid_icp(
     ``w`` relative to the Laplacian's mean diagonal: small, so a limb moves as a whole. Then
     ``refine_iterations`` at ``end_radius`` with the softer ``refine_weight`` follow what did
     not move rigidly. Measured in ``benchmarks/METHODS.md`` ("Where the 20-frame crane drifts"
-    and "Where dfaust-hopping drifts").
+    and "Where dfaust-hopping drifts"). ``tree``: the target's k-d tree, when the caller has it.
     """
     count = len(source)
     laplacian = uniform_laplacian(count, faces).tocsr()
     edges = abs(laplacian - sp.diags(laplacian.diagonal())).tocsr()
     scale = float(laplacian.diagonal().mean())
     edge = median_edge_length(source, faces)
-    tree = cKDTree(target)
+    tree = cKDTree(target) if tree is None else tree
     source_rim = _rim(faces, count)
     factors = {}
     schedule = [(start_radius * (end_radius / start_radius) ** (k / max(iterations - 1, 1)), weight, k > 0)
@@ -265,9 +267,10 @@ def geometric_anchors(
     edge = median_edge_length(source, sfaces)
     target_normals = vertex_normals(target, tfaces)
     source_normals = vertex_normals(source, sfaces)
-    aligned = rigid_icp(source, source_normals, target, target_normals, iterations=rigid_iterations)
-    aligned = nonrigid_icp(source, sfaces, target, target_normals, aligned, iterations=iterations, weight=weight)
     tree = cKDTree(target)
+    aligned = rigid_icp(source, source_normals, target, target_normals, iterations=rigid_iterations, tree=tree)
+    aligned = nonrigid_icp(source, sfaces, target, target_normals, aligned, iterations=iterations, weight=weight,
+                           tree=tree)
 
     # anchors: near candidates, oversampled, checked, then spread to the final density
     normals = vertex_normals(aligned, sfaces)
