@@ -4,7 +4,7 @@ import trimesh
 
 from fourd.errors import InputError
 from fourd.geometry.boundary_loops import boundary_loops
-from fourd.geometry.hole_filling import fill_holes
+from fourd.geometry.hole_filling import fill_holes, membrane_positions, small_holes
 from fourd.geometry.polygon_triangulation import signed_area, triangle_areas, triangulate_polygon
 
 
@@ -41,6 +41,41 @@ def test_only_the_small_holes_when_asked():
     filled = fill_holes(vertices, faces[bottom], max_loop=min(len(loop) for loop in loops))
     remaining = boundary_loops(filled.faces, len(filled.vertices))
     assert len(loops) == 2 and len(remaining) == 1 and len(remaining[0]) == max(len(loop) for loop in loops)
+
+
+def test_the_membrane_follows_every_frame_of_a_moving_rim():
+    """Frames of a capped sphere moved rigidly (turned and shifted) and one scaled: the
+    membrane of each frame is frame 0's moved the same way (the membrane is a linear function
+    of the rim, invariant under similarities)."""
+    vertices, faces = _capped_sphere(0.8)
+    filled = fill_holes(vertices, faces)
+    angle = 0.7
+    turn = np.array([[np.cos(angle), -np.sin(angle), 0], [np.sin(angle), np.cos(angle), 0], [0, 0, 1]])
+    truth = np.stack([filled.vertices, filled.vertices @ turn.T + [0.3, -1.0, 2.0], 1.5 * filled.vertices])
+    start = truth.copy()
+    start[:, filled.filled] = 0.0  # unknown: only the rim and the rest count
+    placed = membrane_positions(start, filled.faces, filled.filled, filled.holes)
+    np.testing.assert_allclose(placed, truth, atol=1e-9)
+    # the C1 terms' weight: 1 is the C1 membrane, 0 the flat one, between lies between
+    heights = {}
+    for smooth in (0.0, 0.3, 1.0):
+        filled = fill_holes(vertices, faces, smooth=smooth)
+        heights[smooth] = filled.vertices[filled.filled, 2].max()
+    flat = fill_holes(vertices, faces, smooth=False)
+    np.testing.assert_allclose(heights[0.0], flat.vertices[flat.filled, 2].max())
+    assert heights[0.0] < heights[0.3] < heights[1.0] < 1.025  # measured 0.807, 0.970, 1.018
+
+
+def test_small_holes_are_the_holes_of_a_body_not_the_outline_of_a_sheet():
+    vertices, faces = _capped_sphere(0.8)  # a cap missing: its flat disk 10% of the rest
+    assert len(small_holes(vertices, faces, max_fraction=0.12)) == 1
+    assert small_holes(vertices, faces, max_fraction=0.08) == []
+    grid = trimesh.creation.box().subdivide().subdivide()  # an open box: a sheet bent up
+    top = grid.vertices[grid.faces].mean(axis=1)[:, 2] < 0.49
+    assert small_holes(grid.vertices, grid.faces[top], max_fraction=0.1) == []  # its opening: a fifth
+    plane = trimesh.creation.box(extents=(1, 1, 0.01))
+    sheet = plane.faces[plane.vertices[plane.faces].mean(axis=1)[:, 2] > 0]  # one side: all outline
+    assert small_holes(plane.vertices, sheet, max_fraction=0.5) == []
 
 
 def test_polygon_triangulation_keeps_the_outline_and_covers_it():

@@ -30,9 +30,10 @@ import scipy.sparse.linalg as spla
 
 from fourd.errors import InputError
 from fourd.geometry.boundary_loops import boundary_loops
+from fourd.geometry.meshes import face_areas, vertex_components
 from fourd.geometry.polygon_triangulation import triangulate_polygon
 
-__all__ = ["FilledMesh", "fill_holes"]
+__all__ = ["FilledMesh", "fill_holes", "membrane_positions", "small_holes"]
 
 
 class FilledMesh(NamedTuple):
@@ -60,7 +61,8 @@ def fill_holes(
     *,
     holes: list | None = None,
     max_loop: int | None = None,
-    smooth: bool = True,
+    smooth: bool | float = True,
+    area_matched: bool = False,
 ) -> FilledMesh:
     """Fill holes of a triangle mesh (see the module docstring).
 
@@ -72,8 +74,14 @@ def fill_holes(
         The loops to fill, as from :func:`fourd.geometry.boundary_loops.boundary_loops` (in
         their direction). Default: every boundary loop, or those of at most ``max_loop``
         vertices (a garment keeps its openings, fills the rest).
-    smooth : bool
-        Add the loop vertices' terms (a C1 membrane); False gives the C0 membrane.
+    smooth : bool or float
+        Add the loop vertices' terms (a C1 membrane); False gives the C0 membrane; a number in
+        between weights those terms.
+    area_matched : bool
+        Space the disk's inner vertices so that they number about what the hole's flat area
+        (:func:`small_holes`) holds at the loop's edge length, rather than the circle of the
+        loop's perimeter: a long, narrow hole (a slit under an arm) laid out on that circle
+        would get the circle's area in vertices, tens of times too many.
     """
     vertices = np.asarray(vertices, dtype=np.float64)
     faces = np.asarray(faces, dtype=np.int64)
@@ -91,7 +99,7 @@ def fill_holes(
         loop = np.asarray(loop, dtype=np.int64)
         if len(loop) < 3:
             continue
-        new_points, new_faces = _disk(vertices[loop])
+        new_points, new_faces = _disk(vertices[loop], area_matched)
         inner = len(new_points) - len(loop)
         index = np.concatenate([loop[::-1], count + np.arange(inner)])  # disk order: loop reversed
         start = vertices[loop].mean(axis=0)
@@ -108,9 +116,16 @@ def fill_holes(
     return FilledMesh(out_vertices, out_faces, filled, list(holes))
 
 
-def _disk(ring: np.ndarray):
+def _flat_area(ring: np.ndarray) -> float:
+    """A closed loop's vector area ``|sum_i p_i x p_(i+1)| / 2`` (``ring [K, 3]``)."""
+    return 0.5 * float(np.linalg.norm(np.cross(ring, np.roll(ring, -1, axis=0)).sum(axis=0)))
+
+
+def _disk(ring: np.ndarray, area_matched: bool = False):
     """The hole's triangulation in the plane: the loop (reversed, so the new faces turn like
-    the mesh) on a circle by arc length, inner points at its mean edge length."""
+    the mesh) on a circle by arc length, inner points at its mean edge length (with
+    ``area_matched``, that length times the square root of the circle's area over the loop's
+    flat area)."""
     ring = ring[::-1]
     steps = np.linalg.norm(np.diff(np.vstack([ring, ring[:1]]), axis=0), axis=1)
     perimeter = float(steps.sum())
@@ -119,28 +134,75 @@ def _disk(ring: np.ndarray):
     angle = 2 * np.pi * np.concatenate([[0.0], np.cumsum(steps[:-1])]) / perimeter
     radius = perimeter / (2 * np.pi)
     circle = radius * np.column_stack([np.cos(angle), np.sin(angle)])
-    return triangulate_polygon(circle, float(steps.mean()))
+    spacing = float(steps.mean())
+    if area_matched:
+        spacing *= np.sqrt(max(np.pi * radius**2 / max(_flat_area(ring), 1e-300), 1.0))
+    return triangulate_polygon(circle, spacing)
 
 
 def _membrane(vertices, faces, filled, holes, smooth):
     """Least-squares positions of the new vertices (equation 3.1, with the C1 terms)."""
-    count = len(vertices)
+    return membrane_positions(vertices[None], faces, filled, holes, smooth=smooth)[0]
+
+
+def membrane_positions(frames: np.ndarray, faces: np.ndarray, filled: np.ndarray, holes: list, *,
+                       smooth: float = 1.0) -> np.ndarray:
+    """The membrane's vertices placed in every frame of an animated mesh: ``frames [T, N, 3]``
+    with the ``filled [N]`` vertices (of holes bounded by the loops ``holes``, as
+    :func:`fill_holes` returns them) replaced by their least-squares membrane over that frame's
+    other vertices (equation 3.1, with the C1 terms weighted by ``smooth``: 1 the thesis' C1
+    membrane, 0 the flat one). One factorisation for all frames: the operator depends on the
+    connectivity alone."""
+    frames = np.asarray(frames, dtype=np.float64)
+    filled = np.asarray(filled, dtype=bool)
+    result = frames.copy()
+    if not filled.any():
+        return result
+    count = frames.shape[1]
     sides = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
     adjacency = sp.csr_matrix((np.ones(len(sides)), (sides[:, 0], sides[:, 1])), shape=(count, count))
     adjacency = ((adjacency + adjacency.T) > 0).astype(np.float64)
     degree = np.asarray(adjacency.sum(axis=1)).ravel()
     laplacian = sp.identity(count) - sp.diags(1.0 / np.maximum(degree, 1)) @ adjacency  # rows P_i - mean
     rows = np.flatnonzero(filled)
-    if smooth:
-        rows = np.concatenate([rows, np.unique(np.concatenate([np.asarray(h) for h in holes]))])
-    operator = laplacian[rows]
+    scale = np.ones(len(rows))
+    if smooth and holes:
+        rim = np.unique(np.concatenate([np.asarray(h) for h in holes]))
+        rows = np.concatenate([rows, rim])
+        scale = np.concatenate([scale, np.full(len(rim), np.sqrt(float(smooth)))])
+    operator = sp.diags(scale) @ laplacian[rows]
     unknown = np.flatnonzero(filled)
     known = np.flatnonzero(~filled)
     a = operator[:, unknown].tocsc()
-    b = -(operator[:, known] @ vertices[known])
-    normal = (a.T @ a).tocsc()
-    solve = spla.factorized(normal)
-    right = a.T @ b
-    result = vertices.copy()
-    result[unknown] = np.column_stack([solve(right[:, k]) for k in range(3)])
+    solve = spla.factorized((a.T @ a).tocsc())
+    # every frame's three coordinates as right-hand sides [K, 3T]
+    known_positions = frames[:, known].transpose(1, 0, 2).reshape(len(known), -1)
+    right = a.T @ -(operator[:, known] @ known_positions)
+    solution = np.column_stack([solve(right[:, k]) for k in range(right.shape[1])])
+    result[:, unknown] = solution.reshape(len(unknown), len(frames), 3).transpose(1, 0, 2)
     return result
+
+
+def small_holes(vertices: np.ndarray, faces: np.ndarray, *, max_fraction: float) -> list:
+    """The boundary loops of a mesh that are holes rather than its outline: those whose flat
+    area (the loop's vector area, ``|sum_i p_i x p_(i+1)| / 2``, the least projected area of
+    any surface spanning it) is at most ``max_fraction`` of the area of the connected piece of
+    surface the loop bounds. A scan's hole in a closed body spans a small part of it; the
+    outline of an open sheet spans about all of it. Loops as
+    :func:`fourd.geometry.boundary_loops.boundary_loops` gives them."""
+    vertices = np.asarray(vertices, dtype=np.float64)
+    faces = np.asarray(faces, dtype=np.int64)
+    loops = boundary_loops(faces, len(vertices))
+    if not loops or max_fraction <= 0:
+        return []
+    _, component = vertex_components(faces, len(vertices))
+    piece_area = np.bincount(component[faces[:, 0]], weights=face_areas(vertices, faces),
+                             minlength=int(component.max()) + 1)
+    chosen = []
+    for loop in loops:
+        loop = np.asarray(loop, dtype=np.int64)
+        if len(loop) < 3:
+            continue
+        if _flat_area(vertices[loop]) <= max_fraction * piece_area[component[loop[0]]]:
+            chosen.append(loop)
+    return chosen

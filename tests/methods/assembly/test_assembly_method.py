@@ -83,6 +83,10 @@ def test_the_method_keeps_the_contract_and_is_registered():
         Options(alignment_weight=0.0)
     with pytest.raises(ValueError, match="map_agreement must be positive"):
         Options(map_agreement=-1.0)
+    with pytest.raises(ValueError, match="close_holes must be a fraction"):
+        Options(close_holes=1.5)
+    with pytest.raises(ValueError, match="close_smoothness must be a fraction"):
+        Options(close_smoothness=-0.1)
     # by default, processes only for frames big enough to pay for starting them
     assert Options().merge_workers(PARALLEL_VERTICES - 1) == 1
     assert Options().merge_workers(PARALLEL_VERTICES) == (os.cpu_count() or 1)
@@ -149,6 +153,33 @@ def test_vertices_the_map_cannot_place_are_filled_in_unobserved():
     error = np.linalg.norm(merged.vertices[1] - moved, axis=1) / edge
     # measured: the cap filled in by the Laplacian registration within a fraction of an edge
     assert error[cap].max() < 1.0 and np.median(error) < 0.1
+
+
+def test_a_hole_no_frame_fills_is_closed_in_every_frame_unobserved():
+    """Every frame lacks the same cap: no merge can fill it, so with ``close_holes`` the
+    membrane closes it at the end, placed in each frame from that frame's rim (near the moving
+    truth), unobserved; the mesh comes out closed and consistently oriented. By default
+    (``close_holes`` 0) the hole stays."""
+    vertices, faces = _bumpy()
+    keep = ~(vertices[faces].mean(axis=1)[:, 0] > 0.85)
+    from fourd.geometry.marching import compact
+
+    holed, holed_faces = compact(vertices, faces[keep])
+    seq = PointCloudSequence([Frame(holed @ _motion(t)[0].T + _motion(t)[1], faces=holed_faces, time=float(t))
+                              for t in range(3)])
+    result = reconstruct(seq, Options(relax_sweeps=1, close_holes=0.25))
+    added = len(result.vertices[0]) - len(holed)
+    assert added > 0 and not result.observed[:, len(holed):].any()
+    mesh = trimesh.Trimesh(result.vertices[2], result.faces, process=False)
+    assert mesh.is_watertight and mesh.is_winding_consistent and mesh.volume > 0
+    edge = np.median(np.linalg.norm(holed[holed_faces] - holed[np.roll(holed_faces, 1, axis=1)], axis=2))
+    for t in range(3):
+        rotation, shift = _motion(t)
+        gap = _distance_to(result.vertices[t, len(holed):], vertices @ rotation.T + shift, faces) / edge
+        # measured: the membrane within 0.14 edges of the missing cap in every frame
+        assert gap.max() < 0.5, (t, gap.max())
+    kept = reconstruct(seq, Options(relax_sweeps=1))
+    assert len(kept.vertices[0]) == len(holed)
 
 
 def test_a_region_missing_from_the_first_frame_is_pasted_in_from_the_next():

@@ -22,7 +22,8 @@ Frames that are meshes are used as they are; point clouds are meshed per frame f
   the right sub-sequence, unmapped vertices placed by Laplacian registration (5.6);
 - :mod:`.completion`: geometry only the later frame has glued into the union mesh along a
   zipped seam, placed in the earlier frames by Laplacian coordinates (5.6, second half);
-- :mod:`.method`: the pipeline (``reconstruct``), :mod:`.options` its ``Options``.
+- :mod:`.method`: the pipeline (``reconstruct``), the holes no frame fills closed at the end
+  by the membrane of 3.6.2 (``close_small_holes``); :mod:`.options` its ``Options``.
 
 - :mod:`.analysis`: the pair map checked against the gradual change assumption (5.5),
   inconsistent vertices flagged and clustered; the method's ``correct`` option tries the
@@ -56,6 +57,7 @@ from fourd.methods.assembly.method import (
     MIN_FRAMES,
     RESULT,
     AssemblyDiagnostics,
+    close_small_holes,
     reconstruct,
     reconstruct_with_diagnostics,
 )
@@ -91,6 +93,7 @@ __all__ = [
     "MergeReport",
     "Options",
     "assemble",
+    "close_small_holes",
     "geometric_anchors",
     "merge_blocks",
     "reconstruct",

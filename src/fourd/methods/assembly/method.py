@@ -8,6 +8,8 @@ assembly of :mod:`~fourd.methods.assembly.hierarchy`.
    points) takes the nearest non-empty frame's mesh, every vertex unobserved.
 2. The binary hierarchy merges consecutive sub-sequences into one consistent sequence with the
    first frame's connectivity, grown by the geometry only later frames have (5.3, 5.6).
+3. With ``close_holes``, the holes no frame filled are closed by the membrane of 3.6.2, placed
+   in every frame from that frame's rim, unobserved (:func:`close_small_holes`).
 """
 
 from __future__ import annotations
@@ -21,6 +23,7 @@ from fourd.animation import AnimatedMesh
 from fourd.cache import report_resumed
 from fourd.errors import InputError
 from fourd.geometry.frame_surface import SurfaceSettings, frame_surfaces
+from fourd.geometry.hole_filling import fill_holes, membrane_positions, small_holes
 from fourd.methods.assembly.hierarchy import Block, assemble
 from fourd.methods.assembly.options import Options
 from fourd.methods.base import Reconstruction
@@ -87,6 +90,25 @@ def base_blocks(seq: PointCloudSequence, meshes) -> list[Block]:
     return blocks
 
 
+def close_small_holes(block: Block, max_fraction: float, smoothness: float = 1.0) -> Block:
+    """``block`` with its holes of flat area at most ``max_fraction`` of their piece's area
+    (:func:`~fourd.geometry.hole_filling.small_holes`, in the first frame) filled by the
+    membrane of 3.6.2 (``smoothness``: weight of its C1 terms, 1 the thesis' membrane, 0 the
+    flat one): the disks triangulated in the first frame, their vertices placed in every frame
+    by the membrane over that frame's rim, ``observed`` False."""
+    holes = small_holes(block.vertices[0], block.faces, max_fraction=max_fraction)
+    if not holes:
+        return block
+    filled = fill_holes(block.vertices[0], block.faces, holes=holes, area_matched=True, smooth=smoothness)
+    added = len(filled.vertices) - block.vertices.shape[1]
+    frames = np.concatenate([block.vertices, np.repeat(filled.vertices[None, -added:], len(block.vertices), axis=0)],
+                            axis=1)
+    frames = membrane_positions(frames, filled.faces, filled.filled, filled.holes, smooth=smoothness)
+    observed = np.concatenate([block.observed, np.zeros((len(block.vertices), added), dtype=bool)], axis=1)
+    log.info("closed %d holes with %d membrane vertices", len(holes), added)
+    return Block(filled.faces, frames, observed)
+
+
 def reconstruct_with_diagnostics(seq: PointCloudSequence, options: Options | None = None) -> Reconstruction:
     """:func:`reconstruct`, with an :class:`AssemblyDiagnostics`."""
     options = Options() if options is None else options
@@ -97,6 +119,8 @@ def reconstruct_with_diagnostics(seq: PointCloudSequence, options: Options | Non
     log.info("assembling %d frames (%d merges)", len(blocks), len(blocks) - 1)
     with progress(total=len(blocks) - 1, desc="assembly merges", unit="merge") as bar:
         block, reports = assemble(blocks, options, on_merge=lambda: bar.update(1))
+    if options.close_holes > 0:
+        block = close_small_holes(block, options.close_holes, options.close_smoothness)
     result = AnimatedMesh(block.faces, block.vertices, seq.times, block.observed, rest=block.vertices[0])
     mapped = float(np.mean([r.mapped for r in reports])) if reports else 1.0
     for level_report in reports:

@@ -240,14 +240,32 @@ class Options(SurfaceSettings):
     paste : bool
         Glue geometry only the later frame of a merge has (a hole of the earlier frame's scan)
         into the union mesh (thesis 5.6, :mod:`fourd.methods.assembly.completion`): the result
-        gains those vertices, unobserved in the frames before. On (the default): with the
-        point-to-plane alignment it fills holes on every bench scene at no cost in accuracy
-        (completeness-95 crane 0.0126 -> 0.0080, dfaust-hopping 0.0170 -> 0.0158,
-        touching-spheres 0.0589 -> 0.0337); off keeps the first frame's mesh, its holes kept
-        (see ``benchmarks/METHODS.md``).
+        gains those vertices, unobserved in the frames before. Off (the default): on the
+        bench's crane, dfaust-hopping and touching-spheres it lowers completeness-95
+        (0.0126 -> 0.0080, 0.0170 -> 0.0158, 0.0589 -> 0.0337), but on the held-out crane
+        stretches the pasted geometry, placed in the earlier frames by Laplacian coordinates,
+        lies off the surface and its correspondence is poor (crane-90: accuracy 0.0089, Chamfer
+        0.0055 against 0.0023 off; correspondence 0.0206 / 0.0340 against 0.0115 / 0.0195);
+        see ``benchmarks/METHODS.md``.
     paste_gap : float
         A later frame's triangle is geometry the union lacks when its corners lie farther than
         this many edges from the union placed in that frame; the seam band is this wide.
+    close_holes : float
+        Close the holes no frame filled at the end by the membrane of thesis 3.6.2
+        (:func:`fourd.geometry.hole_filling.fill_holes`), placed in every frame from that
+        frame's rim, unobserved: every boundary loop whose flat area is at most this fraction
+        of the area of the piece of surface it bounds (the first frames' meshes of the bench:
+        crane's holes span at most 5% of the body, dfaust-hopping's 3%, touching-spheres'
+        unseen facing sides 11% and 16% of their sphere, waving-sheet's outline 94%). 0 (the
+        default) keeps every hole: no membrane suits every hole (``close_smoothness``), and a
+        garment's openings are holes by this test. 0.25 makes closed bodies watertight.
+    close_smoothness : float
+        Weight of the membrane's C1 terms (3.6.2: the rim's own Laplacian rows, which bend the
+        membrane to leave the rim along the surface): 1 the thesis' C1 membrane, 0 the flat
+        (C0) one. C1 continues a convex surface (touching-spheres' unseen caps: Chamfer 0.0047
+        -> 0.0026 over 4 frames, flat 0.0061); occlusion holes in a body's creases are
+        nearer the flat membrane (crane, 4 frames: Chamfer 0.0023 -> 0.0029 with C1, 0.0023
+        flat; completeness-95 0.0115 -> 0.0072 and 0.0048), see ``benchmarks/METHODS.md``.
     workers : int
         Merges of one level of the hierarchy run in this many processes (they are
         independent, 5.3), with the same result; 1 runs them one after the other; 0 (the
@@ -277,8 +295,10 @@ class Options(SurfaceSettings):
     correct: bool = False
     correct_stretch: float = 2.0
     correct_motion: float = 1.5
-    paste: bool = True
+    paste: bool = False
     paste_gap: float = 2.0
+    close_holes: float = 0.0
+    close_smoothness: float = 1.0
     workers: int = 0
     scheduler: str = "sync"
     cache_dir: str | None = None
@@ -296,6 +316,10 @@ class Options(SurfaceSettings):
             value = getattr(self, name)
             if int(value) != value or value < 0:
                 raise ValueError(f"{name} must be a non-negative integer, got {value!r}")
+        for name in ("close_holes", "close_smoothness"):
+            value = getattr(self, name)
+            if not (np.isfinite(value) and 0 <= value <= 1):
+                raise ValueError(f"{name} must be a fraction in [0, 1], got {value!r}")
         if int(self.relax_walks) != self.relax_walks or self.relax_walks < 1:
             raise ValueError(f"relax_walks must be a positive integer, got {self.relax_walks!r}")
         if int(self.workers) != self.workers or self.workers < 0:
