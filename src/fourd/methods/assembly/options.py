@@ -258,7 +258,8 @@ class Options(SurfaceSettings):
         crane's holes span at most 5% of the body, dfaust-hopping's 3%, touching-spheres'
         unseen facing sides 11% and 16% of their sphere, waving-sheet's outline 94%). 0 (the
         default) keeps every hole: no membrane suits every hole (``close_smoothness``), and a
-        garment's openings are holes by this test. 0.25 makes closed bodies watertight.
+        garment's openings are holes by this test. 0.25 takes every hole of the bench's bodies
+        and keeps a sheet's outline.
     close_smoothness : float
         Weight of the membrane's C1 terms (3.6.2: the rim's own Laplacian rows, which bend the
         membrane to leave the rim along the surface): 1 the thesis' C1 membrane, 0 the flat
