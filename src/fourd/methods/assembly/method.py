@@ -8,8 +8,8 @@ assembly of :mod:`~fourd.methods.assembly.hierarchy`.
    points) takes the nearest non-empty frame's mesh, every vertex unobserved.
 2. The binary hierarchy merges consecutive sub-sequences into one consistent sequence with the
    first frame's connectivity, grown by the geometry only later frames have (5.3, 5.6).
-3. With ``close_holes``, the holes no frame filled are closed by the membrane of 3.6.2, placed
-   in every frame from that frame's rim, unobserved (:func:`close_small_holes`).
+3. The holes no frame filled are closed by the membrane of 3.6.2 (``close_holes``), placed in
+   every frame from that frame's rim, unobserved (:func:`close_small_holes`).
 """
 
 from __future__ import annotations
@@ -142,6 +142,6 @@ def reconstruct(seq: PointCloudSequence, options: Options | None = None) -> Anim
     -------
     AnimatedMesh
         ``observed`` False where a vertex was filled in rather than found on that frame's
-        surface.
+        surface (the registration's vertices, the membranes closing holes no frame fills).
     """
     return reconstruct_with_diagnostics(seq, options).result

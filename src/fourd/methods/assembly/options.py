@@ -256,17 +256,19 @@ class Options(SurfaceSettings):
         frame's rim, unobserved: every boundary loop whose flat area is at most this fraction
         of the area of the piece of surface it bounds (the first frames' meshes of the bench:
         crane's holes span at most 5% of the body, dfaust-hopping's 3%, touching-spheres'
-        unseen facing sides 11% and 16% of their sphere, waving-sheet's outline 94%). 0 (the
-        default) keeps every hole: no membrane suits every hole (``close_smoothness``), and a
-        garment's openings are holes by this test. 0.25 takes every hole of the bench's bodies
-        and keeps a sheet's outline.
+        unseen facing sides 11% and 16% of their sphere, waving-sheet's outline 94%, kept).
+        0 keeps every hole; so should a garment (its openings are holes by this test: use
+        the ``garment`` method, or 0).
     close_smoothness : float
         Weight of the membrane's C1 terms (3.6.2: the rim's own Laplacian rows, which bend the
         membrane to leave the rim along the surface): 1 the thesis' C1 membrane, 0 the flat
-        (C0) one. C1 continues a convex surface (touching-spheres' unseen caps: Chamfer 0.0047
-        -> 0.0026 over 4 frames, flat 0.0061); occlusion holes in a body's creases are
-        nearer the flat membrane (crane, 4 frames: Chamfer 0.0023 -> 0.0029 with C1, 0.0023
-        flat; completeness-95 0.0115 -> 0.0072 and 0.0048), see ``benchmarks/METHODS.md``.
+        (C0) one. C1 continues a convex surface (touching-spheres' unseen caps) but also the
+        flare of a scanned rim, and a body's occlusion holes sit in its creases, nearer the
+        flat membrane. 0.1 (the default) serves both: over 4 frames Chamfer / completeness-95
+        crane 0.0023 / 0.0115 open -> 0.0024 / 0.0054 (C1 0.0029 / 0.0072, flat 0.0023 /
+        0.0048), touching-spheres 0.0047 / 0.0488 -> 0.0041 / 0.0216 (C1 0.0026 / 0.0076, flat
+        0.0061 / 0.0373), dfaust-hopping 0.0026 / 0.0153 -> 0.0027 / 0.0101; see
+        ``benchmarks/METHODS.md``.
     workers : int
         Merges of one level of the hierarchy run in this many processes (they are
         independent, 5.3), with the same result; 1 runs them one after the other; 0 (the
@@ -298,8 +300,8 @@ class Options(SurfaceSettings):
     correct_motion: float = 1.5
     paste: bool = False
     paste_gap: float = 2.0
-    close_holes: float = 0.0
-    close_smoothness: float = 1.0
+    close_holes: float = 0.25
+    close_smoothness: float = 0.1
     workers: int = 0
     scheduler: str = "sync"
     cache_dir: str | None = None
