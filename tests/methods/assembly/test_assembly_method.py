@@ -190,6 +190,21 @@ def test_a_hole_no_frame_fills_is_closed_in_every_frame_unobserved():
     assert largest[1.0] < 0.5 and largest[1.0] < largest[0.1] < largest[0.0] < 2.0, largest
 
 
+def test_a_hole_that_cannot_be_filled_leaves_the_assembled_result_as_it_is(monkeypatch):
+    """A rim the membrane cannot span (a degenerate loop) costs the closing, not the run."""
+    import fourd.methods.assembly.method as method
+
+    vertices, faces = _bumpy()
+    keep = ~(vertices[faces].mean(axis=1)[:, 0] > 0.85)
+    block = Block(faces[keep], vertices[None], np.ones((1, len(vertices)), dtype=bool))
+
+    def degenerate(*args, **kwargs):
+        raise InputError("a hole's boundary has no length")
+
+    monkeypatch.setattr(method, "fill_holes", degenerate)
+    assert method.close_small_holes(block, 0.25) is block
+
+
 def test_a_region_missing_from_the_first_frame_is_pasted_in_from_the_next():
     """The left frame lacks a cap the right frame has (5.6, second half): the union mesh gains
     the cap, closed and consistently oriented, at the right frame's own vertices there and

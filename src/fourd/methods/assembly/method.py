@@ -99,7 +99,11 @@ def close_small_holes(block: Block, max_fraction: float, smoothness: float = 1.0
     holes = small_holes(block.vertices[0], block.faces, max_fraction=max_fraction)
     if not holes:
         return block
-    filled = fill_holes(block.vertices[0], block.faces, holes=holes, area_matched=True, smooth=smoothness)
+    try:
+        filled = fill_holes(block.vertices[0], block.faces, holes=holes, area_matched=True, smooth=smoothness)
+    except InputError as error:  # a degenerate rim: keep the assembled result rather than lose it
+        log.warning("holes left open: %s", error)
+        return block
     added = len(filled.vertices) - block.vertices.shape[1]
     frames = np.concatenate([block.vertices, np.repeat(filled.vertices[None, -added:], len(block.vertices), axis=0)],
                             axis=1)
