@@ -30,7 +30,7 @@ import scipy.sparse.linalg as spla
 
 from fourd.errors import InputError
 from fourd.geometry.boundary_loops import boundary_loops
-from fourd.geometry.meshes import face_areas, vertex_components
+from fourd.geometry.meshes import face_areas, vertex_adjacency, vertex_components
 from fourd.geometry.polygon_triangulation import triangulate_polygon
 
 __all__ = ["FilledMesh", "fill_holes", "membrane_positions", "small_holes"]
@@ -159,9 +159,7 @@ def membrane_positions(frames: np.ndarray, faces: np.ndarray, filled: np.ndarray
     if not filled.any():
         return result
     count = frames.shape[1]
-    sides = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
-    adjacency = sp.csr_matrix((np.ones(len(sides)), (sides[:, 0], sides[:, 1])), shape=(count, count))
-    adjacency = ((adjacency + adjacency.T) > 0).astype(np.float64)
+    adjacency = vertex_adjacency(np.asarray(faces, dtype=np.int64), count)
     degree = np.asarray(adjacency.sum(axis=1)).ravel()
     laplacian = sp.identity(count) - sp.diags(1.0 / np.maximum(degree, 1)) @ adjacency  # rows P_i - mean
     rows = np.flatnonzero(filled)
