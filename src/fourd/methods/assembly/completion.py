@@ -14,9 +14,10 @@ two runs: the same union of connectivities, with a band one triangle wide. A pat
 beside any rim is left out and counted (it would float).
 
 The patch's positions in the target's frames are the target's own; in the source's frames they
-are placed by the Laplacian coordinates of the union mesh in the target frame with the union's
-vertices held (:func:`fourd.methods.assembly.registration.register_by_laplacian`, [LSA+05]),
-over the patch and a few rings of the union around it (rows farther away hold no unknown).
+are placed frame by frame, from the one next to the target back to the first, each by the
+Laplacian coordinates of the union mesh in the frame after it with the union's vertices held
+(:func:`fourd.methods.assembly.registration.register_by_laplacian`, [LSA+05]), over the patch
+and a few rings of the union around it (rows farther away hold no unknown).
 
 References
 ----------
@@ -255,12 +256,18 @@ def paste_target_only(
 def place_pasted(
     reference: np.ndarray, faces: np.ndarray, known: np.ndarray, points: np.ndarray, *, iterations: int = 16
 ) -> np.ndarray:
-    """Positions ``[V, 3]`` (or ``[T, V, 3]``, the frames sharing one factorisation) of the
-    pasted vertices (``known`` False) in another frame whose union positions are ``points``
-    (rows of ``known`` vertices), by the Laplacian coordinates of ``reference [V, 3]`` (the
-    union with its patches in the target frame), solved over the patches and
-    :data:`PLACEMENT_RINGS` rings of union vertices around them."""
+    """Positions ``[V, 3]`` (or ``[T, V, 3]``) of the pasted vertices (``known`` False) in the
+    frames before the target, whose union positions are ``points`` (rows of ``known``
+    vertices), by Laplacian coordinates solved over the patches and :data:`PLACEMENT_RINGS`
+    rings of union vertices around them. The frames are consecutive, the last one just before
+    the target, and are placed from the last to the first, each by the Laplacian coordinates of
+    the one after it (``reference [V, 3]``, the union with its patches in the target frame, for
+    the last): the pasted geometry follows the registered motion of its surroundings frame by
+    frame, so each solve starts from a pose a frame away instead of the whole block away."""
     count = len(reference)
+    points = np.asarray(points, dtype=np.float64)
+    if known.all():
+        return points.copy()
     adjacency = vertex_adjacency(faces, count)
     near = ~known
     for _ in range(PLACEMENT_RINGS):
@@ -269,12 +276,14 @@ def place_pasted(
     ids = np.flatnonzero(near)
     index = np.full(count, -1, dtype=np.int64)
     index[ids] = np.arange(len(ids))
-    points = np.asarray(points, dtype=np.float64)
-    local_points = np.zeros(points.shape[:-2] + (len(ids), 3))
-    local_points[..., known[ids], :] = points[..., ids[known[ids]], :]
-    placed = register_by_laplacian(
-        reference[ids], index[local], known[ids], local_points, iterations=iterations
-    )
-    result = points.copy()
-    result[..., ~known, :] = placed[..., index[~known], :]
-    return result
+    frames = points.reshape(-1, count, 3)
+    result = frames.copy()
+    before = np.asarray(reference, dtype=np.float64)[ids]
+    for t in range(len(frames) - 1, -1, -1):
+        local_points = np.zeros((len(ids), 3))
+        local_points[known[ids]] = frames[t, ids[known[ids]]]
+        placed = register_by_laplacian(before, index[local], known[ids], local_points, iterations=iterations)
+        result[t, ~known] = placed[index[~known]]
+        # a vertex the local solve could not place (NaN) keeps the pose it had a frame later
+        before = np.where(np.isnan(placed), before, placed)
+    return result.reshape(points.shape)
