@@ -298,47 +298,46 @@ def _conformal_layout(
     (complex corners ``local [F, 3]``), ``pinned[0]`` at the origin and ``pinned[1]`` at
     ``(distance, 0)`` (Lévy et al. 2002, eq. 7)."""
     # sum_j W_j U_j / sqrt(2 area) = 0 holds when the triangle's image is a similarity of it,
-    # with W_j = z_{j+2} - z_{j+1}
+    # with W_j = z_{j+2} - z_{j+1} and U_j = u_j + i v_j: the energy sum_T |sum_j w_j U_j|^2 is
+    # U^H M U with the Hermitian M summed triangle by triangle (M_jk += conj(w_j) w_k), half
+    # the unknowns of the real (u, v) form, the same minimiser
     weights = np.roll(local, -2, axis=1) - np.roll(local, -1, axis=1)
     double_area = np.abs((np.conj(local[:, 1] - local[:, 0]) * (local[:, 2] - local[:, 0])).imag)
     weights = weights / np.sqrt(np.maximum(double_area, 1e-300))[:, None]
-    a, b = weights.real, weights.imag
-    # W U = (a u - b v) + i (b u + a v): a real row and an imaginary row per triangle over its
-    # six unknowns (u then v of its corners); the normal equations summed triangle by triangle
-    real = np.concatenate([a, -b], axis=1)  # [F, 6]
-    imaginary = np.concatenate([b, a], axis=1)
-    blocks = real[:, :, None] * real[:, None, :] + imaginary[:, :, None] * imaginary[:, None, :]  # [F, 6, 6]
-    unknowns = np.concatenate([faces, count + faces], axis=1)  # [F, 6]
-    rows = np.broadcast_to(unknowns[:, :, None], blocks.shape).ravel()
-    columns = np.broadcast_to(unknowns[:, None, :], blocks.shape).ravel()
-    blocks = blocks.ravel()
-    fixed = np.array([pinned[0], pinned[1], count + pinned[0], count + pinned[1]])
-    values = np.zeros(2 * count)
+    blocks = (np.conj(weights)[:, :, None] * weights[:, None, :]).ravel()  # [F * 9]
+    rows = np.repeat(faces, 3, axis=1).ravel()
+    columns = np.tile(faces, (1, 3)).ravel()
+    values = np.zeros(count, dtype=np.complex128)
     values[pinned[1]] = distance
-    is_fixed = np.zeros(2 * count, dtype=bool)
-    is_fixed[fixed] = True
+    is_fixed = np.zeros(count, dtype=bool)
+    is_fixed[pinned] = True
     index = np.cumsum(~is_fixed) - 1
     free_rows = ~is_fixed[rows]
     both = free_rows & ~is_fixed[columns]
-    size = 2 * count - len(fixed)
     moved = free_rows & is_fixed[columns]
-    rhs = -np.bincount(index[rows[moved]], weights=blocks[moved] * values[columns[moved]], minlength=size)
+    size = count - 2
+    terms = blocks[moved] * values[columns[moved]]
+    rhs = -(np.bincount(index[rows[moved]], weights=terms.real, minlength=size)
+            + 1j * np.bincount(index[rows[moved]], weights=terms.imag, minlength=size))
     solution = values.copy()
-    solution[~is_fixed] = _solve_normal(index[rows[both]], index[columns[both]], blocks[both], rhs)
-    return np.stack([solution[:count], solution[count:]], axis=1)
+    solution[~is_fixed] = _solve_hermitian(index[rows[both]], index[columns[both]], blocks[both], rhs)
+    return np.stack([solution.real, solution.imag], axis=1)
 
 
 #: Normal equations of at most this many unknowns are solved dense (a patch of the
-#: cross-parameterisation has about 70 vertices: 136 unknowns, where a sparse factorisation
-#: costs mostly its setting up).
-DENSE_UNKNOWNS = 600
+#: cross-parameterisation has about 70 vertices: 68 complex unknowns, where a sparse
+#: factorisation costs mostly its setting up).
+DENSE_UNKNOWNS = 300
 
 
-def _solve_normal(rows: np.ndarray, columns: np.ndarray, values: np.ndarray, rhs: np.ndarray) -> np.ndarray:
-    """Solve the symmetric positive definite system given by its entries (duplicates summed)."""
+def _solve_hermitian(rows: np.ndarray, columns: np.ndarray, values: np.ndarray, rhs: np.ndarray) -> np.ndarray:
+    """Solve the Hermitian positive definite system given by its complex entries (duplicates
+    summed)."""
     size = len(rhs)
     if size <= DENSE_UNKNOWNS:
-        matrix = np.bincount(rows * size + columns, weights=values, minlength=size * size).reshape(size, size)
+        flat = rows * size + columns
+        matrix = (np.bincount(flat, weights=values.real, minlength=size * size)
+                  + 1j * np.bincount(flat, weights=values.imag, minlength=size * size)).reshape(size, size)
         try:
             return scipy.linalg.solve(matrix, rhs, assume_a="pos", check_finite=False)
         except np.linalg.LinAlgError:
