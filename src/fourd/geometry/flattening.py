@@ -263,12 +263,24 @@ def angle_distortion(vertices: np.ndarray, faces: np.ndarray, uv: np.ndarray) ->
 def _local_triangles(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     """Each triangle in its own plane as complex corners ``[F, 3]``: corner 0 at 0, corner 1 on
     the positive real axis, corner 2 above it (counter-clockwise)."""
-    tri = vertices[faces]
-    e1, e2 = tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]
-    length = np.linalg.norm(e1, axis=1)
-    x = np.einsum("ij,ij->i", e2, e1) / np.maximum(length, 1e-300)
-    y = np.linalg.norm(np.cross(e1, e2), axis=1) / np.maximum(length, 1e-300)
-    return np.stack([np.zeros(len(faces)), length + 0j, x + 1j * y], axis=1)
+    return _local_triangles_kernel(np.ascontiguousarray(vertices, dtype=np.float64),
+                                   np.ascontiguousarray(faces, dtype=np.int64))
+
+
+@numba.njit(cache=True, nogil=True)
+def _local_triangles_kernel(vertices, faces):
+    local = np.zeros((faces.shape[0], 3), dtype=np.complex128)
+    for f in range(faces.shape[0]):
+        p, q, r = vertices[faces[f, 0]], vertices[faces[f, 1]], vertices[faces[f, 2]]
+        e1, e2 = q - p, r - p
+        length = np.sqrt(e1 @ e1)
+        cx = e1[1] * e2[2] - e1[2] * e2[1]
+        cy = e1[2] * e2[0] - e1[0] * e2[2]
+        cz = e1[0] * e2[1] - e1[1] * e2[0]
+        inverse = 1.0 / max(length, 1e-300)
+        local[f, 1] = length
+        local[f, 2] = (e2 @ e1) * inverse + 1j * np.sqrt(cx * cx + cy * cy + cz * cz) * inverse
+    return local
 
 
 def _triangles_from_angles(angles: np.ndarray, areas: np.ndarray) -> np.ndarray:
@@ -301,50 +313,93 @@ def _conformal_layout(
     # with W_j = z_{j+2} - z_{j+1} and U_j = u_j + i v_j: the energy sum_T |sum_j w_j U_j|^2 is
     # U^H M U with the Hermitian M summed triangle by triangle (M_jk += conj(w_j) w_k), half
     # the unknowns of the real (u, v) form, the same minimiser
-    weights = np.roll(local, -2, axis=1) - np.roll(local, -1, axis=1)
-    double_area = np.abs((np.conj(local[:, 1] - local[:, 0]) * (local[:, 2] - local[:, 0])).imag)
-    weights = weights / np.sqrt(np.maximum(double_area, 1e-300))[:, None]
-    blocks = (np.conj(weights)[:, :, None] * weights[:, None, :]).ravel()  # [F * 9]
-    rows = np.repeat(faces, 3, axis=1).ravel()
-    columns = np.tile(faces, (1, 3)).ravel()
-    values = np.zeros(count, dtype=np.complex128)
-    values[pinned[1]] = distance
+    faces = np.ascontiguousarray(faces, dtype=np.int64)
+    local = np.ascontiguousarray(local, dtype=np.complex128)
     is_fixed = np.zeros(count, dtype=bool)
     is_fixed[pinned] = True
     index = np.cumsum(~is_fixed) - 1
-    free_rows = ~is_fixed[rows]
-    both = free_rows & ~is_fixed[columns]
-    moved = free_rows & is_fixed[columns]
+    index[pinned] = -1 - np.arange(2)  # -1: the origin, -2: (distance, 0)
     size = count - 2
-    terms = blocks[moved] * values[columns[moved]]
-    rhs = -(np.bincount(index[rows[moved]], weights=terms.real, minlength=size)
-            + 1j * np.bincount(index[rows[moved]], weights=terms.imag, minlength=size))
-    solution = values.copy()
-    solution[~is_fixed] = _solve_hermitian(index[rows[both]], index[columns[both]], blocks[both], rhs)
+    solution = np.zeros(count, dtype=np.complex128)
+    solution[pinned[1]] = distance
+    if size <= DENSE_UNKNOWNS:
+        matrix, rhs = _dense_conformal_system(faces, local, index, size, float(distance))
+        try:
+            solution[~is_fixed] = scipy.linalg.solve(matrix, rhs, assume_a="pos", check_finite=False)
+            return np.stack([solution.real, solution.imag], axis=1)
+        except np.linalg.LinAlgError:
+            pass  # singular (a degenerate patch): the sparse solve says so as it always did
+    rows, columns, values, rhs = _sparse_conformal_system(faces, local, index, size, float(distance))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", MatrixRankWarning)  # singular: NaN, which callers test
+        solution[~is_fixed] = spsolve(sp.csc_matrix((values, (rows, columns)), shape=(size, size)), rhs)
     return np.stack([solution.real, solution.imag], axis=1)
+
+
+@numba.njit(cache=True, nogil=True)
+def _triangle_weights(local):
+    """The conformality weights ``w_j = (z_{j+2} - z_{j+1}) / sqrt(2 area)`` ``[F, 3]``."""
+    weights = np.empty(local.shape, dtype=np.complex128)
+    for f in range(local.shape[0]):
+        e1, e2 = local[f, 1] - local[f, 0], local[f, 2] - local[f, 0]
+        scale = 1.0 / np.sqrt(max(abs((np.conj(e1) * e2).imag), 1e-300))
+        for j in range(3):
+            weights[f, j] = (local[f, (j + 2) % 3] - local[f, (j + 1) % 3]) * scale
+    return weights
+
+
+@numba.njit(cache=True, nogil=True)
+def _dense_conformal_system(faces, local, index, size, distance):
+    """The Hermitian matrix ``[size, size]`` and right-hand side of the free unknowns
+    (``index``: a free vertex's unknown, -1 and -2 the two pins)."""
+    weights = _triangle_weights(local)
+    matrix = np.zeros((size, size), dtype=np.complex128)
+    rhs = np.zeros(size, dtype=np.complex128)
+    for f in range(faces.shape[0]):
+        for j in range(3):
+            row = index[faces[f, j]]
+            if row < 0:
+                continue
+            for k in range(3):
+                column = index[faces[f, k]]
+                value = np.conj(weights[f, j]) * weights[f, k]
+                if column >= 0:
+                    matrix[row, column] += value
+                elif column == -2:
+                    rhs[row] -= value * distance
+    return matrix, rhs
+
+
+@numba.njit(cache=True, nogil=True)
+def _sparse_conformal_system(faces, local, index, size, distance):
+    """:func:`_dense_conformal_system` as entries (rows, columns, values; duplicates to be
+    summed) and the right-hand side."""
+    weights = _triangle_weights(local)
+    rows = np.empty(9 * faces.shape[0], dtype=np.int64)
+    columns = np.empty(9 * faces.shape[0], dtype=np.int64)
+    values = np.empty(9 * faces.shape[0], dtype=np.complex128)
+    rhs = np.zeros(size, dtype=np.complex128)
+    n = 0
+    for f in range(faces.shape[0]):
+        for j in range(3):
+            row = index[faces[f, j]]
+            if row < 0:
+                continue
+            for k in range(3):
+                column = index[faces[f, k]]
+                value = np.conj(weights[f, j]) * weights[f, k]
+                if column >= 0:
+                    rows[n], columns[n], values[n] = row, column, value
+                    n += 1
+                elif column == -2:
+                    rhs[row] -= value * distance
+    return rows[:n], columns[:n], values[:n], rhs
 
 
 #: Normal equations of at most this many unknowns are solved dense (a patch of the
 #: cross-parameterisation has about 70 vertices: 68 complex unknowns, where a sparse
 #: factorisation costs mostly its setting up).
 DENSE_UNKNOWNS = 300
-
-
-def _solve_hermitian(rows: np.ndarray, columns: np.ndarray, values: np.ndarray, rhs: np.ndarray) -> np.ndarray:
-    """Solve the Hermitian positive definite system given by its complex entries (duplicates
-    summed)."""
-    size = len(rhs)
-    if size <= DENSE_UNKNOWNS:
-        flat = rows * size + columns
-        matrix = (np.bincount(flat, weights=values.real, minlength=size * size)
-                  + 1j * np.bincount(flat, weights=values.imag, minlength=size * size)).reshape(size, size)
-        try:
-            return scipy.linalg.solve(matrix, rhs, assume_a="pos", check_finite=False)
-        except np.linalg.LinAlgError:
-            pass  # singular (a degenerate patch): the sparse solve says so as it always did
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", MatrixRankWarning)  # singular: NaN, which callers test
-        return spsolve(sp.csc_matrix((values, (rows, columns)), shape=(size, size)), rhs)
 
 
 def _pins(vertices, faces, pinned) -> np.ndarray:
@@ -426,12 +481,11 @@ def lscm(vertices: np.ndarray, faces: np.ndarray, *, pinned=None) -> Flattening:
     """
     vertices, faces = _check(vertices, faces)
     pins = _pins(vertices, faces, pinned)
-    from fourd.geometry.meshes import face_areas
-
     local = _local_triangles(vertices, faces)
+    area = 0.5 * float(np.sum(local[:, 1].real * local[:, 2].imag))
     distance = float(np.linalg.norm(vertices[pins[1]] - vertices[pins[0]])) or 1.0
     uv = _conformal_layout(faces, local, len(vertices), pins, distance)
-    return Flattening(_to_area(uv, faces, float(face_areas(vertices, faces).sum()), pins), pins)
+    return Flattening(_to_area(uv, faces, area, pins), pins)
 
 
 def _optimal_angles(angles: np.ndarray, faces: np.ndarray, interior: np.ndarray, count: int) -> np.ndarray:
