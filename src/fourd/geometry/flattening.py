@@ -329,7 +329,7 @@ def _conformal_layout(
             return np.stack([solution.real, solution.imag], axis=1)
         except np.linalg.LinAlgError:
             pass  # singular (a degenerate patch): the sparse solve says so as it always did
-    rows, columns, values, rhs = _sparse_conformal_system(faces, local, index, size, float(distance))
+    rows, columns, values, rhs = _conformal_system(faces, local, index, size, float(distance))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", MatrixRankWarning)  # singular: NaN, which callers test
         solution[~is_fixed] = spsolve(sp.csc_matrix((values, (rows, columns)), shape=(size, size)), rhs)
@@ -349,31 +349,10 @@ def _triangle_weights(local):
 
 
 @numba.njit(cache=True, nogil=True)
-def _dense_conformal_system(faces, local, index, size, distance):
-    """The Hermitian matrix ``[size, size]`` and right-hand side of the free unknowns
-    (``index``: a free vertex's unknown, -1 and -2 the two pins)."""
-    weights = _triangle_weights(local)
-    matrix = np.zeros((size, size), dtype=np.complex128)
-    rhs = np.zeros(size, dtype=np.complex128)
-    for f in range(faces.shape[0]):
-        for j in range(3):
-            row = index[faces[f, j]]
-            if row < 0:
-                continue
-            for k in range(3):
-                column = index[faces[f, k]]
-                value = np.conj(weights[f, j]) * weights[f, k]
-                if column >= 0:
-                    matrix[row, column] += value
-                elif column == -2:
-                    rhs[row] -= value * distance
-    return matrix, rhs
-
-
-@numba.njit(cache=True, nogil=True)
-def _sparse_conformal_system(faces, local, index, size, distance):
-    """:func:`_dense_conformal_system` as entries (rows, columns, values; duplicates to be
-    summed) and the right-hand side."""
+def _conformal_system(faces, local, index, size, distance):
+    """The Hermitian system of the free unknowns (``index``: a free vertex's unknown, -1 and -2
+    the two pins) as entries (rows, columns, values; duplicates to be summed) and the
+    right-hand side."""
     weights = _triangle_weights(local)
     rows = np.empty(9 * faces.shape[0], dtype=np.int64)
     columns = np.empty(9 * faces.shape[0], dtype=np.int64)
@@ -394,6 +373,17 @@ def _sparse_conformal_system(faces, local, index, size, distance):
                 elif column == -2:
                     rhs[row] -= value * distance
     return rows[:n], columns[:n], values[:n], rhs
+
+
+@numba.njit(cache=True, nogil=True)
+def _dense_conformal_system(faces, local, index, size, distance):
+    """:func:`_conformal_system` as a dense Hermitian matrix ``[size, size]`` and its
+    right-hand side."""
+    rows, columns, values, rhs = _conformal_system(faces, local, index, size, distance)
+    matrix = np.zeros((size, size), dtype=np.complex128)
+    for n in range(len(rows)):
+        matrix[rows[n], columns[n]] += values[n]
+    return matrix, rhs
 
 
 #: Normal equations of at most this many unknowns are solved dense (a patch of the

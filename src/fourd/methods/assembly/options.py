@@ -242,11 +242,11 @@ class Options(SurfaceSettings):
         into the union mesh (thesis 5.6, :mod:`fourd.methods.assembly.completion`): the result
         gains those vertices, unobserved in the frames before. Off (the default): on the
         bench's crane, dfaust-hopping and touching-spheres it lowers completeness-95
-        (0.0126 -> 0.0080, 0.0170 -> 0.0158, 0.0589 -> 0.0337), but on the held-out crane
-        stretches the pasted geometry, placed in the earlier frames by Laplacian coordinates,
-        lies off the surface and its correspondence is poor (crane-90: accuracy 0.0089, Chamfer
-        0.0055 against 0.0023 off; correspondence 0.0206 / 0.0340 against 0.0115 / 0.0195);
-        see ``benchmarks/METHODS.md``.
+        (0.0126 -> 0.0080, 0.0170 -> 0.0158, 0.0589 -> 0.0337), but in the frames that never
+        saw it the pasted geometry's shape is a guess from the rim (placed frame by frame by
+        Laplacian coordinates), and on the held-out crane stretches it lies off the surface
+        (crane-90: Chamfer 0.0036 against 0.0023 off, and a poorer correspondence); see
+        ``benchmarks/METHODS.md``.
     paste_gap : float
         A later frame's triangle is geometry the union lacks when its corners lie farther than
         this many edges from the union placed in that frame; the seam band is this wide.
