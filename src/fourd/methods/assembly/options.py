@@ -257,8 +257,8 @@ class Options(SurfaceSettings):
         of the area of the piece of surface it bounds (the first frames' meshes of the bench:
         crane's holes span at most 5% of the body, dfaust-hopping's 3%, touching-spheres'
         unseen facing sides 11% and 16% of their sphere, waving-sheet's outline 94%, kept).
-        0 keeps every hole; so should a garment (its openings are holes by this test: use
-        the ``garment`` method, or 0).
+        0 keeps every hole. Use 0 for a garment too: its openings are holes by this test (or
+        use the ``garment`` method).
     close_smoothness : float
         Weight of the membrane's C1 terms (3.6.2: the rim's own Laplacian rows, which bend the
         membrane to leave the rim along the surface): 1 the thesis' C1 membrane, 0 the flat
