@@ -322,14 +322,14 @@ def _conformal_layout(
     size = count - 2
     solution = np.zeros(count, dtype=np.complex128)
     solution[pinned[1]] = distance
+    rows, columns, values, rhs = _conformal_system(faces, local, index, size, float(distance))
     if size <= DENSE_UNKNOWNS:
-        matrix, rhs = _dense_conformal_system(faces, local, index, size, float(distance))
         try:
-            solution[~is_fixed] = scipy.linalg.solve(matrix, rhs, assume_a="pos", check_finite=False)
+            solution[~is_fixed] = scipy.linalg.solve(_dense(rows, columns, values, size), rhs, assume_a="pos",
+                                                     check_finite=False)
             return np.stack([solution.real, solution.imag], axis=1)
         except np.linalg.LinAlgError:
             pass  # singular (a degenerate patch): the sparse solve says so as it always did
-    rows, columns, values, rhs = _conformal_system(faces, local, index, size, float(distance))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", MatrixRankWarning)  # singular: NaN, which callers test
         solution[~is_fixed] = spsolve(sp.csc_matrix((values, (rows, columns)), shape=(size, size)), rhs)
@@ -376,14 +376,12 @@ def _conformal_system(faces, local, index, size, distance):
 
 
 @numba.njit(cache=True, nogil=True)
-def _dense_conformal_system(faces, local, index, size, distance):
-    """:func:`_conformal_system` as a dense Hermitian matrix ``[size, size]`` and its
-    right-hand side."""
-    rows, columns, values, rhs = _conformal_system(faces, local, index, size, distance)
+def _dense(rows, columns, values, size):
+    """The ``[size, size]`` matrix of the entries (duplicates summed)."""
     matrix = np.zeros((size, size), dtype=np.complex128)
     for n in range(len(rows)):
         matrix[rows[n], columns[n]] += values[n]
-    return matrix, rhs
+    return matrix
 
 
 #: Normal equations of at most this many unknowns are solved dense (a patch of the
