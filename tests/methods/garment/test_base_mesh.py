@@ -55,28 +55,45 @@ def test_four_anchors_make_a_tetrahedron_turned_outward():
         base_mesh(anchors[:2])
 
 
+def _orientations(result, base):
+    """Each row's triangle in its facet's plane, signed against the facet's normal."""
+    corners = np.einsum("rck,rkd->rcd", result.corners, base.vertices[base.faces[result.chart]])
+    normal = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    facet = base.vertices[base.faces[result.chart]]
+    facet_normal = np.cross(facet[:, 1] - facet[:, 0], facet[:, 2] - facet[:, 0])
+    return np.einsum("rd,rd->r", normal, facet_normal)
+
+
 def test_the_shirt_is_cut_into_four_charts_each_mapped_one_to_one(shirt):
     vertices, faces = shirt.vertices[0], shirt.faces
     _, anchors, _ = _opened(vertices, faces)
     base = base_mesh(anchors)
-    closed_vertices, closed_faces, apex, result, _, _ = _parameterized(vertices, faces, base)
-    assert sorted(set(result.chart.tolist())) == [0, 1, 2, 3]
-    assert np.all(result.corners >= -1e-9)
+    loops, _, _ = _opened(vertices, faces)
+    closed_vertices, closed_faces, apex = closed_surface(vertices, faces, loops, anchors)
+    fixed = parameterize_onto_base(closed_vertices, closed_faces, apex, base, slide=False)
+    assert sorted(set(fixed.chart.tolist())) == [0, 1, 2, 3]
+    # with the borders on the base edges each face lies in its chart's facet (a border face
+    # also has a row in the facet across, unfolded there)
+    own = fixed.chart == fixed.charts.chart[fixed.face]
+    assert np.array_equal(np.unique(fixed.face[own]), np.arange(len(closed_faces)))
+    assert np.all(fixed.corners[own] >= -1e-9)
     # every triangle keeps its orientation in its facet: the map is one to one
-    for facet, base_face in enumerate(base.faces):
-        corners = result.corners[result.chart == facet] @ base.vertices[base_face]
-        normal = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
-        facet_normal = np.cross(*(base.vertices[base_face[1:]] - base.vertices[base_face[0]]))
-        assert np.all(normal @ facet_normal > 0)
+    assert np.all(_orientations(fixed, base) > 0)
     # a vertex on a chart border names one base point from every chart it is in
-    points = np.einsum("fck,fkd->fcd", result.corners, base.vertices[base.faces[result.chart]])
-    for path in result.charts.paths:
+    points = np.einsum("fck,fkd->fcd", fixed.corners[own], base.vertices[base.faces[fixed.chart[own]]])
+    for path in fixed.charts.paths:
         for vertex in path[1:-1]:
-            at = points[closed_faces == vertex]
+            at = points[closed_faces[fixed.face[own]] == vertex]
             assert np.ptp(at, axis=0).max() < 1e-9
-    anchor_points = points[closed_faces == apex[0]]
-    assert np.allclose(anchor_points, base.vertices[0])
-    assert np.all((result.stretch >= 1.0) & (result.stretch < 1.3))
+    assert np.allclose(points[closed_faces[fixed.face[own]] == apex[0]], base.vertices[0])
+    assert 1.0 <= fixed.stretch < 1.3
+    # sliding across the borders lowers the stretch and keeps the map one to one
+    slid = parameterize_onto_base(closed_vertices, closed_faces, apex, base)
+    assert slid.stretch < fixed.stretch
+    assert np.all(_orientations(slid, base) > 0)
+    assert np.all(slid.vertex_facet >= 0) and np.all(slid.vertex_barycentric >= 0)
+    anchor_points = np.einsum("ak,akd->ad", slid.vertex_barycentric[apex], base.vertices[base.faces[slid.vertex_facet[apex]]])
+    assert np.allclose(anchor_points, base.vertices)
 
 
 def test_a_moved_copy_maps_onto_itself_through_the_base(shirt):
@@ -88,7 +105,7 @@ def test_a_moved_copy_maps_onto_itself_through_the_base(shirt):
     turn = np.array([[np.cos(angle), 0, np.sin(angle)], [0, 1, 0], [-np.sin(angle), 0, np.cos(angle)]])
     moved = 1.3 * vertices @ turn.T + [0.2, -0.1, 0.4]
     moved_vertices, moved_faces, _, second, _, _ = _parameterized(moved, faces, base, reference=1.3 * centres @ turn.T + [0.2, -0.1, 0.4])
-    facets, barycentric = vertex_base_coordinates(first, closed_faces, len(vertices))
+    facets, barycentric = vertex_base_coordinates(first, len(vertices))
     points, _, _ = map_through_base(facets, barycentric, moved_vertices, moved_faces, second)
     assert np.abs(points - moved).max() < 1e-6 * np.ptp(moved)
 
@@ -105,7 +122,7 @@ def test_a_nearby_pose_maps_close_to_its_true_points_through_the_base(shirt):
     guides = [move.scale * closed_vertices[path] @ move.rotation.T + move.translation for path in first.charts.paths]
     reach = 0.3 * np.median(np.linalg.norm(later_anchors[:, None] - later_anchors[None], axis=2)[np.triu_indices(4, 1)])
     later_vertices, later_faces, _, second, _, _ = _parameterized(later, faces, base, centres, guides, reach)
-    facets, barycentric = vertex_base_coordinates(first, closed_faces, len(later))
+    facets, barycentric = vertex_base_coordinates(first, len(later))
     points, _, _ = map_through_base(facets, barycentric, later_vertices, later_faces, second)
     error = np.linalg.norm(points - later, axis=1) / shirt.diagonal()
     assert np.median(error) < 0.004 and np.quantile(error, 0.95) < 0.015

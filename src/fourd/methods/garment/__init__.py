@@ -14,7 +14,13 @@ completed by the template (:mod:`.pipeline`). Its parts:
   triangulation, front and back sewn along the outline but the openings, inflation that
   opposes stretch and compression (3.7, equations 3.2-3.3);
 - :mod:`.fit`: the template fitted onto a frame as rigidly as possible, its openings pulled
-  onto the frame's (in place of the thesis' base-mesh parameterisation, 3.6.2);
+  onto the frame's (in place of the thesis' base-mesh parameterisation, 3.6.2, which
+  :mod:`.base_mesh` builds but the pipeline does not use: measured in
+  ``experiments/garment_base_mesh.py``);
+- :mod:`.base_mesh`: the base-mesh parameterisation (3.6.2): each opening closed by a cone at
+  its anchor, the surface cut into one chart per facet of the anchors' tetrahedron, each chart
+  mapped onto its facet (mean-value map, stretch-minimising reweighting, vertices sliding
+  across the charts' borders), and points carried between surfaces through the base;
 - :mod:`.fold_edges`: folds found in a video frame as pairs of parallel, oppositely oriented
   edges flanking a bright ridge or a dark valley (4.3.1, 4.4);
 - :mod:`.wrinkle_anchors`: per frame the best views, their fold edges projected onto the
@@ -23,10 +29,20 @@ completed by the template (:mod:`.pipeline`). Its parts:
   rotations blended over space and time, vertex positioning, stretch reduction (4.5).
 
 The garment scenes (``tshirt``, ``dress``, with the photo) are in :mod:`fourd.synth.garments`;
-the C1 membrane of 3.6.2 is :mod:`fourd.geometry.hole_filling`. Still to come: the base-mesh
-parameterisation (3.6.2).
+the C1 membrane of 3.6.2 is :mod:`fourd.geometry.hole_filling`. Still to come: the thesis'
+re-triangulation of holes on the base during the parameterisation (3.6.2), without which the
+base-mesh map folds or stretches on scanned frames.
 """
 
+from fourd.methods.garment.base_mesh import (
+    BaseMesh,
+    BaseParameterization,
+    base_mesh,
+    closed_surface,
+    map_through_base,
+    parameterize_onto_base,
+    vertex_base_coordinates,
+)
 from fourd.methods.garment.boundary_tracking import (
     BoundaryTrack,
     TrackingOptions,
@@ -82,6 +98,8 @@ from fourd.methods.garment.wrinkling import (
 )
 
 __all__ = [
+    "BaseMesh",
+    "BaseParameterization",
     "COMMON_OPTIONS",
     "MIN_FRAMES",
     "RESULT",
@@ -128,4 +146,9 @@ __all__ = [
     "spacetime_rotations",
     "triangle_stretch",
     "wrinkle",
+    "base_mesh",
+    "closed_surface",
+    "map_through_base",
+    "parameterize_onto_base",
+    "vertex_base_coordinates",
 ]

@@ -7,11 +7,12 @@ triangles (front and back) sharing their edges. A frame is parameterised onto it
 steps:
 
 1. **Closing** (:func:`closed_surface`). Each opening is closed by a cone from its anchor to
-   the opening's loop. (The thesis makes a small cone at the anchor and triangulates the gap
-   between the cone and the loop; the cone here reaches the loop at once.) The other holes
-   (what the cameras missed) are closed first by the caller with the C1 membrane of
-   equation 3.1 (:func:`fourd.geometry.hole_filling.fill_holes`). The result is a closed
-   surface of genus 0 with the anchors as vertices.
+   the opening's loop, or to the arc of a loop that the opening is where an occlusion hole ran
+   into it. (The thesis makes a small cone at the anchor and triangulates the gap between the
+   cone and the loop; the cone here reaches the loop at once.) The other holes (what the
+   cameras missed) are closed by the C1 membrane of equation 3.1
+   (:func:`fourd.geometry.hole_filling.fill_holes`). The result is a closed surface of genus 0
+   with the anchors as vertices.
 2. **Charts** (:func:`base_charts`). One path per base edge, from anchor to anchor, the
    shortest along the edges that no earlier path uses, cut the closed surface into one disk
    per base facet. The base facets are paired with the charts by the anchors at their
@@ -46,6 +47,7 @@ SIGGRAPH 2001 (the L2 stretch).
 
 from __future__ import annotations
 
+import itertools
 from typing import NamedTuple
 
 import numpy as np
@@ -55,7 +57,9 @@ import scipy.sparse.linalg as spla
 from scipy.spatial import cKDTree
 
 from fourd.errors import InputError
+from fourd.geometry.boundary_loops import boundary_loops
 from fourd.geometry.geodesic import edge_length_graph
+from fourd.geometry.hole_filling import fill_holes
 from fourd.geometry.meshes import face_adjacency, face_areas
 
 __all__ = ["BaseMesh", "BaseParameterization", "Charts", "base_charts", "base_mesh", "closed_surface",
@@ -64,6 +68,9 @@ __all__ = ["BaseMesh", "BaseParameterization", "Charts", "base_charts", "base_me
 #: Reweighting rounds of the stretch minimisation at most (it stops earlier once the chart's
 #: L2 stretch no longer falls).
 STRETCH_ROUNDS = 8
+#: A sliver's scale: edges shorter than this fraction of the median edge, and triangles of less
+#: than this fraction squared of the mean area, count as degenerate (weights and stretch).
+SLIVER = 1e-3
 #: Triangles of the other mesh's chart tried for each point located there (nearest centres).
 LOCATE_CANDIDATES = 16
 
@@ -102,20 +109,30 @@ class Charts(NamedTuple):
 class BaseParameterization(NamedTuple):
     """A closed surface mapped onto the base mesh (:func:`parameterize_onto_base`).
 
-    chart : int64 [F]
-        The base facet each face is mapped into.
-    corners : float64 [F, 3, 3]
-        Each face corner's barycentric coordinates in that facet (a vertex on a chart's border
-        has one set per chart; the sets name the same point of the base).
-    stretch : float64 [B]
-        Each chart's L2 stretch at the end, relative to a map that keeps the chart's area (1 for
+    face : int64 [R]
+        The surface face of each row. A face lies in one facet, or across a base edge (then it
+        has a row per facet it reaches).
+    chart : int64 [R]
+        The base facet of the row.
+    corners : float64 [R, 3, 3]
+        The face's corners' barycentric coordinates in that facet (a corner across a base edge,
+        in the facet's plane unfolded over that edge, has a negative one).
+    vertex_facet : int64 [N]
+        The base facet each vertex lies in (-1: in no face).
+    vertex_barycentric : float64 [N, 3]
+        Its barycentric coordinates there (non-negative).
+    stretch : float64
+        The L2 stretch of the whole map, relative to one that keeps the surface's area (1 for
         an isometry).
     charts : Charts
     """
 
+    face: np.ndarray
     chart: np.ndarray
     corners: np.ndarray
-    stretch: np.ndarray
+    vertex_facet: np.ndarray
+    vertex_barycentric: np.ndarray
+    stretch: float
     charts: Charts
 
 
@@ -153,17 +170,20 @@ def base_edges(base: BaseMesh) -> np.ndarray:
 
 
 def closed_surface(vertices: np.ndarray, faces: np.ndarray, openings: list, anchors: np.ndarray):
-    """Each opening loop closed by a cone from its anchor: ``(vertices [N + K, 3], faces,
-    apex [K])``, the anchors appended as vertices ``apex``, each cone's triangles oriented like
-    the faces along its loop.
+    """A garment's surface closed: each opening by a cone from its anchor, every other hole
+    by the C1 membrane (equation 3.1; :func:`fourd.geometry.hole_filling.fill_holes`).
+    Returns ``(vertices [N + K + M, 3], faces, apex [K])``: the anchors appended as vertices
+    ``apex``, then the membranes' vertices.
 
     Parameters
     ----------
     vertices : array [N, 3]
     faces : int array [F, 3]
-        Its only boundary loops are the openings (the other holes filled).
     openings : list of int arrays
-        The openings' boundary loops, in the anchors' order.
+        Per anchor, the boundary vertices of its opening in order along a boundary loop: the
+        whole loop, or the arc of it that the opening is (where an occlusion hole ran into the
+        opening, or two openings share a loop). An arc's cone closes over the chord from its
+        last vertex to its first; what is left of its loop is then a hole like the others.
     anchors : array [K, 3]
     """
     vertices = np.asarray(vertices, dtype=np.float64)
@@ -174,18 +194,29 @@ def closed_surface(vertices: np.ndarray, faces: np.ndarray, openings: list, anch
     directed = set(zip(faces.ravel().tolist(), np.roll(faces, -1, axis=1).ravel().tolist(), strict=True))
     apex = len(vertices) + np.arange(len(anchors))
     cones = []
-    for loop, top in zip(openings, apex, strict=True):
-        loop = np.asarray(loop, dtype=np.int64)
-        following = np.roll(loop, -1)
-        # the loop's edge (u, v) runs u -> v in a face: its cone triangle runs v -> u
-        along = np.array([(int(u), int(v)) in directed for u, v in zip(loop, following, strict=True)])
-        first = np.where(along, following, loop)
-        second = np.where(along, loop, following)
-        cones.append(np.column_stack([first, second, np.full(len(loop), top)]))
-    return np.vstack([vertices, anchors]), np.vstack([faces, *cones]), apex
+    for opening, top in zip(openings, apex, strict=True):
+        opening = np.asarray(opening, dtype=np.int64)
+        if len(opening) < 3:
+            raise InputError(f"an opening of {len(opening)} boundary vertices cannot be closed by a cone")
+        following = np.roll(opening, -1)
+        # the loop's edge (u, v) runs u -> v in a face: its cone triangle runs v -> u; the
+        # chord of an arc (not an edge yet) goes the way most of the arc's edges go
+        along = np.array([(int(u), int(v)) in directed for u, v in zip(opening, following, strict=True)])
+        along[-1] = along[:-1].mean() >= 0.5 if len(opening) > 1 else along[-1]
+        first = np.where(along, following, opening)
+        second = np.where(along, opening, following)
+        cones.append(np.column_stack([first, second, np.full(len(opening), top)]))
+    coned_vertices, coned_faces = np.vstack([vertices, anchors]), np.vstack([faces, *cones])
+    holes = [loop for loop in boundary_loops(coned_faces, len(coned_vertices)) if len(loop) >= 3]
+    if holes:
+        filled = fill_holes(coned_vertices, coned_faces, holes=holes)
+        coned_vertices, coned_faces = filled.vertices, filled.faces
+    return coned_vertices, coned_faces, apex
 
 
-def _path(graph: sp.csr_matrix, blocked: np.ndarray, start: int, end: int) -> np.ndarray:
+def _path(graph: sp.csr_matrix, blocked: np.ndarray, start: int, end: int) -> np.ndarray | None:
+    """The shortest path from ``start`` to ``end`` avoiding the ``blocked`` vertices (None when
+    there is none), without a step over two sides of a triangle."""
     open_ = ~blocked
     open_[[start, end]] = True
     keep = sp.diags(open_.astype(np.float64))
@@ -193,8 +224,7 @@ def _path(graph: sp.csr_matrix, blocked: np.ndarray, start: int, end: int) -> np
     allowed.eliminate_zeros()
     distance, previous = csgraph.dijkstra(allowed, indices=start, return_predecessors=True)
     if not np.isfinite(distance[end]):
-        raise InputError("the garment's surface cannot be cut into base charts: an anchor is cut off "
-                         "from another by the earlier paths")
+        return None
     path = [end]
     while path[-1] != start:
         path.append(int(previous[path[-1]]))
@@ -209,6 +239,32 @@ def _path(graph: sp.csr_matrix, blocked: np.ndarray, start: int, end: int) -> np
         else:
             k += 1
     return np.array(path, dtype=np.int64)
+
+
+def _tracing_orders(base: BaseMesh, edges: list):
+    """Orders to trace the base edges' paths in: a facet's three edges first (they cut the
+    surface in two), then the others in every order, facet after facet."""
+    for face in base.faces:
+        first = [edges.index(tuple(sorted((int(face[k]), int(face[(k + 1) % 3]))))) for k in range(3)]
+        rest = [k for k in range(len(edges)) if k not in first]
+        for tail in itertools.permutations(rest):
+            yield first + list(tail)
+
+
+def _trace(lengths: list, apex: np.ndarray, edges: list, order: list, count: int) -> list | None:
+    """The paths of the base edges (in ``edges``' order) traced in ``order``, each avoiding the
+    earlier ones; None when one is cut off."""
+    blocked = np.zeros(count, dtype=bool)
+    blocked[apex] = True
+    paths = [None] * len(edges)
+    for k in order:
+        a, b = edges[k]
+        path = _path(lengths[k], blocked, int(apex[a]), int(apex[b]))
+        if path is None:
+            return None
+        blocked[path] = True
+        paths[k] = path
+    return paths
 
 
 def _face_components(faces: np.ndarray, cut: set) -> tuple[int, np.ndarray]:
@@ -249,14 +305,16 @@ def base_charts(vertices: np.ndarray, faces: np.ndarray, apex: np.ndarray, base:
     faces = np.asarray(faces, dtype=np.int64)
     apex = np.asarray(apex, dtype=np.int64)
     graph = edge_length_graph(vertices, faces)
-    blocked = np.zeros(len(vertices), dtype=bool)
-    blocked[apex] = True
-    paths = []
-    for index, (a, b) in enumerate(base_edges(base)):
-        lengths = graph if guides is None else _guided(graph, vertices, guides[index], reach)
-        path = _path(lengths, blocked, int(apex[a]), int(apex[b]))
-        blocked[path] = True
-        paths.append(path)
+    edges = [tuple(edge) for edge in base_edges(base).tolist()]
+    lengths = [graph if guides is None else _guided(graph, vertices, guides[k], reach) for k in range(len(edges))]
+    paths = None
+    for order in _tracing_orders(base, edges):
+        paths = _trace(lengths, apex, edges, order, len(vertices))
+        if paths is not None:
+            break
+    if paths is None:
+        raise InputError("the garment's surface cannot be cut into base charts: in every order tried, "
+                         "the earlier paths cut an anchor off from another")
     cut = {tuple(sorted((int(u), int(v)))) for path in paths for u, v in zip(path[:-1], path[1:], strict=True)}
     count, component = _face_components(faces, cut)
     if count != len(base.faces):
@@ -303,8 +361,11 @@ def _facets_of_components(faces, component, count, paths, base: BaseMesh, apex) 
 
 def _mean_value_weights(vertices: np.ndarray, faces: np.ndarray, count: int) -> sp.csr_matrix:
     """Floater's mean-value weights ``w_ij = (tan(a/2) + tan(b/2)) / |v_i - v_j|`` (``a``,
-    ``b`` the angles at ``v_i`` beside the edge), ``[N, N]``, not normalised."""
+    ``b`` the angles at ``v_i`` beside the edge), ``[N, N]``, not normalised. On a sliver
+    (a scan's surface has some) the lengths are floored at :data:`SLIVER` of the median edge
+    and the half-angle tangents capped at ``1 / SLIVER``, so one sliver cannot swamp a row."""
     corners = vertices[faces]
+    shortest = SLIVER * float(np.median(np.linalg.norm(corners[:, 1] - corners[:, 0], axis=1)))
     rows, cols, values = [], [], []
     for k in range(3):
         i, j, m = faces[:, k], faces[:, (k + 1) % 3], faces[:, (k + 2) % 3]
@@ -312,11 +373,16 @@ def _mean_value_weights(vertices: np.ndarray, faces: np.ndarray, count: int) -> 
         to_m = corners[:, (k + 2) % 3] - corners[:, k]
         len_j, len_m = np.linalg.norm(to_j, axis=1), np.linalg.norm(to_m, axis=1)
         cosine = np.einsum("fd,fd->f", to_j, to_m) / np.maximum(len_j * len_m, 1e-300)
-        half = np.tan(0.5 * np.arccos(np.clip(cosine, -1.0, 1.0)))
+        half = np.minimum(np.tan(0.5 * np.arccos(np.clip(cosine, -1.0, 1.0))), 1.0 / SLIVER)
         rows += [i, i]
         cols += [j, m]
-        values += [half / np.maximum(len_j, 1e-300), half / np.maximum(len_m, 1e-300)]
-    return sp.csr_matrix((np.concatenate(values), (np.concatenate(rows), np.concatenate(cols))), shape=(count, count))
+        values += [half / np.maximum(len_j, shortest), half / np.maximum(len_m, shortest)]
+    weights = sp.csr_matrix((np.concatenate(values), (np.concatenate(rows), np.concatenate(cols))), shape=(count, count))
+    # a little of the uniform weights: a vertex all of whose angles are degenerate still has
+    # a row, and the system stays regular
+    uniform = weights.copy()
+    uniform.data[:] = SLIVER * float(np.median(weights.data))
+    return weights + uniform
 
 
 def _facet_frame(corners: np.ndarray) -> np.ndarray:
@@ -339,9 +405,13 @@ def _triangle_stretch(points: np.ndarray, uv: np.ndarray) -> tuple[np.ndarray, n
     safe = np.where(np.abs(area_uv) > 1e-300, area_uv, 1e-300)
     s_s = (q1 * du2[:, 1, None] - q2 * du1[:, 1, None]) / (2 * safe[:, None])
     s_t = (q2 * du1[:, 0, None] - q1 * du2[:, 0, None]) / (2 * safe[:, None])
-    stretch = np.sqrt(0.5 * (np.sum(s_s**2, axis=1) + np.sum(s_t**2, axis=1)))
+    with np.errstate(over="ignore", invalid="ignore"):
+        stretch = np.sqrt(0.5 * (np.sum(s_s**2, axis=1) + np.sum(s_t**2, axis=1)))
     area = 0.5 * np.linalg.norm(np.cross(q1, q2), axis=1)
-    return np.where(area_uv > 0, stretch, np.inf), area
+    # a degenerate triangle (a sliver of the scan) has no stretch to speak of
+    sliver = area <= SLIVER**2 * area.mean()
+    stretch = np.where(sliver, 1.0, np.where(area_uv > 0, stretch, np.inf))
+    return stretch, np.where(sliver, 0.0, area)
 
 
 def _chart_map(vertices, faces, border, border_uv, weights) -> tuple[np.ndarray, float]:
@@ -368,9 +438,11 @@ def _chart_map(vertices, faces, border, border_uv, weights) -> tuple[np.ndarray,
         uv_area = 0.5 * np.abs(first[:, 0] * second[:, 1] - first[:, 1] * second[:, 0]).sum()
         relative = stretch * np.sqrt(uv_area / area_3d)  # 1 where the map keeps areas and shapes
         total = float(np.sqrt(np.sum(area * relative**2) / np.sum(area)))
-        if not total < best_stretch:
+        if best is not None and not total < best_stretch:
             break
         best, best_stretch = uv.copy(), total
+        if not np.isfinite(total):
+            break
         # each vertex's L2 stretch, area-weighted over its triangles
         squared = np.bincount(faces.ravel(), weights=np.repeat(area * relative**2, 3), minlength=count)
         weight = np.bincount(faces.ravel(), weights=np.repeat(area, 3), minlength=count)
@@ -379,8 +451,157 @@ def _chart_map(vertices, faces, border, border_uv, weights) -> tuple[np.ndarray,
     return best, best_stretch
 
 
-def parameterize_onto_base(vertices: np.ndarray, faces: np.ndarray, apex: np.ndarray, base: BaseMesh, *,
-                           guides: list | None = None, reach: float = 0.0) -> BaseParameterization:
+def _unfoldings(base: BaseMesh, frames: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The maps between the facets' planes: ``(linear [B, B, 2, 2], shift [B, B, 2])``, entry
+    ``[g, f]`` taking a point in facet ``g``'s frame into facet ``f``'s. Facets sharing one edge
+    (a tetrahedron's): ``g`` unfolded about it, a rigid motion. Facets sharing all three
+    (front and back): the affine map of their corners, which keeps every border point."""
+    count = len(base.faces)
+    linear = np.zeros((count, count, 2, 2))
+    shift = np.zeros((count, count, 2))
+    for g in range(count):
+        for f in range(count):
+            if f == g:
+                linear[g, f] = np.eye(2)
+                continue
+            shared = [int(v) for v in base.faces[g] if v in base.faces[f]]
+            from_g = np.array([frames[g][list(base.faces[g]).index(v)] for v in shared])
+            to_f = np.array([frames[f][list(base.faces[f]).index(v)] for v in shared])
+            if len(shared) == 3:
+                matrix = np.linalg.solve((from_g[1:] - from_g[0]), (to_f[1:] - to_f[0])).T
+            else:
+                along_g, along_f = from_g[1] - from_g[0], to_f[1] - to_f[0]
+                angle = np.arctan2(along_f[1], along_f[0]) - np.arctan2(along_g[1], along_g[0])
+                matrix = np.array([[np.cos(angle), -np.sin(angle)], [np.sin(angle), np.cos(angle)]])
+            linear[g, f] = matrix
+            shift[g, f] = to_f[0] - matrix @ from_g[0]
+    return linear, shift
+
+
+def _settle(home: np.ndarray, uv: np.ndarray, frames: np.ndarray, base: BaseMesh, rotation, shift):
+    """Each point moved into the facet that holds it: a point past an edge of its facet is
+    carried over that edge (at most three times; then clamped into the facet it reached).
+    Returns ``(home, uv, barycentric)``."""
+    home, uv = home.copy(), uv.copy()
+    for _ in range(3):
+        bary = _batch_barycentric(frames[home], uv)
+        outside = bary.min(axis=1) < -1e-12
+        if not outside.any():
+            break
+        which = np.flatnonzero(outside)
+        corner = np.argmin(bary[which], axis=1)
+        # the facet across the edge opposite that corner
+        across = np.empty(len(which), dtype=np.int64)
+        for row, (f, c) in enumerate(zip(home[which], corner, strict=True)):
+            edge = {int(base.faces[f][(c + 1) % 3]), int(base.faces[f][(c + 2) % 3])}
+            across[row] = next(g for g in range(len(base.faces)) if g != f and edge <= set(base.faces[g].tolist()))
+        uv[which] = np.einsum("pab,pb->pa", rotation[home[which], across], uv[which]) + shift[home[which], across]
+        home[which] = across
+    bary = np.clip(_batch_barycentric(frames[home], uv), 0.0, None)
+    bary /= bary.sum(axis=1, keepdims=True)
+    return home, np.einsum("pk,pkd->pd", bary, frames[home]), bary
+
+
+def _slide(vertices, faces, apex, base: BaseMesh, frames, home, uv) -> tuple[np.ndarray, np.ndarray]:
+    """The map relaxed across the charts' borders (module docstring, step 3): every vertex
+    but the anchors free on the base, its neighbours in other facets unfolded into its own
+    facet's plane; the stretch-minimising mean-value system solved, the vertices settled into
+    the facets they reached, and again, as long as the L2 stretch falls. Returns the vertices'
+    facets and positions in them."""
+    count = len(vertices)
+    rotation, shift = _unfoldings(base, frames)
+    weights = _mean_value_weights(vertices, faces, count).tocoo()
+    is_apex = np.zeros(count, dtype=bool)
+    is_apex[apex] = True
+    free = np.flatnonzero(~is_apex)
+    index = np.full(count, -1, dtype=np.int64)
+    index[free] = np.arange(len(free))
+    keep = ~is_apex[weights.row]
+    i, j, w = weights.row[keep], weights.col[keep], weights.data[keep]
+    corner_slot = np.array([[list(face).index(k) if k in face else -1 for k in range(len(apex))] for face in base.faces])
+    area_3d = face_areas(vertices, faces)
+    best = None
+    scale = np.ones(count)
+    for _ in range(STRETCH_ROUNDS):
+        weight = w / scale[j]
+        block = rotation[home[j], home[i]] * weight[:, None, None]  # [E, 2, 2]
+        rows, cols, values = [], [], []
+        right = np.zeros((len(free), 2))
+        to_free = ~is_apex[j]
+        for a in range(2):
+            for b in range(2):
+                rows.append(2 * index[i[to_free]] + a)
+                cols.append(2 * index[j[to_free]] + b)
+                values.append(block[to_free, a, b])
+        np.add.at(right, index[i[to_free]], -(weight[to_free, None] * shift[home[j[to_free]], home[i[to_free]]]))
+        # an anchor's place in the plane of the vertex's facet: its corner, or unfolded from a
+        # facet that has it
+        at_apex = np.flatnonzero(~to_free)
+        anchor = np.searchsorted(apex, j[at_apex]) if np.all(np.diff(apex) > 0) else np.array(
+            [int(np.flatnonzero(apex == v)[0]) for v in j[at_apex]], dtype=np.int64)
+        facet = home[i[at_apex]]
+        slot = corner_slot[facet, anchor]
+        place = np.zeros((len(at_apex), 2))
+        direct = slot >= 0
+        place[direct] = frames[facet[direct], slot[direct]]
+        for row in np.flatnonzero(~direct):
+            options = [g for g in range(len(base.faces)) if corner_slot[g, anchor[row]] >= 0]
+            images = [rotation[g, facet[row]] @ frames[g, corner_slot[g, anchor[row]]] + shift[g, facet[row]] for g in options]
+            place[row] = min(images, key=lambda point, r=row: np.linalg.norm(point - uv[i[at_apex[r]]]))
+        np.add.at(right, index[i[at_apex]], -(weight[at_apex, None] * place))
+        total = np.bincount(index[i], weights=weight, minlength=len(free))
+        for a in range(2):
+            rows.append(2 * np.arange(len(free)) + a)
+            cols.append(2 * np.arange(len(free)) + a)
+            values.append(-total)
+        system = sp.csc_matrix((np.concatenate(values), (np.concatenate(rows), np.concatenate(cols))),
+                               shape=(2 * len(free), 2 * len(free)))
+        solution = spla.spsolve(system, right.ravel()).reshape(-1, 2)
+        moved = uv.copy()
+        moved[free] = solution
+        new_home, new_uv, _ = _settle(home, moved, frames, base, rotation, shift)
+        new_home[apex], new_uv[apex] = home[apex], uv[apex]
+        stretch, relative, area = _map_stretch(vertices, faces, new_home, new_uv, rotation, shift, area_3d)
+        if not np.isfinite(stretch) or (best is not None and not stretch < best[0]):
+            break
+        best = (stretch, new_home, new_uv)
+        home, uv = new_home, new_uv
+        squared = np.bincount(faces.ravel(), weights=np.repeat(area * relative**2, 3), minlength=count)
+        total_area = np.bincount(faces.ravel(), weights=np.repeat(area, 3), minlength=count)
+        scale = np.sqrt(squared / np.maximum(total_area, 1e-300))
+        scale = np.where(np.isfinite(scale) & (scale > 0), scale, 1.0)
+    return best
+
+
+def _in_frame(faces, home, uv, target, rotation, shift) -> np.ndarray:
+    """Each face's corners ``[F, 3, 2]`` in the plane of facet ``target [F]`` (unfolded)."""
+    corner_home = home[faces]  # [F, 3]
+    corners = uv[faces]
+    goal = np.repeat(target[:, None], 3, axis=1)
+    return np.einsum("fcab,fcb->fca", rotation[corner_home, goal], corners) + shift[corner_home, goal]
+
+
+def _map_stretch(vertices, faces, home, uv, rotation, shift, area_3d):
+    """The L2 stretch of the map relative to an area-keeping one, each triangle's, and the
+    triangles' areas (triangles laid out in their first corner's facet)."""
+    layout = _in_frame(faces, home, uv, home[faces[:, 0]], rotation, shift)
+    stretch, area = _triangle_stretch(vertices[faces], layout)
+    first, second = layout[:, 1] - layout[:, 0], layout[:, 2] - layout[:, 0]
+    uv_area = 0.5 * np.abs(first[:, 0] * second[:, 1] - first[:, 1] * second[:, 0]).sum()
+    relative = stretch * np.sqrt(uv_area / area_3d.sum())
+    return float(np.sqrt(np.sum(area * relative**2) / np.sum(area))), relative, area
+
+
+def parameterize_onto_base(
+    vertices: np.ndarray,
+    faces: np.ndarray,
+    apex: np.ndarray,
+    base: BaseMesh,
+    *,
+    guides: list | None = None,
+    reach: float = 0.0,
+    slide: bool = True,
+) -> BaseParameterization:
     """A closed surface with the anchors as its vertices ``apex [K]`` (:func:`closed_surface`)
     mapped onto the base mesh, one chart per facet (module docstring, steps 2-3).
 
@@ -394,6 +615,9 @@ def parameterize_onto_base(vertices: np.ndarray, faces: np.ndarray, apex: np.nda
     base : BaseMesh
     guides, reach
         As for :func:`base_charts`.
+    slide : bool
+        Let the vertices slide across the charts' borders (Kraevoy and Sheffer; a base of four
+        anchors only). False: the borders stay on the base edges at their arc-length fractions.
 
     Returns
     -------
@@ -403,22 +627,20 @@ def parameterize_onto_base(vertices: np.ndarray, faces: np.ndarray, apex: np.nda
     faces = np.asarray(faces, dtype=np.int64)
     apex = np.asarray(apex, dtype=np.int64)
     charts = base_charts(vertices, faces, apex, base, guides=guides, reach=reach)
+    oriented = faces[:, ::-1] if charts.flipped else faces
     # arc-length fraction of every path vertex along its base edge
     fraction = {}
     for (a, b), path in zip(base_edges(base), charts.paths, strict=True):
         steps = np.r_[0.0, np.cumsum(np.linalg.norm(np.diff(vertices[path], axis=0), axis=1))]
         for vertex, s in zip(path.tolist(), (steps / steps[-1]).tolist(), strict=True):
             fraction[vertex] = (int(a), int(b), s)
-    corners = np.zeros((len(faces), 3, 3))
-    stretch = np.zeros(len(base.faces))
+    frames = np.array([_facet_frame(base.vertices[face]) for face in base.faces])
+    home = np.zeros(len(vertices), dtype=np.int64)
+    uv = np.zeros((len(vertices), 2))
     for facet, base_face in enumerate(base.faces):
         members = np.flatnonzero(charts.chart == facet)
-        chart_faces = faces[members]
-        local, inverse = np.unique(chart_faces, return_inverse=True)
+        local, inverse = np.unique(oriented[members], return_inverse=True)
         local_faces = inverse.reshape(-1, 3)
-        if charts.flipped:
-            local_faces = local_faces[:, ::-1]
-        frame = _facet_frame(base.vertices[base_face])
         slot = {int(v): k for k, v in enumerate(base_face)}
         border = np.array([k for k, v in enumerate(local.tolist()) if v in fraction], dtype=np.int64)
         border_uv = np.empty((len(border), 2))
@@ -426,29 +648,38 @@ def parameterize_onto_base(vertices: np.ndarray, faces: np.ndarray, apex: np.nda
             a, b, s = fraction[int(local[k])]
             if s in (0.0, 1.0):  # an anchor: the facet's corner (it ends several paths)
                 a = b = int(np.flatnonzero(apex == local[k])[0])
-            border_uv[row] = (1 - s) * frame[slot[a]] + s * frame[slot[b]]
+            border_uv[row] = (1 - s) * frames[facet][slot[a]] + s * frames[facet][slot[b]]
         weights = _mean_value_weights(vertices[local], local_faces, len(local))
-        uv, stretch[facet] = _chart_map(vertices[local], local_faces, border, border_uv, weights)
-        if charts.flipped:
-            local_faces = local_faces[:, ::-1]
-        corners[members] = _barycentric_2d(frame, uv[local_faces].reshape(-1, 2)).reshape(-1, 3, 3)
-    return BaseParameterization(charts.chart, corners, stretch, charts)
+        chart_uv, _ = _chart_map(vertices[local], local_faces, border, border_uv, weights)
+        home[local], uv[local] = facet, chart_uv
+    rotation, shift = _unfoldings(base, frames)
+    if slide and len(base.faces) == 4:
+        slid = _slide(vertices, oriented, apex, base, frames, home, uv)
+        if slid is not None:
+            _, home, uv = slid
+    stretch, _, _ = _map_stretch(vertices, oriented, home, uv, rotation, shift, face_areas(vertices, oriented))
+    # a face's rows: every facet one of its corners lies in. The face is laid out in its
+    # first corner's facet (its other corners unfolded over the edge they are near), then
+    # that layout is carried into each facet: unfolding each corner straight into a facet
+    # would take the two sides of a cone point at an anchor the two ways round it.
+    reference = home[faces[:, 0]]
+    layout = _in_frame(faces, home, uv, reference, rotation, shift)
+    pairs = np.unique(np.column_stack([np.tile(np.arange(len(faces)), 3), home[faces.T.ravel()]]), axis=0)
+    row_face, row_facet = pairs[:, 0], pairs[:, 1]
+    source = reference[row_face]
+    layout = np.einsum("rab,rcb->rca", rotation[source, row_facet], layout[row_face]) + shift[source, row_facet][:, None]
+    corners = _batch_barycentric(frames[np.repeat(row_facet, 3)], layout.reshape(-1, 2)).reshape(-1, 3, 3)
+    vertex_bary = np.clip(_batch_barycentric(frames[home], uv), 0.0, None)
+    vertex_bary /= vertex_bary.sum(axis=1, keepdims=True)
+    used = np.zeros(len(vertices), dtype=bool)
+    used[faces.ravel()] = True
+    return BaseParameterization(row_face, row_facet, corners, np.where(used, home, -1), vertex_bary, stretch, charts)
 
 
-def vertex_base_coordinates(parameterization: BaseParameterization, faces: np.ndarray,
-                            count: int) -> tuple[np.ndarray, np.ndarray]:
-    """Where each of a surface's ``count`` vertices lies on the base: ``(facets [N],
-    barycentric [N, 3])``, read from one face at the vertex (a vertex on a chart's border has
-    the same point in every chart); the vertices from ``count`` on (the anchors a closed
-    surface appends) are left out. A vertex in no face gets facet -1."""
-    faces = np.asarray(faces, dtype=np.int64)
-    size = max(count, int(faces.max(initial=-1)) + 1)
-    facets = np.full(size, -1, dtype=np.int64)
-    barycentric = np.zeros((size, 3))
-    for corner in range(3):
-        facets[faces[:, corner]] = parameterization.chart
-        barycentric[faces[:, corner]] = parameterization.corners[:, corner]
-    return facets[:count], barycentric[:count]
+def vertex_base_coordinates(parameterization: BaseParameterization, count: int) -> tuple[np.ndarray, np.ndarray]:
+    """Where the first ``count`` vertices of a surface lie on the base, ``(facets [count],
+    barycentric [count, 3])`` (the anchors a closed surface appends come after them)."""
+    return parameterization.vertex_facet[:count], parameterization.vertex_barycentric[:count]
 
 
 def _barycentric_2d(triangle: np.ndarray, points: np.ndarray) -> np.ndarray:
@@ -477,7 +708,7 @@ def map_through_base(facets: np.ndarray, barycentric: np.ndarray, vertices: np.n
 
     Returns ``(points [P, 3], faces [P], barycentric [P, 3])``: the points on the surface
     ``vertices, faces``, the face holding each and the coordinates there (clamped into the
-    face where the point fell just outside every triangle of the chart, as on its border).
+    face where the point fell just outside every triangle of the facet).
     """
     facets = np.asarray(facets, dtype=np.int64)
     barycentric = np.asarray(barycentric, dtype=np.float64)
@@ -502,7 +733,7 @@ def map_through_base(facets: np.ndarray, barycentric: np.ndarray, vertices: np.n
         best = np.argmax(coords.min(axis=2), axis=1)
         rows = np.arange(len(asked))
         chosen = np.clip(coords[rows, best], 0.0, None)
-        found_face[asked] = members[near[rows, best]]
+        found_face[asked] = parameterization.face[members[near[rows, best]]]
         found_bary[asked] = chosen / chosen.sum(axis=1, keepdims=True)
     points = np.einsum("pk,pkd->pd", found_bary, vertices[faces[found_face]])
     return points, found_face, found_bary

@@ -18,8 +18,10 @@
 6. With ``wrinkles`` and video: folds seen in the video put into the garment by the
    space-time deformation of chapter 4 (:mod:`.wrinkling`).
 
-Not yet here: the base-mesh parameterisation of 3.6.2 (its part
-:mod:`fourd.geometry.hole_filling` exists).
+Not the thesis' path here: the template mapped into each frame through the base-mesh
+parameterisation of 3.6.2 (:mod:`.base_mesh`). On the bench's scanned frames that map folds or
+stretches about twice as much as on the true surfaces (``experiments/garment_base_mesh.py``),
+so the frame-to-frame fit of step 4 places the template instead.
 """
 
 from __future__ import annotations
