@@ -308,3 +308,24 @@ def test_merges_of_a_level_run_in_processes_with_the_same_result():
     parallel = reconstruct(seq, Options(relax_sweeps=1, workers=2))
     np.testing.assert_array_equal(parallel.vertices, serial.vertices)
     np.testing.assert_array_equal(parallel.observed, serial.observed)
+
+
+def test_a_merge_run_in_this_process_sees_its_own_thread_environment(monkeypatch):
+    # with processes for the merges, the last level's single merge runs here: numba refuses to
+    # compile a kernel here once its threads run if the environment asks for another count
+    from fourd.methods.assembly import hierarchy
+
+    seen = []
+
+    def merge(left, right, options):
+        seen.append(os.environ.get("NUMBA_NUM_THREADS"))
+        return hierarchy.Block(left.faces, np.concatenate([left.vertices, right.vertices]),
+                               np.concatenate([left.observed, right.observed])), None
+
+    monkeypatch.setattr(hierarchy, "merge_blocks", merge)
+    monkeypatch.delenv("NUMBA_NUM_THREADS", raising=False)
+    faces = np.array([[0, 1, 2]])
+    block = hierarchy.Block(faces, np.zeros((1, 3, 3)), np.ones((1, 3), dtype=bool))
+    merged, _ = hierarchy.assemble([block, block], Options(workers=2))
+    assert merged.vertices.shape == (2, 3, 3)
+    assert seen == [None]

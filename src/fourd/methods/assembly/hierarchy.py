@@ -40,7 +40,6 @@ Merges of one level are independent (5.3) and run side by side in processes
 
 from __future__ import annotations
 
-import contextlib
 import logging
 import multiprocessing
 from concurrent.futures import ProcessPoolExecutor
@@ -317,29 +316,33 @@ def assemble(blocks: list[Block], options: Options | None = None, *, on_merge=No
         log.info("merging in this process: a daemonic process (a Dask worker's) may not start others")
         workers = 1
     pool = None
-    with threads_per_worker(workers) if workers > 1 else contextlib.nullcontext():
-        if workers > 1:
-            pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"))
-        try:
-            while len(blocks) > 1:
-                jobs = [(blocks[i], blocks[i + 1], options) for i in range(0, len(blocks) - 1, 2)]
-                results = []
-                if pool is not None and len(jobs) > 1:
-                    for result in pool.map(_merge_pair, jobs):
-                        results.append(result)
-                        if on_merge:
-                            on_merge()
-                else:
-                    for job in jobs:
-                        results.append(_merge_pair(job))
-                        if on_merge:
-                            on_merge()
-                merged = [block for block, _ in results]
-                reports += [report for _, report in results]
-                if len(blocks) % 2:
-                    merged.append(blocks[-1])
-                blocks = merged
-        finally:
-            if pool is not None:
-                pool.shutdown()
+    if workers > 1:
+        pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"))
+    try:
+        while len(blocks) > 1:
+            jobs = [(blocks[i], blocks[i + 1], options) for i in range(0, len(blocks) - 1, 2)]
+            results = []
+            if pool is not None and len(jobs) > 1:
+                # the workers start as the jobs are submitted, inheriting pools sized to share
+                # the cores; this process keeps its own environment (numba refuses to compile
+                # here once its threads run if the environment asks another count)
+                with threads_per_worker(workers):
+                    merging = pool.map(_merge_pair, jobs)
+                for result in merging:
+                    results.append(result)
+                    if on_merge:
+                        on_merge()
+            else:
+                for job in jobs:
+                    results.append(_merge_pair(job))
+                    if on_merge:
+                        on_merge()
+            merged = [block for block, _ in results]
+            reports += [report for _, report in results]
+            if len(blocks) % 2:
+                merged.append(blocks[-1])
+            blocks = merged
+    finally:
+        if pool is not None:
+            pool.shutdown()
     return blocks[0], reports
