@@ -210,25 +210,30 @@ def _count_ring_flips(incident, face_ok, source_faces, target_normals, batch, po
     count, tries = candidate_faces.shape
     flips = np.zeros((count, tries), dtype=np.int64)
     corners = np.empty((3, 3))
+    normals = np.empty((3, 3))
     for b in range(count):
         vertex = batch[b]
         for d in range(incident.shape[1]):
             triangle = incident[vertex, d]
             if triangle < 0 or not face_ok[triangle]:
                 continue
+            moved = 0
+            for c in range(3):  # the fixed corners once; the moved one per candidate below
+                corner = source_faces[triangle, c]
+                if corner == vertex:
+                    moved = c
+                    continue
+                for x in range(3):
+                    corners[c, x] = points[corner, x]
+                    normals[c, x] = target_normals[faces[corner], x]
             for k in range(tries):
-                nx = ny = nz = 0.0
-                for c in range(3):
-                    corner = source_faces[triangle, c]
-                    if corner == vertex:
-                        at, face = candidate_points[b, k], candidate_faces[b, k]
-                    else:
-                        at, face = points[corner], faces[corner]
-                    for x in range(3):
-                        corners[c, x] = at[x]
-                    nx += target_normals[face, 0]
-                    ny += target_normals[face, 1]
-                    nz += target_normals[face, 2]
+                face = candidate_faces[b, k]
+                for x in range(3):
+                    corners[moved, x] = candidate_points[b, k, x]
+                    normals[moved, x] = target_normals[face, x]
+                nx = normals[0, 0] + normals[1, 0] + normals[2, 0]
+                ny = normals[0, 1] + normals[1, 1] + normals[2, 1]
+                nz = normals[0, 2] + normals[1, 2] + normals[2, 2]
                 ax, ay, az = corners[1, 0] - corners[0, 0], corners[1, 1] - corners[0, 1], corners[1, 2] - corners[0, 2]
                 bx, by, bz = corners[2, 0] - corners[0, 0], corners[2, 1] - corners[0, 1], corners[2, 2] - corners[0, 2]
                 dot = (ay * bz - az * by) * nx + (az * bx - ax * bz) * ny + (ax * by - ay * bx) * nz
