@@ -20,7 +20,10 @@ in a clean clone took 20 min 22 s against 17 min 32 s with the cache warm (brows
 skipped there). Two trials in a scratch clone, cache cold: without ``inline="always"`` in the MPU
 fit, the MPU evaluation and the rotations, ``_fit_cells`` still took 52 s; without
 ``parallel=True`` it took 29 s (the parallel loop's compilation is about 23 s, but the fit then
-runs serially).
+runs serially). A third (2026-11-30, only the MPU fit's cache deleted): the loop's body moved
+into its own kernel, the parallel loop holding only the call: ``_fit_cells`` 60.0 s, the body
+44.7 s of it, against 56.6 s as it is. The body itself is the cost, not the parallel loop around
+it; not kept.
 """
 
 from __future__ import annotations
