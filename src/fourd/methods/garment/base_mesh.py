@@ -561,7 +561,7 @@ def _slide(vertices, faces, apex, base: BaseMesh, frames, home, uv) -> tuple[np.
         moved[free] = solution
         new_home, new_uv, _ = _settle(home, moved, frames, base, rotation, shift)
         new_home[apex], new_uv[apex] = home[apex], uv[apex]
-        stretch, relative, area = _map_stretch(vertices, faces, new_home, new_uv, rotation, shift, area_3d)
+        stretch, relative, area = _map_stretch(vertices, faces, new_home, new_uv, rotation, shift, area_3d, apex)
         if not np.isfinite(stretch) or (best is not None and not stretch < best[0]):
             break
         best = (stretch, new_home, new_uv)
@@ -581,14 +581,18 @@ def _in_frame(faces, home, uv, target, rotation, shift) -> np.ndarray:
     return np.einsum("fcab,fcb->fca", rotation[corner_home, goal], corners) + shift[corner_home, goal]
 
 
-def _map_stretch(vertices, faces, home, uv, rotation, shift, area_3d):
+def _map_stretch(vertices, faces, home, uv, rotation, shift, area_3d, apex):
     """The L2 stretch of the map relative to an area-keeping one, each triangle's, and the
-    triangles' areas (triangles laid out in their first corner's facet)."""
+    triangles' areas (triangles laid out in their first corner's facet). The cones' triangles
+    at the anchors are left out: an anchor is a cone point of the base, where the facets
+    around it cannot all be unfolded into one plane, and those triangles are not the garment."""
     layout = _in_frame(faces, home, uv, home[faces[:, 0]], rotation, shift)
     stretch, area = _triangle_stretch(vertices[faces], layout)
+    cone = np.isin(faces, apex).any(axis=1)
+    stretch[cone], area[cone] = 1.0, 0.0
     first, second = layout[:, 1] - layout[:, 0], layout[:, 2] - layout[:, 0]
-    uv_area = 0.5 * np.abs(first[:, 0] * second[:, 1] - first[:, 1] * second[:, 0]).sum()
-    relative = stretch * np.sqrt(uv_area / area_3d.sum())
+    uv_area = 0.5 * np.abs(first[:, 0] * second[:, 1] - first[:, 1] * second[:, 0])[~cone].sum()
+    relative = stretch * np.sqrt(uv_area / area_3d[~cone].sum())
     return float(np.sqrt(np.sum(area * relative**2) / np.sum(area))), relative, area
 
 
@@ -657,7 +661,7 @@ def parameterize_onto_base(
         slid = _slide(vertices, oriented, apex, base, frames, home, uv)
         if slid is not None:
             _, home, uv = slid
-    stretch, _, _ = _map_stretch(vertices, oriented, home, uv, rotation, shift, face_areas(vertices, oriented))
+    stretch, _, _ = _map_stretch(vertices, oriented, home, uv, rotation, shift, face_areas(vertices, oriented), apex)
     # a face's rows: every facet one of its corners lies in. The face is laid out in its
     # first corner's facet (its other corners unfolded over the edge they are near), then
     # that layout is carried into each facet: unfolding each corner straight into a facet
