@@ -108,6 +108,12 @@ def test_a_moved_copy_maps_onto_itself_through_the_base(shirt):
     facets, barycentric = vertex_base_coordinates(first, len(vertices))
     points, _, _ = map_through_base(facets, barycentric, moved_vertices, moved_faces, second)
     assert np.abs(points - moved).max() < 1e-6 * np.ptp(moved)
+    # the same surface cut along the first one's paths (same connectivity): the same map
+    along = parameterize_onto_base(moved_vertices, moved_faces, np.arange(len(vertices), len(vertices) + 4), base,
+                                   paths=first.charts.paths)
+    assert [np.array_equal(a, b) for a, b in zip(along.charts.paths, first.charts.paths, strict=True)] == [True] * 6
+    points, _, _ = map_through_base(facets, barycentric, moved_vertices, moved_faces, along)
+    assert np.abs(points - moved).max() < 1e-6 * np.ptp(moved)
 
 
 def test_a_nearby_pose_maps_close_to_its_true_points_through_the_base(shirt):

@@ -285,7 +285,7 @@ def _guided(graph: sp.csr_matrix, vertices: np.ndarray, guide: np.ndarray, reach
 
 
 def base_charts(vertices: np.ndarray, faces: np.ndarray, apex: np.ndarray, base: BaseMesh, *,
-                guides: list | None = None, reach: float = 0.0) -> Charts:
+                guides: list | None = None, reach: float = 0.0, paths: list | None = None) -> Charts:
     """The closed surface (:func:`closed_surface`) cut into one chart per base facet by a path
     per base edge between the anchors ``apex`` (module docstring, step 2).
 
@@ -293,7 +293,8 @@ def base_charts(vertices: np.ndarray, faces: np.ndarray, apex: np.ndarray, base:
     another frame's paths brought near this one), each path is the shortest by edge lengths
     times ``1 + (d / reach)^2``, ``d`` an edge's distance from its guide: where two ways round
     are nearly as short (over the chest or over the back), the paths then go the way the guide
-    went.
+    went. With ``paths`` (vertex arrays in :func:`base_edges`' order, another surface's of the
+    same connectivity) the surface is cut along those.
 
     Raises
     ------
@@ -304,14 +305,14 @@ def base_charts(vertices: np.ndarray, faces: np.ndarray, apex: np.ndarray, base:
     vertices = np.asarray(vertices, dtype=np.float64)
     faces = np.asarray(faces, dtype=np.int64)
     apex = np.asarray(apex, dtype=np.int64)
-    graph = edge_length_graph(vertices, faces)
-    edges = [tuple(edge) for edge in base_edges(base).tolist()]
-    lengths = [graph if guides is None else _guided(graph, vertices, guides[k], reach) for k in range(len(edges))]
-    paths = None
-    for order in _tracing_orders(base, edges):
-        paths = _trace(lengths, apex, edges, order, len(vertices))
-        if paths is not None:
-            break
+    if paths is None:
+        graph = edge_length_graph(vertices, faces)
+        edges = [tuple(edge) for edge in base_edges(base).tolist()]
+        lengths = [graph if guides is None else _guided(graph, vertices, guides[k], reach) for k in range(len(edges))]
+        for order in _tracing_orders(base, edges):
+            paths = _trace(lengths, apex, edges, order, len(vertices))
+            if paths is not None:
+                break
     if paths is None:
         raise InputError("the garment's surface cannot be cut into base charts: in every order tried, "
                          "the earlier paths cut an anchor off from another")
@@ -604,6 +605,7 @@ def parameterize_onto_base(
     *,
     guides: list | None = None,
     reach: float = 0.0,
+    paths: list | None = None,
     slide: bool = True,
 ) -> BaseParameterization:
     """A closed surface with the anchors as its vertices ``apex [K]`` (:func:`closed_surface`)
@@ -617,7 +619,7 @@ def parameterize_onto_base(
     apex : int array [K]
         The anchors' vertices, in the base's vertex order.
     base : BaseMesh
-    guides, reach
+    guides, reach, paths
         As for :func:`base_charts`.
     slide : bool
         Let the vertices slide across the charts' borders (Kraevoy and Sheffer; a base of four
@@ -630,7 +632,7 @@ def parameterize_onto_base(
     vertices = np.asarray(vertices, dtype=np.float64)
     faces = np.asarray(faces, dtype=np.int64)
     apex = np.asarray(apex, dtype=np.int64)
-    charts = base_charts(vertices, faces, apex, base, guides=guides, reach=reach)
+    charts = base_charts(vertices, faces, apex, base, guides=guides, reach=reach, paths=paths)
     oriented = faces[:, ::-1] if charts.flipped else faces
     # arc-length fraction of every path vertex along its base edge
     fraction = {}

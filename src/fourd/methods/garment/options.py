@@ -63,12 +63,6 @@ class Options:
     observed_distance : float
         A vertex counts as observed in a frame when it lies within this many of the frame
         mesh's median edges of it; elsewhere the template completed it.
-    base_map : bool
-        Take the correspondences from the base-mesh parameterisation (3.6.2) rather than from
-        the fit: each frame's fitted surface mapped onto the tetrahedron of the openings'
-        anchors, and every vertex put at the point with its first-frame base coordinates
-        (:mod:`fourd.methods.garment.base_correspondence`). It needs no texture, so it is for
-        plain fabric, where the fit lets the cloth slide; 3 or 4 openings.
     wrinkles : bool
         With multi-view video, wrinkle the captured garment where the video shows folds
         (thesis chapter 4, :mod:`fourd.methods.garment.wrinkling`): for plain fabric under
@@ -96,7 +90,6 @@ class Options:
     template_scale: float = 2.5
     time_sigma: float = 0.0
     observed_distance: float = 2.0
-    base_map: bool = False
     wrinkles: bool = False
     scheduler: str = "sync"
     cache_dir: str | None = None

@@ -14,18 +14,14 @@
    the ellipse itself where the cameras missed an arc; :mod:`.fit`; the thesis maps the template through a
    base-mesh parameterisation instead); where no frame data lies near, the template's shape
    completes the frame and the vertex is marked not observed.
-5. With ``base_map``: the correspondences taken from the base-mesh parameterisation of 3.6.2
-   instead of the fit: every frame's fitted surface mapped onto the tetrahedron of the
-   openings' anchors, the first frame's vertices carried into each through it
-   (:mod:`.base_correspondence`).
-6. The trajectories smoothed in time by a Gaussian (end of 3.7).
-7. With ``wrinkles`` and video: folds seen in the video put into the garment by the
+5. The trajectories smoothed in time by a Gaussian (end of 3.7).
+6. With ``wrinkles`` and video: folds seen in the video put into the garment by the
    space-time deformation of chapter 4 (:mod:`.wrinkling`).
 
-The thesis maps the template into each frame's own surface through the base mesh; on the
-bench's scanned frames (occlusion holes, partly seen openings) that map folds or stretches
-about twice as much as on the true surfaces (``experiments/garment_base_mesh.py``), so the fit
-of step 4 places the template, and ``base_map`` maps the fitted surfaces instead.
+Not the thesis' path here: the template mapped into each frame through the base-mesh
+parameterisation of 3.6.2 (:mod:`.base_mesh`). On the bench's scanned frames that map folds or
+stretches about twice as much as on the true surfaces (``experiments/garment_base_mesh.py``),
+so the frame-to-frame fit of step 4 places the template instead.
 """
 
 from __future__ import annotations
@@ -49,7 +45,6 @@ from fourd.geometry.frame_surface import SurfaceSettings, frame_surface, frame_s
 from fourd.geometry.hole_filling import fill_holes
 from fourd.geometry.meshes import median_edge_length, remove_small_components
 from fourd.geometry.normals import vertex_normals
-from fourd.methods.garment.base_correspondence import correspondence_through_base, template_openings
 from fourd.methods.garment.boundary_tracking import (
     TrackingOptions,
     loop_ellipse,
@@ -159,24 +154,6 @@ def _place_photo_template(template, frame_ellipses):
     return best[1], best[2]
 
 
-def _through_base(vertices, faces, template_loops, tracks) -> np.ndarray:
-    """With ``base_map``: the correspondences through the base mesh
-    (:mod:`.base_correspondence`); the fit as it is when the garment has not 3 or 4 openings
-    or its first frame cannot be mapped."""
-    if len(tracks) not in (3, 4):
-        log.warning("garment: base_map needs 3 or 4 openings, the garment has %d; the fit is kept", len(tracks))
-        return vertices
-    anchors = np.stack([track.anchors for track in tracks], axis=1)  # [T, K, 3]
-    try:
-        openings = template_openings(faces, vertices.shape[1], template_loops)
-        through, carried = correspondence_through_base(vertices, faces, openings, anchors)
-    except InputError as error:
-        log.warning("garment: the first frame cannot be mapped onto the base mesh (%s); the fit is kept", error)
-        return vertices
-    log.info("garment: %d of %d frames' correspondences taken through the base mesh", int(carried.sum()), len(carried))
-    return through
-
-
 def _color_guides(seq, meshes, template, faces, edge) -> PhotometricGuides:
     """Per frame, the colour guide of the template lying on the first frame (its colours read
     there once): each frame's surface vertices carry the colours of their nearest points."""
@@ -267,8 +244,6 @@ def reconstruct(seq: PointCloudSequence, options: Options | None = None) -> Anim
         vertices[t] = current
         distance, _ = cKDTree(frame_vertices).query(current, workers=-1)
         observed[t] = distance <= options.observed_distance * median_edge_length(frame_vertices, frame_faces)
-    if options.base_map:
-        vertices = _through_base(vertices, faces, template_loops, tracks)
     if options.time_sigma > 0:
         vertices = gaussian_filter1d(vertices, options.time_sigma, axis=0, mode="nearest")
     if options.wrinkles and getattr(seq, "video", None) is not None:
