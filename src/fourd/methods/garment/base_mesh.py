@@ -323,14 +323,14 @@ def base_charts(vertices: np.ndarray, faces: np.ndarray, apex: np.ndarray, base:
                          f"not {len(base.faces)}: it is not a closed surface of genus 0 once its openings are closed")
     for flipped in (False, True):
         oriented = faces[:, ::-1] if flipped else faces
-        facet_of = _facets_of_components(oriented, component, count, paths, base, apex)
+        facet_of = _facets_of_components(oriented, component, count, paths, base)
         if facet_of is not None:
             return Charts(facet_of[component], paths, flipped)
     raise InputError("the charts of the garment's surface do not match the base mesh's facets "
                      "(the openings are in another order on the surface than the anchors)")
 
 
-def _facets_of_components(faces, component, count, paths, base: BaseMesh, apex) -> np.ndarray | None:
+def _facets_of_components(faces, component, count, paths, base: BaseMesh) -> np.ndarray | None:
     """The base facet of each chart, or None when a chart's sides name different facets or two
     charts the same one. A chart lying left of the path ``a -> b`` (it holds the directed edge
     ``u -> v`` of consecutive path vertices) is the facet with the directed edge ``a -> b``."""
@@ -514,6 +514,8 @@ def _slide(vertices, faces, apex, base: BaseMesh, frames, home, uv) -> tuple[np.
     weights = _mean_value_weights(vertices, faces, count).tocoo()
     is_apex = np.zeros(count, dtype=bool)
     is_apex[apex] = True
+    anchor_of = np.full(count, -1, dtype=np.int64)
+    anchor_of[apex] = np.arange(len(apex))
     free = np.flatnonzero(~is_apex)
     index = np.full(count, -1, dtype=np.int64)
     index[free] = np.arange(len(free))
@@ -538,8 +540,7 @@ def _slide(vertices, faces, apex, base: BaseMesh, frames, home, uv) -> tuple[np.
         # an anchor's place in the plane of the vertex's facet: its corner, or unfolded from a
         # facet that has it
         at_apex = np.flatnonzero(~to_free)
-        anchor = np.searchsorted(apex, j[at_apex]) if np.all(np.diff(apex) > 0) else np.array(
-            [int(np.flatnonzero(apex == v)[0]) for v in j[at_apex]], dtype=np.int64)
+        anchor = anchor_of[j[at_apex]]
         facet = home[i[at_apex]]
         slot = corner_slot[facet, anchor]
         place = np.zeros((len(at_apex), 2))
