@@ -17,7 +17,8 @@ completed by the template (:mod:`.pipeline`). Its parts:
   onto the frame's (in place of the thesis' base-mesh parameterisation, 3.6.2, which
   :mod:`.base_mesh` builds but the pipeline does not use: measured in
   ``experiments/garment_base_mesh.py``);
-- :mod:`.base_mesh`: the base-mesh parameterisation (3.6.2): each opening closed by a cone at
+- :mod:`.base_mesh`: the base-mesh parameterisation (3.6.2; its function ``base_mesh`` is
+  not re-exported here, where the name is the module's): each opening closed by a cone at
   its anchor, the surface cut into one chart per facet of the anchors' tetrahedron, each chart
   mapped onto its facet (mean-value map, stretch-minimising reweighting, vertices sliding
   across the charts' borders), and points carried between surfaces through the base;
@@ -37,7 +38,6 @@ base-mesh map folds or stretches on scanned frames.
 from fourd.methods.garment.base_mesh import (
     BaseMesh,
     BaseParameterization,
-    base_mesh,
     closed_surface,
     map_through_base,
     parameterize_onto_base,
@@ -146,7 +146,6 @@ __all__ = [
     "spacetime_rotations",
     "triangle_stretch",
     "wrinkle",
-    "base_mesh",
     "closed_surface",
     "map_through_base",
     "parameterize_onto_base",
