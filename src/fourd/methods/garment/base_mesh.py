@@ -60,7 +60,7 @@ from fourd.errors import InputError
 from fourd.geometry.boundary_loops import boundary_loops
 from fourd.geometry.geodesic import edge_length_graph
 from fourd.geometry.hole_filling import fill_holes
-from fourd.geometry.meshes import face_adjacency, face_areas
+from fourd.geometry.meshes import face_adjacency
 
 __all__ = ["BaseMesh", "BaseParameterization", "Charts", "base_charts", "base_mesh", "closed_surface",
            "map_through_base", "parameterize_onto_base", "vertex_base_coordinates"]
@@ -415,16 +415,40 @@ def _triangle_stretch(points: np.ndarray, uv: np.ndarray) -> tuple[np.ndarray, n
     return stretch, np.where(sliver, 0.0, area)
 
 
-def _chart_map(vertices, faces, border, border_uv, weights) -> tuple[np.ndarray, float]:
+def _relative_stretch(points: np.ndarray, layout: np.ndarray, left_out: np.ndarray | None = None):
+    """The L2 stretch of a map from the plane ``layout [F, 3, 2]`` to space ``points [F, 3, 3]``
+    relative to one that keeps the whole area (1 where it keeps areas and shapes): the whole
+    map's, each triangle's, and the triangles' areas in space (0 on slivers and on the
+    ``left_out`` triangles, which count for nothing)."""
+    stretch, area = _triangle_stretch(points, layout)
+    area_3d = 0.5 * np.linalg.norm(np.cross(points[:, 1] - points[:, 0], points[:, 2] - points[:, 0]), axis=1)
+    first, second = layout[:, 1] - layout[:, 0], layout[:, 2] - layout[:, 0]
+    area_uv = 0.5 * np.abs(first[:, 0] * second[:, 1] - first[:, 1] * second[:, 0])
+    if left_out is not None:
+        stretch[left_out], area[left_out] = 1.0, 0.0
+        area_3d, area_uv = area_3d[~left_out], area_uv[~left_out]
+    relative = stretch * np.sqrt(area_uv.sum() / area_3d.sum())
+    return float(np.sqrt(np.sum(area * relative**2) / np.sum(area))), relative, area
+
+
+def _vertex_scales(faces: np.ndarray, relative: np.ndarray, area: np.ndarray, count: int) -> np.ndarray:
+    """Each vertex's L2 stretch, area-weighted over its triangles (1 where it has none): what
+    Yoshizawa et al. divide the vertex's weights by in the next round."""
+    squared = np.bincount(faces.ravel(), weights=np.repeat(area * relative**2, 3), minlength=count)
+    weight = np.bincount(faces.ravel(), weights=np.repeat(area, 3), minlength=count)
+    scale = np.sqrt(squared / np.maximum(weight, 1e-300))
+    return np.where(np.isfinite(scale) & (scale > 0), scale, 1.0)
+
+
+def _chart_map(vertices, faces, border, border_uv, weights) -> np.ndarray:
     """The stretch-minimising convex map of one chart (module docstring, step 3): ``uv [N, 2]``
-    for the chart's vertices (``border`` fixed at ``border_uv``) and its relative L2 stretch."""
+    for the chart's vertices, ``border`` fixed at ``border_uv``."""
     count = len(vertices)
     inside = np.ones(count, dtype=bool)
     inside[border] = False
     free = np.flatnonzero(inside)
     uv = np.zeros((count, 2))
     uv[border] = border_uv
-    area_3d = face_areas(vertices, faces).sum()
     best, best_stretch = None, np.inf
     scale = np.ones(count)
     for _ in range(STRETCH_ROUNDS):
@@ -434,22 +458,14 @@ def _chart_map(vertices, faces, border, border_uv, weights) -> tuple[np.ndarray,
             right = -(system[free][:, border] @ uv[border])
             solve = spla.factorized(system[free][:, free].tocsc())
             uv[free] = np.column_stack([solve(right[:, 0]), solve(right[:, 1])])
-        stretch, area = _triangle_stretch(vertices[faces], uv[faces])
-        first, second = uv[faces[:, 1]] - uv[faces[:, 0]], uv[faces[:, 2]] - uv[faces[:, 0]]
-        uv_area = 0.5 * np.abs(first[:, 0] * second[:, 1] - first[:, 1] * second[:, 0]).sum()
-        relative = stretch * np.sqrt(uv_area / area_3d)  # 1 where the map keeps areas and shapes
-        total = float(np.sqrt(np.sum(area * relative**2) / np.sum(area)))
+        total, relative, area = _relative_stretch(vertices[faces], uv[faces])
         if best is not None and not total < best_stretch:
             break
         best, best_stretch = uv.copy(), total
         if not np.isfinite(total):
             break
-        # each vertex's L2 stretch, area-weighted over its triangles
-        squared = np.bincount(faces.ravel(), weights=np.repeat(area * relative**2, 3), minlength=count)
-        weight = np.bincount(faces.ravel(), weights=np.repeat(area, 3), minlength=count)
-        scale = np.sqrt(squared / np.maximum(weight, 1e-300))
-        scale = np.where(np.isfinite(scale) & (scale > 0), scale, 1.0)
-    return best, best_stretch
+        scale = _vertex_scales(faces, relative, area, count)
+    return best
 
 
 def _unfoldings(base: BaseMesh, frames: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -484,18 +500,17 @@ def _settle(home: np.ndarray, uv: np.ndarray, frames: np.ndarray, base: BaseMesh
     carried over that edge (at most three times; then clamped into the facet it reached).
     Returns ``(home, uv, barycentric)``."""
     home, uv = home.copy(), uv.copy()
+    # the facet across the edge opposite each facet's corner
+    beyond = np.array([[next(g for g in range(len(base.faces)) if g != f and
+                             {int(face[(c + 1) % 3]), int(face[(c + 2) % 3])} <= set(base.faces[g].tolist()))
+                        for c in range(3)] for f, face in enumerate(base.faces)], dtype=np.int64)
     for _ in range(3):
         bary = _batch_barycentric(frames[home], uv)
         outside = bary.min(axis=1) < -1e-12
         if not outside.any():
             break
         which = np.flatnonzero(outside)
-        corner = np.argmin(bary[which], axis=1)
-        # the facet across the edge opposite that corner
-        across = np.empty(len(which), dtype=np.int64)
-        for row, (f, c) in enumerate(zip(home[which], corner, strict=True)):
-            edge = {int(base.faces[f][(c + 1) % 3]), int(base.faces[f][(c + 2) % 3])}
-            across[row] = next(g for g in range(len(base.faces)) if g != f and edge <= set(base.faces[g].tolist()))
+        across = beyond[home[which], np.argmin(bary[which], axis=1)]
         uv[which] = np.einsum("pab,pb->pa", rotation[home[which], across], uv[which]) + shift[home[which], across]
         home[which] = across
     bary = np.clip(_batch_barycentric(frames[home], uv), 0.0, None)
@@ -503,14 +518,14 @@ def _settle(home: np.ndarray, uv: np.ndarray, frames: np.ndarray, base: BaseMesh
     return home, np.einsum("pk,pkd->pd", bary, frames[home]), bary
 
 
-def _slide(vertices, faces, apex, base: BaseMesh, frames, home, uv) -> tuple[np.ndarray, np.ndarray]:
+def _slide(vertices, faces, apex, base: BaseMesh, frames, home, uv, rotation, shift) -> tuple | None:
     """The map relaxed across the charts' borders (module docstring, step 3): every vertex
     but the anchors free on the base, its neighbours in other facets unfolded into its own
     facet's plane; the stretch-minimising mean-value system solved, the vertices settled into
-    the facets they reached, and again, as long as the L2 stretch falls. Returns the vertices'
-    facets and positions in them."""
+    the facets they reached, and again, as long as the L2 stretch falls (``rotation, shift``:
+    :func:`_unfoldings`). Returns the vertices' facets and positions in them, or None when the
+    first solve already folds the map."""
     count = len(vertices)
-    rotation, shift = _unfoldings(base, frames)
     weights = _mean_value_weights(vertices, faces, count).tocoo()
     is_apex = np.zeros(count, dtype=bool)
     is_apex[apex] = True
@@ -522,8 +537,7 @@ def _slide(vertices, faces, apex, base: BaseMesh, frames, home, uv) -> tuple[np.
     keep = ~is_apex[weights.row]
     i, j, w = weights.row[keep], weights.col[keep], weights.data[keep]
     corner_slot = np.array([[list(face).index(k) if k in face else -1 for k in range(len(apex))] for face in base.faces])
-    area_3d = face_areas(vertices, faces)
-    best = None
+    best, best_stretch = None, np.inf
     scale = np.ones(count)
     for _ in range(STRETCH_ROUNDS):
         weight = w / scale[j]
@@ -563,15 +577,12 @@ def _slide(vertices, faces, apex, base: BaseMesh, frames, home, uv) -> tuple[np.
         moved[free] = solution
         new_home, new_uv, _ = _settle(home, moved, frames, base, rotation, shift)
         new_home[apex], new_uv[apex] = home[apex], uv[apex]
-        stretch, relative, area = _map_stretch(vertices, faces, new_home, new_uv, rotation, shift, area_3d, apex)
-        if not np.isfinite(stretch) or (best is not None and not stretch < best[0]):
+        stretch, relative, area = _map_stretch(vertices, faces, new_home, new_uv, rotation, shift, apex)
+        if not np.isfinite(stretch) or (best is not None and not stretch < best_stretch):
             break
-        best = (stretch, new_home, new_uv)
+        best, best_stretch = (new_home, new_uv), stretch
         home, uv = new_home, new_uv
-        squared = np.bincount(faces.ravel(), weights=np.repeat(area * relative**2, 3), minlength=count)
-        total_area = np.bincount(faces.ravel(), weights=np.repeat(area, 3), minlength=count)
-        scale = np.sqrt(squared / np.maximum(total_area, 1e-300))
-        scale = np.where(np.isfinite(scale) & (scale > 0), scale, 1.0)
+        scale = _vertex_scales(faces, relative, area, count)
     return best
 
 
@@ -583,19 +594,13 @@ def _in_frame(faces, home, uv, target, rotation, shift) -> np.ndarray:
     return np.einsum("fcab,fcb->fca", rotation[corner_home, goal], corners) + shift[corner_home, goal]
 
 
-def _map_stretch(vertices, faces, home, uv, rotation, shift, area_3d, apex):
-    """The L2 stretch of the map relative to an area-keeping one, each triangle's, and the
-    triangles' areas (triangles laid out in their first corner's facet). The cones' triangles
-    at the anchors are left out: an anchor is a cone point of the base, where the facets
-    around it cannot all be unfolded into one plane, and those triangles are not the garment."""
+def _map_stretch(vertices, faces, home, uv, rotation, shift, apex):
+    """:func:`_relative_stretch` of the map, each triangle laid out in its first corner's
+    facet. The cones' triangles at the anchors are left out: an anchor is a cone point of the
+    base, where the facets around it cannot all be unfolded into one plane, and those triangles
+    are not the garment."""
     layout = _in_frame(faces, home, uv, home[faces[:, 0]], rotation, shift)
-    stretch, area = _triangle_stretch(vertices[faces], layout)
-    cone = np.isin(faces, apex).any(axis=1)
-    stretch[cone], area[cone] = 1.0, 0.0
-    first, second = layout[:, 1] - layout[:, 0], layout[:, 2] - layout[:, 0]
-    uv_area = 0.5 * np.abs(first[:, 0] * second[:, 1] - first[:, 1] * second[:, 0])[~cone].sum()
-    relative = stretch * np.sqrt(uv_area / area_3d[~cone].sum())
-    return float(np.sqrt(np.sum(area * relative**2) / np.sum(area))), relative, area
+    return _relative_stretch(vertices[faces], layout, np.isin(faces, apex).any(axis=1))
 
 
 def parameterize_onto_base(
@@ -657,14 +662,13 @@ def parameterize_onto_base(
                 a = b = int(np.flatnonzero(apex == local[k])[0])
             border_uv[row] = (1 - s) * frames[facet][slot[a]] + s * frames[facet][slot[b]]
         weights = _mean_value_weights(vertices[local], local_faces, len(local))
-        chart_uv, _ = _chart_map(vertices[local], local_faces, border, border_uv, weights)
-        home[local], uv[local] = facet, chart_uv
+        home[local], uv[local] = facet, _chart_map(vertices[local], local_faces, border, border_uv, weights)
     rotation, shift = _unfoldings(base, frames)
     if slide and len(base.faces) == 4:
-        slid = _slide(vertices, oriented, apex, base, frames, home, uv)
+        slid = _slide(vertices, oriented, apex, base, frames, home, uv, rotation, shift)
         if slid is not None:
-            _, home, uv = slid
-    stretch, _, _ = _map_stretch(vertices, oriented, home, uv, rotation, shift, face_areas(vertices, oriented), apex)
+            home, uv = slid
+    stretch, _, _ = _map_stretch(vertices, oriented, home, uv, rotation, shift, apex)
     # a face's rows: every facet one of its corners lies in. The face is laid out in its
     # first corner's facet (its other corners unfolded over the edge they are near), then
     # that layout is carried into each facet: unfolding each corner straight into a facet
@@ -687,14 +691,6 @@ def vertex_base_coordinates(parameterization: BaseParameterization, count: int) 
     """Where the first ``count`` vertices of a surface lie on the base, ``(facets [count],
     barycentric [count, 3])`` (the anchors a closed surface appends come after them)."""
     return parameterization.vertex_facet[:count], parameterization.vertex_barycentric[:count]
-
-
-def _barycentric_2d(triangle: np.ndarray, points: np.ndarray) -> np.ndarray:
-    """Barycentric coordinates ``[P, 3]`` of ``points [P, 2]`` in ``triangle [3, 2]``."""
-    a, b, c = triangle
-    matrix = np.column_stack([b - a, c - a])
-    st = np.linalg.solve(matrix, (points - a).T).T
-    return np.column_stack([1.0 - st.sum(axis=1), st])
 
 
 def _batch_barycentric(triangles: np.ndarray, points: np.ndarray) -> np.ndarray:
