@@ -195,3 +195,42 @@ def test_a_bad_keyframes_file_names_the_file_and_the_entry(tmp_path, content, me
     with pytest.raises(InputError, match=message) as error:
         read_keyframes(path)
     assert "keys.json" in str(error.value)
+
+
+def test_a_points_angle_on_its_ellipse_gives_the_point_back():
+    rotation = _rotation([1.0, 2.0, 0.5], 0.7)
+    angles = np.linspace(-3.0, 3.0, 13)
+    points = _ellipse_points(np.array([0.3, -0.2, 1.0]), rotation, 0.3, 0.19, angles)
+    ellipse = fit_ellipse(points)
+    again = ellipse.at(ellipse.angles(points))
+    assert np.abs(again - points).max() < 1e-9
+    # scaled off the ellipse along its ray, a point keeps its angle
+    assert np.allclose(ellipse.angles(ellipse.center + 1.1 * (points - ellipse.center)), ellipse.angles(points))
+
+
+def test_an_eccentric_opening_carries_its_turn_and_a_round_or_changing_one_does_not():
+    """The frame's hem points turned by 20 degrees about the opening's normal: each template
+    vertex's goal is the frame point at its own angle, where the hem was seen, and the
+    ellipse's point where a quarter of the hem is missing."""
+    from fourd.methods.garment.boundary_tracking import BoundaryTrack
+    from fourd.methods.garment.pipeline import _angle_goals, _turns
+
+    center = np.zeros(3)
+    template_angles = np.linspace(0.0, 2 * np.pi, 48, endpoint=False)
+    first = fit_ellipse(_ellipse_points(center, np.eye(3), 0.3, 0.19, template_angles))
+    turned_rotation = _rotation([0.0, 0.0, 1.0], np.radians(20.0))
+    seen = template_angles < 1.5 * np.pi
+    frame_points = _ellipse_points(center, turned_rotation, 0.3, 0.19, template_angles[seen] + 0.01)
+    turned = fit_ellipse(_ellipse_points(center, turned_rotation, 0.3, 0.19, template_angles))
+    if turned.axes[0] @ first.axes[0] < 0:  # the tracking keeps the axes' signs from frame to frame
+        turned = turned.__class__(turned.center, turned.normal, -turned.axes, turned.radii)
+    angles = first.angles(_ellipse_points(center, np.eye(3), 0.3, 0.19, template_angles))
+    goals = _angle_goals(angles, frame_points, turned)
+    truth = _ellipse_points(center, turned_rotation, 0.3, 0.19, template_angles)
+    assert np.linalg.norm(goals[seen] - truth[seen], axis=1).max() < 0.01  # the frame's point beside it
+    assert np.linalg.norm(goals[~seen] - truth[~seen], axis=1).max() < 1e-9  # the ellipse's
+    track = lambda radii: BoundaryTrack(*(np.zeros((3, 3)),) * 2, np.zeros((3, 2, 3)), np.array(radii),  # noqa: E731
+                                        np.ones(3, bool), np.ones(3, int), np.zeros((3, 3)))
+    assert _turns(track([[0.3, 0.19]] * 3))
+    assert not _turns(track([[0.105, 0.1]] * 3))  # a sleeve: round
+    assert not _turns(track([[0.3, 0.05], [0.25, 0.08], [0.21, 0.11]]))  # fitted to more than a hem

@@ -10,6 +10,12 @@ pulled onto the same opening in the frame (the boundary points of the ellipse tr
 :mod:`.boundary_tracking`). Where the frame has no data (the underarms the cameras miss), the
 template keeps its own shape, carried as rigidly as possible: the template's completion of 3.7.
 
+The data hold a vertex only across the frame's surface (point to plane: the distance along the
+closest point's normal) and an opening's vertex only across the opening (point to line): the
+fabric slides along both to where the fit's rigidity puts it. Closest points held as points
+stop the template where it entered the frame, on the surface but slid (an untextured
+garment's twist followed by a quarter; ``experiments/garment_plain_drift.py``).
+
 :func:`align_template` places a template (say one inflated from a photo) on the first frame by
 the similarity that best maps its openings' ellipses onto the frame's.
 """
@@ -52,6 +58,10 @@ class FitOptions:
         Closest pairs farther apart than this many median template edges are ignored.
     normal_angle : float
         Closest pairs whose normals differ by more than this (degrees) are ignored.
+    slide : bool
+        Hold each vertex only across the frame's surface and each opening's vertex only across
+        the opening, so they slide along them (module docstring); False: pull them to the
+        closest points themselves.
     """
 
     iterations: int = 10
@@ -61,6 +71,7 @@ class FitOptions:
     project: bool = True
     reject: float = 4.0
     normal_angle: float = 60.0
+    slide: bool = True
 
 
 def fit_template(
@@ -71,6 +82,7 @@ def fit_template(
     target_faces: np.ndarray,
     *,
     openings: list | None = None,
+    opening_goals: list | None = None,
     guide=None,
     options: FitOptions | None = None,
 ) -> np.ndarray:
@@ -80,7 +92,11 @@ def fit_template(
     ----------
     openings : list of (template vertex indices, frame points [M, 3]), optional
         Per garment opening: the template's loop and the frame's boundary points of the same
-        opening (an empty array when the frame lost it).
+        opening (an empty array when the frame lost it); each template vertex is pulled onto
+        the closest of those points (across the opening only, with ``options.slide``).
+    opening_goals : list of (template vertex indices [L], frame points [L, 3]), optional
+        Per opening whose vertices are matched to frame points already: each vertex is pulled
+        to its own point, with the same weight.
     guide : fourd.appearance.guide.Guide, optional
         Where the video's anchors say vertices went, pulled with ``options.anchor_weight``
         times the guide's weight.
@@ -104,47 +120,48 @@ def fit_template(
     cosine = np.cos(np.radians(options.normal_angle))
     count = len(rest)
     x = np.array(start, dtype=np.float64)
+    coupled = sp.kron(laplacian, sp.identity(3), format="csr")
     for _ in range(options.iterations):
         normals = vertex_normals(x, faces)
-        pull = np.zeros(count)
-        goal = np.zeros((count, 3))
+        pulls = _Pulls(count)
         # template -> frame
         distance, nearest = tree.query(x, workers=-1)
-        ok = (distance <= options.reject * edge) & (np.einsum("ij,ij->i", normals, target_normals[nearest]) >= cosine)
-        pull[ok] += options.data_weight
-        goal[ok] += options.data_weight * target_vertices[nearest[ok]]
-        # frame -> template: every frame vertex pulls its closest template vertex
+        ok = np.flatnonzero((distance <= options.reject * edge)
+                            & (np.einsum("ij,ij->i", normals, target_normals[nearest]) >= cosine))
+        pulls.add(ok, target_vertices[nearest[ok]], options.data_weight * stiffness[ok],
+                  across=target_normals[nearest[ok]] if options.slide else None)
+        # frame -> template: every frame vertex pulls its closest template vertex (their mean)
         back_distance, back = cKDTree(x).query(target_vertices, workers=-1)
-        agree = (back_distance <= options.reject * edge) & (
-            np.einsum("ij,ij->i", target_normals, normals[back]) >= cosine)
+        agree = np.flatnonzero((back_distance <= options.reject * edge)
+                               & (np.einsum("ij,ij->i", target_normals, normals[back]) >= cosine))
         share = np.bincount(back[agree], minlength=count).astype(np.float64)
-        pulled = share > 0
-        for k in range(3):
-            goal[:, k] += options.data_weight * np.where(
-                pulled, np.bincount(back[agree], target_vertices[agree, k], count) / np.maximum(share, 1), 0.0)
-        pull[pulled] += options.data_weight
+        pulled = back[agree]
+        pulls.add(pulled, target_vertices[agree], options.data_weight * stiffness[pulled] / share[pulled],
+                  across=target_normals[agree] if options.slide else None)
         for loop, points in openings or []:
             points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
             if not len(points):
                 continue
+            loop = np.asarray(loop, dtype=np.int64)
             _, closest = cKDTree(points).query(x[loop])
-            pull[loop] += options.boundary_weight
-            goal[loop] += options.boundary_weight * points[closest]
+            pulls.add(loop, points[closest], options.boundary_weight * stiffness[loop],
+                      along=_loop_tangents(x[loop]) if options.slide else None)
+        for loop, points in opening_goals or []:
+            loop = np.asarray(loop, dtype=np.int64)
+            pulls.add(loop, np.asarray(points, dtype=np.float64), options.boundary_weight * stiffness[loop])
         if guide is not None and len(guide.vertices):
-            strength = options.anchor_weight * np.asarray(guide.weight, dtype=np.float64)
-            np.add.at(pull, guide.vertices, strength)
-            np.add.at(goal, guide.vertices, strength[:, None] * guide.positions)
-        rhs = arap_right_hand_side(weights, rest, one_ring_rotations(weights, rest, x))
-        if not pull.any():  # nothing holds it: keep the position (the rotations alone are free)
+            vertices = np.asarray(guide.vertices, dtype=np.int64)
+            pulls.add(vertices, np.asarray(guide.positions, dtype=np.float64),
+                      options.anchor_weight * np.asarray(guide.weight, dtype=np.float64) * stiffness[vertices])
+        if not pulls.any():  # nothing holds it: keep the position (the rotations alone are free)
             break
-        system = (laplacian + sp.diags(pull * stiffness)).tocsr()
-        right = rhs + stiffness[:, None] * goal
+        rhs = arap_right_hand_side(weights, rest, one_ring_rotations(weights, rest, x))
+        system = (coupled + pulls.matrix()).tocsr()
+        right = (rhs + pulls.right).ravel()
         # symmetric positive definite and started from the last iterate: a few preconditioned
         # conjugate-gradient steps reach it faster than a factorisation per iteration
         jacobi = sp.diags(1.0 / system.diagonal())
-        x = np.column_stack([
-            spla.cg(system, right[:, k], x0=x[:, k], rtol=1e-7, maxiter=300, M=jacobi)[0] for k in range(3)
-        ])
+        x = spla.cg(system, right, x0=x.ravel(), rtol=1e-6, maxiter=600, M=jacobi)[0].reshape(count, 3)
     if options.project:
         # onto the frame's surface along its normal where the data agrees: no sliding
         distance, nearest = tree.query(x, workers=-1)
@@ -153,6 +170,48 @@ def fit_template(
         offset = np.einsum("ij,ij->i", target_vertices[nearest[ok]] - x[ok], target_normals[nearest[ok]])
         x[ok] += offset[:, None] * target_normals[nearest[ok]]
     return x
+
+
+class _Pulls:
+    """The fit's pulls ``sum w |P (x_v - p)|^2`` gathered per vertex: ``blocks [N, 3, 3]`` (the
+    sum of ``w P``) and ``right [N, 3]`` (of ``w P p``), ``P`` the identity, a plane's normal
+    projector or a line's normal-plane projector."""
+
+    def __init__(self, count: int):
+        self.blocks = np.zeros((count, 3, 3))
+        self.right = np.zeros((count, 3))
+
+    def add(self, vertices, points, weights, *, across=None, along=None) -> None:
+        """Pull ``vertices [K]`` to ``points [K, 3]`` with ``weights [K]``; with ``across``
+        (unit normals [K, 3]) only along the normal, with ``along`` (unit tangents [K, 3]) only
+        across the tangent."""
+        if across is not None:
+            projector = np.einsum("ki,kj->kij", across, across)
+        elif along is not None:
+            projector = np.eye(3) - np.einsum("ki,kj->kij", along, along)
+        else:
+            projector = np.broadcast_to(np.eye(3), (len(vertices), 3, 3))
+        weighted = weights[:, None, None] * projector
+        np.add.at(self.blocks, vertices, weighted)
+        np.add.at(self.right, vertices, np.einsum("kij,kj->ki", weighted, points))
+
+    def any(self) -> bool:
+        return bool(self.blocks.any())
+
+    def matrix(self) -> sp.csr_matrix:
+        """The blocks as a sparse ``[3N, 3N]`` matrix (row ``3 v + i``)."""
+        count = len(self.blocks)
+        index = np.arange(3 * count).reshape(count, 1, 3)
+        rows = np.broadcast_to(np.swapaxes(index, 1, 2), (count, 3, 3))
+        cols = np.broadcast_to(index, (count, 3, 3))
+        return sp.csr_matrix((self.blocks.ravel(), (rows.ravel(), cols.ravel())), shape=(3 * count,) * 2)
+
+
+def _loop_tangents(points: np.ndarray) -> np.ndarray:
+    """Unit tangents [L, 3] of an ordered loop (or arc) of ``points [L, 3]``: central
+    differences, wrapped."""
+    tangents = np.roll(points, -1, axis=0) - np.roll(points, 1, axis=0)
+    return tangents / np.maximum(np.linalg.norm(tangents, axis=1, keepdims=True), 1e-300)
 
 
 def align_template(template_ellipses: list, frame_ellipses: list) -> tuple[np.ndarray, float, np.ndarray]:
