@@ -9,11 +9,14 @@
 3. The template: inflated from a photo of the garment laid flat (3.7) when one is given, and
    placed on the first frame by the similarity that maps its openings onto the frame's; else
    the first frame's own surface with its other holes filled by the C1 membrane (3.6.2).
-4. The template fitted onto every frame in turn, as rigidly as possible, its openings pulled
-   onto the frame's tracked openings (the frame's boundary points on the tracked ellipse, and
-   the ellipse itself where the cameras missed an arc; :mod:`.fit`; the thesis maps the template through a
-   base-mesh parameterisation instead); where no frame data lies near, the template's shape
-   completes the frame and the vertex is marked not observed.
+4. The template fitted onto every frame in turn, as rigidly as possible, held across the
+   frame's surface and its openings pulled onto the frame's tracked openings (the frame's
+   boundary points on the tracked ellipse, and the ellipse itself where the cameras missed an
+   arc), free to slide along both (:mod:`.fit`; the thesis maps the template through a
+   base-mesh parameterisation instead). An eccentric opening that keeps its size
+   (:data:`OPENING_TURN`) carries its turn: each of its vertices keeps its first-frame angle on
+   the ellipse. Where no frame data lies near, the template's shape completes the frame and the
+   vertex is marked not observed.
 5. The trajectories smoothed in time by a Gaussian (end of 3.7).
 6. With ``wrinkles`` and video: folds seen in the video put into the garment by the
    space-time deformation of chapter 4 (:mod:`.wrinkling`).
