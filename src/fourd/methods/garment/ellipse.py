@@ -81,24 +81,12 @@ class Ellipse:
 
     def points(self, count: int = 64) -> np.ndarray:
         """``count`` points along it, ``[count, 3]``."""
-        return self.at(np.linspace(0.0, 2.0 * np.pi, count, endpoint=False))
-
-    def at(self, angles: np.ndarray) -> np.ndarray:
-        """Its points ``[P, 3]`` at the parametric ``angles [P]`` (radians from the major axis
-        towards the minor one)."""
-        angles = np.asarray(angles, dtype=np.float64)
+        t = np.linspace(0.0, 2.0 * np.pi, count, endpoint=False)
         return (
             self.center
-            + np.outer(self.radii[0] * np.cos(angles), self.axes[0])
-            + np.outer(self.radii[1] * np.sin(angles), self.axes[1])
+            + np.outer(self.radii[0] * np.cos(t), self.axes[0])
+            + np.outer(self.radii[1] * np.sin(t), self.axes[1])
         )
-
-    def angles(self, points: np.ndarray) -> np.ndarray:
-        """The parametric angle ``[P]`` (in ``(-pi, pi]``) of each of ``points [P, 3]``
-        projected onto its plane: :meth:`at` of it is the ellipse's point on the same ray from
-        the centre once the axes are scaled to a circle."""
-        offset = np.asarray(points, dtype=np.float64).reshape(-1, 3) - self.center
-        return np.arctan2(offset @ self.axes[1] / self.radii[1], offset @ self.axes[0] / self.radii[0])
 
     def flipped(self) -> Ellipse:
         """The same ellipse with its normal reversed (axes kept right-handed)."""

@@ -82,7 +82,6 @@ def fit_template(
     target_faces: np.ndarray,
     *,
     openings: list | None = None,
-    opening_goals: list | None = None,
     guide=None,
     options: FitOptions | None = None,
 ) -> np.ndarray:
@@ -94,9 +93,6 @@ def fit_template(
         Per garment opening: the template's loop and the frame's boundary points of the same
         opening (an empty array when the frame lost it); each template vertex is pulled onto
         the closest of those points (across the opening only, with ``options.slide``).
-    opening_goals : list of (template vertex indices [L], frame points [L, 3]), optional
-        Per opening whose vertices are matched to frame points already: each vertex is pulled
-        to its own point, with the same weight.
     guide : fourd.appearance.guide.Guide, optional
         Where the video's anchors say vertices went, pulled with ``options.anchor_weight``
         times the guide's weight.
@@ -146,9 +142,6 @@ def fit_template(
             _, closest = cKDTree(points).query(x[loop])
             pulls.add(loop, points[closest], options.boundary_weight * stiffness[loop],
                       along=_loop_tangents(x[loop]) if options.slide else None)
-        for loop, points in opening_goals or []:
-            loop = np.asarray(loop, dtype=np.int64)
-            pulls.add(loop, np.asarray(points, dtype=np.float64), options.boundary_weight * stiffness[loop])
         if guide is not None and len(guide.vertices):
             vertices = np.asarray(guide.vertices, dtype=np.int64)
             pulls.add(vertices, np.asarray(guide.positions, dtype=np.float64),
@@ -192,8 +185,12 @@ class _Pulls:
         else:
             projector = np.broadcast_to(np.eye(3), (len(vertices), 3, 3))
         weighted = weights[:, None, None] * projector
-        np.add.at(self.blocks, vertices, weighted)
-        np.add.at(self.right, vertices, np.einsum("kij,kj->ki", weighted, points))
+        pulled = np.einsum("kij,kj->ki", weighted, points)
+        count = len(self.blocks)
+        for i in range(3):
+            self.right[:, i] += np.bincount(vertices, pulled[:, i], count)
+            for j in range(3):
+                self.blocks[:, i, j] += np.bincount(vertices, weighted[:, i, j], count)
 
     def any(self) -> bool:
         return bool(self.blocks.any())

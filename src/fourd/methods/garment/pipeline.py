@@ -13,10 +13,8 @@
    frame's surface and its openings pulled onto the frame's tracked openings (the frame's
    boundary points on the tracked ellipse, and the ellipse itself where the cameras missed an
    arc), free to slide along both (:mod:`.fit`; the thesis maps the template through a
-   base-mesh parameterisation instead). An eccentric opening that keeps its size
-   (:data:`OPENING_TURN`) carries its turn: each of its vertices keeps its first-frame angle on
-   the ellipse. Where no frame data lies near, the template's shape completes the frame and the
-   vertex is marked not observed.
+   base-mesh parameterisation instead). Where no frame data lies near, the template's shape
+   completes the frame and the vertex is marked not observed.
 5. The trajectories smoothed in time by a Gaussian (end of 3.7).
 6. With ``wrinkles`` and video: folds seen in the video put into the garment by the
    space-time deformation of chapter 4 (:mod:`.wrinkling`).
@@ -77,11 +75,6 @@ OPENING_REACH = 0.15
 #: Points along a tracked opening's ellipse that its template vertices are pulled to, besides
 #: the frame's own boundary points on it.
 OPENING_SAMPLES = 512
-#: An opening carries its turn when its ellipse's radii differ by at least this fraction of the
-#: major one and stay within it of the first frame's in every frame: then each of its template
-#: vertices keeps its first-frame angle on the tracked ellipse. A hem keeps its size, so an
-#: ellipse that does not was fitted to more than the hem, and a near circle shows no turn.
-OPENING_TURN = 0.1
 
 __all__ = ["reconstruct"]
 
@@ -173,34 +166,6 @@ def _color_guides(seq, meshes, template, faces, edge) -> PhotometricGuides:
                              radius=COLOR_RADIUS * edge, scale=COLOR_SCALE * edge)
 
 
-def _turns(track) -> bool:
-    """Whether a tracked opening shows its hem turning (:data:`OPENING_TURN`)."""
-    radii = track.radii  # [T, 2], major first
-    eccentric = radii[0, 0] - radii[0, 1] >= OPENING_TURN * radii[0, 0]
-    return bool(eccentric and np.all(np.abs(radii / radii[0] - 1.0) <= OPENING_TURN))
-
-
-def _angle_goals(angles: np.ndarray, points: np.ndarray, ellipse) -> np.ndarray:
-    """Where each of an opening's template vertices goes in a frame ``[L, 3]``, given the
-    vertices' ``angles [L]`` on the opening's ``ellipse``: the frame's boundary point on the
-    opening (of ``points [P, 3]``) nearest in angle when one lies within half the vertices' own
-    angular spacing, else the ellipse's point at that angle (an arc the cameras missed)."""
-    goals = ellipse.at(angles)
-    if not len(points) or len(angles) < 2:
-        return goals
-    spacing = float(np.median(np.diff(np.sort(angles))))
-    found = ellipse.angles(points)
-    order = np.argsort(found)
-    found = found[order]
-    after = np.searchsorted(found, angles) % len(found)
-    before = (after - 1) % len(found)
-    gaps = [np.abs(np.angle(np.exp(1j * (found[k] - angles)))) for k in (before, after)]
-    nearest = np.where(gaps[0] <= gaps[1], before, after)
-    close = np.minimum(gaps[0], gaps[1]) <= 0.5 * spacing
-    goals[close] = points[order[nearest[close]]]
-    return goals
-
-
 def reconstruct(seq: PointCloudSequence, options: Options | None = None) -> AnimatedMesh:
     """The garment's animated mesh (see the module docstring)."""
     options = options or Options()
@@ -248,20 +213,15 @@ def reconstruct(seq: PointCloudSequence, options: Options | None = None) -> Anim
     observed = np.zeros((frames, len(rest)), dtype=bool)
     current = start
     colours = None
-    turning = [_turns(track) for track in tracks]
-    loop_angles = None  # per opening: its template vertices' angles on its first ellipse
     for t in progress(range(frames), desc="garment: fitting the template", unit="frame"):
         frame_vertices, frame_faces = meshes[t]
-        pairs, matched = [], []
-        for k, (loop, track) in enumerate(zip(template_loops, tracks, strict=True)):
+        pairs = []
+        for loop, track in zip(template_loops, tracks, strict=True):
             ellipse = track.ellipse(t)
+            # the frame's boundary points on the opening, and the ellipse where the cameras missed an arc
             points = boundary_points[t]
-            on_opening = points[_on_opening(points, ellipse)]
-            if loop_angles is not None and turning[k]:
-                matched.append((loop, _angle_goals(loop_angles[k], on_opening, ellipse)))
-            else:
-                # the frame's boundary points on the opening, and the ellipse where the cameras missed an arc
-                pairs.append((loop, np.concatenate([on_opening, ellipse.points(OPENING_SAMPLES)])))
+            kept = np.concatenate([points[_on_opening(points, ellipse)], ellipse.points(OPENING_SAMPLES)])
+            pairs.append((loop, kept))
         iterations = first_iterations if t == 0 else options.iterations
         guide = None
         if anchors is not None and t > 0 and len(anchors[t - 1].source):
@@ -270,8 +230,7 @@ def reconstruct(seq: PointCloudSequence, options: Options | None = None) -> Anim
             start = current.copy()
             start[guide.vertices] += guide.weight[:, None] * (guide.positions - current[guide.vertices])
             current = start
-        current = fit_template(rest, faces, current, frame_vertices, frame_faces, openings=pairs,
-                               opening_goals=matched, guide=guide,
+        current = fit_template(rest, faces, current, frame_vertices, frame_faces, openings=pairs, guide=guide,
                                options=FitOptions(**{**fit_options.__dict__, "iterations": iterations}))
         if t == 0 and options.color_guide and all(f.colors is not None for f in seq.frames):
             colours = _color_guides(seq, meshes, current, faces, edge)
@@ -282,10 +241,8 @@ def reconstruct(seq: PointCloudSequence, options: Options | None = None) -> Anim
                                                          np.r_[guide.positions, late.positions],
                                                          np.r_[guide.weight, late.weight])
                 current = fit_template(rest, faces, current, frame_vertices, frame_faces, openings=pairs,
-                                       opening_goals=matched, guide=both, options=fit_options)
+                                       guide=both, options=fit_options)
         vertices[t] = current
-        if t == 0:
-            loop_angles = [track.ellipse(0).angles(current[loop]) for loop, track in zip(template_loops, tracks, strict=True)]
         distance, _ = cKDTree(frame_vertices).query(current, workers=-1)
         observed[t] = distance <= options.observed_distance * median_edge_length(frame_vertices, frame_faces)
     if options.time_sigma > 0:
