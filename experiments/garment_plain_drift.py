@@ -5,7 +5,9 @@ alone (the openings' ellipses, more data weight, a better start per frame) get i
     python experiments/garment_plain_drift.py scan     # garment on the bench's scan, by region
     python experiments/garment_plain_drift.py truth    # the fit alone, chained over the true meshes
     PIN=all python experiments/garment_plain_drift.py truth   # ... its four hems pinned exactly
-    START=truth | START=velocity, DATA_WEIGHT=4, ITERATIONS=30: other trials of `truth`
+    START=truth | START=velocity, DATA_WEIGHT=4, ITERATIONS=30, SCHEDULE=0.01,0.5 (data weights
+    of successive fits per frame), SLIDE=false (the closest points pulled as points, as before
+    `FitOptions.slide`): other trials of `truth`
 
 `scan` runs `garment` with the bench's options (scan cached in /tmp by
 `experiments/garment_fit_data.py`'s helper), binds its vertices to the truth at frame 0 as the
@@ -15,39 +17,54 @@ height), the mean error and the median turn about the vertical (degrees, result 
 `fit.fit_template` and its defaults, each hem pulled onto the true hem (closest points), and
 prints the error of the whole, of the torso's top band and of the sleeves' outer parts.
 
-Answer (2-core machine, 2026-11-30, 20 frames; error in diagonals):
+Answer (2-core machine, 2026-11-30, 20 frames; error in diagonals). Before (5d3933c: the fit
+pulled each vertex to its closest frame point, each hem vertex to its closest hem point):
 - `scan`: the error is a tangential slide, the fitted surface stays on the data (0.0014-0.0025
   from the true surface where the correspondence is off 0.05-0.065). At the twist's peak
   (frame 5) the torso's top band is 0.044 off and turned +14.9 degrees from the truth (the
   truth turned about 19 there: the fit follows a quarter of the twist), the band above the
-  waist +1.3; the sleeves 0.061 (+7.4 degrees): they roll about their own axis.
+  waist +1.3; the sleeves 0.061 (+7.4 degrees).
 - `truth`: the same on clean meshes with exact hems, so it is not the scan: 0.0117 at frame 1,
-  0.033 at frame 5 (top band 0.042, sleeves 0.066).
-  - With the neck and the waist pinned vertex by vertex to their true positions (what an
-    ellipse's angle could give at best): 0.033 at frame 5, top band 0.041. With all four hems
-    pinned: 0.030, the sleeves 0.046. The openings cannot carry it.
-  - Four times the data weight and 30 iterations: 0.034. Each frame started where the last two
-    frames' motion carries it (constant velocity): worse, 0.041 at frame 5.
-  - Started from the true frame: stays there (0.0002). The truth is an equilibrium of the fit,
-    but the fit entered from the last frame settles in another one on the same surface: on an
-    untextured garment the geometry does not decide where the fabric sits (the project's shared
-    limit); printed cloth's video anchors do (0.0055).
-- Tried in the pipeline and not kept: each template vertex of an eccentric opening (radii 10%
-  apart) kept its first frame's angle on the tracked ellipse (the waist and the neck): harness
-  figure 0.0244 -> 0.0240 / 0.0129, Chamfer unchanged. On the scan the first frame's neck loop
-  has the occlusion hole behind it run into it: its ellipse came out 0.305 x 0.051 (the truth's
-  0.13 x 0.10) and its radii drift to 0.21 x 0.11 over the take, so its angles mean nothing.
+  0.033 at frame 5 (top band 0.042, sleeves 0.066). Neck and waist pinned vertex by vertex
+  (`PIN=neck-waist`): 0.033; all four hems pinned (`PIN=all`): 0.030. Four times the data
+  weight and 30 iterations: 0.034; each frame started where the last two frames' motion
+  carries it (`START=velocity`): 0.041; started from the true frame (`START=truth`): stays
+  there (0.0002).
+- So the truth is an equilibrium, and a much better one: its as-rigid-as-possible energy
+  (from the first frame; printed per frame) is 0.009-0.236 over frames 1-5, the fit's own
+  0.316-1.526. The fit did not find it because the closest points, pulled as points, hold
+  every vertex where it entered the frame: tangential motion costs data energy in every
+  global step. A lower data weight in a first fit (`SCHEDULE=0.01,0.5`): 0.021 at frame 5.
+- The data held only across the surface (point to plane) and each hem vertex only across the
+  hem (point to line), so both slide (now `FitOptions.slide`, on): `truth` 0.0043 at frame 5
+  (top band 0.0079, sleeves 0.0069), its energy now below the truth's (0.179 against 0.236:
+  what is left is the rigidity's own preference, the truth's shoulders are skinned, not
+  as-rigid-as-possible); with the hems pinned exactly (`PIN=all`) 0.0038. `scan` after it:
+  0.0148 at frame 5 (top band 0.019, +5.6 degrees; sleeves 0.027, +1.5). Harness
+  (`garment_fit_data.py`, 20k samples): 0.0244 / 0.0135 -> 0.0133 / 0.0128, Chamfer 0.0036 ->
+  0.0034; printed cloth 0.0058 / 0.0074 -> 0.0056 / 0.0068. Bench: benchmarks/METHODS.md.
+- Tried and not kept: each template vertex of an eccentric hem that keeps its size (radii 10%
+  apart and within 10% of the first frame's in every frame: the waist; the neck's first loop
+  has the occlusion hole behind it run into it, its ellipse 0.305 x 0.051 for the truth's 0.13
+  x 0.10, drifting to 0.21 x 0.11) pulled to its first-frame angle on the tracked ellipse. The
+  waist's band halved (0.0157 -> 0.0072 at frame 14), but the whole was mixed: plain T-shirt
+  0.0133 / 0.0128 -> 0.0124 / 0.0141, the dress (bench) 0.0036 / 0.0039 -> 0.0038 / 0.0047 (its
+  hem's flutes travel round it, so its ellipse turns without the fabric).
 """
 
 from __future__ import annotations
 
 import os
 import sys
+from dataclasses import replace
 
 import numpy as np
+import scipy.sparse as sp
 
 from fourd.appearance.guide import Guide
 from fourd.geometry.boundary_loops import boundary_loops
+from fourd.geometry.laplacian import cotangent_weights
+from fourd.geometry.rotations import one_ring_rotations
 from fourd.methods import garment
 from fourd.methods.garment.fit import FitOptions, fit_template
 from fourd.metrics.sampling import bind_to_surface, bound_positions, sample_surface
@@ -92,7 +109,10 @@ def truth_fit() -> None:
     pin = os.environ.get("PIN", "")  # "": none, "neck-waist", "all"
     start = os.environ.get("START", "last")  # last | velocity | truth
     options = FitOptions(data_weight=float(os.environ.get("DATA_WEIGHT", 0.5)),
-                         iterations=int(os.environ.get("ITERATIONS", 10)))
+                         iterations=int(os.environ.get("ITERATIONS", 10)),
+                         slide=os.environ.get("SLIDE", "true") == "true")
+    schedule = [float(w) for w in os.environ.get("SCHEDULE", str(options.data_weight)).split(",")]
+    weights = cotangent_weights(rest, faces, clamp_negative=True)
     top = (rest[:, 1] > 0.17) & (np.abs(rest[:, 0]) <= 0.42)
     sleeve_ends = np.abs(rest[:, 0]) > 0.42
     current = previous = rest.copy()
@@ -106,10 +126,26 @@ def truth_fit() -> None:
             guide = Guide(vertices, target[vertices], np.full(len(vertices), options.boundary_weight / options.anchor_weight))
         begin = {"last": current, "velocity": 2 * current - previous, "truth": target}[start]
         previous = current
-        current = fit_template(rest, faces, begin, target, faces, openings=pulled, guide=guide, options=options)
+        current = begin
+        for data_weight in schedule:
+            current = fit_template(rest, faces, current, target, faces, openings=pulled, guide=guide,
+                                   options=replace(options, data_weight=data_weight))
         error = np.linalg.norm(current - target, axis=1) / diagonal
         print(f"frame {t}: mean {error.mean():.4f}, torso top {error[top].mean():.4f}, "
-              f"sleeve ends {error[sleeve_ends].mean():.4f}", flush=True)
+              f"sleeve ends {error[sleeve_ends].mean():.4f}; as-rigid-as-possible energy: fit "
+              f"{_arap_energy(weights, rest, current):.3f}, truth {_arap_energy(weights, rest, target):.3f}", flush=True)
+
+
+def _arap_energy(weights, rest: np.ndarray, deformed: np.ndarray) -> float:
+    """``sum_ij w_ij |(x_i - x_j) - R_i (r_i - r_j)|^2`` over both directions of every edge,
+    ``R_i`` each one-ring's best rotation."""
+    rotations = one_ring_rotations(weights, rest, deformed)
+    pairs = sp.triu(weights, k=1).tocoo()
+    total = 0.0
+    for i, j in ((pairs.row, pairs.col), (pairs.col, pairs.row)):
+        residual = deformed[i] - deformed[j] - np.einsum("nab,nb->na", rotations[i], rest[i] - rest[j])
+        total += float((pairs.data * (residual**2).sum(axis=1)).sum())
+    return total
 
 
 if __name__ == "__main__":
