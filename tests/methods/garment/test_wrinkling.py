@@ -10,6 +10,7 @@ from fourd.geometry.meshes import face_adjacency
 from fourd.methods.garment import (
     FrameAnchors,
     WrinkleOptions,
+    hold_to_data,
     position_vertices,
     spacetime_rotations,
     wrinkle,
@@ -58,6 +59,27 @@ def test_positioning_keeps_a_mesh_without_rotations_and_turns_one_turned_everywh
     rotated = position_vertices(vertices, faces, np.tile(turn, (len(faces), 1)), pull=1e-8)
     expected = Rotation.from_rotvec(turn).apply(vertices)
     assert np.allclose(rotated - rotated.mean(axis=0), expected - expected.mean(axis=0), atol=1e-5)
+
+
+def test_wrinkles_move_an_observed_vertex_only_toward_its_data_and_a_completed_one_freely():
+    vertices, _ = _grid()
+    data = vertices.copy()  # the scan: the plane z = 0
+    normals = np.tile([0.0, 0.0, 1.0], (len(data), 1))
+    rng = np.random.default_rng(3)
+    before = vertices + np.c_[np.zeros((len(vertices), 2)), rng.uniform(-0.02, 0.02, len(vertices))]
+    after = before + np.c_[rng.uniform(-0.01, 0.01, (len(vertices), 2)), rng.uniform(-0.05, 0.05, len(vertices))]
+    free = np.zeros(len(vertices), dtype=bool)
+    free[:40] = True
+    held = hold_to_data(before, after, data, normals, free)
+    assert np.array_equal(held[free], after[free])
+    assert np.allclose(held[~free, :2], after[~free, :2])  # the move along the data's surface stays
+    assert np.all(np.abs(held[~free, 2]) <= np.abs(before[~free, 2]) + 1e-12)  # never off the data
+    toward = ~free & (before[:, 2] * (after[:, 2] - before[:, 2]) < 0)
+    assert toward.sum() > 100
+    expected = np.where(np.abs(after[:, 2]) < np.abs(before[:, 2]), after[:, 2], 0.0)  # crossing: onto it
+    expected = np.where(np.sign(after[:, 2]) == np.sign(before[:, 2]), expected, 0.0)
+    assert np.allclose(held[toward, 2], expected[toward])
+    assert np.allclose(held[~free & ~toward, 2], before[~free & ~toward, 2])
 
 
 @pytest.fixture(scope="module")

@@ -91,6 +91,7 @@ from fourd.methods.garment.wrinkle_anchors import (
 from fourd.methods.garment.wrinkling import (
     WrinkleOptions,
     WrinkleResult,
+    hold_to_data,
     position_vertices,
     spacetime_rotations,
     triangle_stretch,
@@ -141,6 +142,7 @@ __all__ = [
     "WrinkleOptions",
     "WrinkleResult",
     "frame_anchors",
+    "hold_to_data",
     "position_vertices",
     "rotation_between",
     "spacetime_rotations",

@@ -17,7 +17,8 @@
    completes the frame and the vertex is marked not observed.
 5. The trajectories smoothed in time by a Gaussian (end of 3.7).
 6. With ``wrinkles`` and video: folds seen in the video put into the garment by the
-   space-time deformation of chapter 4 (:mod:`.wrinkling`).
+   space-time deformation of chapter 4 (:mod:`.wrinkling`); an observed vertex only toward its
+   frame's data (``wrinkles_hold_data``).
 
 Not the thesis' path here: the template mapped into each frame through the base-mesh
 parameterisation of 3.6.2 (:mod:`.base_mesh`). On the bench's scanned frames that map folds or
@@ -56,7 +57,7 @@ from fourd.methods.garment.ellipse import as_batch, fit_ellipse, point_distances
 from fourd.methods.garment.fit import FitOptions, align_template, fit_template
 from fourd.methods.garment.options import Options
 from fourd.methods.garment.template import TemplateOptions, template_from_photo
-from fourd.methods.garment.wrinkling import wrinkle
+from fourd.methods.garment.wrinkling import hold_to_data, wrinkle
 from fourd.progress import progress
 from fourd.sequence import PointCloudSequence
 
@@ -251,6 +252,10 @@ def reconstruct(seq: PointCloudSequence, options: Options | None = None) -> Anim
         wrinkled = wrinkle(vertices, faces, seq.video)
         log.info("garment: wrinkled from %d fold pairs in the video, largest edge stretch %.3f",
                  sum(frame.used for frame in wrinkled.anchors), float(wrinkled.stretch.max()))
+        if options.wrinkles_hold_data:
+            for t, (frame_vertices, frame_faces) in enumerate(meshes):
+                wrinkled.vertices[t] = hold_to_data(vertices[t], wrinkled.vertices[t], frame_vertices,
+                                                    vertex_normals(frame_vertices, frame_faces), ~observed[t])
         vertices = wrinkled.vertices
     log.info("garment: %d template vertices, %.0f%% observed", len(rest), 100 * observed.mean())
     return AnimatedMesh(faces, vertices, times=np.asarray(seq.times, dtype=np.float64), observed=observed,

@@ -23,6 +23,10 @@ Given a captured garment (one connectivity, every frame) and the anchors the vid
 4. **Folds only** (not in the thesis). Of each frame's displacement, only the part finer than
    the folds' wavelength is kept: the anchors' rotations blended over the surface also bend it
    broadly, which is no fold, and moves a garment captured from depth scans off its data.
+5. **The data stands** (not in the thesis, :func:`hold_to_data`). The thesis wrinkles surfaces
+   from multi-view stereo, too smooth to show folds; a depth scan resolves many of them, and
+   there what the video adds is error. An observed vertex is moved only toward its frame's
+   data, never off it; a vertex the template completed takes the video's folds whole.
 """
 
 from __future__ import annotations
@@ -33,6 +37,7 @@ from typing import NamedTuple
 import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.linalg import cg, splu
+from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 
 from fourd.geometry.low_pass import low_pass_surface
@@ -46,7 +51,8 @@ from fourd.methods.garment.wrinkle_anchors import (
 )
 from fourd.progress import progress
 
-__all__ = ["WrinkleOptions", "WrinkleResult", "position_vertices", "positioned_frames", "spacetime_rotations", "triangle_stretch", "wrinkle"]
+__all__ = ["WrinkleOptions", "WrinkleResult", "hold_to_data", "position_vertices", "positioned_frames", "spacetime_rotations",
+           "triangle_stretch", "wrinkle"]
 
 
 @dataclass(frozen=True)
@@ -196,6 +202,33 @@ def wrinkle(vertices: np.ndarray, faces: np.ndarray, video, options: WrinkleOpti
                 result[t] -= broad
     stretch = np.array([float(triangle_stretch(vertices[t], result[t], faces).max()) for t in range(frames)])
     return WrinkleResult(result, anchors, stretch)
+
+
+def hold_to_data(before: np.ndarray, after: np.ndarray, points: np.ndarray, normals: np.ndarray,
+                 free: np.ndarray) -> np.ndarray:
+    """The wrinkled vertices ``after`` [N, 3] with each held vertex's move along the data's
+    normal cut to what brings it toward the data (module docstring, step 5).
+
+    ``before`` [N, 3] the vertices before wrinkling; ``points`` [M, 3] and unit ``normals``
+    [M, 3] the frame's data; ``free`` [N] bool: vertices that take the whole move (those no data
+    observed). For a held vertex with nearest data point ``p`` and normal ``n``: its offset from
+    the data's plane ``s = (before - p) . n`` and its move along the normal ``d = (after -
+    before) . n``; the move is kept only where it goes toward the plane (``s d < 0``) and no
+    farther than onto it; the move along the surface is kept.
+    """
+    before = np.asarray(before, dtype=np.float64)
+    after = np.asarray(after, dtype=np.float64)
+    held = ~np.asarray(free, dtype=bool)
+    if not held.any() or not len(points):
+        return after.copy()
+    _, nearest = cKDTree(points).query(before[held], workers=-1)
+    normal = normals[nearest]
+    offset = np.einsum("ij,ij->i", before[held] - points[nearest], normal)
+    move = np.einsum("ij,ij->i", after[held] - before[held], normal)
+    kept = np.where(offset * move < 0, np.sign(move) * np.minimum(np.abs(move), np.abs(offset)), 0.0)
+    result = after.copy()
+    result[held] += (kept - move)[:, None] * normal
+    return result
 
 
 def positioned_frames(vertices: np.ndarray, faces: np.ndarray, rotations: np.ndarray,
