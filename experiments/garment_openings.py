@@ -18,7 +18,9 @@ Answer (bench scan, 20 frames; median / largest over the frames, frames over 0.0
 
 from __future__ import annotations
 
+import os
 import sys
+from dataclasses import replace
 
 import numpy as np
 
@@ -47,9 +49,13 @@ def main(label: str) -> None:
     first_vertices, first_faces = meshes[0]
     openings = _openings(first_vertices, first_faces, BOUNDARIES[scene.name])
     hems = boundary_loops(truth.faces, truth.vertex_count)
-    for name, fit in (("least squares", fit_ellipse), ("loop_ellipse", loop_ellipse)):
+    fits = (("least squares", fit_ellipse, TrackingOptions()), ("loop_ellipse", loop_ellipse, TrackingOptions()))
+    for text in filter(None, os.environ.get("TRACK", "").split(";")):
+        fields = {key: float(value) for key, value in (item.split("=") for item in text.split(","))}
+        fits += ((f"loop_ellipse {text}", loop_ellipse, replace(TrackingOptions(), **fields)),)
+    for name, fit, tracking in fits:
         for k, loop in enumerate(openings):
-            track = track_boundary(boundary_points, fit(first_vertices[loop]), TrackingOptions())
+            track = track_boundary(boundary_points, fit(first_vertices[loop]), tracking)
             first = track.ellipse(0).center
             hem = hems[int(np.argmin([np.linalg.norm(truth.vertices[0][h].mean(axis=0) - first) for h in hems]))]
             errors = np.array([np.linalg.norm(track.ellipse(t).center - truth.vertices[t][hem].mean(axis=0))
@@ -57,6 +63,9 @@ def main(label: str) -> None:
             print(f"{label} {name}: opening {k} ({len(loop)} loop vertices): centre error median "
                   f"{np.median(errors):.4f}, largest {errors.max():.4f} (frame {int(errors.argmax())}), "
                   f"frames over 0.02: {int((errors > 0.02).sum())} of {len(errors)}", flush=True)
+            if os.environ.get("FRAMES"):
+                print("   per frame:", " ".join(f"{e:.4f}{'' if f else '*'}" for e, f in zip(errors, track.found, strict=True)),
+                      " radii:", " ".join(f"{r[0]:.3f}/{r[1]:.3f}" for r in track.radii[-4:]))
 
 
 if __name__ == "__main__":

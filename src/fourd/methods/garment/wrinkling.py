@@ -25,8 +25,9 @@ Given a captured garment (one connectivity, every frame) and the anchors the vid
    broadly, which is no fold, and moves a garment captured from depth scans off its data.
 5. **The data stands** (not in the thesis, :func:`hold_to_data`). The thesis wrinkles surfaces
    from multi-view stereo, too smooth to show folds; a depth scan resolves many of them, and
-   there what the video adds is error. An observed vertex is moved only toward its frame's
-   data, never off it; a vertex the template completed takes the video's folds whole.
+   there what the video adds is error. An observed vertex is moved only along its data's
+   normal toward the data, never off it; a vertex the template completed takes the video's
+   folds whole.
 """
 
 from __future__ import annotations
@@ -214,7 +215,8 @@ def hold_to_data(before: np.ndarray, after: np.ndarray, points: np.ndarray, norm
     observed). For a held vertex with nearest data point ``p`` and normal ``n``: its offset from
     the data's plane ``s = (before - p) . n`` and its move along the normal ``d = (after -
     before) . n``; the move is kept only where it goes toward the plane (``s d < 0``) and no
-    farther than onto it; the move along the surface is kept.
+    farther than onto it, and its move along the surface is dropped (where the scan observed a
+    vertex, the fit placed it along the surface; measured in METHODS.md).
     """
     before = np.asarray(before, dtype=np.float64)
     after = np.asarray(after, dtype=np.float64)
@@ -227,7 +229,7 @@ def hold_to_data(before: np.ndarray, after: np.ndarray, points: np.ndarray, norm
     move = np.einsum("ij,ij->i", after[held] - before[held], normal)
     kept = np.where(offset * move < 0, np.sign(move) * np.minimum(np.abs(move), np.abs(offset)), 0.0)
     result = after.copy()
-    result[held] += (kept - move)[:, None] * normal
+    result[held] = before[held] + kept[:, None] * normal
     return result
 
 
