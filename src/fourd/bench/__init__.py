@@ -15,6 +15,7 @@ from fourd.bench.runner import DEFAULT_OUTPUT, QUICK_OUTPUT, RECORD, default_out
 from fourd.bench.suite import (
     APPEARANCE_SCENES,
     GARMENT_BENCH_SCENES,
+    GARMENT_HELD_OUT_SCENES,
     HELD_OUT_SCENES,
     PEERS,
     PROTOCOL,
@@ -33,6 +34,7 @@ __all__ = [
     "RECORD",
     "APPEARANCE_SCENES",
     "GARMENT_BENCH_SCENES",
+    "GARMENT_HELD_OUT_SCENES",
     "HELD_OUT_SCENES",
     "PEERS",
     "PROTOCOL",
