@@ -38,7 +38,7 @@ from dataclasses import replace
 from pathlib import Path
 
 from fourd import synth
-from fourd.bench.suite import GARMENT_BENCH_SCENES, PROTOCOL
+from fourd.bench.suite import GARMENT_BENCH_SCENES, GARMENT_HELD_OUT_SCENES, PROTOCOL
 from fourd.methods import garment
 from fourd.methods.garment import pipeline
 from fourd.metrics import evaluate
@@ -60,7 +60,7 @@ def _variant(text: str) -> dict:
 
 
 def _scene(label: str):
-    scene = next(s for s in GARMENT_BENCH_SCENES if s.key == label)
+    scene = next(s for s in GARMENT_BENCH_SCENES + GARMENT_HELD_OUT_SCENES if s.key == label)
     cache = Path(f"/tmp/garment_{label}.pkl")
     if cache.exists():
         return scene, *pickle.loads(cache.read_bytes())

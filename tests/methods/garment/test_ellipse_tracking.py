@@ -125,6 +125,25 @@ def test_smoothing_in_time_reduces_jitter():
     assert np.std(np.diff(smooth.centers, axis=0)) < 0.5 * np.std(np.diff(rough.centers, axis=0))
 
 
+def test_the_smoothing_chosen_by_leave_one_out_follows_a_swing_and_averages_jitter_out():
+    """``time_sigma`` None: a boundary swinging in an arc (found exactly in every frame) is
+    smoothed least, so its centres stay on the arc; one standing still but found with jitter
+    is smoothed most, as steadily as a fixed width of 2 frames."""
+    angles = np.linspace(0, 2 * np.pi, 40, endpoint=False)
+    swing = 0.6 * np.sin(np.linspace(0, 2 * np.pi, 20))  # radians: there and back
+    arc = np.column_stack([3 * np.sin(swing), 3 * (1 - np.cos(swing)), np.zeros(20)])
+    frames = [_ellipse_points(c, _rotation([0, 0, 1], a), 1.0, 0.8, angles) for c, a in zip(arc, swing, strict=True)]
+    chosen = track_boundary(frames, fit_ellipse(frames[0]), TrackingOptions())
+    fixed = track_boundary(frames, fit_ellipse(frames[0]), TrackingOptions(time_sigma=1.0))
+    lag, fixed_lag = (np.linalg.norm(t.centers - arc, axis=1).max() for t in (chosen, fixed))
+    assert lag < 0.5 * fixed_lag and fixed_lag > 0.05
+    jitter = np.random.default_rng(1).normal(0, 0.02, (20, 3))
+    frames = [_ellipse_points(j, np.eye(3), 1.0, 0.8, angles) for j in jitter]
+    chosen = track_boundary(frames, fit_ellipse(frames[0]), TrackingOptions())
+    widest = track_boundary(frames, fit_ellipse(frames[0]), TrackingOptions(time_sigma=2.0))
+    assert np.allclose(chosen.centers, widest.centers)
+
+
 def test_too_few_boundary_loops_is_an_input_error():
     vertices, faces = _tube()
     with pytest.raises(InputError, match="boundary loops"):

@@ -75,8 +75,15 @@ class TrackingOptions:
         reference's largest radius of it.
     min_support : int
         A frame whose best candidate has fewer supporting points is skipped (interpolated).
-    time_sigma : float
-        Standard deviation of the Gaussian smoothing in time, frames (0: none).
+    time_sigma : float or None
+        Standard deviation of the Gaussian smoothing in time, frames (0: none). None: chosen
+        per boundary among ``time_sigma_choices`` as the one whose smoothing best predicts
+        each frame's centre from the other frames (leave-one-out): a boundary that moves
+        steadily and is found cleanly in every frame (a sleeve swinging with its arm) is
+        smoothed little, so the smoothing does not lag it; one whose ellipse jumps from frame
+        to frame (a neck whose back the cameras miss) is smoothed more.
+    time_sigma_choices : tuple of float
+        The candidates for ``time_sigma`` None.
     anchor_offset : float
         The anchor's distance from the ellipse's centre along its normal, in mean radii.
     seed : int
@@ -90,7 +97,8 @@ class TrackingOptions:
     size_tolerance: float = 0.3
     tolerance: float = 0.05
     min_support: int = 8
-    time_sigma: float = 1.0
+    time_sigma: float | None = None
+    time_sigma_choices: tuple = (0.5, 1.0, 1.5, 2.0)
     anchor_offset: float = 1.0
     seed: int = 0
 
@@ -207,11 +215,14 @@ def track_boundary(
     counts[0] = support(as_batch(first), first_points, scale)[0][0] if len(first_points) else 0
     found = np.array([e is not None for e in chosen])
     centers, normals, axes, radii = _interpolate(chosen, found)
-    if options.time_sigma > 0 and frames > 1:
-        centers = gaussian_filter1d(centers, options.time_sigma, axis=0, mode="nearest")
-        normals = gaussian_filter1d(normals, options.time_sigma, axis=0, mode="nearest")
-        radii = gaussian_filter1d(radii, options.time_sigma, axis=0, mode="nearest")
-        axes = gaussian_filter1d(axes, options.time_sigma, axis=0, mode="nearest")
+    sigma = options.time_sigma
+    if sigma is None:
+        sigma = _cross_validated_sigma(centers, options.time_sigma_choices)
+    if sigma > 0 and frames > 1:
+        centers = gaussian_filter1d(centers, sigma, axis=0, mode="nearest")
+        normals = gaussian_filter1d(normals, sigma, axis=0, mode="nearest")
+        radii = gaussian_filter1d(radii, sigma, axis=0, mode="nearest")
+        axes = gaussian_filter1d(axes, sigma, axis=0, mode="nearest")
     normals, axes = _orthonormal(normals, axes)
     anchors = centers + options.anchor_offset * radii.mean(axis=1)[:, None] * normals
     return BoundaryTrack(centers, normals, axes, radii, found, counts, anchors)
@@ -287,6 +298,23 @@ def _interpolate(chosen: list, found: np.ndarray):
         field(lambda e: e.axes),
         field(lambda e: e.radii),
     )
+
+
+def _cross_validated_sigma(centers: np.ndarray, choices) -> float:
+    """Of ``choices`` (frames), the Gaussian width whose average of the other frames best
+    predicts each frame's centre (``centers [T, 3]``; least mean squared error; the first of
+    equals). With fewer than three frames, the smallest."""
+    frames = len(centers)
+    if frames < 3:
+        return float(min(choices))
+    offset = np.arange(frames)[None, :] - np.arange(frames)[:, None]
+    errors = []
+    for sigma in choices:
+        weight = np.exp(-0.5 * (offset / sigma) ** 2)
+        np.fill_diagonal(weight, 0.0)
+        predicted = (weight @ centers) / weight.sum(axis=1, keepdims=True)
+        errors.append(float(np.mean(np.sum((predicted - centers) ** 2, axis=1))))
+    return float(choices[int(np.argmin(errors))])
 
 
 def _orthonormal(normals: np.ndarray, axes: np.ndarray):
