@@ -29,6 +29,11 @@ The neck's last frame (2026-11-30): its ellipse grows from radii 0.155 / 0.120 t
 - a frame skipped when its ellipse's supporting points cover under half (or two thirds) of its
   angle in twelve sectors: none skipped (the ellipse covers the hole's rim as well).
 The dress's two openings stay under 0.0075 in every variant.
+
+Then each opening's width chosen by leave-one-out (`TrackingOptions.time_sigma` None, the
+default since d0e8a6b; the table in METHODS.md): tshirt-cloth-video waist 0.0071, neck 0.0183,
+sleeves 0.0081 / 0.0080, none over; tshirt-wide-cloth-video waist 0.0070, neck 0.0307 (3 over),
+sleeves 0.0086 / 0.0103 (before 0.0209 / 0.0209, 5 over); dress 0.0054 / 0.0070.
 """
 
 from __future__ import annotations
