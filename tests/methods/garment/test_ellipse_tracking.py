@@ -128,7 +128,8 @@ def test_smoothing_in_time_reduces_jitter():
 def test_the_smoothing_chosen_by_leave_one_out_follows_a_swing_and_averages_jitter_out():
     """``time_sigma`` None: a boundary swinging in an arc (found exactly in every frame) is
     smoothed least, so its centres stay on the arc; one standing still but found with jitter
-    is smoothed most, as steadily as a fixed width of 2 frames."""
+    is smoothed most, as steadily as a fixed width of 2 frames; a take of 4 frames is smoothed
+    1 frame wide."""
     angles = np.linspace(0, 2 * np.pi, 40, endpoint=False)
     swing = 0.6 * np.sin(np.linspace(0, 2 * np.pi, 20))  # radians: there and back
     arc = np.column_stack([3 * np.sin(swing), 3 * (1 - np.cos(swing)), np.zeros(20)])
@@ -142,6 +143,10 @@ def test_the_smoothing_chosen_by_leave_one_out_follows_a_swing_and_averages_jitt
     chosen = track_boundary(frames, fit_ellipse(frames[0]), TrackingOptions())
     widest = track_boundary(frames, fit_ellipse(frames[0]), TrackingOptions(time_sigma=2.0))
     assert np.allclose(chosen.centers, widest.centers)
+    short = frames[:4]  # too few frames to choose: 1 frame wide
+    chosen = track_boundary(short, fit_ellipse(short[0]), TrackingOptions())
+    one = track_boundary(short, fit_ellipse(short[0]), TrackingOptions(time_sigma=1.0))
+    assert np.allclose(chosen.centers, one.centers)
 
 
 def test_too_few_boundary_loops_is_an_input_error():
