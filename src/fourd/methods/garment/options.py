@@ -68,9 +68,10 @@ class Options:
         (thesis chapter 4, :mod:`fourd.methods.garment.wrinkling`): for plain fabric under
         diffuse light, where a fold's valley is darker than its ridge; silent without video.
     wrinkles_hold_data : bool
-        With ``wrinkles``: an observed vertex is moved by them only toward its frame's data,
-        never off it (where the scan resolves a fold, the scan's fold stands); the vertices the
-        template completed take the video's folds whole. Off: the thesis' wrinkling everywhere.
+        With ``wrinkles``: an observed vertex is moved by them only along its frame's data
+        normal toward the data, never off it nor along it (where the scan resolves a fold, the
+        scan's fold stands); the vertices the template completed take the video's folds whole.
+        Off: the thesis' wrinkling everywhere.
     scheduler : str
         Where the frames' own surfaces are made (``fourd reconstruct --scheduler``): ``sync``
         here, ``processes`` side by side in local processes, or a ``dask.distributed``
