@@ -17,8 +17,8 @@
    completes the frame and the vertex is marked not observed.
 5. The trajectories smoothed in time by a Gaussian (end of 3.7).
 6. With ``wrinkles`` and video: folds seen in the video put into the garment by the
-   space-time deformation of chapter 4 (:mod:`.wrinkling`); an observed vertex only toward its
-   frame's data (``wrinkles_hold_data``).
+   space-time deformation of chapter 4 (:mod:`.wrinkling`); an observed vertex moves only
+   along its frame's data normal toward the data (``wrinkles_hold_data``).
 
 Not the thesis' path here: the template mapped into each frame through the base-mesh
 parameterisation of 3.6.2 (:mod:`.base_mesh`). On the bench's scanned frames that map folds or
