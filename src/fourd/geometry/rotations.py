@@ -265,10 +265,27 @@ def arap_right_hand_side(weights: sp.spmatrix, rest: np.ndarray, rotations: np.n
     rotations : array [N, 3, 3]
         Each vertex's rotation (:func:`one_ring_rotations`).
     """
-    pairs = sp.coo_matrix(weights)
-    i, j = pairs.row, pairs.col
-    rotated = 0.5 * np.einsum("eab,eb->ea", rotations[i] + rotations[j], rest[i] - rest[j]) * pairs.data[:, None]
-    return np.stack([np.bincount(i, rotated[:, k], len(rest)) for k in range(3)], axis=1)
+    edges = weights if sp.issparse(weights) and weights.format == "csr" else sp.csr_matrix(weights)
+    return _arap_right_hand_side(edges.indptr, edges.indices, np.asarray(edges.data, dtype=np.float64),
+                                 np.ascontiguousarray(rest, dtype=np.float64),
+                                 np.ascontiguousarray(rotations, dtype=np.float64))
+
+
+@numba.njit(cache=True, nogil=True)
+def _arap_right_hand_side(indptr, indices, weights, rest, rotations):
+    """``sum_j w_ij / 2 (R_i + R_j) (r_i - r_j)`` per row ``i`` of the CSR weights ``[N, 3]``."""
+    count = len(indptr) - 1
+    right = np.zeros((count, 3))
+    for i in range(count):
+        for e in range(indptr[i], indptr[i + 1]):
+            j = indices[e]
+            half = 0.5 * weights[e]
+            d0, d1, d2 = rest[i, 0] - rest[j, 0], rest[i, 1] - rest[j, 1], rest[i, 2] - rest[j, 2]
+            for a in range(3):
+                right[i, a] += half * ((rotations[i, a, 0] + rotations[j, a, 0]) * d0
+                                       + (rotations[i, a, 1] + rotations[j, a, 1]) * d1
+                                       + (rotations[i, a, 2] + rotations[j, a, 2]) * d2)
+    return right
 
 
 @numba.njit(cache=True, nogil=True)

@@ -25,8 +25,11 @@ def test_the_dress_keeps_its_two_openings_and_lies_on_every_frame(dress):
     for t in range(truth.frame_count):
         surface = trimesh.Trimesh(truth.vertices[t], truth.faces, process=False)
         _, distance, _ = trimesh.proximity.closest_point(surface, result.vertices[t])
-        # the frames' own surfaces overshoot the hem by about a point spacing: the tail
-        assert np.median(distance) < 0.002 * diagonal and np.quantile(distance, 0.95) < 0.015 * diagonal
+        # the frames' own surfaces overshoot the hem by about a point spacing: the tail. Its
+        # 95th percentile in frame 2 (the fastest) is 0.0137-0.0152 over scan seeds 0-3 and moves
+        # by 5% with rounding-level changes (a 1e-15 change in the fit's right-hand side): the
+        # bound leaves a fifth above that spread
+        assert np.median(distance) < 0.002 * diagonal and np.quantile(distance, 0.95) < 0.018 * diagonal
     assert result.observed.mean() > 0.8
 
 

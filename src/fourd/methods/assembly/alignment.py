@@ -35,6 +35,7 @@ from fourd.geometry.icp import rigid_icp as point_to_plane_icp
 from fourd.geometry.laplacian import uniform_laplacian
 from fourd.geometry.meshes import median_edge_length, mesh_arrays
 from fourd.geometry.normals import vertex_normals
+from fourd.geometry.projector_sums import projector_sums
 from fourd.geometry.rotations import arap_right_hand_side, one_ring_rotations
 from fourd.methods.assembly.anchors import (
     Anchors,
@@ -133,16 +134,12 @@ def _data_terms(x, normals, target, target_normals, tree, limit, source_rim, poi
     pulls &= (np.einsum("ij,ij->i", normals[back], target_normals) > NORMAL_AGREEMENT) & ~source_rim[back]
     owner = np.concatenate([np.flatnonzero(found), back[pulls]])
     paired = np.concatenate([nearest[found], np.flatnonzero(pulls)])
-    n, y = target_normals[paired], target[paired]
     own_pair = np.arange(len(owner)) < found.sum()  # the vertex's nearest, not a pull back
     share = np.where(source_rim[owner] & own_pair, 1.0, point_to_point)
-    q = (1.0 - share)[:, None, None] * n[:, :, None] * n[:, None, :] + share[:, None, None] * np.eye(3)
-    qy = np.einsum("kij,kj->ki", q, y)
-    pairs = np.maximum(np.bincount(owner, minlength=count), 1).astype(np.float64)
-    quadric = np.stack([np.bincount(owner, weights=q[:, i, j], minlength=count)
-                        for i in range(3) for j in range(3)], axis=1).reshape(count, 3, 3)
-    goal = np.stack([np.bincount(owner, weights=qy[:, i], minlength=count) for i in range(3)], axis=1)
-    return quadric / pairs[:, None, None], goal / pairs[:, None]
+    sums = projector_sums(owner, target[paired], 1.0, count, directions=target_normals[paired], identity=share,
+                          outer=1.0 - share)
+    pairs = np.maximum(sums.counts, 1).astype(np.float64)
+    return sums.blocks / pairs[:, None, None], sums.right / pairs[:, None]
 
 
 def nonrigid_icp(

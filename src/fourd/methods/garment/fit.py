@@ -31,6 +31,7 @@ from scipy.spatial import cKDTree
 
 from fourd.geometry.laplacian import cotangent_weights, weights_laplacian
 from fourd.geometry.normals import vertex_normals
+from fourd.geometry.projector_sums import projector_sums
 from fourd.geometry.rotations import arap_right_hand_side, one_ring_rotations, procrustes
 
 __all__ = ["FitOptions", "align_template", "fit_template"]
@@ -179,18 +180,14 @@ class _Pulls:
         (unit normals [K, 3]) only along the normal, with ``along`` (unit tangents [K, 3]) only
         across the tangent."""
         if across is not None:
-            projector = np.einsum("ki,kj->kij", across, across)
+            sums = projector_sums(vertices, points, weights, len(self.blocks), directions=across, identity=0.0,
+                                  outer=1.0)
         elif along is not None:
-            projector = np.eye(3) - np.einsum("ki,kj->kij", along, along)
+            sums = projector_sums(vertices, points, weights, len(self.blocks), directions=along, outer=-1.0)
         else:
-            projector = np.broadcast_to(np.eye(3), (len(vertices), 3, 3))
-        weighted = weights[:, None, None] * projector
-        pulled = np.einsum("kij,kj->ki", weighted, points)
-        count = len(self.blocks)
-        for i in range(3):
-            self.right[:, i] += np.bincount(vertices, pulled[:, i], count)
-            for j in range(3):
-                self.blocks[:, i, j] += np.bincount(vertices, weighted[:, i, j], count)
+            sums = projector_sums(vertices, points, weights, len(self.blocks))
+        self.blocks += sums.blocks
+        self.right += sums.right
 
     def any(self) -> bool:
         return bool(self.blocks.any())
