@@ -40,12 +40,19 @@ class Options:
         Edge length of a template inflated from the photo, in the photo's units (0: 0.04).
     iterations : int
         As-rigid-as-possible fitting iterations per frame (three times as many in the first).
+    motion_prediction : float
+        Each frame's fit starts from the last frame's result moved on by this fraction of the
+        last step's motion (1: constant velocity; 0: where the last frame left it). The fit
+        slides to a nearby equilibrium, so its start decides which one on a fast limb.
     data_weight : float
         Weight of the closest-point data in the fit, in units of a vertex's stiffness.
     boundary_weight : float
         Weight of the openings pulled onto the frame's tracked openings, same units.
     anchor_weight : float
         Weight of the video's anchors (where the optical flow says a vertex went), same units.
+        The colour guide pulls as strongly. The anchors go from frame to frame, so their errors
+        add up: a light pull keeps what they see that the geometry cannot (a dress's twirl)
+        without most of their drift.
     video_anchors : bool
         With multi-view video, track anchors by optical flow (:func:`fourd.appearance.anchors`,
         thesis 5.4.1) and pull the template along them; silent without video.
@@ -87,9 +94,10 @@ class Options:
     keyframes: str = ""
     template_edge: float = 0.0
     iterations: int = 10
+    motion_prediction: float = 1.0
     data_weight: float = 0.5
     boundary_weight: float = 4.0
-    anchor_weight: float = 8.0
+    anchor_weight: float = 0.2
     video_anchors: bool = True
     color_guide: bool = True
     template_scale: float = 2.5
