@@ -35,9 +35,11 @@ import sys
 from pathlib import Path
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from fourd.appearance import anchors as track_anchors
 from fourd.geometry.boundary_loops import boundary_loops
+from fourd.geometry.normals import vertex_normals
 from fourd.methods import garment
 from fourd.methods.garment import pipeline
 from fourd.metrics.sampling import bind_to_surface, bound_positions, sample_surface
@@ -82,8 +84,6 @@ def main(label: str) -> None:
                              truth.faces)[0][:, 0]
     sleeve = np.abs(rest_x) > garments._SHOULDER
     normals_truth = [None] * truth.frame_count
-    from fourd.geometry.normals import vertex_normals
-    from scipy.spatial import cKDTree
     pairs = track_anchors(scans, texture=3.0, sources=2.0)
     print(f"{label}: {sleeve.sum()} of {len(sleeve)} vertices on the sleeves")
     print("frame  sleeves  torso  | sleeves along-normal across | anchors on sleeves: count  median error")
