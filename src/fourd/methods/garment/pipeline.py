@@ -13,8 +13,10 @@
    frame's surface and its openings pulled onto the frame's tracked openings (the frame's
    boundary points on the tracked ellipse, and the ellipse itself where the cameras missed an
    arc), free to slide along both (:mod:`.fit`; the thesis maps the template through a
-   base-mesh parameterisation instead). Where no frame data lies near, the template's shape
-   completes the frame and the vertex is marked not observed.
+   base-mesh parameterisation instead). Each frame's fit starts where the last step's motion
+   carries the template (``motion_prediction``), guided by the video's anchors and the colours
+   (``anchor_weight``). Where no frame data lies near, the template's shape completes the
+   frame and the vertex is marked not observed.
 5. The trajectories smoothed in time by a Gaussian (end of 3.7).
 6. With ``wrinkles`` and video: folds seen in the video put into the garment by the
    space-time deformation of chapter 4 (:mod:`.wrinkling`); an observed vertex moves only
