@@ -81,6 +81,8 @@ def _sums(vertices, points, weights, directions, identity, outer, count):
         for i in range(3):
             for j in range(3):
                 blocks[v, i, j] += q[i, j]
-            right[v, i] += q[i, 0] * points[k, 0] + q[i, 1] * points[k, 1] + q[i, 2] * points[k, 2]
+            # summed as numpy's einsum sums it (first and last term, then the middle): the
+            # results of the vectorised forms this replaced, to the last bit
+            right[v, i] += (q[i, 0] * points[k, 0] + q[i, 2] * points[k, 2]) + q[i, 1] * points[k, 1]
         counts[v] += 1
     return blocks, right, counts

@@ -279,12 +279,15 @@ def _arap_right_hand_side(indptr, indices, weights, rest, rotations):
     for i in range(count):
         for e in range(indptr[i], indptr[i + 1]):
             j = indices[e]
-            half = 0.5 * weights[e]
             d0, d1, d2 = rest[i, 0] - rest[j, 0], rest[i, 1] - rest[j, 1], rest[i, 2] - rest[j, 2]
             for a in range(3):
-                right[i, a] += half * ((rotations[i, a, 0] + rotations[j, a, 0]) * d0
-                                       + (rotations[i, a, 1] + rotations[j, a, 1]) * d1
-                                       + (rotations[i, a, 2] + rotations[j, a, 2]) * d2)
+                # summed as numpy's einsum sums it (first and last term, then the middle), so
+                # the result is the vectorised form's to the last bit: the assembly's choices of
+                # patches downstream turn on it
+                rotated = (((rotations[i, a, 0] + rotations[j, a, 0]) * d0
+                            + (rotations[i, a, 2] + rotations[j, a, 2]) * d2)
+                           + (rotations[i, a, 1] + rotations[j, a, 1]) * d1)
+                right[i, a] += (0.5 * rotated) * weights[e]
     return right
 
 
