@@ -226,13 +226,12 @@ def reconstruct(seq: PointCloudSequence, options: Options | None = None) -> Anim
             kept = np.concatenate([points[_on_opening(points, ellipse)], ellipse.points(OPENING_SAMPLES)])
             pairs.append((loop, kept))
         iterations = first_iterations if t == 0 else options.iterations
-        last = current  # frame t - 1's fit, where the video's anchors start
         if t >= 2:
-            current = last + options.motion_prediction * (vertices[t - 1] - vertices[t - 2])
+            current = current + options.motion_prediction * (vertices[t - 1] - vertices[t - 2])
         guide = None
         if anchors is not None and t > 0 and len(anchors[t - 1].source):
-            pair = anchors[t - 1]
-            guide = anchor_guide(last, pair.source, pair.target, pair.confidence, radius=2.0 * edge)
+            pair = anchors[t - 1]  # starting on frame t - 1's fit
+            guide = anchor_guide(vertices[t - 1], pair.source, pair.target, pair.confidence, radius=2.0 * edge)
             start = current.copy()
             start[guide.vertices] += guide.weight[:, None] * (guide.positions - current[guide.vertices])
             current = start
