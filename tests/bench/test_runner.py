@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from fourd.bench import case as bench_case
@@ -140,3 +141,21 @@ def test_a_scenes_appearance_and_video_reach_the_scanner(monkeypatch):
                               isolate=False, bar=runner.progress(total=0))
     assert seen["appearance"] == "skin" and seen["video"] is True
     assert entry["settings"]["appearance"] == "skin"
+
+
+def test_photo_scene_in_a_spec_is_the_garment_scenes_own_photo(tmp_path):
+    import json as json_module
+
+    from PIL import Image
+
+    tshirt = suite.BenchScene("tshirt", label="tshirt-cloth-video")
+    spec = runner._with_scene_files("garment:boundaries=4,photo=scene", tshirt, tmp_path)
+    name, values = suite.parse_method_spec(spec)
+    photo = Path(values["photo"])
+    assert name == "garment" and values["boundaries"] == "4" and photo.parent == tmp_path
+    image = np.asarray(Image.open(photo))
+    calibration = json_module.loads((tmp_path / "pattern.json").read_text())
+    assert image.max() == 255 and image.min() == 0 and len(calibration["openings"]) == 4
+    assert runner._with_scene_files("garment:boundaries=4", tshirt, tmp_path) == "garment:boundaries=4"
+    with pytest.raises(InputError, match="squash-ball has no photo"):
+        runner._with_scene_files("garment:photo=scene", suite.BenchScene("squash-ball"), tmp_path)

@@ -22,6 +22,7 @@ import importlib.util
 import logging
 import os
 import statistics
+import tempfile
 import time
 from dataclasses import asdict, replace
 from pathlib import Path
@@ -43,9 +44,15 @@ from fourd.bench.suite import (
 from fourd.errors import InputError
 from fourd.metrics import evaluate, metric_floor
 from fourd.progress import progress
-from fourd.synth.garments import GARMENT_SCENES
+from fourd.synth.garments import GARMENT_SCENES, pattern_outline
+from fourd.synth.write import write_pattern_photo
 
 log = logging.getLogger("fourd.bench")
+
+#: In a method spec, ``photo=scene`` stands for the scene's own photo of the garment laid out
+#: flat (``garment:boundaries=4,photo=scene``; issue 54, the thesis' template of 3.7), which the
+#: bench writes for the run; the row keeps the spec as its label.
+SCENE_PHOTO = "photo=scene"
 
 
 #: Where a run writes its report unless told otherwise (git-ignored).
@@ -194,30 +201,56 @@ def _run_scene(bench_scene: BenchScene, methods, peers, *, samples, seed, repeat
     entry["truth_kind"] = type(truth).__name__
     entry["points_per_frame"] = round(sum(len(f) for f in scans.frames) / len(scans), 1)
     entry["floor"] = metric_floor(truth, samples=samples, seed=seed)
-    for kind, name, label in [("method", m, m) for m in methods] + [("baseline", fn, lb) for lb, fn in peers.items()]:
-        bar.set_postfix_str(f"{bench_scene.key} / {label}")
-        log.info("bench: %s on %s (%d frames)", label, bench_scene.key, len(scans))
-        case = run_case(kind, name, scans, repeats=repeats, timeout=timeout, isolate=isolate)
-        if "error" in case:
-            log.warning("bench: %s failed on %s: %s", label, bench_scene.key, case["error"])
-            entry["rows"][label] = {"error": case["error"], "made": made}
-        else:
-            per_frame = statistics.median(case["seconds"]) / len(scans)
-            timing = {"seconds_per_frame": per_frame, "seconds": case["seconds"],
-                      "peak_memory_mb": case["peak_mb"], "start_memory_mb": case["start_mb"],
-                      "peak_memory_all_runs_mb": case.get("peak_all_mb", case["peak_mb"])}
-            try:
-                metrics = evaluate(case["result"], truth, samples=samples, seed=seed, timing=timing,
-                                   folds=bench_scene.name in GARMENT_SCENES)
-                metrics.update(case.get("diagnostics") or {})
-                entry["rows"][label] = {"metrics": metrics, "made": made}
-            except Exception as error:  # noqa: BLE001
-                entry["rows"][label] = {"error": f"evaluation failed: {type(error).__name__}: {error}",
-                                        "made": made}
-            if sheets is not None:
-                entry["rows"][label]["sheet"] = _contact_sheet(case["result"], truth, sheets, bench_scene.key, label)
-        bar.update(1)
+    with tempfile.TemporaryDirectory(prefix="fourd-bench-") as scene_files:
+        for kind, name, label in [("method", m, m) for m in methods] + [("baseline", fn, lb) for lb, fn in peers.items()]:
+            bar.set_postfix_str(f"{bench_scene.key} / {label}")
+            _run_row(entry, bench_scene, truth, scans, kind, name, label, Path(scene_files), samples=samples, seed=seed,
+                     repeats=repeats, timeout=timeout, isolate=isolate, sheets=sheets, made=made)
+            bar.update(1)
     return entry
+
+
+def _with_scene_files(spec: str, bench_scene: BenchScene, folder: Path) -> str:
+    """``spec`` with :data:`SCENE_PHOTO` replaced by the path of the scene's photo, written
+    into ``folder`` the first time."""
+    if SCENE_PHOTO not in spec:
+        return spec
+    if bench_scene.name not in GARMENT_SCENES:
+        raise InputError(f"{spec}: scene {bench_scene.key} has no photo of a garment ({SCENE_PHOTO})")
+    photo = folder / "pattern.png"
+    if not photo.exists():
+        photo = write_pattern_photo(pattern_outline(bench_scene.name, with_openings=True), folder)
+    return spec.replace(SCENE_PHOTO, f"photo={photo}")
+
+
+def _run_row(entry, bench_scene, truth, scans, kind, name, label, scene_files, *, samples, seed, repeats, timeout,
+             isolate, sheets, made) -> None:
+    """One method's (or peer's) row of the scene, into ``entry["rows"][label]``."""
+    log.info("bench: %s on %s (%d frames)", label, bench_scene.key, len(scans))
+    try:
+        name = _with_scene_files(name, bench_scene, scene_files) if kind == "method" else name
+    except InputError as error:
+        log.warning("bench: %s", error)
+        entry["rows"][label] = {"error": str(error), "made": made}
+        return
+    case = run_case(kind, name, scans, repeats=repeats, timeout=timeout, isolate=isolate)
+    if "error" in case:
+        log.warning("bench: %s failed on %s: %s", label, bench_scene.key, case["error"])
+        entry["rows"][label] = {"error": case["error"], "made": made}
+        return
+    per_frame = statistics.median(case["seconds"]) / len(scans)
+    timing = {"seconds_per_frame": per_frame, "seconds": case["seconds"],
+              "peak_memory_mb": case["peak_mb"], "start_memory_mb": case["start_mb"],
+              "peak_memory_all_runs_mb": case.get("peak_all_mb", case["peak_mb"])}
+    try:
+        metrics = evaluate(case["result"], truth, samples=samples, seed=seed, timing=timing,
+                           folds=bench_scene.name in GARMENT_SCENES)
+        metrics.update(case.get("diagnostics") or {})
+        entry["rows"][label] = {"metrics": metrics, "made": made}
+    except Exception as error:  # noqa: BLE001
+        entry["rows"][label] = {"error": f"evaluation failed: {type(error).__name__}: {error}", "made": made}
+    if sheets is not None:
+        entry["rows"][label]["sheet"] = _contact_sheet(case["result"], truth, sheets, bench_scene.key, label)
 
 
 def _contact_sheet(result, truth, folder: Path, scene: str, label: str) -> str | None:

@@ -50,6 +50,22 @@ def save_truth(truth, path: str | os.PathLike) -> None:
     save(truth, path)
 
 
+def write_pattern_photo(pattern, folder: str | os.PathLike) -> Path:
+    """Write a garment's photo (``pattern``: ``(outline [K, 2], openings)`` of
+    :func:`fourd.synth.garments.pattern_outline`) into ``folder`` as ``pattern.png`` with its
+    calibration ``pattern.json`` beside it (what ``garment``'s ``photo`` option reads); returns
+    the photo's path."""
+    from PIL import Image
+
+    from fourd.synth.garments import pattern_photo
+
+    folder = Path(folder)
+    image, calibration = pattern_photo(*pattern)
+    Image.fromarray(image).save(folder / PATTERN_IMAGE)
+    (folder / PATTERN_FILE).write_text(json.dumps(calibration, indent=1) + "\n")
+    return folder / PATTERN_IMAGE
+
+
 def write_synth(
     truth,
     scans: PointCloudSequence,
@@ -93,13 +109,7 @@ def write_synth(
         if info is not None:
             (tmp / INFO_FILE).write_text(json.dumps(jsonable(info), indent=1) + "\n")
         if pattern is not None:
-            from PIL import Image
-
-            from fourd.synth.garments import pattern_photo
-
-            image, calibration = pattern_photo(*pattern)
-            Image.fromarray(image).save(tmp / PATTERN_IMAGE)
-            (tmp / PATTERN_FILE).write_text(json.dumps(calibration, indent=1) + "\n")
+            write_pattern_photo(pattern, tmp)
     logger.info("wrote %d scanned frames and the truth to %s", len(scans), outdir)
     return outdir
 
