@@ -62,3 +62,19 @@ def test_the_tshirt_from_its_photo_keeps_four_openings_and_its_pattern_coordinat
         surface = trimesh.Trimesh(truth.vertices[t], truth.faces, process=False)
         _, distance, _ = trimesh.proximity.closest_point(surface, result.vertices[t])
         assert np.median(distance) < 0.003 * diagonal
+
+
+def test_the_photos_template_is_placed_on_the_dress_upright(dress):
+    from fourd.methods.garment import Options, TemplateOptions, template_from_photo
+    from fourd.methods.garment.pipeline import _frame_meshes, _openings, _place_photo_template
+    from fourd.synth.garments import pattern_outline, pattern_photo
+
+    _, scans = dress
+    vertices, faces = _frame_meshes(scans, Options(boundaries=2))[0]
+    template = template_from_photo(*pattern_photo(*pattern_outline("dress", with_openings=True)),
+                                   TemplateOptions(edge=0.04))
+    _, loops, ellipses = _place_photo_template(template, vertices, _openings(vertices, faces, 2))
+    # the template's hem (its longer opening) on the frame's hem (the wider one), the waist on
+    # the waist: with the ellipses' normals' signs left to chance, the similarity that fitted
+    # best put this dress upside down
+    assert np.argmax([len(loop) for loop in loops]) == np.argmax([ellipse.radii.mean() for ellipse in ellipses])

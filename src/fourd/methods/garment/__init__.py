@@ -50,6 +50,7 @@ from fourd.methods.garment.boundary_tracking import (
     loop_ellipse,
     read_keyframes,
     track_boundary,
+    turned_outward,
 )
 from fourd.methods.garment.ellipse import (
     Ellipse,
@@ -136,6 +137,7 @@ __all__ = [
     "support",
     "trace_edges",
     "track_boundary",
+    "turned_outward",
     "read_keyframes",
     "AnchorOptions",
     "FrameAnchors",

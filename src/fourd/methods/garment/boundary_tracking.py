@@ -46,7 +46,7 @@ from fourd.methods.garment.ellipse import (
 )
 
 __all__ = ["BoundaryTrack", "TrackingOptions", "initial_ellipses", "loop_ellipse", "read_keyframes",
-           "track_boundary"]
+           "track_boundary", "turned_outward"]
 
 
 @dataclass(frozen=True)
@@ -163,14 +163,18 @@ def initial_ellipses(vertices: np.ndarray, faces: np.ndarray, count: int) -> lis
             f"the first frame's mesh has {len(loops)} boundary loops of 6 vertices or more, "
             f"the garment needs {count}"
         )
-    ellipses = []
-    for loop in loops[:count]:
-        ellipse = loop_ellipse(vertices[loop])
-        near = vertices[np.linalg.norm(vertices - ellipse.center, axis=1) <= 2.0 * ellipse.radii[0]]
-        if len(near) and float(np.mean((near - ellipse.center) @ ellipse.normal)) > 0:
-            ellipse = ellipse.flipped()
-        ellipses.append(ellipse)
-    return ellipses
+    return [turned_outward(loop_ellipse(vertices[loop]), vertices) for loop in loops[:count]]
+
+
+def turned_outward(ellipse: Ellipse, vertices: np.ndarray) -> Ellipse:
+    """``ellipse`` (an opening of the surface with ``vertices [N, 3]``) with its normal away
+    from the garment: the surface's vertices within two radii of its centre lie behind it on
+    average. A fitted ellipse's normal has either sign."""
+    vertices = np.asarray(vertices, dtype=np.float64)
+    near = vertices[np.linalg.norm(vertices - ellipse.center, axis=1) <= 2.0 * ellipse.radii[0]]
+    if len(near) and float(np.mean((near - ellipse.center) @ ellipse.normal)) > 0:
+        return ellipse.flipped()
+    return ellipse
 
 
 def track_boundary(

@@ -54,6 +54,7 @@ from fourd.methods.garment.boundary_tracking import (
     loop_ellipse,
     read_keyframes,
     track_boundary,
+    turned_outward,
 )
 from fourd.methods.garment.ellipse import as_batch, fit_ellipse, point_distances
 from fourd.methods.garment.fit import FitOptions, align_template, fit_template
@@ -140,14 +141,18 @@ def _photo_template(options: Options):
     return template_from_photo(image, calibration, TemplateOptions(edge=edge))
 
 
-def _place_photo_template(template, frame_ellipses):
-    """The photo's template moved onto the first frame: its openings matched to the frame's by
-    the permutation whose similarity fits best."""
+def _place_photo_template(template, first_vertices, openings):
+    """The photo's template moved onto the first frame (``first_vertices [N, 3]``, its
+    ``openings`` as vertex loops): ``(placed vertices, template loops, frame ellipses)``, the
+    template's openings matched to the frame's (in their order) by the permutation whose
+    similarity fits best. Both sides' ellipses have their normals turned away from their
+    garment: with either sign, the similarity put the dress upside down, its hem on the waist."""
+    frame_ellipses = [turned_outward(loop_ellipse(first_vertices[loop]), first_vertices) for loop in openings]
     loops = [loop for loop in boundary_loops(template.faces, len(template.vertices)) if len(loop) >= 6]
     if len(loops) != len(frame_ellipses):
         raise InputError(f"the garment photo's template has {len(loops)} openings, the frames "
                          f"{len(frame_ellipses)}: set the option boundaries")
-    ellipses = [fit_ellipse(template.vertices[loop]) for loop in loops]
+    ellipses = [turned_outward(fit_ellipse(template.vertices[loop]), template.vertices) for loop in loops]
     best = None
     for order in itertools.permutations(range(len(loops))):
         rotation, scale, translation = align_template([ellipses[k] for k in order], frame_ellipses)
@@ -155,7 +160,7 @@ def _place_photo_template(template, frame_ellipses):
         error = sum(np.linalg.norm(placed[loops[k]].mean(axis=0) - e.center) for k, e in zip(order, frame_ellipses, strict=True))
         if best is None or error < best[0]:
             best = (error, placed, [loops[k] for k in order])
-    return best[1], best[2]
+    return best[1], best[2], frame_ellipses
 
 
 def _color_guides(seq, meshes, template, faces, edge) -> PhotometricGuides:
@@ -183,9 +188,8 @@ def reconstruct(seq: PointCloudSequence, options: Options | None = None) -> Anim
         anchors = track_anchors(seq, texture=3.0, sources=2.0)
     if options.photo:
         openings = _openings(first_vertices, first_faces, options.boundaries)
-        frame_ellipses = [loop_ellipse(first_vertices[loop]) for loop in openings]
         template = _photo_template(options)
-        start, template_loops = _place_photo_template(template, frame_ellipses)
+        start, template_loops, frame_ellipses = _place_photo_template(template, first_vertices, openings)
         rest, faces, uv = start, template.faces, template.uv[template.faces]  # per face corner
         first_iterations = 4 * options.iterations
     else:
