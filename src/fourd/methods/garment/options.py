@@ -38,7 +38,7 @@ class Options:
         nearest it. Empty: automatic tracking only.
     template_edge : float
         Edge length of a template inflated from the photo, in the photo's units (0: a 60th of
-        the garment's diagonal in the photo, 0.025 for the synthetic T-shirt).
+        the garment's diagonal in the photo, 0.026 for the synthetic T-shirt).
     iterations : int
         As-rigid-as-possible fitting iterations per frame (three times as many in the first).
     motion_prediction : float
