@@ -144,8 +144,6 @@ def test_a_scenes_appearance_and_video_reach_the_scanner(monkeypatch):
 
 
 def test_photo_scene_in_a_spec_is_the_garment_scenes_own_photo(tmp_path):
-    import json as json_module
-
     from PIL import Image
 
     tshirt = suite.BenchScene("tshirt", label="tshirt-cloth-video")
@@ -154,7 +152,7 @@ def test_photo_scene_in_a_spec_is_the_garment_scenes_own_photo(tmp_path):
     photo = Path(values["photo"])
     assert name == "garment" and values["boundaries"] == "4" and photo.parent == tmp_path
     image = np.asarray(Image.open(photo))
-    calibration = json_module.loads((tmp_path / "pattern.json").read_text())
+    calibration = json.loads((tmp_path / "pattern.json").read_text())
     assert image.max() == 255 and image.min() == 0 and len(calibration["openings"]) == 4
     assert runner._with_scene_files("garment:boundaries=4", tshirt, tmp_path) == "garment:boundaries=4"
     with pytest.raises(InputError, match="squash-ball has no photo"):
