@@ -146,22 +146,27 @@ def _membrane(vertices, faces, filled, holes, smooth):
 
 
 def membrane_positions(frames: np.ndarray, faces: np.ndarray, filled: np.ndarray, holes: list, *,
-                       smooth: float = 1.0) -> np.ndarray:
+                       smooth: float = 1.0, weights: sp.spmatrix | None = None) -> np.ndarray:
     """The membrane's vertices placed in every frame of an animated mesh: ``frames [T, N, 3]``
     with the ``filled [N]`` vertices (of holes bounded by the loops ``holes``, as
-    :func:`fill_holes` returns them) replaced by their least-squares membrane over that frame's
-    other vertices (equation 3.1, with the C1 terms weighted by ``smooth``: 1 the thesis' C1
-    membrane, 0 the flat one). One factorisation for all frames: the operator depends on the
-    connectivity alone."""
+    :func:`fill_holes` returns them, or any arrays of the holes' rim vertices) replaced by their
+    least-squares membrane over that frame's other vertices (equation 3.1, with the C1 terms
+    weighted by ``smooth``: 1 the thesis' C1 membrane, 0 the flat one). ``weights`` ``[N, N]``,
+    rows summing to 1, are the equation's ``w_ij`` (the thesis' mean-value weights of the base
+    embedding, :func:`fourd.methods.garment.base_holes.base_mean_value_weights`); None: the
+    uniform weights of the mesh's neighbours. One factorisation for all frames: the operator
+    does not depend on the positions."""
     frames = np.asarray(frames, dtype=np.float64)
     filled = np.asarray(filled, dtype=bool)
     result = frames.copy()
     if not filled.any():
         return result
     count = frames.shape[1]
-    adjacency = vertex_adjacency(np.asarray(faces, dtype=np.int64), count)
-    degree = np.asarray(adjacency.sum(axis=1)).ravel()
-    laplacian = sp.identity(count) - sp.diags(1.0 / np.maximum(degree, 1)) @ adjacency  # rows P_i - mean
+    if weights is None:
+        adjacency = vertex_adjacency(np.asarray(faces, dtype=np.int64), count)
+        degree = np.asarray(adjacency.sum(axis=1)).ravel()
+        weights = sp.diags(1.0 / np.maximum(degree, 1)) @ adjacency
+    laplacian = (sp.identity(count) - weights).tocsr()  # rows P_i - sum_j w_ij P_j
     rows = np.flatnonzero(filled)
     scale = np.ones(len(rows))
     if smooth and holes:

@@ -22,6 +22,9 @@ completed by the template (:mod:`.pipeline`). Its parts:
   its anchor, the surface cut into one chart per facet of the anchors' tetrahedron, each chart
   mapped onto its facet (mean-value map, stretch-minimising reweighting, vertices sliding
   across the charts' borders), and points carried between surfaces through the base;
+- :mod:`.base_holes`: the holes of that closed surface re-triangulated on the base (Delaunay
+  flips) and re-projected by the membrane with the base embedding's mean-value weights, in
+  turn with the parameterisation (3.6.2);
 - :mod:`.fold_edges`: folds found in a video frame as pairs of parallel, oppositely oriented
   edges flanking a bright ridge or a dark valley (4.3.1, 4.4);
 - :mod:`.wrinkle_anchors`: per frame the best views, their fold edges projected onto the
@@ -30,11 +33,10 @@ completed by the template (:mod:`.pipeline`). Its parts:
   rotations blended over space and time, vertex positioning, stretch reduction (4.5).
 
 The garment scenes (``tshirt``, ``dress``, with the photo) are in :mod:`fourd.synth.garments`;
-the C1 membrane of 3.6.2 is :mod:`fourd.geometry.hole_filling`. Still to come: the thesis'
-re-triangulation of holes on the base during the parameterisation (3.6.2), without which the
-base-mesh map folds or stretches on scanned frames.
+the C1 membrane of 3.6.2 is :mod:`fourd.geometry.hole_filling`.
 """
 
+from fourd.methods.garment.base_holes import ClosedOnBase, reparameterize_holes
 from fourd.methods.garment.base_mesh import (
     BaseMesh,
     BaseParameterization,
@@ -102,6 +104,7 @@ from fourd.methods.garment.wrinkling import (
 __all__ = [
     "BaseMesh",
     "BaseParameterization",
+    "ClosedOnBase",
     "COMMON_OPTIONS",
     "MIN_FRAMES",
     "RESULT",
@@ -153,5 +156,6 @@ __all__ = [
     "closed_surface",
     "map_through_base",
     "parameterize_onto_base",
+    "reparameterize_holes",
     "vertex_base_coordinates",
 ]
