@@ -49,6 +49,21 @@ def test_a_region_carried_off_is_flagged_as_one_region():
     assert passes_stretch_test(vertices, pair.source_faces, vertices, cap)
 
 
+def test_a_band_of_flags_across_the_surface_does_not_take_a_half_with_it():
+    # the neck between two parts that the next frame breaks: the flags cut the surface in two,
+    # and neither half is an island to add to the region
+    import trimesh
+
+    sphere = trimesh.creation.icosphere(4)
+    vertices, faces = np.asarray(sphere.vertices), np.asarray(sphere.faces)
+    edge = float(np.median(sphere.edges_unique_length))
+    band = np.abs(vertices[:, 2]) < 0.6 * edge
+    points = vertices + (3.0 * edge * band)[:, None] * vertices
+    analysis = inconsistent_regions(vertices, faces, points, np.ones(len(vertices), dtype=bool))
+    assert analysis.flagged[band].all() and analysis.regions == 1
+    assert not analysis.flagged[np.abs(vertices[:, 2]) > 0.3].any()
+
+
 def test_the_merge_can_unmap_inconsistent_regions():
     pair = rigid_copy()
     left = Block(pair.source_faces, pair.source_vertices[None], np.ones((1, len(pair.source_vertices)), dtype=bool))

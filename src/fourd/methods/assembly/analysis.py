@@ -4,8 +4,8 @@ Between consecutive frames the map from source to target should stretch triangle
 move every vertex about as its neighbours move. Vertices of triangles whose edges the map
 stretches or shrinks beyond ``stretch`` (a ratio), and vertices whose motion differs from
 their one-ring's mean motion by more than ``motion`` source edges, are flagged; the flags are
-grown by one ring, the unflagged islands they enclose added (a region carried off whole moves
-consistently inside, only its border breaks), and clustered into connected regions
+grown by one ring, the small unflagged islands they enclose added (a region carried off whole
+moves consistently inside, only its border breaks), and clustered into connected regions
 (:func:`inconsistent_regions`).
 
 The thesis then tries both fixes per region, the source's geometry pasted into the target and
@@ -123,8 +123,11 @@ def inconsistent_regions(
 
 def _fill_islands(adjacency: sp.csr_matrix, flagged: np.ndarray) -> np.ndarray:
     """``flagged`` with the unflagged islands it encloses added: in each connected piece of
-    the mesh, every unflagged component but the largest (a region carried off whole moves
-    consistently inside; only its border stretches)."""
+    the mesh, every unflagged component but the largest that has no more vertices than the
+    piece's flagged ones (a small region carried off whole moves consistently inside; only its
+    border stretches). A larger one is not an island: a band of flags across a neck that the
+    next frame breaks cuts the piece in two halves, and either half added would take the neck's
+    region with it through the stretch test (``test_a_bridge_the_next_frame_breaks_is_found_and_cut``)."""
     _, piece = connected_components(adjacency, directed=False)
     free = sp.diags((~flagged).astype(np.float64))
     _, label = connected_components(free @ adjacency @ free, directed=False)
@@ -135,7 +138,8 @@ def _fill_islands(adjacency: sp.csr_matrix, flagged: np.ndarray) -> np.ndarray:
         if not members.any():
             continue
         labels, sizes = np.unique(label[members], return_counts=True)
-        result |= members & (label != labels[np.argmax(sizes)])
+        enclosed = labels[(labels != labels[np.argmax(sizes)]) & (sizes <= np.sum(flagged & (piece == p)))]
+        result |= members & np.isin(label, enclosed)
     return result
 
 
