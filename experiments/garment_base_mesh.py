@@ -134,12 +134,19 @@ def _truth_openings(vertices, faces, reference=None):
     return loops, np.array([e.center + e.radii.mean() * e.normal for e in ellipses]), np.array([e.center for e in ellipses])
 
 
-def truth() -> None:
+def _truth_closed():
+    """The generated T-shirt (20 frames), its first frame's anchors and base, and that frame
+    closed by cones at its anchors."""
     shirt = tshirt(20, 0)
     faces = shirt.faces
     loops, anchors, centres = _truth_openings(shirt.vertices[0], faces)
     base = base_mesh(anchors)
     closed, closed_faces, apex = closed_surface(shirt.vertices[0], faces, loops, anchors)
+    return shirt, faces, anchors, centres, base, closed, closed_faces, apex
+
+
+def truth() -> None:
+    shirt, faces, anchors, centres, base, closed, closed_faces, apex = _truth_closed()
     for slide in (False, True):
         first = parameterize_onto_base(closed, closed_faces, apex, base, slide=slide)
         facets, barycentric = vertex_base_coordinates(first, len(shirt.vertices[0]))
@@ -247,11 +254,7 @@ def _holed(vertices, faces, centre, radius):
 
 
 def holes() -> None:
-    shirt = tshirt(20, 0)
-    faces = shirt.faces
-    loops, anchors, centres = _truth_openings(shirt.vertices[0], faces)
-    base = base_mesh(anchors)
-    closed, closed_faces, apex = closed_surface(shirt.vertices[0], faces, loops, anchors)
+    shirt, faces, anchors, centres, base, closed, closed_faces, apex = _truth_closed()
     first = parameterize_onto_base(closed, closed_faces, apex, base)
     facets, barycentric = vertex_base_coordinates(first, len(shirt.vertices[0]))
     paths = [closed[path] for path in first.charts.paths]
