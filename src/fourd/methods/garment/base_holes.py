@@ -134,6 +134,17 @@ def _edges_of(faces: np.ndarray):
     return face[half], face[other], start[half], end[half], opposite[half], opposite[other]
 
 
+def _angles(at: np.ndarray, p: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """The signed angles ``[Q]`` at ``at`` from ``p`` to ``q`` (points ``[Q, 2]``)."""
+    u, v = p - at, q - at
+    return np.arctan2(u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0], np.einsum("qd,qd->q", u, v))
+
+
+def _turns(o: np.ndarray, p: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """Twice the signed areas ``[Q]`` of the triangles ``o, p, q`` (points ``[Q, 2]``)."""
+    return (p[:, 0] - o[:, 0]) * (q[:, 1] - o[:, 1]) - (p[:, 1] - o[:, 1]) * (q[:, 0] - o[:, 0])
+
+
 def delaunay_flips(faces: np.ndarray, flippable: np.ndarray, home: np.ndarray, uv: np.ndarray,
                    rotation: np.ndarray, shift: np.ndarray, fixed: set | None = None) -> tuple[np.ndarray, int]:
     """The ``flippable [F]`` faces re-triangulated towards the Delaunay triangulation of their
@@ -157,18 +168,10 @@ def delaunay_flips(faces: np.ndarray, flippable: np.ndarray, home: np.ndarray, u
         target = np.repeat(home[a][:, None], 4, axis=1)
         place = np.einsum("qcxy,qcy->qcx", rotation[home[quad], target], uv[quad]) + shift[home[quad], target]
         pa, pb, pc, pd = place[:, 0], place[:, 1], place[:, 2], place[:, 3]
-
-        def angle(at, p, q):
-            u, v = p - at, q - at
-            return np.arctan2(u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0], np.einsum("qd,qd->q", u, v))
-
-        def cross(o, p, q):
-            return (p[:, 0] - o[:, 0]) * (q[:, 1] - o[:, 1]) - (p[:, 1] - o[:, 1]) * (q[:, 0] - o[:, 0])
-
-        # left holds a -> b -> c, right holds b -> a -> d; the flip gives c -> d ... as (a, d, c), (b, c, d)
-        sum_opposite = np.abs(angle(pc, pa, pb)) + np.abs(angle(pd, pb, pa))
-        orientation = np.sign(cross(pa, pb, pc))
-        convex = (np.sign(cross(pa, pd, pc)) == orientation) & (np.sign(cross(pb, pc, pd)) == orientation) \
+        # left holds a -> b -> c, right holds b -> a -> d; the flip makes (a, d, c) and (b, c, d)
+        sum_opposite = np.abs(_angles(pc, pa, pb)) + np.abs(_angles(pd, pb, pa))
+        orientation = np.sign(_turns(pa, pb, pc))
+        convex = (np.sign(_turns(pa, pd, pc)) == orientation) & (np.sign(_turns(pb, pc, pd)) == orientation) \
             & (orientation != 0)
         want = np.flatnonzero((sum_opposite > np.pi + 1e-9) & convex)
         if not len(want):
