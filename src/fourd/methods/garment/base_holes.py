@@ -31,6 +31,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from fourd.geometry.hole_filling import membrane_positions
+from fourd.geometry.meshes import face_adjacency
 from fourd.methods.garment.base_mesh import (
     BaseMesh,
     BaseParameterization,
@@ -116,22 +117,15 @@ def base_mean_value_weights(faces: np.ndarray, home: np.ndarray, uv: np.ndarray,
 
 
 def _edges_of(faces: np.ndarray):
-    """Every interior edge ``(a, b)`` as the face holding ``a -> b`` and the face holding
-    ``b -> a``, with the corners opposite: ``(left, right, a, b, c, d)`` arrays."""
-    count = len(faces)
-    start = faces.ravel()
-    end = np.roll(faces, -1, axis=1).ravel()
-    opposite = np.roll(faces, -2, axis=1).ravel()
-    face = np.repeat(np.arange(count), 3)
-    order = np.lexsort((end, start))
-    keys = start[order] * (faces.max() + 1) + end[order]
-    reverse_keys = end * (faces.max() + 1) + start
-    where = np.searchsorted(keys, reverse_keys)
-    where = np.minimum(where, len(keys) - 1)
-    found = keys[where] == reverse_keys
-    half = found & (start < end)
-    other = order[where[half]]
-    return face[half], face[other], start[half], end[half], opposite[half], opposite[other]
+    """Every interior edge ``(a, b)`` with the face holding ``a -> b`` (left), the face holding
+    ``b -> a`` (right) and the corners opposite it in each: ``(left, right, a, b, c, d)`` arrays
+    (from :func:`fourd.geometry.meshes.face_adjacency`)."""
+    pairs, edges = face_adjacency(faces)
+    left, right = pairs[:, 0], pairs[:, 1]
+    u, v = edges[:, 0], edges[:, 1]
+    forward = ((faces[left] == u[:, None]) & (np.roll(faces, -1, axis=1)[left] == v[:, None])).any(axis=1)
+    a, b = np.where(forward, u, v), np.where(forward, v, u)
+    return left, right, a, b, faces[left].sum(axis=1) - u - v, faces[right].sum(axis=1) - u - v
 
 
 def _angles(at: np.ndarray, p: np.ndarray, q: np.ndarray) -> np.ndarray:
@@ -159,6 +153,7 @@ def delaunay_flips(faces: np.ndarray, flippable: np.ndarray, home: np.ndarray, u
     flips = 0
     for _ in range(FLIP_PASSES):
         left, right, a, b, c, d = _edges_of(faces)
+        existing = {(int(p), int(q)) for p, q in zip(np.minimum(a, b), np.maximum(a, b), strict=True)}
         keep = flippable[left] & flippable[right] & (c != d)
         left, right, a, b, c, d = left[keep], right[keep], a[keep], b[keep], c[keep], d[keep]
         if not len(left):
@@ -176,7 +171,6 @@ def delaunay_flips(faces: np.ndarray, flippable: np.ndarray, home: np.ndarray, u
         want = np.flatnonzero((sum_opposite > np.pi + 1e-9) & convex)
         if not len(want):
             break
-        existing = set(zip(*_edges_of(faces)[2:4], strict=True))
         used = np.zeros(len(faces), dtype=bool)
         done = 0
         for q in want[np.argsort(-sum_opposite[want])]:
