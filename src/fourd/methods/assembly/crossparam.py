@@ -19,8 +19,8 @@ from __future__ import annotations
 import logging
 from typing import NamedTuple
 
+import numba
 import numpy as np
-from scipy.spatial import cKDTree
 
 from fourd.geometry.flattening import flatten
 from fourd.geometry.meshes import mesh_arrays
@@ -30,8 +30,6 @@ from fourd.methods.assembly.patches import PatchPair, grow_patches
 
 log = logging.getLogger("fourd.methods.assembly.crossparam")
 
-#: Target triangles tried per located point (nearest centroids in the target flattening).
-CANDIDATES = 12
 #: A point counts as inside a triangle down to this barycentric coordinate (rounding).
 INSIDE = -1e-9
 
@@ -99,25 +97,43 @@ def _flat(vertices: np.ndarray, faces: np.ndarray, patch, method: str):
 
 def _locate(uv: np.ndarray, faces: np.ndarray, points: np.ndarray):
     """The triangle of ``faces`` over ``uv`` holding each of ``points [P, 2]`` and the
-    barycentric coordinates there; ``-1`` for points inside none of the candidate triangles."""
-    corners = uv[faces]  # [F, 3, 2]
-    k = min(CANDIDATES, len(faces))
-    _, near = cKDTree(corners.mean(axis=1)).query(points, k=k)
-    near = near.reshape(len(points), k)
-    a, b, c = corners[near, 0], corners[near, 1], corners[near, 2]  # [P, k, 2]
-    e1, e2, rel = b - a, c - a, points[:, None] - a
-    det = e1[..., 0] * e2[..., 1] - e1[..., 1] * e2[..., 0]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        v = (rel[..., 0] * e2[..., 1] - rel[..., 1] * e2[..., 0]) / det
-        w = (e1[..., 0] * rel[..., 1] - e1[..., 1] * rel[..., 0]) / det
-    bary = np.stack([1.0 - v - w, v, w], axis=2)
-    worst = np.where(np.isfinite(bary).all(axis=2), bary.min(axis=2), -np.inf)
-    best = np.argmax(worst, axis=1)
-    rows = np.arange(len(points))
-    inside = worst[rows, best] >= INSIDE
-    chosen = np.clip(bary[rows, best], 0.0, None)
-    chosen /= chosen.sum(axis=1, keepdims=True)
-    return np.where(inside, near[rows, best], -1), chosen
+    barycentric coordinates there; ``-1`` for points inside no triangle. Where the layout
+    overlaps itself, the triangle a point lies deepest in (largest smallest coordinate)."""
+    triangle, bary = _locate_kernel(np.ascontiguousarray(uv, dtype=np.float64),
+                                    np.ascontiguousarray(faces, dtype=np.int64),
+                                    np.ascontiguousarray(points, dtype=np.float64), INSIDE)
+    return triangle, bary
+
+
+@numba.njit(cache=True, nogil=True)
+def _locate_kernel(uv, faces, points, inside):
+    """:func:`_locate` by a search over every triangle (a patch holds a few hundred)."""
+    count = len(points)
+    triangle = np.full(count, -1, dtype=np.int64)
+    bary = np.zeros((count, 3))
+    for p in range(count):
+        px, py = points[p, 0], points[p, 1]
+        best, best_v, best_w, best_f = -np.inf, 0.0, 0.0, -1
+        for f in range(len(faces)):
+            ax, ay = uv[faces[f, 0], 0], uv[faces[f, 0], 1]
+            e1x, e1y = uv[faces[f, 1], 0] - ax, uv[faces[f, 1], 1] - ay
+            e2x, e2y = uv[faces[f, 2], 0] - ax, uv[faces[f, 2], 1] - ay
+            det = e1x * e2y - e1y * e2x
+            if det == 0.0:
+                continue
+            rx, ry = px - ax, py - ay
+            v = (rx * e2y - ry * e2x) / det
+            w = (e1x * ry - e1y * rx) / det
+            worst = min(1.0 - v - w, v, w)
+            if worst > best:
+                best, best_v, best_w, best_f = worst, v, w, f
+        if best_f < 0 or not best >= inside:
+            continue
+        a, b, c = max(1.0 - best_v - best_w, 0.0), max(best_v, 0.0), max(best_w, 0.0)
+        total = a + b + c
+        triangle[p] = best_f
+        bary[p, 0], bary[p, 1], bary[p, 2] = a / total, b / total, c / total
+    return triangle, bary
 
 
 def map_patch(
