@@ -31,12 +31,13 @@ from scipy.sparse.linalg import LinearOperator, cg, splu
 from scipy.spatial import cKDTree
 
 from fourd.geometry.boundary_loops import boundary_edges
+from fourd.geometry.decimation import decimate
 from fourd.geometry.icp import rigid_icp as point_to_plane_icp
 from fourd.geometry.laplacian import uniform_laplacian
 from fourd.geometry.meshes import median_edge_length, mesh_arrays
 from fourd.geometry.normals import vertex_normals
 from fourd.geometry.projector_sums import projector_sums
-from fourd.geometry.rotations import arap_right_hand_side, one_ring_rotations
+from fourd.geometry.rotations import arap_right_hand_side, one_ring_rotations, procrustes
 from fourd.methods.assembly.anchors import (
     Anchors,
     consistent_anchors,
@@ -49,6 +50,12 @@ NORMAL_AGREEMENT = 0.3
 
 #: Relative tolerance of the ARAP-ICP's conjugate gradients (on each step's update).
 CG_TOLERANCE = 1e-2
+
+#: The ARAP-ICP's search radius at its first and its last stiff iteration (source edges).
+START_RADIUS, END_RADIUS = 40.0, 3.0
+
+#: Sources smaller than this align at their own resolution whatever ``coarse`` says.
+COARSE_VERTICES = 4000
 
 
 class Alignment(NamedTuple):
@@ -151,8 +158,8 @@ def nonrigid_icp(
     *,
     iterations: int = 50,
     weight: float = 0.001,
-    start_radius: float = 40.0,
-    end_radius: float = 3.0,
+    start_radius: float = START_RADIUS,
+    end_radius: float = END_RADIUS,
     relaxation: float = 0.8,
     refine_iterations: int = 3,
     refine_weight: float = 0.03,
@@ -216,6 +223,21 @@ def nonrigid_icp(
     return x
 
 
+def _coarse_then_fine(source, faces, target, target_normals, rigid, tree, edge, reduction, *, iterations, weight):
+    """:func:`nonrigid_icp`'s stiff iterations on the decimated source, its soft ones on the
+    source itself, from the rigidly aligned ``rigid`` (:func:`geometric_anchors`' ``coarse``)."""
+    coarse = decimate(source, faces, reduction)
+    fit = procrustes(source, rigid)
+    start = coarse.vertices @ fit.rotation.T + fit.translation
+    ratio = edge / median_edge_length(coarse.vertices, coarse.faces)
+    moved = nonrigid_icp(coarse.vertices, coarse.faces, target, target_normals, start, iterations=iterations,
+                         weight=weight, start_radius=START_RADIUS * ratio, end_radius=END_RADIUS * ratio,
+                         refine_iterations=0, tree=tree)
+    # the non-rigid part only: inverse-distance weights reproduce a translation, not a turn
+    followed = rigid + coarse.carry(moved - start + coarse.vertices)
+    return nonrigid_icp(source, faces, target, target_normals, followed, iterations=0, tree=tree)
+
+
 def geometric_anchors(
     source_vertices: np.ndarray,
     source_faces: np.ndarray,
@@ -228,6 +250,7 @@ def geometric_anchors(
     rigid_iterations: int = 10,
     iterations: int = 50,
     weight: float = 0.001,
+    coarse: float = 0.0,
     seed: int = 0,
 ) -> Alignment:
     """Anchors from the source to the target by a coarse non-rigid alignment (module docstring).
@@ -252,6 +275,12 @@ def geometric_anchors(
         Rigid and non-rigid (:func:`nonrigid_icp`) ICP iterations.
     weight : float
         Data weight of the non-rigid ICP's stiff iterations (:func:`nonrigid_icp`).
+    coarse : float
+        When above 0 (and the source has at least :data:`COARSE_VERTICES` vertices), the
+        stiff iterations run on the source decimated by this fraction of its faces
+        (:func:`fourd.geometry.decimation.decimate`), the search radii kept in the source's
+        own edges; the fine source follows the coarse one's non-rigid displacements, then
+        takes the soft iterations itself.
     seed : int
         Seed of the anchors' spreading.
 
@@ -266,8 +295,12 @@ def geometric_anchors(
     source_normals = vertex_normals(source, sfaces)
     tree = cKDTree(target)
     aligned = rigid_icp(source, source_normals, target, target_normals, iterations=rigid_iterations, tree=tree)
-    aligned = nonrigid_icp(source, sfaces, target, target_normals, aligned, iterations=iterations, weight=weight,
-                           tree=tree)
+    if coarse > 0.0 and len(source) >= COARSE_VERTICES:
+        aligned = _coarse_then_fine(source, sfaces, target, target_normals, aligned, tree, edge, coarse,
+                                    iterations=iterations, weight=weight)
+    else:
+        aligned = nonrigid_icp(source, sfaces, target, target_normals, aligned, iterations=iterations, weight=weight,
+                               tree=tree)
 
     # anchors: near candidates, oversampled, checked, then spread to the final density
     normals = vertex_normals(aligned, sfaces)

@@ -142,7 +142,8 @@ def merge_blocks(left: Block, right: Block, options: Options | None = None) -> t
     alignment = geometric_anchors(
         source, faces, target, target_faces,
         spacing=options.anchor_spacing, gap=options.anchor_gap, tolerance=options.anchor_tolerance,
-        iterations=options.alignment_iterations, weight=options.alignment_weight, seed=options.seed,
+        iterations=options.alignment_iterations, weight=options.alignment_weight,
+        coarse=options.alignment_coarse, seed=options.seed,
     )
     count = len(source)
     if len(alignment.anchors.source) >= 3:

@@ -203,6 +203,10 @@ class Options(SurfaceSettings):
     alignment_weight : float
         Its data weight relative to the Laplacian's mean diagonal: smaller is stiffer, a limb
         moving as a whole.
+    alignment_coarse : float
+        When above 0, that alignment's stiff iterations run on each source decimated by this
+        fraction of its faces (0.75: a quarter left), its last soft ones at full resolution
+        (:func:`~fourd.methods.assembly.alignment.geometric_anchors`' ``coarse``).
     map_agreement : float
         Largest distance (source edges) between a vertex's place by the pair map and by that
         alignment: farther, the two disagree, and the vertex is left to the registration of
@@ -289,6 +293,7 @@ class Options(SurfaceSettings):
     anchor_tolerance: float = 1.5
     alignment_iterations: int = 50
     alignment_weight: float = 0.001
+    alignment_coarse: float = 0.0
     map_agreement: float = 2.0
     max_radius: float = 0.2
     flattening: str = "lscm"
@@ -315,6 +320,8 @@ class Options(SurfaceSettings):
             value = getattr(self, name)
             if not (np.isfinite(value) and value > 0):
                 raise ValueError(f"{name} must be positive, got {value!r}")
+        if not 0.0 <= self.alignment_coarse < 1.0:
+            raise ValueError(f"alignment_coarse must lie in [0, 1), got {self.alignment_coarse!r}")
         for name in ("alignment_iterations", "relax_sweeps", "registration_iterations"):
             value = getattr(self, name)
             if int(value) != value or value < 0:
