@@ -230,8 +230,11 @@ def _coarse_then_fine(source, faces, target, target_normals, rigid, tree, edge, 
     fit = procrustes(source, rigid)
     start = coarse.vertices @ fit.rotation.T + fit.translation
     ratio = edge / median_edge_length(coarse.vertices, coarse.faces)
+    # uniform edge weights: a bend costs the coarse mesh's ARAP term 1 / ratio^2 times the
+    # fine one's against the same data, so the data weight grows by as much (crane: the
+    # same weight left the limbs behind, correspondence 0.0062 / 0.0090 -> 0.0075 / 0.0101)
     moved = nonrigid_icp(coarse.vertices, coarse.faces, target, target_normals, start, iterations=iterations,
-                         weight=weight, start_radius=START_RADIUS * ratio, end_radius=END_RADIUS * ratio,
+                         weight=weight / ratio**2, start_radius=START_RADIUS * ratio, end_radius=END_RADIUS * ratio,
                          refine_iterations=0, tree=tree)
     # the non-rigid part only: inverse-distance weights reproduce a translation, not a turn
     followed = rigid + coarse.carry(moved - start + coarse.vertices)
