@@ -191,6 +191,22 @@ def test_a_hole_no_frame_fills_is_closed_in_every_frame_unobserved():
     assert largest[1.0] < 0.5 and largest[1.0] < largest[default] < largest[0.0] < 2.0, largest
 
 
+def test_a_hole_of_one_triangle_closes_without_new_vertices():
+    """The membrane of a three-vertex rim has no interior vertex: the block keeps its vertex
+    count and gains the triangle (the positions once came back doubled, crane-remeshed)."""
+    from fourd.methods.assembly import close_small_holes
+
+    vertices, faces = _bumpy()
+    frames = np.stack([vertices @ _motion(t)[0].T + _motion(t)[1] for t in range(2)])
+    block = Block(faces[1:], frames, np.ones((2, len(vertices)), dtype=bool))
+    closed = close_small_holes(block, 0.25)
+    assert closed.vertices.shape == frames.shape and closed.observed.shape == (2, len(vertices))
+    np.testing.assert_array_equal(closed.vertices, frames)
+    assert len(closed.faces) == len(faces)
+    mesh = trimesh.Trimesh(closed.vertices[1], closed.faces, process=False)
+    assert mesh.is_watertight and mesh.is_winding_consistent
+
+
 def test_a_hole_that_cannot_be_filled_leaves_the_assembled_result_as_it_is(monkeypatch):
     """A rim the membrane cannot span (a degenerate loop) costs the closing, not the run."""
     import fourd.methods.assembly.method as method

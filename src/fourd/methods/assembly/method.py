@@ -104,8 +104,9 @@ def close_small_holes(block: Block, max_fraction: float, smoothness: float = 1.0
     except InputError as error:  # a degenerate rim: keep the assembled result rather than lose it
         log.warning("holes left open: %s", error)
         return block
-    added = len(filled.vertices) - block.vertices.shape[1]
-    frames = np.concatenate([block.vertices, np.repeat(filled.vertices[None, -added:], len(block.vertices), axis=0)],
+    count = block.vertices.shape[1]
+    added = len(filled.vertices) - count  # may be 0: a small hole closed by its rim's triangles
+    frames = np.concatenate([block.vertices, np.repeat(filled.vertices[None, count:], len(block.vertices), axis=0)],
                             axis=1)
     frames = membrane_positions(frames, filled.faces, filled.filled, filled.holes, smooth=smoothness)
     observed = np.concatenate([block.observed, np.zeros((len(block.vertices), added), dtype=bool)], axis=1)
