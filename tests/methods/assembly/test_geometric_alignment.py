@@ -6,6 +6,7 @@ import numpy as np
 from assembly_shapes import remeshed_frames, rigid_copy
 
 from fourd.geometry.normals import vertex_normals
+from fourd.methods.assembly import alignment as alignment_module
 from fourd.methods.assembly.alignment import geometric_anchors, nonrigid_icp
 
 
@@ -70,3 +71,15 @@ def test_a_tube_sliding_along_itself_is_followed():
     followed = (placed - source)[:, 2] / shift[2]
     assert np.median(followed) > 0.9, np.median(followed)
     assert np.linalg.norm(placed - source - shift, axis=1).mean() < 0.3 * edge
+
+
+def test_the_coarse_alignment_brings_a_bent_arm_along(monkeypatch):
+    """The stiff iterations on the arm decimated to a quarter of its faces (1,042 vertices
+    to about 260), the soft ones on the arm itself: the forearm still comes along."""
+    monkeypatch.setattr(alignment_module, "COARSE_VERTICES", 0)
+    pair = remeshed_frames(frame=5)
+    alignment = geometric_anchors(pair.source_vertices, pair.source_faces, pair.target_vertices, pair.target_faces,
+                                  coarse=0.75)
+    aligned, at_anchors = _errors(pair, alignment)
+    assert np.percentile(aligned, 95) < 6.0
+    assert np.percentile(at_anchors, 95) < 6.0
