@@ -74,12 +74,14 @@ def test_a_tube_sliding_along_itself_is_followed():
 
 
 def test_the_coarse_alignment_brings_a_bent_arm_along(monkeypatch):
-    """The stiff iterations on the arm decimated to a quarter of its faces (1,042 vertices
-    to about 260), the soft ones on the arm itself: the forearm still comes along."""
+    """The stiff iterations on the arm decimated to half its faces (1,042 vertices to 522),
+    twice as many, the soft ones on the arm itself: the forearm still comes along (measured:
+    95th percentile 4.96 edges, 3.57 at full resolution; 13.4 with as many iterations as at
+    full resolution, 13.6 at a quarter of the faces)."""
     monkeypatch.setattr(alignment_module, "COARSE_VERTICES", 0)
     pair = remeshed_frames(frame=5)
     alignment = geometric_anchors(pair.source_vertices, pair.source_faces, pair.target_vertices, pair.target_faces,
-                                  coarse=0.75)
+                                  coarse=0.5)
     aligned, at_anchors = _errors(pair, alignment)
     assert np.percentile(aligned, 95) < 6.0
     assert np.percentile(at_anchors, 95) < 6.0

@@ -204,9 +204,12 @@ class Options(SurfaceSettings):
         Its data weight relative to the Laplacian's mean diagonal: smaller is stiffer, a limb
         moving as a whole.
     alignment_coarse : float
-        When above 0, that alignment's stiff iterations run on each source decimated by this
-        fraction of its faces (0.75: a quarter left), its last soft ones at full resolution
-        (:func:`~fourd.methods.assembly.alignment.geometric_anchors`' ``coarse``).
+        When above 0, that alignment's stiff iterations run on each source of at least
+        :data:`~fourd.methods.assembly.alignment.COARSE_VERTICES` vertices decimated by this
+        fraction of its faces (0.75: a quarter left), twice as many of them, its last soft
+        ones at full resolution
+        (:func:`~fourd.methods.assembly.alignment.geometric_anchors`' ``coarse``); 0: all at
+        full resolution.
     map_agreement : float
         Largest distance (source edges) between a vertex's place by the pair map and by that
         alignment: farther, the two disagree, and the vertex is left to the registration of
@@ -293,7 +296,7 @@ class Options(SurfaceSettings):
     anchor_tolerance: float = 1.5
     alignment_iterations: int = 50
     alignment_weight: float = 0.001
-    alignment_coarse: float = 0.0
+    alignment_coarse: float = 0.75
     map_agreement: float = 2.0
     max_radius: float = 0.2
     flattening: str = "lscm"
