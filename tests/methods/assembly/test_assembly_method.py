@@ -315,11 +315,41 @@ def test_point_cloud_frames_are_meshed_first_and_bad_input_is_named():
 
 @pytest.mark.slow
 def test_merges_of_a_level_run_in_processes_with_the_same_result():
-    seq, _ = _remeshed_sequence(4)
+    seq, _ = _remeshed_sequence(5)
     serial = reconstruct(seq, Options(relax_sweeps=1, workers=1))
     parallel = reconstruct(seq, Options(relax_sweeps=1, workers=2))
     np.testing.assert_array_equal(parallel.vertices, serial.vertices)
     np.testing.assert_array_equal(parallel.observed, serial.observed)
+
+
+@pytest.mark.parametrize("count", [2, 5, 7, 8])
+def test_merges_started_as_their_blocks_are_ready_are_those_of_the_levels(monkeypatch, count):
+    """The scheduler with a pool (threads here) merges the same pairs of the same blocks as
+    level by level: the frames come out in order, one report per merge in merge order."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    from fourd.methods.assembly import hierarchy
+
+    def merge(left, right, options):
+        return (hierarchy.Block(left.faces, np.concatenate([left.vertices, right.vertices]),
+                                np.concatenate([left.observed, right.observed])),
+                (int(left.vertices[0, 0, 0]), int(right.vertices[0, 0, 0])))
+
+    monkeypatch.setattr(hierarchy, "merge_blocks", merge)
+    faces = np.array([[0, 1, 2]])
+    blocks = [hierarchy.Block(faces, np.full((1, 3, 3), float(t)), np.ones((1, 3), dtype=bool))
+              for t in range(count)]
+    serial = hierarchy._merge_as_ready(blocks, Options(), None, 1, None)
+    with ThreadPoolExecutor(2) as pool:
+        parallel = hierarchy._merge_as_ready(blocks, Options(), pool, 2, None)
+    for block, reports in (serial, parallel):
+        assert block.vertices[:, 0, 0].tolist() == list(range(count))
+        # each merge joins the first frames of its two blocks, level by level
+        tree = hierarchy.merge_tree(count)
+        firsts = list(range(count))
+        for a, _ in tree:
+            firsts.append(firsts[a])
+        assert reports == [(firsts[a], firsts[b]) for a, b in tree]
 
 
 def test_a_merge_run_in_this_process_sees_its_own_thread_environment(monkeypatch):

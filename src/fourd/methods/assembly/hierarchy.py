@@ -35,14 +35,16 @@ positions in the right frames are the right block's own, in the left frames plac
 Laplacian coordinates of the union in the target frame, unobserved.
 
 Merges of one level are independent (5.3) and run side by side in processes
-(``Options.workers``; by default one per core for frames big enough to pay for it).
+(``Options.workers``; by default one per core for frames big enough to pay for it), each
+started as soon as its two blocks are there, so a merge of the next level need not wait for
+the whole level.
 """
 
 from __future__ import annotations
 
 import logging
 import multiprocessing
-from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from typing import NamedTuple
 
 import numpy as np
@@ -280,9 +282,60 @@ def _test_replacements(union: _Union, paste: Paste, placed, region, drop, option
     return _keep(union, keep), paste._replace(target=paste.target[kept_new], patch=paste.patch[kept_new]), len(replaced)
 
 
-def _merge_pair(args):
-    left, right, options = args
-    return merge_blocks(left, right, options)
+def merge_tree(count: int) -> list[tuple[int, int]]:
+    """The merges of the hierarchy over ``count`` blocks, level by level: pairs of node ids,
+    ``0 .. count - 1`` the blocks and ``count + k`` the result of the ``k``-th merge (an odd
+    last node waits for the next level).
+
+    >>> merge_tree(5)
+    [(0, 1), (2, 3), (5, 6), (7, 4)]
+    """
+    level, merges = list(range(count)), []
+    while len(level) > 1:
+        following = []
+        for i in range(0, len(level) - 1, 2):
+            merges.append((level[i], level[i + 1]))
+            following.append(count + len(merges) - 1)
+        if len(level) % 2:
+            following.append(level[-1])
+        level = following
+    return merges
+
+
+def _merge_as_ready(blocks: list[Block], options: Options, pool, workers: int, on_merge):
+    """The merges of :func:`merge_tree`, each started in ``pool`` as soon as both its blocks
+    are there, so a level's last merge does not keep the next level waiting; one that is alone
+    (nothing else running or ready), and every one without a pool, runs here, with this
+    process's thread pools. The same merges of the same blocks as level by level. Returns the
+    last block and the reports in merge order."""
+    count = len(blocks)
+    merges = merge_tree(count)
+    ready = dict(enumerate(blocks))
+    waiting = {count + k: pair for k, pair in enumerate(merges)}
+    running, reports = {}, [None] * len(merges)
+    while waiting or running:
+        startable = [node for node, (a, b) in waiting.items() if a in ready and b in ready]
+        if pool is None or (len(startable) == 1 and not running):
+            for node in startable if pool is None else startable[:1]:
+                a, b = waiting.pop(node)
+                ready[node], reports[node - count] = merge_blocks(ready.pop(a), ready.pop(b), options)
+                if on_merge:
+                    on_merge()
+            continue
+        for node in startable:
+            a, b = waiting.pop(node)
+            # the workers start as the jobs are submitted, inheriting pools sized to share the
+            # cores; this process keeps its own environment (numba refuses to compile here once
+            # its threads run if the environment asks another count)
+            with threads_per_worker(workers):
+                running[pool.submit(merge_blocks, ready.pop(a), ready.pop(b), options)] = node
+        done, _ = wait(running, return_when=FIRST_COMPLETED)
+        for future in done:
+            node = running.pop(future)
+            ready[node], reports[node - count] = future.result()
+            if on_merge:
+                on_merge()
+    return ready[count + len(merges) - 1] if merges else blocks[0], reports
 
 
 def assemble(blocks: list[Block], options: Options | None = None, *, on_merge=None) -> tuple[Block, list[MergeReport]]:
@@ -293,8 +346,8 @@ def assemble(blocks: list[Block], options: Options | None = None, *, on_merge=No
     ----------
     blocks : list of Block
     options : Options, optional
-        Its :meth:`~Options.merge_workers` > 1 runs the merges of a level in that many
-        processes.
+        Its :meth:`~Options.merge_workers` > 1 runs the merges in that many processes, each
+        as soon as its two blocks are there.
     on_merge : callable, optional
         Called with no argument after each merge (progress).
 
@@ -308,7 +361,6 @@ def assemble(blocks: list[Block], options: Options | None = None, *, on_merge=No
     options = Options() if options is None else options
     if not blocks:
         raise ValueError("nothing to assemble")
-    reports: list[MergeReport] = []
     blocks = list(blocks)
     # spawned, not forked: a fork after OpenMP (numba, BLAS) has started aborts the child;
     # their thread pools sized to share the cores (fourd.pipeline.worker_threads)
@@ -320,30 +372,8 @@ def assemble(blocks: list[Block], options: Options | None = None, *, on_merge=No
     if workers > 1:
         pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"))
     try:
-        while len(blocks) > 1:
-            jobs = [(blocks[i], blocks[i + 1], options) for i in range(0, len(blocks) - 1, 2)]
-            results = []
-            if pool is not None and len(jobs) > 1:
-                # the workers start as the jobs are submitted, inheriting pools sized to share
-                # the cores; this process keeps its own environment (numba refuses to compile
-                # here once its threads run if the environment asks another count)
-                with threads_per_worker(workers):
-                    merging = pool.map(_merge_pair, jobs)
-                for result in merging:
-                    results.append(result)
-                    if on_merge:
-                        on_merge()
-            else:
-                for job in jobs:
-                    results.append(_merge_pair(job))
-                    if on_merge:
-                        on_merge()
-            merged = [block for block, _ in results]
-            reports += [report for _, report in results]
-            if len(blocks) % 2:
-                merged.append(blocks[-1])
-            blocks = merged
+        block, reports = _merge_as_ready(blocks, options, pool, workers, on_merge)
     finally:
         if pool is not None:
             pool.shutdown()
-    return blocks[0], reports
+    return block, reports
