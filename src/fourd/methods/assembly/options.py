@@ -209,7 +209,8 @@ class Options(SurfaceSettings):
         fraction of its faces (0.75: a quarter left), twice as many of them, its last soft
         ones at full resolution
         (:func:`~fourd.methods.assembly.alignment.geometric_anchors`' ``coarse``); 0: all at
-        full resolution.
+        full resolution. Off: 10% faster and better on crane and dfaust-hopping, worse on the
+        held-out crane-50 (``benchmarks/METHODS.md``).
     map_agreement : float
         Largest distance (source edges) between a vertex's place by the pair map and by that
         alignment: farther, the two disagree, and the vertex is left to the registration of
