@@ -297,7 +297,7 @@ class Options(SurfaceSettings):
     anchor_tolerance: float = 1.5
     alignment_iterations: int = 50
     alignment_weight: float = 0.001
-    alignment_coarse: float = 0.75
+    alignment_coarse: float = 0.0
     map_agreement: float = 2.0
     max_radius: float = 0.2
     flattening: str = "lscm"
