@@ -3,11 +3,13 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from assembly_shapes import remeshed_frames, rigid_copy
 
 from fourd.geometry.normals import vertex_normals
 from fourd.methods.assembly import alignment as alignment_module
 from fourd.methods.assembly.alignment import geometric_anchors, nonrigid_icp
+from fourd.methods.assembly.options import Options
 
 
 def _errors(pair, alignment):
@@ -85,3 +87,10 @@ def test_the_coarse_alignment_brings_a_bent_arm_along(monkeypatch):
     aligned, at_anchors = _errors(pair, alignment)
     assert np.percentile(aligned, 95) < 6.0
     assert np.percentile(at_anchors, 95) < 6.0
+
+
+def test_a_coarse_fraction_outside_zero_to_one_is_refused():
+    for value in (-0.1, 1.0):
+        with pytest.raises(ValueError, match="alignment_coarse"):
+            Options(alignment_coarse=value)
+    assert Options(alignment_coarse=0.5).alignment_coarse == 0.5
