@@ -70,6 +70,6 @@ def decimate(vertices: np.ndarray, faces: np.ndarray, reduction: float) -> Coars
     k = min(CARRY_NEIGHBOURS, len(coarse))
     distance, nearest = cKDTree(coarse).query(vertices, k=k)
     distance, nearest = distance.reshape(len(vertices), k), nearest.reshape(len(vertices), k)
-    weights = 1.0 / np.maximum(distance, 1e-12 * max(float(np.ptp(vertices, axis=0).max()), 1e-300))
+    weights = 1.0 / np.maximum(distance, 1e-300)  # a fine vertex on a coarse one takes its motion
     weights /= weights.sum(axis=1, keepdims=True)
     return Coarse(coarse, coarse_faces, nearest, weights)

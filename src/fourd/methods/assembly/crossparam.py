@@ -99,10 +99,8 @@ def _locate(uv: np.ndarray, faces: np.ndarray, points: np.ndarray):
     """The triangle of ``faces`` over ``uv`` holding each of ``points [P, 2]`` and the
     barycentric coordinates there; ``-1`` for points inside no triangle. Where the layout
     overlaps itself, the triangle a point lies deepest in (largest smallest coordinate)."""
-    triangle, bary = _locate_kernel(np.ascontiguousarray(uv, dtype=np.float64),
-                                    np.ascontiguousarray(faces, dtype=np.int64),
-                                    np.ascontiguousarray(points, dtype=np.float64), INSIDE)
-    return triangle, bary
+    return _locate_kernel(np.ascontiguousarray(uv, dtype=np.float64), np.ascontiguousarray(faces, dtype=np.int64),
+                          np.ascontiguousarray(points, dtype=np.float64), INSIDE)
 
 
 @numba.njit(cache=True, nogil=True)
