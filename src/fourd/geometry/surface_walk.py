@@ -152,84 +152,82 @@ def _walk(vertices, faces, neighbours, normals, face, bary, step, max_crossings,
     """Each point's walk (module docstring), one face at a time: ``face`` and ``bary`` are
     updated in place; returns which points stopped short."""
     stopped = np.zeros(len(face), dtype=np.bool_)
-    here = np.empty(3)
-    there = np.empty(3)
-    change = np.empty(3)
     for p in range(len(face)):
-        f = face[p]
-        sx, sy, sz = step[p, 0], step[p, 1], step[p, 2]
-        along = sx * normals[f, 0] + sy * normals[f, 1] + sz * normals[f, 2]
-        sx, sy, sz = sx - along * normals[f, 0], sy - along * normals[f, 1], sz - along * normals[f, 2]
-        if not sx * sx + sy * sy + sz * sz > 0:
-            continue
-        for crossing in range(max_crossings + 2):
-            if crossing == max_crossings + 1:
-                stopped[p] = True
-                break
-            i0, i1, i2 = faces[f, 0], faces[f, 1], faces[f, 2]
-            e1x, e1y, e1z = vertices[i1, 0] - vertices[i0, 0], vertices[i1, 1] - vertices[i0, 1], vertices[i1, 2] - vertices[i0, 2]
-            e2x, e2y, e2z = vertices[i2, 0] - vertices[i0, 0], vertices[i2, 1] - vertices[i0, 1], vertices[i2, 2] - vertices[i0, 2]
-            # what is left of a step at the rounding level of the face's size is no step (its
-            # barycentric change is all noise, which would spin the point round a vertex)
-            if not sx * sx + sy * sy + sz * sz > tiny * tiny * (e1x * e1x + e1y * e1y + e1z * e1z):
-                break
-            for c in range(3):
-                here[c] = bary[p, c]
-            # the point moved, in the plane of the face, as barycentric coordinates
-            rx = here[1] * e1x + here[2] * e2x + sx
-            ry = here[1] * e1y + here[2] * e2y + sy
-            rz = here[1] * e1z + here[2] * e2z + sz
-            d11 = e1x * e1x + e1y * e1y + e1z * e1z
-            d12 = e1x * e2x + e1y * e2y + e1z * e2z
-            d22 = e2x * e2x + e2y * e2y + e2z * e2z
-            r1 = rx * e1x + ry * e1y + rz * e1z
-            r2 = rx * e2x + ry * e2y + rz * e2z
-            det = d11 * d22 - d12 * d12
-            if not det > 1e-14 * max(d11 * d22, 1e-300):
-                stopped[p] = True
-                break
-            there[1] = (d22 * r1 - d12 * r2) / det
-            there[2] = (d11 * r2 - d12 * r1) / det
-            there[0] = 1.0 - there[1] - there[2]
-            corner = 0
-            t = np.inf
-            for c in range(3):
-                change[c] = there[c] - here[c]
-                if change[c] < 0:
-                    leave = max(here[c], 0.0) / -change[c]
-                    if leave < t:
-                        t, corner = leave, c
-            if t >= 1.0:
-                for c in range(3):
-                    bary[p, c] = there[c]
-                break
-            total = 0.0
-            for c in range(3):
-                value = 0.0 if c == corner else max(here[c] + t * change[c], 0.0)
-                bary[p, c] = value
-                total += value
-            for c in range(3):
-                bary[p, c] /= total
-            new = neighbours[f, corner]
-            if new < 0:
-                stopped[p] = True
-                break
-            # the rest of the step, unfolded about the crossed edge onto the next face
-            a, b = faces[f, (corner + 1) % 3], faces[f, (corner + 2) % 3]
-            ax, ay, az = vertices[b, 0] - vertices[a, 0], vertices[b, 1] - vertices[a, 1], vertices[b, 2] - vertices[a, 2]
-            length = np.sqrt(ax * ax + ay * ay + az * az)
-            ax, ay, az = ax / length, ay / length, az / length
-            rest = 1.0 - t
-            sx, sy, sz = rest * sx, rest * sy, rest * sz
-            ox, oy, oz = normals[f, 1] * az - normals[f, 2] * ay, normals[f, 2] * ax - normals[f, 0] * az, normals[f, 0] * ay - normals[f, 1] * ax
-            nx, ny, nz = normals[new, 1] * az - normals[new, 2] * ay, normals[new, 2] * ax - normals[new, 0] * az, normals[new, 0] * ay - normals[new, 1] * ax
-            forward = sx * ax + sy * ay + sz * az
-            across = sx * ox + sy * oy + sz * oz
-            sx, sy, sz = forward * ax + across * nx, forward * ay + across * ny, forward * az + across * nz
-            weight_a, weight_b = bary[p, (corner + 1) % 3], bary[p, (corner + 2) % 3]
-            for c in range(3):
-                vertex = faces[new, c]
-                bary[p, c] = weight_a if vertex == a else (weight_b if vertex == b else 0.0)
-            f = new
-        face[p] = f
+        face[p], stopped[p] = walk_point(vertices, faces, neighbours, normals, face[p], bary[p],
+                                         step[p, 0], step[p, 1], step[p, 2], max_crossings, tiny)
     return stopped
+
+
+@numba.njit(cache=True, nogil=True)
+def walk_point(vertices, faces, neighbours, normals, f, bary, sx, sy, sz, max_crossings, tiny):
+    """One point's walk from face ``f`` by the step ``(sx, sy, sz)`` (module docstring), for
+    compiled callers: ``bary [3]`` is updated in place; returns the end face and whether the
+    point stopped short."""
+    along = sx * normals[f, 0] + sy * normals[f, 1] + sz * normals[f, 2]
+    sx, sy, sz = sx - along * normals[f, 0], sy - along * normals[f, 1], sz - along * normals[f, 2]
+    if not sx * sx + sy * sy + sz * sz > 0:
+        return f, False
+    for crossing in range(max_crossings + 2):
+        if crossing == max_crossings + 1:
+            return f, True
+        i0, i1, i2 = faces[f, 0], faces[f, 1], faces[f, 2]
+        e1x, e1y, e1z = vertices[i1, 0] - vertices[i0, 0], vertices[i1, 1] - vertices[i0, 1], vertices[i1, 2] - vertices[i0, 2]
+        e2x, e2y, e2z = vertices[i2, 0] - vertices[i0, 0], vertices[i2, 1] - vertices[i0, 1], vertices[i2, 2] - vertices[i0, 2]
+        # what is left of a step at the rounding level of the face's size is no step (its
+        # barycentric change is all noise, which would spin the point round a vertex)
+        if not sx * sx + sy * sy + sz * sz > tiny * tiny * (e1x * e1x + e1y * e1y + e1z * e1z):
+            return f, False
+        h0, h1, h2 = bary[0], bary[1], bary[2]
+        # the point moved, in the plane of the face, as barycentric coordinates
+        rx = h1 * e1x + h2 * e2x + sx
+        ry = h1 * e1y + h2 * e2y + sy
+        rz = h1 * e1z + h2 * e2z + sz
+        d11 = e1x * e1x + e1y * e1y + e1z * e1z
+        d12 = e1x * e2x + e1y * e2y + e1z * e2z
+        d22 = e2x * e2x + e2y * e2y + e2z * e2z
+        r1 = rx * e1x + ry * e1y + rz * e1z
+        r2 = rx * e2x + ry * e2y + rz * e2z
+        det = d11 * d22 - d12 * d12
+        if not det > 1e-14 * max(d11 * d22, 1e-300):
+            return f, True
+        t1 = (d22 * r1 - d12 * r2) / det
+        t2 = (d11 * r2 - d12 * r1) / det
+        t0 = 1.0 - t1 - t2
+        c0, c1, c2 = t0 - h0, t1 - h1, t2 - h2
+        corner = 0
+        t = np.inf
+        if c0 < 0:
+            t, corner = max(h0, 0.0) / -c0, 0
+        if c1 < 0 and max(h1, 0.0) / -c1 < t:
+            t, corner = max(h1, 0.0) / -c1, 1
+        if c2 < 0 and max(h2, 0.0) / -c2 < t:
+            t, corner = max(h2, 0.0) / -c2, 2
+        if t >= 1.0:
+            bary[0], bary[1], bary[2] = t0, t1, t2
+            return f, False
+        b0 = 0.0 if corner == 0 else max(h0 + t * c0, 0.0)
+        b1 = 0.0 if corner == 1 else max(h1 + t * c1, 0.0)
+        b2 = 0.0 if corner == 2 else max(h2 + t * c2, 0.0)
+        total = b0 + b1 + b2
+        bary[0], bary[1], bary[2] = b0 / total, b1 / total, b2 / total
+        new = neighbours[f, corner]
+        if new < 0:
+            return f, True
+        # the rest of the step, unfolded about the crossed edge onto the next face
+        a, b = faces[f, (corner + 1) % 3], faces[f, (corner + 2) % 3]
+        ax, ay, az = vertices[b, 0] - vertices[a, 0], vertices[b, 1] - vertices[a, 1], vertices[b, 2] - vertices[a, 2]
+        length = np.sqrt(ax * ax + ay * ay + az * az)
+        ax, ay, az = ax / length, ay / length, az / length
+        rest = 1.0 - t
+        sx, sy, sz = rest * sx, rest * sy, rest * sz
+        ox, oy, oz = normals[f, 1] * az - normals[f, 2] * ay, normals[f, 2] * ax - normals[f, 0] * az, normals[f, 0] * ay - normals[f, 1] * ax
+        nx, ny, nz = normals[new, 1] * az - normals[new, 2] * ay, normals[new, 2] * ax - normals[new, 0] * az, normals[new, 0] * ay - normals[new, 1] * ax
+        forward = sx * ax + sy * ay + sz * az
+        across = sx * ox + sy * oy + sz * oz
+        sx, sy, sz = forward * ax + across * nx, forward * ay + across * ny, forward * az + across * nz
+        weight_a, weight_b = bary[(corner + 1) % 3], bary[(corner + 2) % 3]
+        for c in range(3):
+            vertex = faces[new, c]
+            bary[c] = weight_a if vertex == a else (weight_b if vertex == b else 0.0)
+        f = new
+    return f, True

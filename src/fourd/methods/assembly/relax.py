@@ -57,13 +57,15 @@ import scipy.sparse as sp
 from fourd.geometry.laplacian import cotangent_laplacian, uniform_laplacian
 from fourd.geometry.meshes import median_edge_length, mesh_arrays, vertex_adjacency
 from fourd.geometry.rotations import one_ring_rotations
-from fourd.geometry.surface_walk import face_neighbours, face_unit_normals, walk_on_surface
+from fourd.geometry.surface_walk import TINY_STEP, face_neighbours, face_unit_normals, walk_point
 from fourd.methods.assembly.options import RelaxOptions
 
 log = logging.getLogger("fourd.methods.assembly.relax")
 
 #: Error levels (quantiles) of the visiting order within a sweep.
 ORDER_LEVELS = 4
+#: Edges a walk may cross (:func:`fourd.geometry.surface_walk.walk_on_surface`'s default).
+MAX_CROSSINGS = 64
 
 
 class RelaxedMap(NamedTuple):
@@ -192,118 +194,144 @@ def _energy(problem: _Problem, source_vertices: np.ndarray, points: np.ndarray) 
     return float(np.sum(_residual(problem, points, _goals(problem, source_vertices, points)) ** 2))
 
 
-def _ring_flips(problem: _Problem, batch, points, faces, candidate_points, candidate_faces) -> np.ndarray:
-    """Flipped triangles around each batch vertex ``[B, K]`` with the vertex at each of its
-    ``K`` candidate points (target triangles ``candidate_faces [B, K]``)."""
-    return _count_ring_flips(problem.incident, problem.face_ok, problem.source_faces, problem.target_normals,
-                             np.asarray(batch, dtype=np.int64), points, faces,
-                             np.ascontiguousarray(candidate_points, dtype=np.float64),
-                             np.ascontiguousarray(candidate_faces, dtype=np.int64))
+@numba.njit(cache=True, nogil=True)
+def _vertex_flips(incident, face_ok, source_faces, target_normals, points, faces, vertex, px, py, pz, face):
+    """Flipped triangles around ``vertex`` with it at the point ``(px, py, pz)`` in target
+    triangle ``face``: a triangle counts when every corner is mapped; it is flipped when the
+    normal of its mapped corners does not point along the sum of the target normals at them."""
+    flips = 0
+    for d in range(incident.shape[1]):
+        triangle = incident[vertex, d]
+        if triangle < 0 or not face_ok[triangle]:
+            continue
+        moved = 0
+        while source_faces[triangle, moved] != vertex:
+            moved += 1
+        one, two = source_faces[triangle, (moved + 1) % 3], source_faces[triangle, (moved + 2) % 3]
+        nx = target_normals[face, 0] + target_normals[faces[one], 0] + target_normals[faces[two], 0]
+        ny = target_normals[face, 1] + target_normals[faces[one], 1] + target_normals[faces[two], 1]
+        nz = target_normals[face, 2] + target_normals[faces[one], 2] + target_normals[faces[two], 2]
+        # the corners in the triangle's order from the moved one: the same orientation
+        ax, ay, az = points[one, 0] - px, points[one, 1] - py, points[one, 2] - pz
+        bx, by, bz = points[two, 0] - px, points[two, 1] - py, points[two, 2] - pz
+        dot = (ay * bz - az * by) * nx + (az * bx - ax * bz) * ny + (ax * by - ay * bx) * nz
+        if not dot > 0:
+            flips += 1
+    return flips
 
 
 @numba.njit(cache=True, nogil=True)
-def _count_ring_flips(incident, face_ok, source_faces, target_normals, batch, points, faces, candidate_points,
-                      candidate_faces):
-    """:func:`_ring_flips`: a triangle counts when every corner is mapped; it is flipped when
-    the normal of its mapped corners does not point along the sum of the target normals at
-    them (the moved vertex's taken at its candidate)."""
-    count, tries = candidate_faces.shape
-    flips = np.zeros((count, tries), dtype=np.int64)
-    corners = np.empty((3, 3))
-    normals = np.empty((3, 3))
-    for b in range(count):
+def _step(batch, goal, faces, bary, points, target_vertices, target_faces, target_normals, target_neighbours,
+          incident, face_ok, source_faces, angle, reach, moved):
+    """One step of :func:`_move` for every batch vertex (in place): the tangent step towards
+    its ``goal [B, 3]``, then ``W`` random directions (``angle [B, W]`` in the target face's
+    frame; the first half walked to the point nearest the goal, the rest by ``reach [B, W]``);
+    the end with the fewest flipped triangles, then the lowest energy, is taken if it flips
+    fewer than now or lowers the energy."""
+    walks = angle.shape[1]
+    half = walks // 2
+    tries = walks + 1
+    end_bary = np.empty((tries, 3))
+    end_face = np.empty(tries, dtype=np.int64)
+    end_point = np.empty((tries, 3))
+    for b in range(len(batch)):
         vertex = batch[b]
-        for d in range(incident.shape[1]):
-            triangle = incident[vertex, d]
-            if triangle < 0 or not face_ok[triangle]:
-                continue
-            moved = 0
-            for c in range(3):  # the fixed corners once; the moved one per candidate below
-                corner = source_faces[triangle, c]
-                if corner == vertex:
-                    moved = c
-                    continue
-                for x in range(3):
-                    corners[c, x] = points[corner, x]
-                    normals[c, x] = target_normals[faces[corner], x]
-            for k in range(tries):
-                face = candidate_faces[b, k]
-                for x in range(3):
-                    corners[moved, x] = candidate_points[b, k, x]
-                    normals[moved, x] = target_normals[face, x]
-                nx = normals[0, 0] + normals[1, 0] + normals[2, 0]
-                ny = normals[0, 1] + normals[1, 1] + normals[2, 1]
-                nz = normals[0, 2] + normals[1, 2] + normals[2, 2]
-                ax, ay, az = corners[1, 0] - corners[0, 0], corners[1, 1] - corners[0, 1], corners[1, 2] - corners[0, 2]
-                bx, by, bz = corners[2, 0] - corners[0, 0], corners[2, 1] - corners[0, 1], corners[2, 2] - corners[0, 2]
-                dot = (ay * bz - az * by) * nx + (az * bx - ax * bz) * ny + (ax * by - ay * bx) * nz
-                if not dot > 0:
-                    flips[b, k] += 1
-    return flips
+        f = faces[vertex]
+        hx, hy, hz = points[vertex, 0], points[vertex, 1], points[vertex, 2]
+        gx, gy, gz = goal[b, 0], goal[b, 1], goal[b, 2]
+        nx, ny, nz = target_normals[f, 0], target_normals[f, 1], target_normals[f, 2]
+        tx, ty, tz = gx - hx, gy - hy, gz - hz
+        along = tx * nx + ty * ny + tz * nz
+        tx, ty, tz = tx - along * nx, ty - along * ny, tz - along * nz
+        i0, i1 = target_faces[f, 0], target_faces[f, 1]
+        fx = target_vertices[i1, 0] - target_vertices[i0, 0]
+        fy = target_vertices[i1, 1] - target_vertices[i0, 1]
+        fz = target_vertices[i1, 2] - target_vertices[i0, 2]
+        length = np.sqrt(fx * fx + fy * fy + fz * fz)
+        fx, fy, fz = fx / length, fy / length, fz / length
+        sx, sy, sz = ny * fz - nz * fy, nz * fx - nx * fz, nx * fy - ny * fx
+        b0, b1, b2 = max(bary[vertex, 0], 0.0), max(bary[vertex, 1], 0.0), max(bary[vertex, 2], 0.0)
+        total = b0 + b1 + b2
+        now = (hx - gx) ** 2 + (hy - gy) ** 2 + (hz - gz) ** 2
+        fewest, best, best_gain = 1 << 62, -1, np.inf
+        for k in range(tries):
+            if k == 0:
+                dx, dy, dz = tx, ty, tz
+            else:
+                c, s = np.cos(angle[b, k - 1]), np.sin(angle[b, k - 1])
+                ux, uy, uz = c * fx + s * sx, c * fy + s * sy, c * fz + s * sz
+                step = ux * tx + uy * ty + uz * tz if k - 1 < half else reach[b, k - 1]
+                dx, dy, dz = step * ux, step * uy, step * uz
+            end_bary[k, 0], end_bary[k, 1], end_bary[k, 2] = b0 / total, b1 / total, b2 / total
+            face, _ = walk_point(target_vertices, target_faces, target_neighbours, target_normals, f, end_bary[k],
+                                 dx, dy, dz, MAX_CROSSINGS, TINY_STEP)
+            e0, e1, e2 = max(end_bary[k, 0], 0.0), max(end_bary[k, 1], 0.0), max(end_bary[k, 2], 0.0)
+            e = e0 + e1 + e2
+            end_bary[k, 0], end_bary[k, 1], end_bary[k, 2] = e0 / e, e1 / e, e2 / e
+            end_face[k] = face
+            for x in range(3):
+                end_point[k, x] = (end_bary[k, 0] * target_vertices[target_faces[face, 0], x]
+                                   + end_bary[k, 1] * target_vertices[target_faces[face, 1], x]
+                                   + end_bary[k, 2] * target_vertices[target_faces[face, 2], x])
+            gain = (end_point[k, 0] - gx) ** 2 + (end_point[k, 1] - gy) ** 2 + (end_point[k, 2] - gz) ** 2 - now
+            flips = _vertex_flips(incident, face_ok, source_faces, target_normals, points, faces, vertex,
+                                  end_point[k, 0], end_point[k, 1], end_point[k, 2], face)
+            if flips < fewest or (flips == fewest and gain < best_gain):
+                fewest, best, best_gain = flips, k, gain
+        flips_now = _vertex_flips(incident, face_ok, source_faces, target_normals, points, faces, vertex,
+                                  hx, hy, hz, f)
+        if best >= 0 and (fewest < flips_now or (fewest == flips_now and best_gain < 0)):
+            faces[vertex] = end_face[best]
+            for x in range(3):
+                bary[vertex, x] = end_bary[best, x]
+                points[vertex, x] = end_point[best, x]
+            moved[b] = True
 
 
 def _move(problem, batch, faces, bary, points, residual, rng, options: RelaxOptions) -> int:
     """Move the batch's vertices (in place); returns how many moved."""
     start = points[batch].copy()
     pull = problem.rows[:, batch].T @ residual
-    goal = start - pull / problem.weight[batch, None]  # q_i
+    goal = np.ascontiguousarray(start - pull / problem.weight[batch, None])  # q_i
     moved = np.zeros(len(batch), dtype=bool)
-    tv, tf = problem.target_vertices, problem.target_faces
     for _ in range(options.steps):
-        here, face = points[batch], faces[batch]
-        normal = problem.target_normals[face]
-        towards = goal - here
-        towards -= np.einsum("bd,bd->b", towards, normal)[:, None] * normal
-        first = tv[tf[face, 1]] - tv[tf[face, 0]]
-        first /= np.linalg.norm(first, axis=1, keepdims=True)
-        second = np.cross(normal, first)
         angle = rng.uniform(0.0, 2.0 * np.pi, size=(len(batch), options.walks))
-        direction = np.cos(angle)[..., None] * first[:, None] + np.sin(angle)[..., None] * second[:, None]
-        length = np.einsum("bkd,bd->bk", direction, towards)
-        # the other half walk a random length: the way out of a flip may cost energy
-        wander = np.arange(options.walks) >= options.walks // 2
-        reach = problem.scale * 10.0 ** rng.uniform(-2.0, 0.0, size=length.shape)
-        length = np.where(wander, reach, length)
-        steps = np.concatenate([towards[:, None], length[..., None] * direction], axis=1)  # [B, K, 3]
-        tries = steps.shape[1]
-        walked = walk_on_surface(tv, tf, np.repeat(face, tries), np.repeat(bary[batch], tries, axis=0),
-                                 steps.reshape(-1, 3), neighbours=problem.target_neighbours,
-                                 normals=problem.target_normals)
-        end = walked.points.reshape(len(batch), tries, 3)
-        end_face = walked.faces.reshape(len(batch), tries)
-        gain = np.sum((end - goal[:, None]) ** 2, axis=2) - np.sum((here - goal) ** 2, axis=1)[:, None]
-        flips = _ring_flips(problem, batch, points, faces, end, end_face)
-        flips_now = _ring_flips(problem, batch, points, faces, here[:, None], face[:, None])[:, 0]
-        fewest = flips.min(axis=1)
-        best = np.argmin(np.where(flips == fewest[:, None], gain, np.inf), axis=1)
-        rows = np.arange(len(batch))
-        take = (fewest < flips_now) | ((fewest == flips_now) & (gain[rows, best] < 0))
-        chosen = rows[take] * tries + best[take]
-        faces[batch[take]] = walked.faces[chosen]
-        bary[batch[take]] = walked.barycentric[chosen]
-        points[batch[take]] = walked.points[chosen]
-        moved |= take
+        # the second half walk a random length: the way out of a flip may cost energy
+        reach = problem.scale * 10.0 ** rng.uniform(-2.0, 0.0, size=angle.shape)
+        _step(batch, goal, faces, bary, points, problem.target_vertices, problem.target_faces, problem.target_normals,
+              problem.target_neighbours, problem.incident, problem.face_ok, problem.source_faces, angle, reach, moved)
     residual += problem.rows[:, batch] @ (points[batch] - start)
     return int(moved.sum())
 
 
-def _batches(near: sp.csr_matrix, error: np.ndarray, movable: np.ndarray, rng):
+def _batches(near: sp.csr_matrix, error: np.ndarray, movable: np.ndarray, rng) -> list[np.ndarray]:
     """Independent sets of ``near`` covering ``movable``, higher error levels first
-    (Jones-Plassmann; module docstring)."""
+    (Jones-Plassmann; module docstring), each in increasing vertex order."""
     levels = np.zeros(len(error))
     if movable.any():
         edges = np.quantile(error[movable], np.linspace(0.0, 1.0, ORDER_LEVELS + 1)[1:-1])
         levels = np.searchsorted(edges, error, side="right").astype(np.float64)
     key = levels + rng.random(len(error)) * 0.5  # random ties within a level
-    remaining = movable.copy()
-    filled = np.diff(near.indptr) > 0
-    while remaining.any():
-        current = np.where(remaining, key, -1.0)
-        highest = np.full(len(error), -1.0)
-        highest[filled] = np.maximum.reduceat(current[near.indices], near.indptr[:-1][filled])
-        batch = np.flatnonzero(remaining & (current > highest))
-        remaining[batch] = False
-        yield batch
+    candidates = np.flatnonzero(movable)
+    rounds = _selection_rounds(near.indptr, near.indices, key, movable, candidates[np.argsort(-key[candidates])])
+    order = candidates[np.argsort(rounds[candidates], kind="stable")]
+    return np.split(order, np.flatnonzero(np.diff(rounds[order])) + 1) if len(order) else []
+
+
+@numba.njit(cache=True, nogil=True)
+def _selection_rounds(indptr, indices, key, movable, descending):
+    """The Jones-Plassmann round of each movable vertex ``[N]``: a vertex is selected in the
+    round after the last of its movable neighbours with a higher key (``descending``: the
+    movable vertices by decreasing key), so round 0 holds the local maxima."""
+    rounds = np.zeros(len(key), dtype=np.int64)
+    for vertex in descending:
+        highest = -1
+        for slot in range(indptr[vertex], indptr[vertex + 1]):
+            other = indices[slot]
+            if movable[other] and key[other] > key[vertex] and rounds[other] > highest:
+                highest = rounds[other]
+        rounds[vertex] = highest + 1
+    return rounds
 
 
 def relax_map(
