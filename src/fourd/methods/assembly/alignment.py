@@ -62,6 +62,10 @@ COARSE_VERTICES = 8000
 #: The coarse alignment's stiff iterations, per stiff iteration asked for.
 COARSE_ITERATIONS = 2
 
+#: Stiff iterations in a row that must move no vertex farther than ``settle`` (99th percentile)
+#: before the rest of them are skipped (:func:`nonrigid_icp`).
+SETTLED_ITERATIONS = 3
+
 
 class Alignment(NamedTuple):
     """The result of :func:`geometric_anchors`.
@@ -169,6 +173,7 @@ def nonrigid_icp(
     refine_iterations: int = 3,
     refine_weight: float = 0.03,
     point_to_point: float = 0.05,
+    settle: float = 0.0,
     tree: cKDTree | None = None,
 ) -> np.ndarray:
     """The source ``[N, 3]`` (mesh ``faces``) registered onto the target's vertices ``[M, 3]``
@@ -187,7 +192,10 @@ def nonrigid_icp(
     ``w`` relative to the Laplacian's mean diagonal: small, so a limb moves as a whole. Then
     ``refine_iterations`` at ``end_radius`` with the softer ``refine_weight`` follow what did
     not move rigidly. Measured in ``benchmarks/METHODS.md`` ("Where the 20-frame crane drifts"
-    and "Where dfaust-hopping drifts"). ``tree``: the target's k-d tree, when the caller has it.
+    and "Where dfaust-hopping drifts"). ``settle`` (source edges; 0: never): once
+    :data:`SETTLED_ITERATIONS` stiff iterations in a row moved 99% of the vertices less than
+    this, the template has come to rest and the refining iterations follow at once. ``tree``:
+    the target's k-d tree, when the caller has it.
     """
     count = len(source)
     laplacian = uniform_laplacian(count, faces).tocsr()
@@ -202,7 +210,10 @@ def nonrigid_icp(
     schedule += [(end_radius, refine_weight, False)] * refine_iterations
     x = np.array(start, dtype=np.float64)
     shape = (3 * count, 3 * count)
-    for radius, relative, relax in schedule:
+    resting = 0
+    for index, (radius, relative, relax) in enumerate(schedule):
+        if index < iterations and resting >= SETTLED_ITERATIONS:
+            continue
         w = relative * scale
         if w not in factors:
             factors[w] = splu((laplacian + w * sp.identity(count)).tocsc(), permc_spec="MMD_AT_PLUS_A",
@@ -223,12 +234,17 @@ def nonrigid_icp(
         update, _ = cg(LinearOperator(shape, matvec=apply, dtype=np.float64), residual, rtol=CG_TOLERANCE,
                        maxiter=100, M=LinearOperator(shape, matvec=lambda v, solve=solve: solve(v.reshape(count, 3)).ravel(),
                                                      dtype=np.float64))
-        step = x + update.reshape(count, 3)
+        update = update.reshape(count, 3)
+        step = x + update
         x = step + relaxation * (step - x) if relax else step
+        if settle > 0.0:
+            moved = np.percentile(np.einsum("ij,ij->i", update, update), 99.0)
+            resting = resting + 1 if moved < (settle * edge) ** 2 else 0
     return x
 
 
-def _coarse_then_fine(source, faces, target, target_normals, rigid, tree, edge, reduction, *, iterations, weight):
+def _coarse_then_fine(source, faces, target, target_normals, rigid, tree, edge, reduction, *, iterations, weight,
+                      settle=0.0):
     """:func:`nonrigid_icp`'s stiff iterations on the decimated source, its soft ones on the
     source itself, from the rigidly aligned ``rigid`` (:func:`geometric_anchors`' ``coarse``)."""
     coarse = decimate(source, faces, reduction)
@@ -243,7 +259,7 @@ def _coarse_then_fine(source, faces, target, target_normals, rigid, tree, edge, 
     moved = nonrigid_icp(coarse.vertices, coarse.faces, target, target_normals, start,
                          iterations=COARSE_ITERATIONS * iterations,
                          weight=weight / ratio**2, start_radius=START_RADIUS * ratio, end_radius=END_RADIUS * ratio,
-                         refine_iterations=0, tree=tree)
+                         refine_iterations=0, settle=settle * ratio, tree=tree)
     # the non-rigid part only: inverse-distance weights reproduce a translation, not a turn
     followed = rigid + coarse.carry(moved - start + coarse.vertices)
     return nonrigid_icp(source, faces, target, target_normals, followed, iterations=0, tree=tree)
@@ -262,6 +278,7 @@ def geometric_anchors(
     iterations: int = 50,
     weight: float = 0.001,
     coarse: float = 0.0,
+    settle: float = 0.0,
     seed: int = 0,
 ) -> Alignment:
     """Anchors from the source to the target by a coarse non-rigid alignment (module docstring).
@@ -293,6 +310,8 @@ def geometric_anchors(
         many, the search radii kept in the source's own edges and the data weight scaled by
         the squared edge ratio; the fine source follows the coarse one's non-rigid
         displacements, then takes the soft iterations itself.
+    settle : float
+        :func:`nonrigid_icp`'s ``settle`` (source edges; 0: every stiff iteration runs).
     seed : int
         Seed of the anchors' spreading.
 
@@ -309,10 +328,10 @@ def geometric_anchors(
     aligned = rigid_icp(source, source_normals, target, target_normals, iterations=rigid_iterations, tree=tree)
     if coarse > 0.0 and len(source) >= COARSE_VERTICES:
         aligned = _coarse_then_fine(source, sfaces, target, target_normals, aligned, tree, edge, coarse,
-                                    iterations=iterations, weight=weight)
+                                    iterations=iterations, weight=weight, settle=settle)
     else:
         aligned = nonrigid_icp(source, sfaces, target, target_normals, aligned, iterations=iterations, weight=weight,
-                               tree=tree)
+                               settle=settle, tree=tree)
 
     # anchors: near candidates, oversampled, checked, then spread to the final density
     normals = vertex_normals(aligned, sfaces)

@@ -145,7 +145,7 @@ def merge_blocks(left: Block, right: Block, options: Options | None = None) -> t
         source, faces, target, target_faces,
         spacing=options.anchor_spacing, gap=options.anchor_gap, tolerance=options.anchor_tolerance,
         iterations=options.alignment_iterations, weight=options.alignment_weight,
-        coarse=options.alignment_coarse, seed=options.seed,
+        coarse=options.alignment_coarse, settle=options.alignment_settle, seed=options.seed,
     )
     count = len(source)
     if len(alignment.anchors.source) >= 3:

@@ -211,6 +211,11 @@ class Options(SurfaceSettings):
         (:func:`~fourd.methods.assembly.alignment.geometric_anchors`' ``coarse``); 0: all at
         full resolution. Off: 10% faster and better on crane and dfaust-hopping, worse on the
         held-out crane-50 (``benchmarks/METHODS.md``).
+    alignment_settle : float
+        That alignment's stiff iterations end early once three in a row moved 99% of the
+        vertices less than this (source edges): the template has come to rest, and the
+        refining iterations follow (:func:`~fourd.methods.assembly.alignment.nonrigid_icp`'s
+        ``settle``); 0: all of them run.
     map_agreement : float
         Largest distance (source edges) between a vertex's place by the pair map and by that
         alignment: farther, the two disagree, and the vertex is left to the registration of
@@ -298,6 +303,7 @@ class Options(SurfaceSettings):
     alignment_iterations: int = 50
     alignment_weight: float = 0.001
     alignment_coarse: float = 0.0
+    alignment_settle: float = 0.0
     map_agreement: float = 2.0
     max_radius: float = 0.2
     flattening: str = "lscm"
@@ -324,6 +330,8 @@ class Options(SurfaceSettings):
             value = getattr(self, name)
             if not (np.isfinite(value) and value > 0):
                 raise ValueError(f"{name} must be positive, got {value!r}")
+        if not (np.isfinite(self.alignment_settle) and self.alignment_settle >= 0.0):
+            raise ValueError(f"alignment_settle must be non-negative, got {self.alignment_settle!r}")
         if not 0.0 <= self.alignment_coarse < 1.0:
             raise ValueError(f"alignment_coarse must lie in [0, 1), got {self.alignment_coarse!r}")
         for name in ("alignment_iterations", "relax_sweeps", "registration_iterations"):
