@@ -209,6 +209,8 @@ def walk_point(vertices, faces, neighbours, normals, f, bary, sx, sy, sz, max_cr
         b1 = 0.0 if corner == 1 else max(h1 + t * c1, 0.0)
         b2 = 0.0 if corner == 2 else max(h2 + t * c2, 0.0)
         total = b0 + b1 + b2
+        if not total > 0:  # a degenerate face
+            return f, True
         bary[0], bary[1], bary[2] = b0 / total, b1 / total, b2 / total
         new = neighbours[f, corner]
         if new < 0:
@@ -217,6 +219,8 @@ def walk_point(vertices, faces, neighbours, normals, f, bary, sx, sy, sz, max_cr
         a, b = faces[f, (corner + 1) % 3], faces[f, (corner + 2) % 3]
         ax, ay, az = vertices[b, 0] - vertices[a, 0], vertices[b, 1] - vertices[a, 1], vertices[b, 2] - vertices[a, 2]
         length = np.sqrt(ax * ax + ay * ay + az * az)
+        if not length > 0:  # a collapsed edge
+            return f, True
         ax, ay, az = ax / length, ay / length, az / length
         rest = 1.0 - t
         sx, sy, sz = rest * sx, rest * sy, rest * sz

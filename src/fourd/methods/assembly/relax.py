@@ -248,10 +248,12 @@ def _step(batch, goal, faces, bary, points, target_vertices, target_faces, targe
         fy = target_vertices[i1, 1] - target_vertices[i0, 1]
         fz = target_vertices[i1, 2] - target_vertices[i0, 2]
         length = np.sqrt(fx * fx + fy * fy + fz * fz)
-        fx, fy, fz = fx / length, fy / length, fz / length
-        sx, sy, sz = ny * fz - nz * fy, nz * fx - nx * fz, nx * fy - ny * fx
         b0, b1, b2 = max(bary[vertex, 0], 0.0), max(bary[vertex, 1], 0.0), max(bary[vertex, 2], 0.0)
         total = b0 + b1 + b2
+        if not (length > 0 and total > 0):  # a degenerate triangle gives no tangent frame
+            continue
+        fx, fy, fz = fx / length, fy / length, fz / length
+        sx, sy, sz = ny * fz - nz * fy, nz * fx - nx * fz, nx * fy - ny * fx
         now = (hx - gx) ** 2 + (hy - gy) ** 2 + (hz - gz) ** 2
         fewest, best, best_gain = 1 << 62, -1, np.inf
         for k in range(tries):
@@ -267,6 +269,8 @@ def _step(batch, goal, faces, bary, points, target_vertices, target_faces, targe
                                  dx, dy, dz, MAX_CROSSINGS, TINY_STEP)
             e0, e1, e2 = max(end_bary[k, 0], 0.0), max(end_bary[k, 1], 0.0), max(end_bary[k, 2], 0.0)
             e = e0 + e1 + e2
+            if not e > 0:
+                continue
             end_bary[k, 0], end_bary[k, 1], end_bary[k, 2] = e0 / e, e1 / e, e2 / e
             end_face[k] = face
             for x in range(3):
