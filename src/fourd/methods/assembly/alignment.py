@@ -62,8 +62,8 @@ COARSE_VERTICES = 8000
 #: The coarse alignment's stiff iterations, per stiff iteration asked for.
 COARSE_ITERATIONS = 2
 
-#: Stiff iterations in a row that must move no vertex farther than ``settle`` (99th percentile)
-#: before the rest of them are skipped (:func:`nonrigid_icp`).
+#: Stiff iterations in a row that must move 99% of the vertices less than ``settle`` before
+#: the schedule skips to its last this many stiff iterations (:func:`nonrigid_icp`).
 SETTLED_ITERATIONS = 3
 
 
@@ -194,7 +194,9 @@ def nonrigid_icp(
     not move rigidly. Measured in ``benchmarks/METHODS.md`` ("Where the 20-frame crane drifts"
     and "Where dfaust-hopping drifts"). ``settle`` (source edges; 0: never): once
     :data:`SETTLED_ITERATIONS` stiff iterations in a row moved 99% of the vertices less than
-    this, the template has come to rest and the refining iterations follow at once. ``tree``:
+    this, the template has come to rest, and the schedule goes on with its last
+    :data:`SETTLED_ITERATIONS` stiff iterations (the smallest radii: pairs that only a large
+    radius finds, across a gap that opened, let go there) and the refining ones. ``tree``:
     the target's k-d tree, when the caller has it.
     """
     count = len(source)
@@ -212,7 +214,7 @@ def nonrigid_icp(
     shape = (3 * count, 3 * count)
     resting = 0
     for index, (radius, relative, relax) in enumerate(schedule):
-        if index < iterations and resting >= SETTLED_ITERATIONS:
+        if index < iterations - SETTLED_ITERATIONS and resting >= SETTLED_ITERATIONS:
             continue
         w = relative * scale
         if w not in factors:
