@@ -193,8 +193,8 @@ def nonrigid_icp(
     ``refine_iterations`` at ``end_radius`` with the softer ``refine_weight`` follow what did
     not move rigidly. Measured in ``benchmarks/METHODS.md`` ("Where the 20-frame crane drifts"
     and "Where dfaust-hopping drifts"). ``settle`` (source edges; 0: never): once
-    :data:`SETTLED_ITERATIONS` stiff iterations in a row moved 99% of the vertices less than
-    this, the template has come to rest, and the schedule goes on with its last
+    :data:`SETTLED_ITERATIONS` stiff iterations in a row solved a step (before the
+    over-relaxation) of less than this for 99% of the vertices, the template has come to rest, and the schedule goes on with its last
     :data:`SETTLED_ITERATIONS` stiff iterations (the smallest radii: pairs that only a large
     radius finds, across a gap that opened, let go there) and the refining ones. ``tree``:
     the target's k-d tree, when the caller has it.

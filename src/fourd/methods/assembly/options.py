@@ -215,9 +215,9 @@ class Options(SurfaceSettings):
         That alignment's stiff schedule skips to its last three iterations once three in a
         row moved 99% of the vertices less than this (source edges): the template has come to
         rest (:func:`~fourd.methods.assembly.alignment.nonrigid_icp`'s ``settle``); 0: all
-        of them run. 0.02: crane 12% and dfaust-hopping 22% faster,
-        dfaust's correspondence better, crane's and the held-out crane-50's a few percent
-        worse (``benchmarks/METHODS.md``).
+        of them run. 0.02: crane 15% and dfaust-hopping 26% faster, dfaust's correspondence
+        6% better, crane's and the held-out crane stretches' 1-4% worse
+        (``benchmarks/METHODS.md``).
     map_agreement : float
         Largest distance (source edges) between a vertex's place by the pair map and by that
         alignment: farther, the two disagree, and the vertex is left to the registration of
