@@ -81,12 +81,16 @@ def test_the_coarse_alignment_brings_a_bent_arm_along(monkeypatch):
     95th percentile 4.96 edges, 3.57 at full resolution; 13.4 with as many iterations as at
     full resolution, 13.6 at a quarter of the faces)."""
     monkeypatch.setattr(alignment_module, "COARSE_VERTICES", 0)
-    pair = remeshed_frames(frame=5)
-    alignment = geometric_anchors(pair.source_vertices, pair.source_faces, pair.target_vertices, pair.target_faces,
-                                  coarse=0.5)
-    aligned, at_anchors = _errors(pair, alignment)
+    aligned, at_anchors = _bent_arm_errors(coarse=0.5)
     assert np.percentile(aligned, 95) < 6.0
     assert np.percentile(at_anchors, 95) < 6.0
+
+
+def _bent_arm_errors(**settings):
+    """:func:`_errors` of bending-arm frames 0 and 5, remeshed apart, aligned with ``settings``."""
+    pair = remeshed_frames(frame=5)
+    return _errors(pair, geometric_anchors(pair.source_vertices, pair.source_faces, pair.target_vertices,
+                                           pair.target_faces, **settings))
 
 
 def _counting_solves(monkeypatch):
@@ -103,8 +107,9 @@ def _counting_solves(monkeypatch):
 
 def test_a_settled_alignment_stops_early_and_lands_where_the_full_schedule_does(monkeypatch):
     """bending-arm frames 0 and 1, remeshed apart: the template comes to rest within a few
-    iterations; with ``settle`` the rest of the stiff schedule is skipped and the aligned
-    vertices stay within a tenth of an edge of the full schedule's."""
+    iterations; with ``settle`` the schedule skips to its last three stiff iterations and the
+    aligned vertices stay within a tenth of an edge of the full schedule's (measured: 11 solves
+    against 53, 95th percentile 0.039 edges apart)."""
     pair = remeshed_frames(frame=1)
     calls = _counting_solves(monkeypatch)
     full = geometric_anchors(pair.source_vertices, pair.source_faces, pair.target_vertices, pair.target_faces)
@@ -119,11 +124,9 @@ def test_a_settled_alignment_stops_early_and_lands_where_the_full_schedule_does(
 
 def test_a_settled_alignment_still_brings_a_bent_arm_along():
     """The forearm's swing keeps the template moving, so ``settle`` leaves the schedule whole
-    until it has come along (95th percentile within 6 edges, as without it)."""
-    pair = remeshed_frames(frame=5)
-    alignment = geometric_anchors(pair.source_vertices, pair.source_faces, pair.target_vertices, pair.target_faces,
-                                  settle=0.02)
-    aligned, at_anchors = _errors(pair, alignment)
+    until it has come along (measured: all 53 solves, 95th percentile 3.57 edges, the same as
+    without it)."""
+    aligned, at_anchors = _bent_arm_errors(settle=0.02)
     assert np.percentile(aligned, 95) < 6.0
     assert np.percentile(at_anchors, 95) < 6.0
 
