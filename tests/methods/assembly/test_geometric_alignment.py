@@ -131,9 +131,10 @@ def test_a_settled_alignment_still_brings_a_bent_arm_along():
     assert np.percentile(at_anchors, 95) < 6.0
 
 
-def test_a_negative_settle_is_refused():
-    with pytest.raises(ValueError, match="alignment_settle"):
-        Options(alignment_settle=-0.01)
+def test_a_negative_settle_or_patch_spacing_is_refused():
+    for name in ("alignment_settle", "patch_spacing"):
+        with pytest.raises(ValueError, match=name):
+            Options(**{name: -0.01})
 
 
 def test_a_coarse_fraction_outside_zero_to_one_is_refused():

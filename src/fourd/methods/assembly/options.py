@@ -42,6 +42,11 @@ class CrossParamOptions:
         patch's radius (RMS, in the plane) is given up: the patches do not match (measured on
         bending-arm frames 0 and 3 remeshed apart: median 0.006, largest 0.047; frames 0
         and 7: largest 0.12).
+    centre_spacing : float
+        The first pass grows pairs around anchors at least this far apart on the source
+        (source median edges; :func:`~fourd.methods.assembly.anchors.spread_anchors`); 0:
+        around every anchor, as the thesis does. A patch holds several anchors, so pairs
+        around all of them cover each vertex many times over.
     """
 
     patch_anchors: int = 4
@@ -50,6 +55,7 @@ class CrossParamOptions:
     boundary_band: float = 0.25
     flattening: str = "abf"
     max_residual: float = 0.2
+    centre_spacing: float = 0.0
 
     def __post_init__(self):
         if int(self.min_anchors) != self.min_anchors or self.min_anchors < 3:
@@ -67,6 +73,8 @@ class CrossParamOptions:
             raise ValueError(f"max_residual must be > 0, got {self.max_residual!r}")
         if self.flattening not in ("abf", "lscm"):
             raise ValueError(f"flattening must be 'abf' or 'lscm', got {self.flattening!r}")
+        if not (np.isfinite(self.centre_spacing) and self.centre_spacing >= 0):
+            raise ValueError(f"centre_spacing must be non-negative, got {self.centre_spacing!r}")
 
 
 @dataclass(frozen=True)
@@ -218,6 +226,11 @@ class Options(SurfaceSettings):
         of them run. 0.02: crane 15% and dfaust-hopping 26% faster, dfaust's correspondence
         6% better, crane's and the held-out crane stretches' 1-4% worse
         (``benchmarks/METHODS.md``).
+    patch_spacing : float
+        The pair maps' first patches grow around anchors at least this far apart (source
+        edges; the pair map's ``centre_spacing``); 0: around every anchor (the thesis). 5:
+        half the patches and a quarter less time in the patch maps of a crane merge, the same
+        map (``benchmarks/METHODS.md``).
     map_agreement : float
         Largest distance (source edges) between a vertex's place by the pair map and by that
         alignment: farther, the two disagree, and the vertex is left to the registration of
@@ -306,6 +319,7 @@ class Options(SurfaceSettings):
     alignment_weight: float = 0.001
     alignment_coarse: float = 0.0
     alignment_settle: float = 0.02
+    patch_spacing: float = 5.0
     map_agreement: float = 2.0
     max_radius: float = 0.2
     flattening: str = "lscm"
@@ -332,8 +346,10 @@ class Options(SurfaceSettings):
             value = getattr(self, name)
             if not (np.isfinite(value) and value > 0):
                 raise ValueError(f"{name} must be positive, got {value!r}")
-        if not (np.isfinite(self.alignment_settle) and self.alignment_settle >= 0.0):
-            raise ValueError(f"alignment_settle must be non-negative, got {self.alignment_settle!r}")
+        for name in ("alignment_settle", "patch_spacing"):
+            value = getattr(self, name)
+            if not (np.isfinite(value) and value >= 0.0):
+                raise ValueError(f"{name} must be non-negative, got {value!r}")
         if not 0.0 <= self.alignment_coarse < 1.0:
             raise ValueError(f"alignment_coarse must lie in [0, 1), got {self.alignment_coarse!r}")
         for name in ("alignment_iterations", "relax_sweeps", "registration_iterations"):
@@ -360,6 +376,7 @@ class Options(SurfaceSettings):
     def pair_options(self) -> PairOptions:
         """The :class:`PairOptions` of each merge's pair map."""
         return PairOptions(
-            crossparam=CrossParamOptions(max_radius=self.max_radius, flattening=self.flattening),
+            crossparam=CrossParamOptions(max_radius=self.max_radius, flattening=self.flattening,
+                                         centre_spacing=self.patch_spacing),
             relax=RelaxOptions(sweeps=self.relax_sweeps, walks=self.relax_walks, seed=self.seed),
         )

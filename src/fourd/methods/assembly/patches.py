@@ -31,8 +31,8 @@ import scipy.sparse as sp
 
 from fourd.geometry.flattening import boundary_loop_vertices
 from fourd.geometry.geodesic import edge_length_graph, geodesic_distances
-from fourd.geometry.meshes import face_adjacency
-from fourd.methods.assembly.anchors import Anchors
+from fourd.geometry.meshes import face_adjacency, median_edge_length
+from fourd.methods.assembly.anchors import Anchors, spread_anchors
 from fourd.methods.assembly.options import CrossParamOptions
 
 log = logging.getLogger("fourd.methods.assembly.patches")
@@ -385,7 +385,11 @@ def grow_patches(
         covered[pair.source.vertices[inner]] = True
         return True
 
-    for a in range(len(anchors.source)):
+    first = np.arange(len(anchors.source))
+    if options.centre_spacing > 0 and len(first):
+        spacing = options.centre_spacing * median_edge_length(source.vertices, source.faces)
+        first = np.flatnonzero(spread_anchors(anchors, source.vertices, spacing))
+    for a in first:
         ds, dt = _near_distances(source, target, anchors, support, anchors.source[a], corners[a], offsets[a],
                                  options, largest)
         keep(_pair(source, target, anchors, support, anchors.source[a], ds, dt,
