@@ -9,9 +9,11 @@ source patch and its target triangle in the target patch); a pair that reaches t
 radius with fewer than ``min_anchors`` is discarded. The radius then grows by the ignored
 boundary band, so the anchors lie where the map is kept.
 
-The first pass grows a pair around every anchor. A second pass grows pairs around the source
-vertices no kept patch covers yet (outside its boundary band). Such a vertex has no known
-image, so the thesis grows the target patch around the nearest anchor's image instead; here
+The first pass grows a pair around every anchor, or (``centre_spacing``) around anchors that
+far apart: a patch holds several anchors, so pairs around all of them cover each vertex many
+times over. A second pass grows pairs around the source vertices no kept patch covers yet
+(outside its boundary band). Such a vertex has no known image, so the thesis grows the target
+patch around the nearest anchor's image instead; here
 the target patch is centred on the vertex's estimated image, the target vertex whose geodesic
 distances from the nearest anchors' images best match the vertex's own distances from those
 anchors (a geodesic multilateration), so both patches cover the same piece of surface (for a
