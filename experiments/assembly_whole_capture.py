@@ -23,6 +23,8 @@ completeness-95 0.0545, correspondence 0.0383 mean / 0.0720 last, 1.10 s/frame, 
   hierarchy, so frame t's correspondence is the composition of t pair maps, and the errors of
   the hard pairs add up. The 20-frame held-out stretches show the size of one such step
   (crane-50: 0.0151 / 0.0245).
+- The dense rig (``crane-full``, 400 rays, at 55f0ca1) climbs the same staircase, lower:
+  correspondence 0.0137 / 0.0229, Chamfer 0.0026. The chain, not the density.
 """
 
 from __future__ import annotations
