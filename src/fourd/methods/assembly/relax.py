@@ -253,6 +253,7 @@ def _step(batch, goal, faces, bary, points, target_vertices, target_faces, targe
         if not (length > 0 and total > 0):  # a degenerate triangle gives no tangent frame
             continue
         fx, fy, fz = fx / length, fy / length, fz / length
+        b0, b1, b2 = b0 / total, b1 / total, b2 / total  # every walk starts here
         sx, sy, sz = ny * fz - nz * fy, nz * fx - nx * fz, nx * fy - ny * fx
         now = (hx - gx) ** 2 + (hy - gy) ** 2 + (hz - gz) ** 2
         fewest, best, best_gain = 1 << 62, -1, np.inf
@@ -264,7 +265,7 @@ def _step(batch, goal, faces, bary, points, target_vertices, target_faces, targe
                 ux, uy, uz = c * fx + s * sx, c * fy + s * sy, c * fz + s * sz
                 step = ux * tx + uy * ty + uz * tz if k - 1 < half else reach[b, k - 1]
                 dx, dy, dz = step * ux, step * uy, step * uz
-            end_bary[k, 0], end_bary[k, 1], end_bary[k, 2] = b0 / total, b1 / total, b2 / total
+            end_bary[k, 0], end_bary[k, 1], end_bary[k, 2] = b0, b1, b2
             face, _ = walk_point(target_vertices, target_faces, target_neighbours, target_normals, f, end_bary[k],
                                  dx, dy, dz, MAX_CROSSINGS, TINY_STEP)
             e0, e1, e2 = max(end_bary[k, 0], 0.0), max(end_bary[k, 1], 0.0), max(end_bary[k, 2], 0.0)
@@ -295,7 +296,8 @@ def _step(batch, goal, faces, bary, points, target_vertices, target_faces, targe
 def _move(problem, batch, faces, bary, points, residual, rng, options: RelaxOptions) -> int:
     """Move the batch's vertices (in place); returns how many moved."""
     start = points[batch].copy()
-    pull = problem.rows[:, batch].T @ residual
+    rows = problem.rows[:, batch]  # the energy rows the batch's vertices enter
+    pull = rows.T @ residual
     goal = np.ascontiguousarray(start - pull / problem.weight[batch, None])  # q_i
     moved = np.zeros(len(batch), dtype=bool)
     for _ in range(options.steps):
@@ -304,7 +306,7 @@ def _move(problem, batch, faces, bary, points, residual, rng, options: RelaxOpti
         reach = problem.scale * 10.0 ** rng.uniform(-2.0, 0.0, size=angle.shape)
         _step(batch, goal, faces, bary, points, problem.target_vertices, problem.target_faces, problem.target_normals,
               problem.target_neighbours, problem.incident, problem.face_ok, problem.source_faces, angle, reach, moved)
-    residual += problem.rows[:, batch] @ (points[batch] - start)
+    residual += rows @ (points[batch] - start)
     return int(moved.sum())
 
 
