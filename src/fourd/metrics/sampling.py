@@ -12,68 +12,13 @@ from typing import NamedTuple
 import numpy as np
 from scipy.spatial import cKDTree
 
+from fourd.geometry.closest_point import closest_on_triangles
 from fourd.geometry.meshes import face_areas  # noqa: F401 (re-exported: metrics.sampling.face_areas)
 from fourd.geometry.surface_samples import (  # noqa: F401 (re-exported: they were defined here)
     SurfaceSamples,
     sample_points,
     sample_surface,
 )
-
-
-def closest_on_triangles(points: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
-    """Barycentric coordinates ``[M, 3]`` of the closest point to ``points[i]`` on triangle
-    ``(a[i], b[i], c[i])`` (all ``[M, 3]``); degenerate triangles are handled.
-
-    References
-    ----------
-    C. Ericson, *Real-Time Collision Detection*, 2005, section 5.1.5 (the Voronoi-region
-    walk), here evaluated for all regions at once.
-    """
-    p = np.asarray(points, dtype=np.float64)
-    ab, ac, ap = b - a, c - a, p - a
-    d1 = np.einsum("ij,ij->i", ab, ap)
-    d2 = np.einsum("ij,ij->i", ac, ap)
-    bp = p - b
-    d3 = np.einsum("ij,ij->i", ab, bp)
-    d4 = np.einsum("ij,ij->i", ac, bp)
-    cp = p - c
-    d5 = np.einsum("ij,ij->i", ab, cp)
-    d6 = np.einsum("ij,ij->i", ac, cp)
-    va = d3 * d6 - d5 * d4
-    vb = d5 * d2 - d1 * d6
-    vc = d1 * d4 - d3 * d2
-    m = len(p)
-    out = np.zeros((m, 3))
-    done = np.zeros(m, dtype=bool)
-
-    def put(mask, u, v, w):
-        nonlocal done
-        mask = mask & ~done
-        out[mask, 0] = u[mask] if np.ndim(u) else u
-        out[mask, 1] = v[mask] if np.ndim(v) else v
-        out[mask, 2] = w[mask] if np.ndim(w) else w
-        done |= mask
-
-    with np.errstate(divide="ignore", invalid="ignore"):
-        put((d1 <= 0) & (d2 <= 0), 1.0, 0.0, 0.0)  # vertex a
-        put((d3 >= 0) & (d4 <= d3), 0.0, 1.0, 0.0)  # vertex b
-        put((d6 >= 0) & (d5 <= d6), 0.0, 0.0, 1.0)  # vertex c
-        v = d1 / (d1 - d3)
-        put((vc <= 0) & (d1 >= 0) & (d3 <= 0), 1.0 - v, v, 0.0)  # edge ab
-        w = d2 / (d2 - d6)
-        put((vb <= 0) & (d2 >= 0) & (d6 <= 0), 1.0 - w, 0.0, w)  # edge ac
-        w = (d4 - d3) / ((d4 - d3) + (d5 - d6))
-        put((va <= 0) & ((d4 - d3) >= 0) & ((d5 - d6) >= 0), 0.0, 1.0 - w, w)  # edge bc
-        denom = va + vb + vc
-        v = vb / denom
-        w = vc / denom
-        put(np.ones(m, dtype=bool), 1.0 - v - w, v, w)  # interior
-    bad = ~np.isfinite(out).all(axis=1)
-    if bad.any():  # degenerate triangle: fall back to its nearest corner
-        corners = np.stack([a[bad], b[bad], c[bad]], axis=1)
-        k = np.argmin(np.linalg.norm(corners - p[bad, None], axis=2), axis=1)
-        out[bad] = np.eye(3)[k]
-    return out
 
 
 class Binding(NamedTuple):

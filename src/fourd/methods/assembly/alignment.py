@@ -26,11 +26,11 @@ from typing import NamedTuple
 
 import numpy as np
 import scipy.sparse as sp
-import trimesh
 from scipy.sparse.linalg import LinearOperator, cg, splu
 from scipy.spatial import cKDTree
 
 from fourd.geometry.boundary_loops import boundary_edges
+from fourd.geometry.closest_point import closest_points_on_mesh
 from fourd.geometry.decimation import decimate
 from fourd.geometry.icp import rigid_icp as point_to_plane_icp
 from fourd.geometry.laplacian import uniform_laplacian
@@ -346,12 +346,8 @@ def geometric_anchors(
     dense = Anchors(candidates, candidates, np.zeros((len(candidates), 3)))
     candidates = candidates[spread_anchors(dense, source, 0.5 * spacing * edge, priority=-distance[candidates],
                                            seed=seed)]
-    mesh = trimesh.Trimesh(target, tfaces, process=False)
-    closest, exact, triangle = trimesh.proximity.closest_point(mesh, aligned[candidates])
-    bary = trimesh.triangles.points_to_barycentric(mesh.triangles[triangle], closest)
-    bary = np.clip(bary, 0.0, None)
-    bary /= np.maximum(bary.sum(axis=1, keepdims=True), 1e-300)
-    anchors = Anchors(candidates, triangle.astype(np.int64), bary)
+    triangle, bary, _, exact = closest_points_on_mesh(target, tfaces, aligned[candidates])
+    anchors = Anchors(candidates, triangle, bary)
     near = exact <= gap * edge
     _, back = cKDTree(aligned).query(target, workers=-1)
     ok = near & consistent_anchors(anchors, source, returned_points(anchors, tfaces, source[back]), tolerance * edge)

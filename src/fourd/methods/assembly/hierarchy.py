@@ -48,9 +48,9 @@ from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from typing import NamedTuple
 
 import numpy as np
-import trimesh
 from scipy.spatial import cKDTree
 
+from fourd.geometry.closest_point import closest_points_on_mesh
 from fourd.geometry.meshes import median_edge_length
 from fourd.geometry.rotations import procrustes
 from fourd.methods.assembly.alignment import geometric_anchors
@@ -116,10 +116,8 @@ class MergeReport(NamedTuple):
 def _closest_map(aligned, target_vertices, target_faces):
     """Target triangle and barycentric coordinates of the point closest to each of
     ``aligned [N, 3]`` (the fallback map when the pair map places almost nothing)."""
-    mesh = trimesh.Trimesh(target_vertices, target_faces, process=False)
-    closest, _, triangle = trimesh.proximity.closest_point(mesh, aligned)
-    bary = np.clip(trimesh.triangles.points_to_barycentric(mesh.triangles[triangle], closest), 0.0, None)
-    return triangle.astype(np.int64), bary / np.maximum(bary.sum(axis=1, keepdims=True), 1e-300)
+    found = closest_points_on_mesh(target_vertices, target_faces, aligned)
+    return found.triangle, found.barycentric
 
 
 def merge_blocks(left: Block, right: Block, options: Options | None = None) -> tuple[Block, MergeReport]:

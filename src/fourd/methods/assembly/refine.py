@@ -18,8 +18,8 @@ import logging
 from typing import NamedTuple
 
 import numpy as np
-import trimesh
 
+from fourd.geometry.closest_point import closest_points_on_mesh
 from fourd.geometry.meshes import median_edge_length, mesh_arrays
 from fourd.methods.assembly.anchors import Anchors, spread_anchors
 from fourd.methods.assembly.options import RefineOptions
@@ -93,14 +93,10 @@ def refine_anchors(
     distance = np.full(len(source_vertices), np.nan)
     if len(candidates) == 0:
         return Refinement(anchors, np.zeros(0, dtype=np.int64), registered, distance)
-    mesh = trimesh.Trimesh(target_vertices, target_faces, process=False)
-    closest, gap, triangle = trimesh.proximity.closest_point(mesh, registered[candidates])
+    triangle, bary, _, gap = closest_points_on_mesh(target_vertices, target_faces, registered[candidates])
     distance[candidates] = gap
     touching = gap <= options.touch * edge
-    bary = trimesh.triangles.points_to_barycentric(mesh.triangles[triangle[touching]], closest[touching])
-    bary = np.clip(bary, 0.0, None)
-    bary /= bary.sum(axis=1, keepdims=True)
-    new = Anchors(candidates[touching], triangle[touching].astype(np.int64), bary)
+    new = Anchors(candidates[touching], triangle[touching], bary[touching])
     every = Anchors.join(anchors, new)
     old = np.arange(len(every.source)) < len(anchors.source)
     priority = np.r_[np.full(len(anchors.source), np.inf), -gap[touching]]

@@ -1,0 +1,41 @@
+import numpy as np
+import pytest
+import trimesh
+
+from fourd.geometry.closest_point import closest_on_triangles, closest_points_on_mesh
+
+
+def _brute_force(vertices, faces, points):
+    """The closest point over every triangle: distances [M]."""
+    corners = vertices[faces]
+    m, f = len(points), len(faces)
+    repeated = np.repeat(points, f, axis=0)
+    tiled = np.tile(corners, (m, 1, 1))
+    bary = closest_on_triangles(repeated, tiled[:, 0], tiled[:, 1], tiled[:, 2])
+    closest = np.einsum("sk,skd->sd", bary, tiled)
+    return np.linalg.norm(closest - repeated, axis=1).reshape(m, f).min(axis=1)
+
+
+def test_points_near_a_bumpy_sphere_find_the_true_closest_point():
+    sphere = trimesh.creation.icosphere(subdivisions=3)
+    rng = np.random.default_rng(0)
+    vertices = sphere.vertices * (1.0 + 0.05 * rng.standard_normal((len(sphere.vertices), 1)))
+    edge = float(np.median(sphere.edges_unique_length))
+    points = vertices[rng.integers(0, len(vertices), 400)] + rng.normal(scale=edge, size=(400, 3))
+    found = closest_points_on_mesh(vertices, sphere.faces, points)
+    np.testing.assert_allclose(found.distances, _brute_force(vertices, sphere.faces, points), atol=1e-12)
+    # the point, its distance, its triangle and barycentric coordinates agree with each other
+    np.testing.assert_allclose(np.linalg.norm(found.points - points, axis=1), found.distances, atol=1e-12)
+    on_triangle = np.einsum("mk,mkd->md", found.barycentric, vertices[sphere.faces[found.triangle]])
+    np.testing.assert_allclose(on_triangle, found.points, atol=1e-12)
+    assert (found.barycentric >= 0).all() and np.allclose(found.barycentric.sum(axis=1), 1.0)
+
+
+def test_a_mesh_with_fewer_triangles_than_candidates_and_no_points():
+    square = np.array([[0.0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]])
+    faces = np.array([[0, 1, 2], [0, 2, 3]])
+    found = closest_points_on_mesh(square, faces, [[0.9, 0.1, -2.0]])
+    assert found.distances.tolist() == [2.0] and found.triangle.tolist() == [0]
+    assert len(closest_points_on_mesh(square, faces, np.zeros((0, 3))).triangle) == 0
+    with pytest.raises(ValueError, match="no faces"):
+        closest_points_on_mesh(square, np.zeros((0, 3), dtype=int), [[0.0, 0, 0]])
