@@ -66,6 +66,11 @@ COARSE_ITERATIONS = 2
 #: the schedule skips to its last this many stiff iterations (:func:`nonrigid_icp`).
 SETTLED_ITERATIONS = 3
 
+#: Source points each rigid ICP fit uses at most (about: an even subset). A rigid motion needs
+#: few: on crane's and dfaust-hopping's pairs (29,000-35,000 vertices) 5,000 move every vertex
+#: within 0.03-0.2 edges of the fit on all of them, in a quarter of the time.
+RIGID_POINTS = 5000
+
 
 class Alignment(NamedTuple):
     """The result of :func:`geometric_anchors`.
@@ -103,11 +108,13 @@ def rigid_icp(source, source_normals, target, target_normals, *, iterations: int
     module docstring, :func:`fourd.geometry.icp.rigid_icp`); returns the moved points
     ``[N, 3]``. ICP runs twice, from where the source is and with its centroid moved onto the
     target's, and the fit with the smaller median gap wins (a part that moves alone, an arm
-    bending, drags the centroid away). ``tree``: the target's k-d tree, when the caller has it."""
+    bending, drags the centroid away). Each fit uses an even subset of at most about
+    :data:`RIGID_POINTS` source points. ``tree``: the target's k-d tree, when the caller has it."""
     tree = cKDTree(target) if tree is None else tree
     best, best_gap = source, np.inf
+    every = max(1, len(source) // RIGID_POINTS)
     for start in (source, source - source.mean(axis=0) + target.mean(axis=0)):
-        fit = point_to_plane_icp(start, target, target_normals, source_normals=source_normals,
+        fit = point_to_plane_icp(start[::every], target, target_normals, source_normals=source_normals[::every],
                                  iterations=iterations)
         moved = start @ fit.rotation.T + fit.translation
         gap, _, usable = _pairs(moved, source_normals @ fit.rotation.T, tree, target_normals)
