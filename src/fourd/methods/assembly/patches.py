@@ -307,21 +307,26 @@ def _image(target: _Mesh, corners: np.ndarray, offsets: np.ndarray, reach: np.nd
            limit: float) -> int:
     """The target vertex whose geodesic distances from the given anchors' target points best
     match the source vertex's distances ``reach [K]`` from those anchors (least squares over
-    the vertices all of them reach within ``limit``); -1 when none does.
+    the vertices all of them reach within ``reach + limit``); -1 when none does.
 
-    Searched from twice the largest ``reach``, doubled while a vertex beyond the search could
-    cost less than the best one found (its cost is at least ``(search - max(reach))^2``), so
-    the answer is that of the search to ``limit``."""
+    Anchor ``k`` is searched to ``reach[k] + margin``, the margin from half the largest
+    ``reach``, doubled while a vertex beyond some search could cost less than the best one
+    found (its cost is at least ``margin^2``), so the answer is that of the searches to
+    ``reach + limit``. The nearest anchor's search, the smallest, gives the candidates."""
     farthest = float(np.max(reach))
-    search = min(limit, 2.0 * farthest) if farthest > 0 else limit
+    margin = min(limit, 0.5 * farthest) if farthest > 0 else limit
+    order = np.argsort(reach, kind="stable")
     while True:
-        cost = np.zeros(len(target.vertices))
-        for k in range(len(reach)):
-            cost += (_distances(target, corners[k], offsets[k], search) - reach[k]) ** 2
-        best = int(np.argmin(cost))
-        if search >= limit or cost[best] < (search - farthest) ** 2:
-            return best if np.isfinite(cost[best]) else -1
-        search = min(limit, 2.0 * search)
+        first = order[0]
+        distance = _distances(target, corners[first], offsets[first], reach[first] + margin)
+        candidates = np.flatnonzero(np.isfinite(distance))
+        cost = (distance[candidates] - reach[first]) ** 2
+        for k in order[1:]:
+            cost += (_distances(target, corners[k], offsets[k], reach[k] + margin)[candidates] - reach[k]) ** 2
+        best = int(np.argmin(cost)) if len(cost) else -1
+        if margin >= limit or (best >= 0 and cost[best] < margin**2):
+            return int(candidates[best]) if best >= 0 and np.isfinite(cost[best]) else -1
+        margin = min(limit, 2.0 * margin)
 
 
 def _nearest_anchors(source: _Mesh, anchors: Anchors, centre: int, count: int, largest: float):
