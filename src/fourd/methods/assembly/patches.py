@@ -7,7 +7,11 @@ patch and the target patch of a pair grow together, with the same radius, until 
 ``patch_anchors`` matching anchors (an anchor matches when its source vertex lies in the
 source patch and its target triangle in the target patch); a pair that reaches the largest
 radius with fewer than ``min_anchors`` is discarded. The radius then grows by the ignored
-boundary band, so the anchors lie where the map is kept.
+boundary band, so the anchors lie where the map is kept. When the two balls at that radius
+are not both disks (a limb thinner than the patch, where the ball wraps round it), the pair
+is tried once more at the smaller radius where ``min_anchors`` anchors enter (the thesis
+asks for 3-5 anchors a patch): on crane's and dfaust-hopping's first pairs that covers 0.4%
+and 1.1% more of the source.
 
 The first pass grows a pair around every anchor, or (``centre_spacing``) around anchors that
 far apart: a patch holds several anchors, so pairs around all of them cover each vertex many
@@ -234,14 +238,18 @@ def _pair(source: _Mesh, target: _Mesh, anchors: Anchors, support: np.ndarray, c
           dt: np.ndarray, target_face: int, options: CrossParamOptions,
           largest: float) -> PatchPair | None:
     """Grow the pair around ``centre`` (source) and the target point of ``dt``'s origin (in
-    ``target_face``) with one radius until it holds ``patch_anchors`` matching anchors
-    (``support``: :meth:`Anchors.target_corners`)."""
-    radius = _radius(anchors, support, ds, dt, options, largest)
-    if radius is None:
-        return None
-    src = _disk(source, ds, radius, int(source.first_face[centre]))
-    tgt = _disk(target, dt, radius, target_face)
-    if src is None or tgt is None:
+    ``target_face``) with one radius until it holds ``patch_anchors`` matching anchors, or
+    ``min_anchors`` when those balls are not disks (``support``:
+    :meth:`Anchors.target_corners`)."""
+    for wanted in dict.fromkeys((options.patch_anchors, options.min_anchors)):
+        radius = _radius(anchors, support, ds, dt, options, largest, wanted)
+        if radius is None:
+            return None
+        src = _disk(source, ds, radius, int(source.first_face[centre]))
+        tgt = _disk(target, dt, radius, target_face)
+        if src is not None and tgt is not None:
+            break
+    else:
         return None
     in_source = np.isin(anchors.source, src.vertices)
     in_target = (np.isin(support, tgt.vertices) | (support < 0)).all(axis=1)
@@ -252,11 +260,13 @@ def _pair(source: _Mesh, target: _Mesh, anchors: Anchors, support: np.ndarray, c
 
 
 def _radius(anchors: Anchors, support: np.ndarray, ds: np.ndarray, dt: np.ndarray,
-            options: CrossParamOptions, largest: float) -> float | None:
+            options: CrossParamOptions, largest: float, wanted: int | None = None) -> float | None:
     """The pair's radius: the one at which ``patch_anchors`` anchors lie in both patches (an
-    anchor enters at the larger of its source and target distances), widened by the ignored
+    anchor enters at the larger of its source and target distances; ``wanted``, by default
+    ``patch_anchors``, anchors), widened by the ignored
     boundary band, at most ``largest``; None when fewer than ``min_anchors`` enter by then."""
-    entered, entry = _nearest_entries(anchors.source, support, ds, dt, float(largest), int(options.patch_anchors))
+    wanted = options.patch_anchors if wanted is None else wanted
+    entered, entry = _nearest_entries(anchors.source, support, ds, dt, float(largest), int(wanted))
     if entered < options.min_anchors:
         return None
     return min(entry / (1.0 - options.boundary_band), largest)
