@@ -220,21 +220,22 @@ def _vertex_flips(incident, face_ok, source_faces, target_normals, points, faces
     return flips
 
 
-@numba.njit(cache=True, nogil=True)
+@numba.njit(cache=True, nogil=True, parallel=True)
 def _step(batch, goal, faces, bary, points, target_vertices, target_faces, target_normals, target_neighbours,
           incident, face_ok, source_faces, angle, reach, moved):
     """One step of :func:`_move` for every batch vertex (in place): the tangent step towards
     its ``goal [B, 3]``, then ``W`` random directions (``angle [B, W]`` in the target face's
     frame; the first half walked to the point nearest the goal, the rest by ``reach [B, W]``);
     the end with the fewest flipped triangles, then the lowest energy, is taken if it flips
-    fewer than now or lowers the energy."""
+    fewer than now or lowers the energy. The batch's vertices are independent (module
+    docstring), so they move in parallel."""
     walks = angle.shape[1]
     half = walks // 2
     tries = walks + 1
-    end_bary = np.empty((tries, 3))
-    end_face = np.empty(tries, dtype=np.int64)
-    end_point = np.empty((tries, 3))
-    for b in range(len(batch)):
+    for b in numba.prange(len(batch)):
+        end_bary = np.empty((tries, 3))
+        end_face = np.empty(tries, dtype=np.int64)
+        end_point = np.empty((tries, 3))
         vertex = batch[b]
         f = faces[vertex]
         hx, hy, hz = points[vertex, 0], points[vertex, 1], points[vertex, 2]
