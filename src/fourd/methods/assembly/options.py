@@ -95,6 +95,9 @@ class RelaxOptions:
         direction is always tried beside them.
     steps : int
         Moves per vertex in a sweep (each the best of its walks).
+    tolerance : float
+        The sweeps stop after one that lowered the energy by less than this fraction of the
+        energy before the first (0: all ``sweeps`` run).
     laplacian : {"uniform", "cotangent"}
         The source Laplacian ``L``. Uniform by default: per-frame meshes from marching cubes
         have slivers whose cotangent weights run into the hundreds (bending-arm remeshed:
@@ -106,6 +109,7 @@ class RelaxOptions:
     sweeps: int = 6
     walks: int = 16
     steps: int = 2
+    tolerance: float = 0.0
     laplacian: str = "uniform"
     seed: int = 0
 
@@ -114,6 +118,8 @@ class RelaxOptions:
             value = getattr(self, name)
             if int(value) != value or value < (1 if name == "steps" else 0):
                 raise ValueError(f"{name} must be a non-negative integer (steps >= 1), got {value!r}")
+        if not (np.isfinite(self.tolerance) and 0.0 <= self.tolerance < 1.0):
+            raise ValueError(f"tolerance must lie in [0, 1), got {self.tolerance!r}")
         if self.laplacian not in ("uniform", "cotangent"):
             raise ValueError(f"laplacian must be 'uniform' or 'cotangent', got {self.laplacian!r}")
 
@@ -249,6 +255,9 @@ class Options(SurfaceSettings):
         Sweeps of the local relaxation of each pair map (5.4.3; 0 skips it).
     relax_walks : int
         Random walks per vertex and step of the relaxation.
+    relax_tolerance : float
+        The relaxation stops after a sweep that lowered its energy by less than this fraction
+        of the energy it started from (0: every sweep runs).
     registration_iterations : int
         Rotation fits of the Laplacian registration that places the vertices a pair map
         cannot (thesis 5.6, [LSA+05]).
@@ -325,6 +334,7 @@ class Options(SurfaceSettings):
     flattening: str = "lscm"
     relax_sweeps: int = 6
     relax_walks: int = 16
+    relax_tolerance: float = 0.0
     registration_iterations: int = 16
     correct: bool = False
     correct_stretch: float = 2.0
@@ -378,5 +388,6 @@ class Options(SurfaceSettings):
         return PairOptions(
             crossparam=CrossParamOptions(max_radius=self.max_radius, flattening=self.flattening,
                                          centre_spacing=self.patch_spacing),
-            relax=RelaxOptions(sweeps=self.relax_sweeps, walks=self.relax_walks, seed=self.seed),
+            relax=RelaxOptions(sweeps=self.relax_sweeps, walks=self.relax_walks, tolerance=self.relax_tolerance,
+                               seed=self.seed),
         )
