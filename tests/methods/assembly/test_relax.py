@@ -51,6 +51,21 @@ def test_a_slid_map_comes_back_towards_the_truth_without_flips():
     assert (result.barycentric >= 0).all()
 
 
+def test_the_sweeps_stop_once_one_gains_less_than_the_tolerance():
+    pair = remeshed_frames()
+    faces, bary = slid_map(pair, noise=0.4)
+    full = _relax(pair, faces, bary, options=RelaxOptions(sweeps=6))
+    gains = -np.diff(full.energy) / full.energy[0]
+    tolerance = 0.5 * (gains[1] + gains[2])  # between the second sweep's gain and the third's
+    assert gains[1] > tolerance > gains[2]
+    stopped = _relax(pair, faces, bary, options=RelaxOptions(sweeps=6, tolerance=tolerance))
+    # the same sweeps as the full run up to the first that gained too little, then no more
+    assert len(stopped.energy) == 4
+    np.testing.assert_array_equal(stopped.energy, full.energy[:4])
+    with pytest.raises(ValueError, match="tolerance"):
+        RelaxOptions(tolerance=1.0)
+
+
 def test_fixed_and_unmapped_vertices_stay_where_they_are():
     pair = rigid_copy()
     faces, bary = slid_map(pair, noise=0.3)
