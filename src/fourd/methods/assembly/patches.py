@@ -14,8 +14,8 @@ asks for 3-5 anchors a patch): on crane's and dfaust-hopping's first pairs that 
 and 1.1% more of the source.
 
 The first pass grows a pair around every anchor, or (``centre_spacing``) around anchors that
-far apart: a patch holds several anchors, so pairs around all of them cover each vertex many
-times over. A second pass grows pairs around the source vertices no kept patch covers yet
+far apart, then around the other anchors no kept patch covers yet: a patch holds several
+anchors, so pairs around all of them cover each vertex many times over. A second pass grows pairs around the source vertices no kept patch covers yet
 (outside its boundary band). Such a vertex has no known image, so the thesis grows the target
 patch around the nearest anchor's image instead; here
 the target patch is centred on the vertex's estimated image, the target vertex whose geodesic
@@ -406,12 +406,21 @@ def grow_patches(
     if options.centre_spacing > 0 and len(first):
         spacing = options.centre_spacing * median_edge_length(source.vertices, source.faces)
         first = np.flatnonzero(spread_anchors(anchors, source.vertices, spacing))
-    for a in first:
+
+    def around_anchor(a: int) -> None:
         ds, dt = _near_distances(source, target, anchors, support, anchors.source[a], corners[a], offsets[a],
                                  options, largest)
         keep(_pair(source, target, anchors, support, anchors.source[a], ds, dt,
                    int(anchors.target_faces[a]), options, largest))
         used[anchors.source[a]] = True
+
+    for a in first:
+        around_anchor(a)
+    if len(first) < len(anchors.source):
+        # the anchors the spread passed over and no patch covers: their images are known
+        for a in np.flatnonzero(~np.isin(np.arange(len(anchors.source)), first)):
+            if not covered[anchors.source[a]] and not used[anchors.source[a]]:
+                around_anchor(a)
     while True:
         left = np.flatnonzero(~covered & ~used)
         if len(left) == 0:
