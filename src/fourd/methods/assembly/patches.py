@@ -15,13 +15,13 @@ and 1.1% more of the source.
 
 The first pass grows a pair around every anchor, or (``centre_spacing``) around anchors that
 far apart, then around the other anchors no kept patch covers yet: a patch holds several
-anchors, so pairs around all of them cover each vertex many times over. A second pass grows pairs around the source vertices no kept patch covers yet
-(outside its boundary band). Such a vertex has no known image, so the thesis grows the target
-patch around the nearest anchor's image instead; here
-the target patch is centred on the vertex's estimated image, the target vertex whose geodesic
-distances from the nearest anchors' images best match the vertex's own distances from those
-anchors (a geodesic multilateration), so both patches cover the same piece of surface (for a
-rigidly moved copy, exactly the same) and grow as before. When a pair fails, the uncovered
+anchors, so pairs around all of them cover each vertex many times over. A second pass grows
+pairs around the source vertices no kept patch covers yet (outside its boundary band). Such
+a vertex has no known image, so the thesis grows the target patch around the nearest anchor's
+image instead; here the target patch is centred on the vertex's estimated image, the target
+vertex whose geodesic distances from the nearest anchors' images best match the vertex's own
+distances from those anchors (a geodesic multilateration), so both patches cover the same
+piece of surface (for a rigidly moved copy, exactly the same) and grow as before. When a pair fails, the uncovered
 vertices within half the distance from its centre to the nearest anchor are not tried again.
 Vertices that stay uncovered have no counterpart on the target.
 """
@@ -261,10 +261,10 @@ def _pair(source: _Mesh, target: _Mesh, anchors: Anchors, support: np.ndarray, c
 
 def _radius(anchors: Anchors, support: np.ndarray, ds: np.ndarray, dt: np.ndarray,
             options: CrossParamOptions, largest: float, wanted: int | None = None) -> float | None:
-    """The pair's radius: the one at which ``patch_anchors`` anchors lie in both patches (an
-    anchor enters at the larger of its source and target distances; ``wanted``, by default
-    ``patch_anchors``, anchors), widened by the ignored
-    boundary band, at most ``largest``; None when fewer than ``min_anchors`` enter by then."""
+    """The pair's radius: the one at which ``wanted`` anchors (by default ``patch_anchors``)
+    lie in both patches (an anchor enters at the larger of its source and target distances),
+    widened by the ignored boundary band, at most ``largest``; None when fewer than
+    ``min_anchors`` enter by then."""
     wanted = options.patch_anchors if wanted is None else wanted
     entered, entry = _nearest_entries(anchors.source, support, ds, dt, float(largest), int(wanted))
     if entered < options.min_anchors:

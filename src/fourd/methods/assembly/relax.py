@@ -405,7 +405,7 @@ def relax_map(
         energy.append(_energy(problem, source_vertices, points))
         flipped.append(flips())
         moved.append(total)
-        if energy[-2] - energy[-1] < options.tolerance * energy[0]:
+        if options.tolerance > 0 and energy[-2] - energy[-1] < options.tolerance * energy[0]:
             break
     log.debug("relaxation: energy %.3g -> %.3g, flipped %d -> %d", energy[0], energy[-1], flipped[0], flipped[-1])
     points[~mapped] = np.nan
