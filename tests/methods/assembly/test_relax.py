@@ -8,6 +8,7 @@ import pytest
 from assembly_shapes import remeshed_frames, rigid_copy, slid_map, true_map
 
 from fourd.methods.assembly import RelaxOptions, flipped_triangles, relax_map
+from fourd.methods.assembly.options import Options
 
 
 def _relax(pair, faces, bary, **kwargs):
@@ -64,6 +65,9 @@ def test_the_sweeps_stop_once_one_gains_less_than_the_tolerance():
     np.testing.assert_array_equal(stopped.energy, full.energy[:4])
     with pytest.raises(ValueError, match="tolerance"):
         RelaxOptions(tolerance=1.0)
+    for value in (-0.01, 1.0, float("nan")):  # the assembly's own option names itself
+        with pytest.raises(ValueError, match="relax_tolerance"):
+            Options(relax_tolerance=value)
 
 
 def test_fixed_and_unmapped_vertices_stay_where_they_are():

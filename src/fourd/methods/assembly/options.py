@@ -362,6 +362,8 @@ class Options(SurfaceSettings):
             value = getattr(self, name)
             if not (np.isfinite(value) and value >= 0.0):
                 raise ValueError(f"{name} must be non-negative, got {value!r}")
+        if not (np.isfinite(self.relax_tolerance) and 0.0 <= self.relax_tolerance < 1.0):
+            raise ValueError(f"relax_tolerance must lie in [0, 1), got {self.relax_tolerance!r}")
         if not 0.0 <= self.alignment_coarse < 1.0:
             raise ValueError(f"alignment_coarse must lie in [0, 1), got {self.alignment_coarse!r}")
         for name in ("alignment_iterations", "relax_sweeps", "registration_iterations"):
