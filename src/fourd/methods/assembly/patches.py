@@ -106,6 +106,7 @@ class _Mesh(NamedTuple):
     face_graph: sp.csr_matrix  # face -> edge-adjacent faces [F, F]
     degree: np.ndarray  # edge-adjacent faces of each face [F] (below 3: on the mesh's own boundary)
     first_face: np.ndarray  # a face of each vertex [N] (F for a vertex of no face)
+    slot: np.ndarray  # -1 per vertex [N], scratch of _patch_vertices (left as found)
 
 
 def _mesh(vertices, faces) -> _Mesh:
@@ -122,7 +123,8 @@ def _mesh(vertices, faces) -> _Mesh:
     degree = np.bincount(adjacency.ravel(), minlength=count)
     first_face = np.full(len(vertices), count, dtype=np.int64)
     np.minimum.at(first_face, faces.ravel(), rows)
-    return _Mesh(vertices, faces, edge_length_graph(vertices, faces), incidence, face_graph, degree, first_face)
+    return _Mesh(vertices, faces, edge_length_graph(vertices, faces), incidence, face_graph, degree, first_face,
+                 np.full(len(vertices), -1, dtype=np.int64))
 
 
 def _distances(mesh: _Mesh, seeds: np.ndarray, offsets: np.ndarray, limit: float) -> np.ndarray:
@@ -141,13 +143,38 @@ def _disk(mesh: _Mesh, distance: np.ndarray, radius: float, seed_face: int) -> P
                         HOLE_REACH * float(radius), int(seed_face))
     if not len(faces):
         return None
-    vertices = np.unique(mesh.faces[faces])
-    local_faces = np.searchsorted(vertices, mesh.faces[faces])
+    vertices, local_faces = _patch_vertices(mesh.faces, faces, mesh.slot)
     try:
         boundary_loop_vertices(local_faces, len(vertices))
     except ValueError:
         return None
     return Patch(faces, vertices, distance[vertices], float(radius))
+
+
+@numba.njit(cache=True, nogil=True)
+def _patch_vertices(faces, chosen, slot):
+    """The vertices of the ``chosen`` faces (sorted, ``[M]``) and those faces in their
+    indices (``[K, 3]``): ``np.unique`` and ``np.searchsorted`` in one pass, with ``slot``
+    (-1 per mesh vertex) as scratch, left as it was found."""
+    found = np.empty(3 * len(chosen), dtype=np.int64)
+    count = 0
+    for f in chosen:
+        for k in range(3):
+            v = faces[f, k]
+            if slot[v] < 0:
+                slot[v] = 0
+                found[count] = v
+                count += 1
+    vertices = np.sort(found[:count])
+    for i in range(count):
+        slot[vertices[i]] = i
+    local = np.empty((len(chosen), 3), dtype=np.int64)
+    for j in range(len(chosen)):
+        for k in range(3):
+            local[j, k] = slot[faces[chosen[j], k]]
+    for i in range(count):
+        slot[vertices[i]] = -1
+    return vertices, local
 
 
 @numba.njit(cache=True, nogil=True)
