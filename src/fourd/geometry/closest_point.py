@@ -88,9 +88,9 @@ def closest_on_triangles(points: np.ndarray, a: np.ndarray, b: np.ndarray, c: np
     return out
 
 
-def _best_of(points: np.ndarray, corners: np.ndarray, candidates: np.ndarray):
-    """The closest point of each ``points [m, 3]`` over its ``candidates [m, c]`` triangles
-    (``-1``: none) with ``corners [F, 3, 3]``: (triangle, barycentric, point, distance)."""
+def closest_on_candidates(points: np.ndarray, corners: np.ndarray, candidates: np.ndarray) -> ClosestPoints:
+    """The closest point of each of ``points [m, 3]`` over its ``candidates [m, c]``
+    triangles (``-1``: none), the triangles' corners ``corners [F, 3, 3]``."""
     m, c = candidates.shape
     flat = candidates.ravel()
     valid = flat >= 0
@@ -101,7 +101,7 @@ def _best_of(points: np.ndarray, corners: np.ndarray, candidates: np.ndarray):
     distance = np.where(valid, np.linalg.norm(closest - repeated, axis=1), np.inf).reshape(m, c)
     best = np.argmin(distance, axis=1)
     rows = np.arange(m) * c + best
-    return flat[rows], bary[rows], closest[rows], distance[np.arange(m), best]
+    return ClosestPoints(flat[rows], bary[rows], closest[rows], distance[np.arange(m), best])
 
 
 def closest_points_on_mesh(vertices: np.ndarray, faces: np.ndarray, points: np.ndarray) -> ClosestPoints:
@@ -129,8 +129,7 @@ def closest_points_on_mesh(vertices: np.ndarray, faces: np.ndarray, points: np.n
         block = points[start:start + _BLOCK]
         _, near = tree.query(block, k=k, workers=-1)
         near = near.reshape(len(block), k)
-        triangle, bary, closest, distance = _best_of(block, corners, near)
-        parts.append((triangle, bary, closest, distance))
+        parts.append(closest_on_candidates(block, corners, near))
     if not parts:
         return ClosestPoints(np.zeros(0, dtype=np.int64), np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0))
     return ClosestPoints(*(np.concatenate([part[i] for part in parts]) for i in range(4)))

@@ -12,7 +12,7 @@ from typing import NamedTuple
 import numpy as np
 from scipy.spatial import cKDTree
 
-from fourd.geometry.closest_point import closest_on_triangles
+from fourd.geometry.closest_point import closest_on_candidates, closest_on_triangles  # noqa: F401 (re-exported)
 from fourd.geometry.meshes import face_areas  # noqa: F401 (re-exported: metrics.sampling.face_areas)
 from fourd.geometry.surface_samples import (  # noqa: F401 (re-exported: they were defined here)
     SurfaceSamples,
@@ -90,16 +90,8 @@ def _bind_block(queries, vertices, faces, samples, sample_tree, vertex_tree, ver
     near = near.reshape(len(queries), k)
     _, nearest_vertex = vertex_tree.query(queries, workers=-1)
     candidate_faces = np.concatenate([samples.faces[near], vertex_face[nearest_vertex][:, None]], axis=1)
-    m, c = candidate_faces.shape
-    flat = candidate_faces.ravel()
-    corners = vertices[faces[flat]]
-    repeated = np.repeat(queries, c, axis=0)
-    bary = closest_on_triangles(repeated, corners[:, 0], corners[:, 1], corners[:, 2])
-    closest = np.einsum("sk,skd->sd", bary, corners)
-    dist = np.linalg.norm(closest - repeated, axis=1).reshape(m, c)
-    best = np.argmin(dist, axis=1)
-    rows = np.arange(m) * c + best
-    return Binding(flat[rows], bary[rows], dist[np.arange(m), best], closest[rows])
+    found = closest_on_candidates(queries, vertices[faces], candidate_faces)
+    return Binding(found.triangle, found.barycentric, found.distances, found.points)
 
 
 def bound_positions(binding: Binding, vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:

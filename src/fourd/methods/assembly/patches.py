@@ -443,11 +443,10 @@ def grow_patches(
 
     for a in first:
         around_anchor(a)
-    if len(first) < len(anchors.source):
-        # the anchors the spread passed over and no patch covers: their images are known
-        for a in np.flatnonzero(~np.isin(np.arange(len(anchors.source)), first)):
-            if not covered[anchors.source[a]] and not used[anchors.source[a]]:
-                around_anchor(a)
+    # then the anchors the spread passed over that no patch covers: their images are known
+    for a in range(len(anchors.source)):
+        if not covered[anchors.source[a]] and not used[anchors.source[a]]:
+            around_anchor(a)
     while True:
         left = np.flatnonzero(~covered & ~used)
         if len(left) == 0:
