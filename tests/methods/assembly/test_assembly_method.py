@@ -322,34 +322,61 @@ def test_merges_of_a_level_run_in_processes_with_the_same_result():
     np.testing.assert_array_equal(parallel.observed, serial.observed)
 
 
-@pytest.mark.parametrize("count", [2, 5, 7, 8])
-def test_merges_started_as_their_blocks_are_ready_are_those_of_the_levels(monkeypatch, count):
-    """The scheduler with a pool (threads here) merges the same pairs of the same blocks as
-    level by level: the frames come out in order, one report per merge in merge order."""
+@pytest.mark.parametrize("paste", [False, True])
+@pytest.mark.parametrize("count", [2, 5, 7, 8, 20])
+def test_merges_started_as_their_blocks_are_ready_are_those_of_the_levels(monkeypatch, count, paste):
+    """The scheduler with a pool (threads here) maps the same frames and joins the same blocks
+    as merging level by level: the frames come out in order, one report per merge in merge
+    order, each map from the left block's last frame to the right block's first, whether the
+    map starts before the right block is assembled (by default) or after (``paste``)."""
     from concurrent.futures import ThreadPoolExecutor
 
     from fourd.methods.assembly import hierarchy
 
-    def merge(left, right, options):
+    def map_pair(source, faces, target, target_faces, options):
+        return int(source[0, 0]), int(target[0, 0])
+
+    def join(left, right, pair, options):
         return (hierarchy.Block(left.faces, np.concatenate([left.vertices, right.vertices]),
                                 np.concatenate([left.observed, right.observed])),
-                (int(left.vertices[0, 0, 0]), int(right.vertices[0, 0, 0])))
+                (int(left.vertices[0, 0, 0]), int(right.vertices[0, 0, 0]), pair))
 
-    monkeypatch.setattr(hierarchy, "merge_blocks", merge)
+    monkeypatch.setattr(hierarchy, "map_pair", map_pair)
+    monkeypatch.setattr(hierarchy, "join_blocks", join)
     faces = np.array([[0, 1, 2]])
     blocks = [hierarchy.Block(faces, np.full((1, 3, 3), float(t)), np.ones((1, 3), dtype=bool))
               for t in range(count)]
-    serial = hierarchy._merge_as_ready(blocks, Options(), None, 1, None)
+    options = Options(paste=paste)
+    serial = hierarchy._merge_as_ready(blocks, options, None, 1, None)
     with ThreadPoolExecutor(2) as pool:
-        parallel = hierarchy._merge_as_ready(blocks, Options(), pool, 2, None)
+        parallel = hierarchy._merge_as_ready(blocks, options, pool, 2, None)
+    tree = hierarchy.merge_tree(count)
+    firsts, lasts = list(range(count)), list(range(count))
+    for a, b in tree:
+        firsts.append(firsts[a])
+        lasts.append(lasts[b])
     for block, reports in (serial, parallel):
         assert block.vertices[:, 0, 0].tolist() == list(range(count))
-        # each merge joins the first frames of its two blocks, level by level
+        assert reports == [(firsts[a], firsts[b], (lasts[a], firsts[b])) for a, b in tree]
+
+
+def test_the_merge_tree_halves_the_sequence():
+    """Powers of two merge lengths 1, 2, 4, ... (figure 5.2); other counts end with two merges
+    side by side before the last, every block merged once, consecutive blocks only."""
+    from fourd.methods.assembly import hierarchy
+
+    assert hierarchy.merge_tree(8) == [(0, 1), (2, 3), (4, 5), (6, 7), (8, 9), (10, 11), (12, 13)]
+    for count in range(1, 40):
         tree = hierarchy.merge_tree(count)
-        firsts = list(range(count))
-        for a, _ in tree:
-            firsts.append(firsts[a])
-        assert reports == [(firsts[a], firsts[b]) for a, b in tree]
+        assert len(tree) == count - 1
+        spans = {node: (node, node + 1) for node in range(count)}
+        for k, (a, b) in enumerate(tree):
+            assert spans[a][1] == spans[b][0]  # consecutive
+            spans[count + k] = (spans.pop(a)[0], spans.pop(b)[1])
+        assert list(spans.values()) == [(0, count)] if count > 1 else True
+        if count > 3:  # the last merge's two blocks are both merges, made side by side
+            a, b = tree[-1]
+            assert a >= count and b >= count
 
 
 def test_a_merge_run_in_this_process_sees_its_own_thread_environment(monkeypatch):
@@ -359,12 +386,15 @@ def test_a_merge_run_in_this_process_sees_its_own_thread_environment(monkeypatch
 
     seen = []
 
-    def merge(left, right, options):
+    def map_pair(source, faces, target, target_faces, options):
         seen.append(os.environ.get("NUMBA_NUM_THREADS"))
+
+    def join(left, right, pair, options):
         return hierarchy.Block(left.faces, np.concatenate([left.vertices, right.vertices]),
                                np.concatenate([left.observed, right.observed])), None
 
-    monkeypatch.setattr(hierarchy, "merge_blocks", merge)
+    monkeypatch.setattr(hierarchy, "map_pair", map_pair)
+    monkeypatch.setattr(hierarchy, "join_blocks", join)
     monkeypatch.delenv("NUMBA_NUM_THREADS", raising=False)
     faces = np.array([[0, 1, 2]])
     block = hierarchy.Block(faces, np.zeros((1, 3, 3)), np.ones((1, 3), dtype=bool))

@@ -51,7 +51,15 @@ from fourd.methods.assembly.crossparam import (
     cross_parameterize,
     map_patch,
 )
-from fourd.methods.assembly.hierarchy import Block, MergeReport, assemble, merge_blocks
+from fourd.methods.assembly.hierarchy import (
+    Block,
+    MergeMap,
+    MergeReport,
+    assemble,
+    join_blocks,
+    map_pair,
+    merge_blocks,
+)
 from fourd.methods.assembly.method import (
     COMMON_OPTIONS,
     MIN_FRAMES,
@@ -90,11 +98,14 @@ __all__ = [
     "paste_target_only",
     "place_pasted",
     "zip_strip",
+    "MergeMap",
     "MergeReport",
     "Options",
     "assemble",
     "close_small_holes",
     "geometric_anchors",
+    "join_blocks",
+    "map_pair",
     "merge_blocks",
     "reconstruct",
     "reconstruct_with_diagnostics",

@@ -3,8 +3,9 @@ the propagation of section 5.6.
 
 A :class:`Block` is a consistent sub-sequence: one connectivity, positions in each of its
 frames. At the bottom level every frame's own mesh is a block of length one; each level merges
-consecutive pairs of blocks (lengths 1, 2, 4, ...; an odd last block waits for the next
-level), so after ``ceil(log2 T)`` levels one block holds the whole sequence.
+consecutive pairs of blocks (lengths 1, 2, 4, ... when ``T`` is a power of two; otherwise
+the halves of the sequence, halved again, :func:`merge_tree`), so after ``ceil(log2 T)``
+levels one block holds the whole sequence.
 
 :func:`merge_blocks` maps the left block's last frame (the source) onto the right block's
 first (the target) with :func:`~fourd.methods.assembly.pair.cross_parameterize_pair`, its
@@ -35,9 +36,12 @@ positions in the right frames are the right block's own, in the left frames plac
 Laplacian coordinates of the union in the target frame, unobserved.
 
 Merges of one level are independent (5.3) and run side by side in processes
-(``Options.workers``; by default one per core for frames big enough to pay for it), each
-started as soon as its two blocks are there, so a merge of the next level need not wait for
-the whole level.
+(``Options.workers``; by default one per core for frames big enough to pay for it). A merge is
+its pair map (:func:`map_pair`, nearly all the work), which needs only the left block's last
+frame and the right block's first, then the join (:func:`join_blocks`). Each map starts as
+soon as its frames are there: with ``paste`` and ``correct`` off a block's first frame is its
+first frame's own mesh, so the map of the last merge runs beside the last merge of its right
+half instead of alone after it (:func:`_merge_as_ready`).
 """
 
 from __future__ import annotations
@@ -120,25 +124,36 @@ def _closest_map(aligned, target_vertices, target_faces):
     return found.triangle, found.barycentric
 
 
-def merge_blocks(left: Block, right: Block, options: Options | None = None) -> tuple[Block, MergeReport]:
-    """Merge two consecutive blocks into one (module docstring).
+class MergeMap(NamedTuple):
+    """The map of a merge's source frame onto its target frame (:func:`map_pair`).
 
-    Parameters
-    ----------
-    left, right : Block
-        ``left``'s last frame comes just before ``right``'s first.
-    options : Options, optional
-
-    Returns
-    -------
-    Block
-        ``left.faces`` (the pasted patches' faces after them), with ``len(left) + len(right)``
-        frames of positions.
-    MergeReport
+    anchors : int
+        Geometric anchors the pair map started from.
+    faces : int64 [N]
+        Target triangle of each source vertex (meaningful where ``mapped``).
+    barycentric : float64 [N, 3]
+    mapped : bool [N]
+        Source vertices the map places (the rest are filled in by registration).
+    analysis : Analysis or None
+        The inconsistent regions (``correct``), their vertices already unmapped.
     """
+
+    anchors: int
+    faces: np.ndarray
+    barycentric: np.ndarray
+    mapped: np.ndarray
+    analysis: object = None
+
+
+def map_pair(source: np.ndarray, faces: np.ndarray, target: np.ndarray, target_faces: np.ndarray,
+             options: Options | None = None) -> MergeMap:
+    """The first half of a merge (module docstring): the source frame ``[N, 3]`` (mesh
+    ``faces``) mapped onto the target frame ``[M, 3]`` (mesh ``target_faces``) by anchors from
+    the coarse alignment and the pair's cross-parameterisation, with the map analysed and its
+    inconsistent regions unmapped when ``correct`` is on. It needs only those two frames, so a
+    merge's map can be made while the right block is still being assembled (when its first
+    frame is final, :func:`_merge_as_ready`)."""
     options = Options() if options is None else options
-    source, faces = left.vertices[-1], left.faces
-    target, target_faces = right.vertices[0], right.faces
     alignment = geometric_anchors(
         source, faces, target, target_faces,
         spacing=options.anchor_spacing, gap=options.anchor_gap, tolerance=options.anchor_tolerance,
@@ -154,7 +169,6 @@ def merge_blocks(left: Block, right: Block, options: Options | None = None) -> t
     mapped = (map_faces >= 0) & ~alignment.past_rim
     image = np.einsum("nk,nkd->nd", bary[mapped], target[target_faces[map_faces[mapped]]])
     mapped[mapped] = np.linalg.norm(image - alignment.aligned[mapped], axis=1) <= options.map_agreement * alignment.edge
-    flagged = 0
     analysis = None
     if options.correct and mapped.sum() >= 3:
         points = np.full((count, 3), np.nan)
@@ -162,12 +176,48 @@ def merge_blocks(left: Block, right: Block, options: Options | None = None) -> t
         analysis = inconsistent_regions(source, faces, points, mapped, stretch=options.correct_stretch,
                                         motion=options.correct_motion)
         mapped &= ~analysis.flagged
-        flagged = int(analysis.flagged.sum())
     if mapped.sum() < 3:
         log.warning("pair map placed %d of %d vertices: closest points of the coarse alignment instead",
                     int(mapped.sum()), count)
         map_faces, bary = _closest_map(alignment.aligned, target, target_faces)
         mapped = np.ones(count, dtype=bool)
+    return MergeMap(len(alignment.anchors.source), map_faces, bary, mapped, analysis)
+
+
+def merge_blocks(left: Block, right: Block, options: Options | None = None) -> tuple[Block, MergeReport]:
+    """Merge two consecutive blocks into one (module docstring): :func:`map_pair` of the
+    left block's last frame onto the right block's first, then :func:`join_blocks`.
+
+    Parameters
+    ----------
+    left, right : Block
+        ``left``'s last frame comes just before ``right``'s first.
+    options : Options, optional
+
+    Returns
+    -------
+    Block
+        ``left.faces`` (the pasted patches' faces after them), with ``len(left) + len(right)``
+        frames of positions.
+    MergeReport
+    """
+    options = Options() if options is None else options
+    pair = map_pair(left.vertices[-1], left.faces, right.vertices[0], right.faces, options)
+    return join_blocks(left, right, pair, options)
+
+
+def join_blocks(left: Block, right: Block, pair: MergeMap, options: Options | None = None) -> tuple[Block, MergeReport]:
+    """The second half of a merge (module docstring): ``pair``, the map of ``left``'s last
+    frame onto ``right``'s first (:func:`map_pair`), carried through every frame of
+    ``right``, the unmapped vertices placed by registration, and the union mesh of the two
+    blocks (with the inconsistent regions' replacements and the pasted patches when on).
+    Returns what :func:`merge_blocks` returns."""
+    options = Options() if options is None else options
+    source, faces = left.vertices[-1], left.faces
+    target, target_faces = right.vertices[0], right.faces
+    count = len(source)
+    map_faces, bary, mapped, analysis = pair.faces, pair.barycentric, pair.mapped, pair.analysis
+    flagged = int(analysis.flagged.sum()) if analysis is not None else 0
     corners = right.faces[map_faces[mapped]]  # [K, 3]
     carried = np.einsum("kc,tkcd->tkd", bary[mapped], right.vertices[:, corners])
     frames = len(right.vertices)
@@ -205,7 +255,7 @@ def merge_blocks(left: Block, right: Block, options: Options | None = None) -> t
     deleted = len(np.unique(analysis.region[drop])) - replaced if drop.any() else 0
     merged = Block(union.faces, np.concatenate([union.left_vertices, union.right_vertices]),
                    np.concatenate([union.left_observed, union.right_observed]))
-    return merged, MergeReport(len(alignment.anchors.source), float(mapped.mean()), float(rigid.mean()), flagged,
+    return merged, MergeReport(pair.anchors, float(mapped.mean()), float(rigid.mean()), flagged,
                                pasted, regions, replaced, deleted)
 
 
@@ -281,59 +331,95 @@ def _test_replacements(union: _Union, paste: Paste, placed, region, drop, option
 
 
 def merge_tree(count: int) -> list[tuple[int, int]]:
-    """The merges of the hierarchy over ``count`` blocks, level by level: pairs of node ids,
-    ``0 .. count - 1`` the blocks and ``count + k`` the result of the ``k``-th merge (an odd
-    last node waits for the next level).
+    """The merges of the hierarchy over ``count`` blocks: pairs of node ids, ``0 .. count - 1``
+    the blocks and ``count + k`` the result of the ``k``-th merge, level by level from the
+    bottom.
+
+    The sequence is halved recursively (the left half the larger by one when ``count`` is
+    odd), so for a power of two the levels merge lengths 1, 2, 4, ... as in figure 5.2, and for
+    other counts the last merges still have a sibling to run beside: 20 blocks end with 5 + 5
+    twice side by side and then 10 + 10, where pairing left to right ends with 8 + 8 and
+    16 + 4, two merges alone.
 
     >>> merge_tree(5)
-    [(0, 1), (2, 3), (5, 6), (7, 4)]
+    [(0, 1), (3, 4), (5, 2), (7, 6)]
     """
-    level, merges = list(range(count)), []
-    while len(level) > 1:
-        following = []
-        for i in range(0, len(level) - 1, 2):
-            merges.append((level[i], level[i + 1]))
-            following.append(count + len(merges) - 1)
-        if len(level) % 2:
-            following.append(level[-1])
-        level = following
+    spans = []  # (height, first block, split, end) of every merge
+
+    def split(first: int, end: int) -> int:
+        if end - first == 1:
+            return 0
+        middle = first + (end - first + 1) // 2
+        height = 1 + max(split(first, middle), split(middle, end))
+        spans.append((height, first, middle, end))
+        return height
+
+    split(0, count)
+    spans.sort()
+    node = {(first, first + 1): first for first in range(count)}
+    merges = []
+    for _, first, middle, end in spans:
+        merges.append((node[first, middle], node[middle, end]))
+        node[first, end] = count + len(merges) - 1
     return merges
 
 
 def _merge_as_ready(blocks: list[Block], options: Options, pool, workers: int, on_merge):
-    """The merges of :func:`merge_tree`, each started in ``pool`` as soon as both its blocks
-    are there, so a level's last merge does not keep the next level waiting; one that is alone
-    (nothing else running or ready), and every one without a pool, runs here, with this
-    process's thread pools. The same merges of the same blocks as level by level. Returns the
-    last block and the reports in merge order."""
+    """The merges of :func:`merge_tree`, each in two steps (:func:`merge_blocks`): the pair map
+    (:func:`map_pair`) started in ``pool`` as soon as its left block is there and its target
+    frame is known, then the join (:func:`join_blocks`, here) once the right block is there too.
+
+    The target frame is the right block's first, which merges leave as its first base block's
+    mesh unless ``paste`` or ``correct`` changes the union, so by default a merge's map runs
+    while its right block is still being assembled and the top of the hierarchy keeps both
+    cores busy (the last merge would otherwise run alone). A map that is alone (nothing else
+    running or ready), and every one without a pool, runs here, with this process's thread
+    pools. The same maps of the same frames as merging level by level. Returns the last block
+    and the reports in merge order."""
     count = len(blocks)
     merges = merge_tree(count)
+    if not merges:
+        return blocks[0], []
+    first = list(range(count))  # the base block of each node's first frame
+    for a, _ in merges:
+        first.append(first[a])
+    known_first = not (options.paste or options.correct)
+    base = list(blocks)
     ready = dict(enumerate(blocks))
-    waiting = {count + k: pair for k, pair in enumerate(merges)}
-    running, reports = {}, [None] * len(merges)
-    while waiting or running:
-        startable = [node for node, (a, b) in waiting.items() if a in ready and b in ready]
+    pending = {count + k: pair for k, pair in enumerate(merges)}  # no map yet
+    maps, running, reports = {}, {}, [None] * len(merges)
+
+    def frames(node):
+        a, b = merges[node - count]
+        right = ready.get(b, base[first[b]] if known_first else None)
+        if a not in ready or right is None:
+            return None
+        return ready[a].vertices[-1], ready[a].faces, right.vertices[0], right.faces
+
+    while count + len(merges) - 1 not in ready:
+        for node in [node for node in maps if merges[node - count][1] in ready]:
+            a, b = merges[node - count]
+            ready[node], reports[node - count] = join_blocks(ready.pop(a), ready.pop(b), maps.pop(node), options)
+            if on_merge:
+                on_merge()
+        startable = {node: inputs for node in pending if (inputs := frames(node)) is not None}
         if pool is None or (len(startable) == 1 and not running):
-            for node in startable if pool is None else startable[:1]:
-                a, b = waiting.pop(node)
-                ready[node], reports[node - count] = merge_blocks(ready.pop(a), ready.pop(b), options)
-                if on_merge:
-                    on_merge()
+            for node, inputs in startable.items():
+                del pending[node]
+                maps[node] = map_pair(*inputs, options)
             continue
-        for node in startable:
-            a, b = waiting.pop(node)
+        for node, inputs in startable.items():
+            del pending[node]
             # the workers start as the jobs are submitted, inheriting pools sized to share the
             # cores; this process keeps its own environment (numba refuses to compile here once
             # its threads run if the environment asks another count)
             with threads_per_worker(workers):
-                running[pool.submit(merge_blocks, ready.pop(a), ready.pop(b), options)] = node
-        done, _ = wait(running, return_when=FIRST_COMPLETED)
-        for future in done:
-            node = running.pop(future)
-            ready[node], reports[node - count] = future.result()
-            if on_merge:
-                on_merge()
-    return ready[count + len(merges) - 1] if merges else blocks[0], reports
+                running[pool.submit(map_pair, *inputs, options)] = node
+        if running:
+            done, _ = wait(running, return_when=FIRST_COMPLETED)
+            for future in done:
+                maps[running.pop(future)] = future.result()
+    return ready[count + len(merges) - 1], reports
 
 
 def assemble(blocks: list[Block], options: Options | None = None, *, on_merge=None) -> tuple[Block, list[MergeReport]]:
