@@ -379,6 +379,7 @@ def frame_surfaces(
     desc: str = "frame surfaces",
     use_faces: bool = True,
     scheduler: str = "sync",
+    submit=None,
 ):
     """Every frame's surface ``[(vertices [N, 3], faces [F, 3]), ...]`` and how many came
     from the cache: a frame's own faces when it has them and ``use_faces`` (unreferenced
@@ -388,7 +389,9 @@ def frame_surfaces(
     ``scheduler`` (:func:`fourd.pipeline.map_frames`): ``"sync"`` makes the frames here one
     after the other, each cached as it is made; ``"processes"`` or a ``dask.distributed``
     scheduler's address makes the missing frames side by side (the same surfaces), cached when
-    they come back."""
+    they come back. ``submit``, a function like :meth:`concurrent.futures.Executor.submit`
+    (the caller's worker processes), makes them there instead of ``"sync"``'s here."""
+    from concurrent.futures import as_completed
     from functools import partial
 
     from fourd.cache import StageCache, stage_key
@@ -413,7 +416,13 @@ def frame_surfaces(
             surfaces[index] = (stored["vertices"], stored["faces"])
             found += 1
     make = partial(_surface_of, settings)
-    if scheduler == "sync":
+    if scheduler == "sync" and submit is not None and missing:
+        futures = {submit(make, frames[index]): index for index in missing}
+        for future in progress(as_completed(futures), desc=desc, total=len(missing)):
+            index = futures[future]
+            surfaces[index] = future.result()
+            cache.save(stage, keys[index], {"vertices": surfaces[index][0], "faces": surfaces[index][1]})
+    elif scheduler == "sync":
         for index in progress(missing, desc=desc, total=len(missing)):
             surfaces[index] = make(frames[index])
             cache.save(stage, keys[index], {"vertices": surfaces[index][0], "faces": surfaces[index][1]})

@@ -12,6 +12,7 @@ from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 
 import fourd
+from fourd import synth
 from fourd.errors import InputError
 from fourd.methods import method_module
 from fourd.methods.assembly import (
@@ -314,8 +315,13 @@ def test_point_cloud_frames_are_meshed_first_and_bad_input_is_named():
 
 
 @pytest.mark.slow
-def test_merges_of_a_level_run_in_processes_with_the_same_result():
-    seq, _ = _remeshed_sequence(5)
+@pytest.mark.parametrize("points", [False, True])
+def test_merges_of_a_level_run_in_processes_with_the_same_result(points):
+    """Per-frame meshes, or point clouds whose meshes the merge processes make first."""
+    if points:
+        seq = synth.scan(synth.scene("squash-ball", frames=3), resolution=64)
+    else:
+        seq, _ = _remeshed_sequence(5)
     serial = reconstruct(seq, Options(relax_sweeps=1, workers=1))
     parallel = reconstruct(seq, Options(relax_sweeps=1, workers=2))
     np.testing.assert_array_equal(parallel.vertices, serial.vertices)
@@ -347,9 +353,9 @@ def test_merges_started_as_their_blocks_are_ready_are_those_of_the_levels(monkey
     blocks = [hierarchy.Block(faces, np.full((1, 3, 3), float(t)), np.ones((1, 3), dtype=bool))
               for t in range(count)]
     options = Options(paste=paste)
-    serial = hierarchy._merge_as_ready(blocks, options, None, 1, None)
+    serial = hierarchy._merge_as_ready(blocks, options, None, None)
     with ThreadPoolExecutor(2) as pool:
-        parallel = hierarchy._merge_as_ready(blocks, options, pool, 2, None)
+        parallel = hierarchy._merge_as_ready(blocks, options, hierarchy.MergePool(pool, 2), None)
     tree = hierarchy.merge_tree(count)
     firsts, lasts = list(range(count)), list(range(count))
     for a, b in tree:

@@ -46,6 +46,7 @@ half instead of alone after it (:func:`_merge_as_ready`).
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import multiprocessing
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
@@ -364,7 +365,7 @@ def merge_tree(count: int) -> list[tuple[int, int]]:
     return merges
 
 
-def _merge_as_ready(blocks: list[Block], options: Options, pool, workers: int, on_merge):
+def _merge_as_ready(blocks: list[Block], options: Options, pool: MergePool | None, on_merge):
     """The merges of :func:`merge_tree`, each in two steps (:func:`merge_blocks`): the pair map
     (:func:`map_pair`) started in ``pool`` as soon as its left block is there and its target
     frame is known, then the join (:func:`join_blocks`, here) once the right block is there too.
@@ -410,11 +411,7 @@ def _merge_as_ready(blocks: list[Block], options: Options, pool, workers: int, o
             continue
         for node, inputs in startable.items():
             del pending[node]
-            # the workers start as the jobs are submitted, inheriting pools sized to share the
-            # cores; this process keeps its own environment (numba refuses to compile here once
-            # its threads run if the environment asks another count)
-            with threads_per_worker(workers):
-                running[pool.submit(map_pair, *inputs, options)] = node
+            running[pool.submit(map_pair, *inputs, options)] = node
         if running:
             done, _ = wait(running, return_when=FIRST_COMPLETED)
             for future in done:
@@ -422,7 +419,41 @@ def _merge_as_ready(blocks: list[Block], options: Options, pool, workers: int, o
     return ready[count + len(merges) - 1], reports
 
 
-def assemble(blocks: list[Block], options: Options | None = None, *, on_merge=None) -> tuple[Block, list[MergeReport]]:
+class MergePool(NamedTuple):
+    """Worker processes for the merges (:func:`merge_pool`)."""
+
+    executor: ProcessPoolExecutor
+    workers: int
+
+    def submit(self, function, *args):
+        """``executor.submit``, a worker started for it inheriting thread pools sized to share
+        the cores; this process keeps its own environment (numba refuses to compile here once
+        its threads run if the environment asks another count)."""
+        with threads_per_worker(self.workers):
+            return self.executor.submit(function, *args)
+
+
+@contextlib.contextmanager
+def merge_pool(workers: int):
+    """A :class:`MergePool` of ``workers`` processes while inside, shut down on leaving;
+    ``None`` for one worker, or inside a daemonic process (a Dask worker's), which may not
+    start others. Spawned, not forked: a fork after OpenMP (numba, BLAS) has started aborts
+    the child."""
+    if workers > 1 and multiprocessing.current_process().daemon:
+        log.info("merging in this process: a daemonic process (a Dask worker's) may not start others")
+        workers = 1
+    if workers <= 1:
+        yield None
+        return
+    executor = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"))
+    try:
+        yield MergePool(executor, workers)
+    finally:
+        executor.shutdown()
+
+
+def assemble(blocks: list[Block], options: Options | None = None, *, on_merge=None,
+             pool: MergePool | None = None) -> tuple[Block, list[MergeReport]]:
     """Merge ``blocks`` (consecutive, usually one frame each) level by level into one block
     (module docstring).
 
@@ -434,6 +465,9 @@ def assemble(blocks: list[Block], options: Options | None = None, *, on_merge=No
         as soon as its two blocks are there.
     on_merge : callable, optional
         Called with no argument after each merge (progress).
+    pool : MergePool, optional
+        Processes to run the merges in (:func:`merge_pool`), instead of a pool of
+        :meth:`~Options.merge_workers` started here.
 
     Returns
     -------
@@ -446,18 +480,7 @@ def assemble(blocks: list[Block], options: Options | None = None, *, on_merge=No
     if not blocks:
         raise ValueError("nothing to assemble")
     blocks = list(blocks)
-    # spawned, not forked: a fork after OpenMP (numba, BLAS) has started aborts the child;
-    # their thread pools sized to share the cores (fourd.pipeline.worker_threads)
-    workers = options.merge_workers(blocks[0].vertices.shape[1])
-    if workers > 1 and multiprocessing.current_process().daemon:
-        log.info("merging in this process: a daemonic process (a Dask worker's) may not start others")
-        workers = 1
-    pool = None
-    if workers > 1:
-        pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"))
-    try:
-        block, reports = _merge_as_ready(blocks, options, pool, workers, on_merge)
-    finally:
-        if pool is not None:
-            pool.shutdown()
-    return block, reports
+    if pool is not None:
+        return _merge_as_ready(blocks, options, pool, on_merge)
+    with merge_pool(options.merge_workers(blocks[0].vertices.shape[1])) as started:
+        return _merge_as_ready(blocks, options, started, on_merge)

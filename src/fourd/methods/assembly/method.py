@@ -24,7 +24,7 @@ from fourd.cache import report_resumed
 from fourd.errors import InputError
 from fourd.geometry.frame_surface import SurfaceSettings, frame_surfaces
 from fourd.geometry.hole_filling import fill_holes, membrane_positions, small_holes
-from fourd.methods.assembly.hierarchy import Block, assemble
+from fourd.methods.assembly.hierarchy import Block, MergePool, assemble, merge_pool
 from fourd.methods.assembly.options import Options
 from fourd.methods.base import Reconstruction
 from fourd.progress import progress
@@ -61,12 +61,20 @@ class AssemblyDiagnostics:
 def frame_meshes(seq: PointCloudSequence, options: Options) -> list[tuple[np.ndarray, np.ndarray]]:
     """Every frame's mesh (step 1 of the module docstring), empty ones included: its own faces
     when it has them, else :func:`~fourd.geometry.frame_surface.frame_surface` (cached)."""
-    settings = SurfaceSettings(**{f.name: getattr(options, f.name) for f in dataclasses.fields(SurfaceSettings)})
-    meshes, found = frame_surfaces(seq.frames, settings, cache_dir=options.cache_dir, stage=STAGE,
-                                   desc="assembly meshes", scheduler=options.scheduler)
+    meshes, found = _frame_meshes(seq, options)
     if found:
         report_resumed(log, f"{found} of {len(seq.frames)} frames' meshes")
     return meshes
+
+
+def _frame_meshes(seq: PointCloudSequence, options: Options, pool: MergePool | None = None,
+                  frames: slice = slice(None)) -> tuple[list[tuple[np.ndarray, np.ndarray]], int]:
+    """:func:`frame_meshes` of the ``frames``, made in ``pool``'s processes when given (and
+    ``scheduler`` is ``sync``), and how many came from the cache."""
+    settings = SurfaceSettings(**{f.name: getattr(options, f.name) for f in dataclasses.fields(SurfaceSettings)})
+    return frame_surfaces(seq.frames[frames], settings, cache_dir=options.cache_dir, stage=STAGE,
+                          desc="assembly meshes", scheduler=options.scheduler,
+                          submit=None if pool is None else pool.submit)
 
 
 def base_blocks(seq: PointCloudSequence, meshes) -> list[Block]:
@@ -119,11 +127,19 @@ def reconstruct_with_diagnostics(seq: PointCloudSequence, options: Options | Non
     options = Options() if options is None else options
     if len(seq) < 2:
         raise InputError(f"the assembly method needs at least 2 frames, the input has {len(seq)}")
-    meshes = frame_meshes(seq, options)
-    blocks = base_blocks(seq, meshes)
-    log.info("assembling %d frames (%d merges)", len(blocks), len(blocks) - 1)
-    with progress(total=len(blocks) - 1, desc="assembly merges", unit="merge") as bar:
-        block, reports = assemble(blocks, options, on_merge=lambda: bar.update(1))
+    # the first frame's mesh here decides the merge processes (its size, as assemble does);
+    # they make the other frames' meshes before the merges
+    meshes, found = _frame_meshes(seq, options, frames=slice(0, 1))
+    size = len(meshes[0][0]) or max(len(frame.points) for frame in seq.frames)
+    with merge_pool(options.merge_workers(size)) as pool:
+        others, found_others = _frame_meshes(seq, options, pool, frames=slice(1, None))
+        meshes, found = meshes + others, found + found_others
+        if found:
+            report_resumed(log, f"{found} of {len(seq.frames)} frames' meshes")
+        blocks = base_blocks(seq, meshes)
+        log.info("assembling %d frames (%d merges)", len(blocks), len(blocks) - 1)
+        with progress(total=len(blocks) - 1, desc="assembly merges", unit="merge") as bar:
+            block, reports = assemble(blocks, options, on_merge=lambda: bar.update(1), pool=pool)
     if options.close_holes > 0:
         block = close_small_holes(block, options.close_holes, options.close_smoothness)
     result = AnimatedMesh(block.faces, block.vertices, seq.times, block.observed, rest=block.vertices[0])
