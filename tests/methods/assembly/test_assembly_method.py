@@ -366,25 +366,6 @@ def test_merges_started_as_their_blocks_are_ready_are_those_of_the_levels(monkey
         assert reports == [(firsts[a], firsts[b], (lasts[a], firsts[b])) for a, b in tree]
 
 
-def test_the_merge_tree_halves_the_sequence():
-    """Powers of two merge lengths 1, 2, 4, ... (figure 5.2); other counts end with two merges
-    side by side before the last, every block merged once, consecutive blocks only."""
-    from fourd.methods.assembly import hierarchy
-
-    assert hierarchy.merge_tree(8) == [(0, 1), (2, 3), (4, 5), (6, 7), (8, 9), (10, 11), (12, 13)]
-    for count in range(1, 40):
-        tree = hierarchy.merge_tree(count)
-        assert len(tree) == count - 1
-        spans = {node: (node, node + 1) for node in range(count)}
-        for k, (a, b) in enumerate(tree):
-            assert spans[a][1] == spans[b][0]  # consecutive
-            spans[count + k] = (spans.pop(a)[0], spans.pop(b)[1])
-        assert list(spans.values()) == [(0, count)] if count > 1 else True
-        if count > 3:  # the last merge's two blocks are both merges, made side by side
-            a, b = tree[-1]
-            assert a >= count and b >= count
-
-
 def test_a_merge_run_in_this_process_sees_its_own_thread_environment(monkeypatch):
     # with processes for the merges, the last level's single merge runs here: numba refuses to
     # compile a kernel here once its threads run if the environment asks for another count

@@ -3,9 +3,8 @@ the propagation of section 5.6.
 
 A :class:`Block` is a consistent sub-sequence: one connectivity, positions in each of its
 frames. At the bottom level every frame's own mesh is a block of length one; each level merges
-consecutive pairs of blocks (lengths 1, 2, 4, ... when ``T`` is a power of two; otherwise
-the halves of the sequence, halved again, :func:`merge_tree`), so after ``ceil(log2 T)``
-levels one block holds the whole sequence.
+consecutive pairs of blocks (lengths 1, 2, 4, ...; an odd last block waits for the next
+level), so after ``ceil(log2 T)`` levels one block holds the whole sequence.
 
 :func:`merge_blocks` maps the left block's last frame (the source) onto the right block's
 first (the target) with :func:`~fourd.methods.assembly.pair.cross_parameterize_pair`, its
@@ -332,36 +331,22 @@ def _test_replacements(union: _Union, paste: Paste, placed, region, drop, option
 
 
 def merge_tree(count: int) -> list[tuple[int, int]]:
-    """The merges of the hierarchy over ``count`` blocks: pairs of node ids, ``0 .. count - 1``
-    the blocks and ``count + k`` the result of the ``k``-th merge, level by level from the
-    bottom.
-
-    The sequence is halved recursively (the left half the larger by one when ``count`` is
-    odd), so for a power of two the levels merge lengths 1, 2, 4, ... as in figure 5.2, and for
-    other counts the last merges still have a sibling to run beside: 20 blocks end with 5 + 5
-    twice side by side and then 10 + 10, where pairing left to right ends with 8 + 8 and
-    16 + 4, two merges alone.
+    """The merges of the hierarchy over ``count`` blocks, level by level: pairs of node ids,
+    ``0 .. count - 1`` the blocks and ``count + k`` the result of the ``k``-th merge (an odd
+    last node waits for the next level).
 
     >>> merge_tree(5)
-    [(0, 1), (3, 4), (5, 2), (7, 6)]
+    [(0, 1), (2, 3), (5, 6), (7, 4)]
     """
-    spans = []  # (height, first block, split, end) of every merge
-
-    def split(first: int, end: int) -> int:
-        if end - first == 1:
-            return 0
-        middle = first + (end - first + 1) // 2
-        height = 1 + max(split(first, middle), split(middle, end))
-        spans.append((height, first, middle, end))
-        return height
-
-    split(0, count)
-    spans.sort()
-    node = {(first, first + 1): first for first in range(count)}
-    merges = []
-    for _, first, middle, end in spans:
-        merges.append((node[first, middle], node[middle, end]))
-        node[first, end] = count + len(merges) - 1
+    level, merges = list(range(count)), []
+    while len(level) > 1:
+        following = []
+        for i in range(0, len(level) - 1, 2):
+            merges.append((level[i], level[i + 1]))
+            following.append(count + len(merges) - 1)
+        if len(level) % 2:
+            following.append(level[-1])
+        level = following
     return merges
 
 
