@@ -352,23 +352,26 @@ def merge_tree(count: int) -> list[tuple[int, int]]:
 
 def _merge_as_ready(blocks: list[Block], options: Options, pool: MergePool | None, on_merge):
     """The merges of :func:`merge_tree`, each in two steps (:func:`merge_blocks`): the pair map
-    (:func:`map_pair`) started in ``pool`` as soon as its left block is there and its target
-    frame is known, then the join (:func:`join_blocks`, here) once the right block is there too.
+    (:func:`map_pair`), run in ``pool`` once its left block is there and its target frame is
+    known, then the join (:func:`join_blocks`, here) once the right block is there too.
 
     The target frame is the right block's first, which merges leave as its first base block's
-    mesh unless ``paste`` or ``correct`` changes the union, so by default a merge's map runs
-    while its right block is still being assembled and the top of the hierarchy keeps both
-    cores busy (the last merge would otherwise run alone). A map that is alone (nothing else
-    running or ready), and every one without a pool, runs here, with this process's thread
-    pools. The same maps of the same frames as merging level by level. Returns the last block
-    and the reports in merge order."""
+    mesh unless ``paste`` or ``correct`` changes the union, so by default a merge's map can run
+    while its right block is still being assembled. Of the maps that can run, those with the
+    longest chain of maps still to follow them go first (:func:`_chains`): the blocks the last
+    merges' sources come from are made first, and the rest fill the cores beside the last
+    maps. A map that is alone (nothing else running or ready), and every one without a pool,
+    runs here, with this process's thread pools. The same maps of the same frames as merging
+    level by level. Returns the last block and the reports in merge order."""
     count = len(blocks)
     merges = merge_tree(count)
     if not merges:
         return blocks[0], []
+    last = count + len(merges) - 1
     first = list(range(count))  # the base block of each node's first frame
     for a, _ in merges:
         first.append(first[a])
+    chain = _chains(merges, count)
     known_first = not (options.paste or options.correct)
     base = list(blocks)
     ready = dict(enumerate(blocks))
@@ -382,26 +385,49 @@ def _merge_as_ready(blocks: list[Block], options: Options, pool: MergePool | Non
             return None
         return ready[a].vertices[-1], ready[a].faces, right.vertices[0], right.faces
 
-    while count + len(merges) - 1 not in ready:
+    def startable() -> list[int]:
+        return sorted((node for node in pending if frames(node) is not None), key=lambda node: (-chain[node], node))
+
+    def fill():
+        for node in startable()[:max(pool.workers - len(running), 0)]:
+            del pending[node]
+            running[pool.submit(map_pair, *frames(node), options)] = node
+
+    while last not in ready:
         for node in [node for node in maps if merges[node - count][1] in ready]:
             a, b = merges[node - count]
             ready[node], reports[node - count] = join_blocks(ready.pop(a), ready.pop(b), maps.pop(node), options)
             if on_merge:
                 on_merge()
-        startable = {node: inputs for node in pending if (inputs := frames(node)) is not None}
-        if pool is None or (len(startable) == 1 and not running):
-            for node, inputs in startable.items():
+        now = startable()
+        if pool is None or (len(now) == 1 and not running):
+            for node in now if pool is None else now[:1]:
                 del pending[node]
-                maps[node] = map_pair(*inputs, options)
+                maps[node] = map_pair(*frames(node), options)
             continue
-        for node, inputs in startable.items():
-            del pending[node]
-            running[pool.submit(map_pair, *inputs, options)] = node
+        fill()
         if running:
             done, _ = wait(running, return_when=FIRST_COMPLETED)
             for future in done:
                 maps[running.pop(future)] = future.result()
-    return ready[count + len(merges) - 1], reports
+            fill()  # before the joins, which take a while here
+    return ready[last], reports
+
+
+def _chains(merges: list[tuple[int, int]], count: int) -> dict[int, int]:
+    """For each merge node, the most maps that must run one after another after its own: a
+    block is the next merge's source when it is its left block (that map follows), and only
+    joined when it is the right one (what follows that merge follows it).
+
+    >>> _chains(merge_tree(5), 5)
+    {5: 2, 6: 1, 7: 1, 8: 0}
+    """
+    chain = {count + len(merges) - 1: 0}
+    for k in range(len(merges) - 1, -1, -1):
+        a, b = merges[k]
+        after = chain[count + k]
+        chain[a], chain[b] = after + 1, after
+    return {node: chain[node] for node in range(count, count + len(merges))}
 
 
 class MergePool(NamedTuple):
