@@ -93,6 +93,10 @@ def test_one_ring_rotations_recover_a_rigid_motion_and_a_bend():
     assert np.abs(found[far & ~upper] - other).max() < 1e-9
     lonely = one_ring_rotations(sp.csr_matrix((len(rest), len(rest))), rest, rest)
     assert np.abs(lonely - np.eye(3)).max() == 0
+    # some rows only: those rows' rotations, to the bit
+    rows = np.array([5, 0, 41, 41, 100])
+    assert np.array_equal(one_ring_rotations(weights, rest, bent, rows), found[rows])
+    assert one_ring_rotations(weights, rest, bent, rows[:0]).shape == (0, 3, 3)
 
 
 def test_arap_right_hand_side_is_the_laplacian_of_the_rest_turned():

@@ -226,7 +226,8 @@ class RigidTransform(NamedTuple):
     rms: float
 
 
-def one_ring_rotations(weights: sp.spmatrix, rest: np.ndarray, deformed: np.ndarray) -> np.ndarray:
+def one_ring_rotations(weights: sp.spmatrix, rest: np.ndarray, deformed: np.ndarray,
+                       rows: np.ndarray | None = None) -> np.ndarray:
     """Each vertex's rotation best aligning its one-ring's edges at rest with the deformed ones,
     the local step of as-rigid-as-possible modelling (Sorkine and Alexa 2007, eq. 5-6):
     ``R_i`` maximises ``sum_j w_ij (d_j - d_i) . R_i (r_j - r_i)``.
@@ -236,20 +237,23 @@ def one_ring_rotations(weights: sp.spmatrix, rest: np.ndarray, deformed: np.ndar
     weights : sparse [N, N]
         Non-negative edge weights ``w_ij`` (the one-rings: the non-zeros of row ``i``).
     rest, deformed : array [N, 3]
+    rows : int array [K], optional
+        Only these vertices' rotations (all by default).
 
     Returns
     -------
-    ndarray float [N, 3, 3]
+    ndarray float [N, 3, 3] (or [K, 3, 3])
         Proper rotations with ``R_i (r_j - r_i) ~ d_j - d_i``; the identity where a vertex
         has no weighted edge.
     """
     rest = np.ascontiguousarray(rest, dtype=np.float64)
     deformed = np.ascontiguousarray(deformed, dtype=np.float64)
     edges = weights if sp.issparse(weights) and weights.format == "csr" else sp.csr_matrix(weights)
+    rows = np.arange(edges.shape[0]) if rows is None else np.asarray(rows, dtype=np.int64).reshape(-1)
     covariance = _one_ring_covariances(edges.indptr, edges.indices, np.asarray(edges.data, dtype=np.float64),
-                                       rest, deformed)
+                                       rest, deformed, rows)
     rotations = best_rotations(covariance)
-    rotations[np.diff(edges.indptr) == 0] = np.eye(3)
+    rotations[np.diff(edges.indptr)[rows] == 0] = np.eye(3)
     return rotations
 
 
@@ -292,18 +296,19 @@ def _arap_right_hand_side(indptr, indices, weights, rest, rotations):
 
 
 @numba.njit(cache=True, nogil=True)
-def _one_ring_covariances(indptr, indices, weights, rest, deformed):
-    """``sum_j w_ij (r_j - r_i) (d_j - d_i)^T`` per row ``i`` of the CSR weights ``[N, 3, 3]``."""
-    count = len(indptr) - 1
-    covariance = np.zeros((count, 3, 3))
-    for i in range(count):
+def _one_ring_covariances(indptr, indices, weights, rest, deformed, rows):
+    """``sum_j w_ij (r_j - r_i) (d_j - d_i)^T`` for each row ``i`` in ``rows [K]`` of the CSR
+    weights, ``[K, 3, 3]``."""
+    covariance = np.zeros((len(rows), 3, 3))
+    for k in range(len(rows)):
+        i = rows[k]
         for e in range(indptr[i], indptr[i + 1]):
             j = indices[e]
             w = weights[e]
             for a in range(3):
                 before = w * (rest[j, a] - rest[i, a])
                 for b in range(3):
-                    covariance[i, a, b] += before * (deformed[j, b] - deformed[i, b])
+                    covariance[k, a, b] += before * (deformed[j, b] - deformed[i, b])
     return covariance
 
 

@@ -95,11 +95,14 @@ def register_by_laplacian(
                   options={"SymmetricMode": True})
     edges = abs(L - sp.diags(L.diagonal())).tocsr()
     delta = L @ vertices
+    # only the rows a free vertex enters reach the solve: their rotations are enough
+    rows = np.unique(L_free.indices)
+    goal = np.zeros_like(delta)
     for frame in result:
         fixed_part = L_held @ frame[held]  # [N, 3]
         frame[free] = normal.solve(L_free.T @ (delta - fixed_part))
         for _ in range(iterations):
             placed = np.where(np.isnan(frame), 0.0, frame)
-            goal = np.einsum("nab,nb->na", one_ring_rotations(edges, vertices, placed), delta)
+            goal[rows] = np.einsum("nab,nb->na", one_ring_rotations(edges, vertices, placed, rows), delta[rows])
             frame[free] = normal.solve(L_free.T @ (goal - fixed_part))
     return result.reshape(points.shape)
