@@ -92,7 +92,10 @@ class RelaxOptions:
         hundredth of a source edge to one edge, which is what frees a flipped sliver (on
         bending-arm frames 0 and 3 remeshed apart, from a map slid by 0.4 edges: 12 flipped
         triangles left after 6 sweeps with line searches only, none with both). The steepest
-        direction is always tried beside them.
+        direction is always tried beside them. 8 (the default) against 16: crane's
+        correspondence 0.0065 / 0.0094 -> 0.0064 / 0.0093 in 10% less time; 4 was as good on
+        the bench scenes, but left two slivers of 3 and 6 vertices beside the deleted neck
+        of ``correct``'s two spheres (``benchmarks/METHODS.md``).
     steps : int
         Moves per vertex in a sweep (each the best of its walks).
     tolerance : float
@@ -107,7 +110,7 @@ class RelaxOptions:
     """
 
     sweeps: int = 6
-    walks: int = 16
+    walks: int = 8
     steps: int = 2
     tolerance: float = 0.0
     laplacian: str = "uniform"
@@ -335,7 +338,7 @@ class Options(SurfaceSettings):
     max_radius: float = 0.2
     flattening: str = "lscm"
     relax_sweeps: int = 6
-    relax_walks: int = 16
+    relax_walks: int = 8
     relax_tolerance: float = 0.0
     registration_iterations: int = 16
     correct: bool = False
