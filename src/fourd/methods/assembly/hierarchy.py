@@ -388,22 +388,29 @@ def _merge_as_ready(blocks: list[Block], options: Options, pool: MergePool | Non
     def startable() -> list[int]:
         return sorted((node for node in pending if frames(node) is not None), key=lambda node: (-chain[node], node))
 
+    def take(node):
+        inputs = frames(node)
+        del pending[node]
+        base[first[merges[node - count][1]]] = None  # its frame is in the inputs: let it go once joined
+        return inputs
+
     def fill():
         for node in startable()[:max(pool.workers - len(running), 0)]:
-            del pending[node]
-            running[pool.submit(map_pair, *frames(node), options)] = node
+            running[pool.submit(map_pair, *take(node), options)] = node
 
     while last not in ready:
-        for node in [node for node in maps if merges[node - count][1] in ready]:
+        joinable = [node for node in maps if merges[node - count][1] in ready]
+        for node in joinable:
             a, b = merges[node - count]
             ready[node], reports[node - count] = join_blocks(ready.pop(a), ready.pop(b), maps.pop(node), options)
             if on_merge:
                 on_merge()
         now = startable()
+        if not (now or running or joinable):
+            raise RuntimeError("the assembly's merges stalled: no map can start")  # a bug, not the input
         if pool is None or (len(now) == 1 and not running):
             for node in now if pool is None else now[:1]:
-                del pending[node]
-                maps[node] = map_pair(*frames(node), options)
+                maps[node] = map_pair(*take(node), options)
             continue
         fill()
         if running:
