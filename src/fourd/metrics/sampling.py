@@ -12,7 +12,10 @@ from typing import NamedTuple
 import numpy as np
 from scipy.spatial import cKDTree
 
-from fourd.geometry.closest_point import closest_on_candidates, closest_on_triangles  # noqa: F401 (re-exported)
+from fourd.geometry.closest_point import (
+    closest_on_candidates,
+    closest_on_triangles,  # noqa: F401 (re-exported: it was defined here)
+)
 from fourd.geometry.meshes import face_areas  # noqa: F401 (re-exported: metrics.sampling.face_areas)
 from fourd.geometry.surface_samples import (  # noqa: F401 (re-exported: they were defined here)
     SurfaceSamples,
@@ -74,8 +77,9 @@ def bind_to_surface(
         vertex_face[faces[:, corner]] = np.arange(len(faces))
     if len(queries) == 0:
         return Binding(np.zeros(0, dtype=np.int64), np.zeros((0, 3)), np.zeros(0), np.zeros((0, 3)))
+    corners = vertices[faces]
     parts = [
-        _bind_block(queries[start : start + _BLOCK], vertices, faces, samples, sample_tree, vertex_tree, vertex_face, k)
+        _bind_block(queries[start : start + _BLOCK], corners, samples, sample_tree, vertex_tree, vertex_face, k)
         for start in range(0, len(queries), _BLOCK)
     ]
     return Binding(*(np.concatenate([getattr(p, name) for p in parts]) for name in Binding._fields))
@@ -85,12 +89,12 @@ def bind_to_surface(
 _BLOCK = 100_000
 
 
-def _bind_block(queries, vertices, faces, samples, sample_tree, vertex_tree, vertex_face, k) -> Binding:
+def _bind_block(queries, corners, samples, sample_tree, vertex_tree, vertex_face, k) -> Binding:
     _, near = sample_tree.query(queries, k=k, workers=-1)
     near = near.reshape(len(queries), k)
     _, nearest_vertex = vertex_tree.query(queries, workers=-1)
     candidate_faces = np.concatenate([samples.faces[near], vertex_face[nearest_vertex][:, None]], axis=1)
-    found = closest_on_candidates(queries, vertices[faces], candidate_faces)
+    found = closest_on_candidates(queries, corners, candidate_faces)
     return Binding(found.triangle, found.barycentric, found.distances, found.points)
 
 

@@ -58,7 +58,7 @@ from fourd.geometry.closest_point import closest_points_on_mesh
 from fourd.geometry.meshes import median_edge_length
 from fourd.geometry.rotations import procrustes
 from fourd.methods.assembly.alignment import geometric_anchors
-from fourd.methods.assembly.analysis import inconsistent_regions, passes_stretch_test
+from fourd.methods.assembly.analysis import Analysis, inconsistent_regions, passes_stretch_test
 from fourd.methods.assembly.completion import Paste, paste_target_only, place_pasted
 from fourd.methods.assembly.options import Options
 from fourd.methods.assembly.pair import cross_parameterize_pair
@@ -142,7 +142,7 @@ class MergeMap(NamedTuple):
     faces: np.ndarray
     barycentric: np.ndarray
     mapped: np.ndarray
-    analysis: object = None
+    analysis: Analysis | None = None
 
 
 def map_pair(source: np.ndarray, faces: np.ndarray, target: np.ndarray, target_faces: np.ndarray,

@@ -16,14 +16,14 @@ and 1.1% more of the source.
 The first pass grows a pair around every anchor, or (``centre_spacing``) around anchors that
 far apart, then around the other anchors no kept patch covers yet: a patch holds several
 anchors, so pairs around all of them cover each vertex many times over. A second pass grows
-pairs around the source vertices no kept patch covers yet (outside its boundary band). Such
-a vertex has no known image, so the thesis grows the target patch around the nearest anchor's
+pairs around the source vertices no kept patch covers yet (outside its boundary band). Such a
+vertex has no known image, so the thesis grows the target patch around the nearest anchor's
 image instead; here the target patch is centred on the vertex's estimated image, the target
 vertex whose geodesic distances from the nearest anchors' images best match the vertex's own
-distances from those anchors (a geodesic multilateration), so both patches cover the same
-piece of surface (for a rigidly moved copy, exactly the same) and grow as before. When a pair fails, the uncovered
-vertices within half the distance from its centre to the nearest anchor are not tried again.
-Vertices that stay uncovered have no counterpart on the target.
+distances from those anchors (a geodesic multilateration), so both patches cover the same piece
+of surface (for a rigidly moved copy, exactly the same) and grow as before. When a pair fails,
+the uncovered vertices within half the distance from its centre to the nearest anchor are not
+tried again. Vertices that stay uncovered have no counterpart on the target.
 """
 
 from __future__ import annotations
