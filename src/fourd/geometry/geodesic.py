@@ -12,6 +12,8 @@ so the cost is that of the ball reached, not of the mesh.
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numba
 import numpy as np
 import scipy.sparse as sp
@@ -35,6 +37,31 @@ def edge_length_graph(vertices: np.ndarray, faces: np.ndarray) -> sp.csr_matrix:
     return graph
 
 
+class GeodesicBall(NamedTuple):
+    """What one search reached: ``distances [N]`` (inf where no seed reached) and the
+    ``vertices [K]`` with a finite distance, in the order first reached."""
+
+    distances: np.ndarray
+    vertices: np.ndarray
+
+
+class GeodesicScratch(NamedTuple):
+    """Working arrays of the searches on one graph of ``N`` vertices (:func:`geodesic_scratch`),
+    reused from search to search so that a small ball costs what it reaches, not ``N``. Each
+    search leaves them as it found them; one search at a time per scratch."""
+
+    keys: np.ndarray  # [N] inf
+    where: np.ndarray  # [N] -1
+    heap: np.ndarray  # [N]
+    reached: np.ndarray  # [N]
+
+
+def geodesic_scratch(count: int) -> GeodesicScratch:
+    """Fresh :class:`GeodesicScratch` for a graph of ``count`` vertices."""
+    return GeodesicScratch(np.full(count, np.inf), np.full(count, -1, dtype=np.int64),
+                           np.empty(count, dtype=np.int64), np.empty(count, dtype=np.int64))
+
+
 def geodesic_distances(graph: sp.csr_matrix, seeds, offsets=None, limit: float = np.inf) -> np.ndarray:
     """Distance ``[N]`` of every vertex from the nearest seed, along ``graph``'s edges, plus
     that seed's offset: ``min over s of offsets[s] + d(seeds[s], v)``, a seed counting only
@@ -51,6 +78,14 @@ def geodesic_distances(graph: sp.csr_matrix, seeds, offsets=None, limit: float =
     limit : float
         No vertex farther than this from a seed is reached from it.
     """
+    return geodesic_ball(graph, seeds, offsets, limit).distances
+
+
+def geodesic_ball(graph: sp.csr_matrix, seeds, offsets=None, limit: float = np.inf,
+                  scratch: GeodesicScratch | None = None) -> GeodesicBall:
+    """:func:`geodesic_distances` with the vertices it reached, searched with ``scratch``
+    (:func:`geodesic_scratch` of the graph's size) when given: then the search touches only the
+    vertices it reaches, apart from the ``[N]`` distances it returns."""
     if not (sp.issparse(graph) and graph.format == "csr"):
         graph = sp.csr_matrix(graph)
     seeds = np.atleast_1d(np.asarray(seeds, dtype=np.int64))
@@ -59,20 +94,24 @@ def geodesic_distances(graph: sp.csr_matrix, seeds, offsets=None, limit: float =
         raise ValueError(f"one offset per seed: {len(seeds)} seeds, {len(offsets)} offsets")
     if len(seeds) and (seeds.min() < 0 or seeds.max() >= graph.shape[0]):
         raise ValueError(f"seeds out of range for a graph of {graph.shape[0]} vertices")
+    scratch = geodesic_scratch(graph.shape[0]) if scratch is None else scratch
+    if len(scratch.keys) != graph.shape[0]:
+        raise ValueError(f"scratch for {len(scratch.keys)} vertices, the graph has {graph.shape[0]}")
     weights = graph.data if graph.data.dtype == np.float64 else graph.data.astype(np.float64)
-    return _nearest_seed_distances(graph.indptr, graph.indices, weights, seeds, offsets, float(limit))
+    distances, vertices = _nearest_seed_distances(graph.indptr, graph.indices, weights, seeds, offsets,
+                                                  float(limit), *scratch)
+    return GeodesicBall(distances, vertices)
 
 
 @numba.njit(cache=True, nogil=True)
-def _nearest_seed_distances(indptr, indices, weights, seeds, offsets, limit):
-    """Dijkstra from each seed in turn, within ``limit``; the minimum of distance plus offset.
-    Only the vertices a search reaches are reset after it."""
+def _nearest_seed_distances(indptr, indices, weights, seeds, offsets, limit, keys, where, heap, reached):
+    """Dijkstra from each seed in turn, within ``limit``; the minimum of distance plus offset,
+    and the vertices reached. Only the vertices a search reaches are reset after it (``keys``
+    inf and ``where`` -1 on entry and on return)."""
     count = len(indptr) - 1
     result = np.full(count, np.inf)
-    keys = np.full(count, np.inf)
-    where = np.full(count, -1, dtype=np.int64)
-    heap = np.empty(count, dtype=np.int64)
-    reached = np.empty(count, dtype=np.int64)
+    found = np.empty(count, dtype=np.int64)
+    total = 0
     for s in range(len(seeds)):
         seed = seeds[s]
         keys[seed] = 0.0
@@ -85,6 +124,9 @@ def _nearest_seed_distances(indptr, indices, weights, seeds, offsets, limit):
             node, size = heap_pop(keys, heap, where, size)
             here = keys[node]
             if here + offsets[s] < result[node]:
+                if result[node] == np.inf:
+                    found[total] = node
+                    total += 1
                 result[node] = here + offsets[s]
             for e in range(indptr[node], indptr[node + 1]):
                 other = indices[e]
@@ -104,4 +146,4 @@ def _nearest_seed_distances(indptr, indices, weights, seeds, offsets, limit):
                     sift_up(keys, heap, where, where[other])
         for r in range(touched):
             keys[reached[r]] = np.inf
-    return result
+    return result, found[:total].copy()
