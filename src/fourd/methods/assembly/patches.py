@@ -119,6 +119,8 @@ class _Mesh(NamedTuple):
     first_face: np.ndarray  # a face of each vertex [N] (F for a vertex of no face)
     slot: np.ndarray  # -1 per vertex [N], scratch of _patch_vertices (left as found)
     search: GeodesicScratch  # scratch of the geodesic searches (left as found)
+    face_state: np.ndarray  # 0 per face [F], scratch of _disk_faces (left as found)
+    near_faces: np.ndarray  # [F], scratch of _disk_faces
 
 
 def _mesh(vertices, faces) -> _Mesh:
@@ -136,7 +138,8 @@ def _mesh(vertices, faces) -> _Mesh:
     first_face = np.full(len(vertices), count, dtype=np.int64)
     np.minimum.at(first_face, faces.ravel(), rows)
     return _Mesh(vertices, faces, edge_length_graph(vertices, faces), incidence, face_graph, degree, first_face,
-                 np.full(len(vertices), -1, dtype=np.int64), geodesic_scratch(len(vertices)))
+                 np.full(len(vertices), -1, dtype=np.int64), geodesic_scratch(len(vertices)),
+                 np.zeros(count, dtype=np.int8), np.empty(count, dtype=np.int64))
 
 
 def _ball(mesh: _Mesh, seeds, offsets, limit: float) -> GeodesicBall:
@@ -159,7 +162,7 @@ def _disk(mesh: _Mesh, ball: GeodesicBall, radius: float, seed_face: int) -> Pat
     distance = ball.distances
     faces = _disk_faces(mesh.faces, mesh.face_graph.indptr, mesh.face_graph.indices, mesh.degree,
                         mesh.incidence.indptr, mesh.incidence.indices, distance, ball.vertices, float(radius),
-                        HOLE_REACH * float(radius), int(seed_face))
+                        HOLE_REACH * float(radius), int(seed_face), mesh.face_state, mesh.near_faces)
     if not len(faces):
         return None
     vertices, local_faces = _patch_vertices(mesh.faces, faces, mesh.slot)
@@ -198,16 +201,26 @@ def _patch_vertices(faces, chosen, slot):
 
 @numba.njit(cache=True, nogil=True)
 def _disk_faces(faces, graph_start, graph_faces, degree, incident_start, incident_faces, distance, reached,
-                radius, reach, seed_face):
+                radius, reach, seed_face, state, near):
+    """:func:`_near_disk_faces` with the scratch ``state`` (0 per face ``[F]``) reset to 0 after."""
+    result, count = _near_disk_faces(faces, graph_start, graph_faces, degree, incident_start, incident_faces,
+                                     distance, reached, radius, reach, seed_face, state, near)
+    for i in range(count):
+        state[near[i]] = 0
+    return result
+
+
+@numba.njit(cache=True, nogil=True)
+def _near_disk_faces(faces, graph_start, graph_faces, degree, incident_start, incident_faces, distance, reached,
+                     radius, reach, seed_face, state, near):
     """The faces of :func:`_disk` (sorted; none when the seed face is not in the ball): the
     faces near the ball (a corner within ``reach``); among them the edge-connected piece of
     faces with every corner within ``radius`` that holds the seed; and the pieces of the other
     near faces that stay within ``reach`` and touch neither a face beyond the near ones nor
     the mesh's own border (holes). ``reached``: the vertices of finite ``distance`` (no
-    other is read)."""
+    other is read). ``state`` (0 per face) and ``near`` (``[F]``) are scratch: returns the
+    faces and how many near faces ``near`` lists, whose ``state`` is left changed."""
     # 0 far, 1 near, 2 in the piece, 3 rest, 4 hole, 5 rest that is not a hole
-    state = np.zeros(len(faces), dtype=np.int8)
-    near = np.empty(len(faces), dtype=np.int64)
     count = 0
     for v in reached:
         if distance[v] <= reach:
@@ -219,10 +232,10 @@ def _disk_faces(faces, graph_start, graph_faces, degree, incident_start, inciden
                     count += 1
     empty = np.empty(0, dtype=np.int64)
     if state[seed_face] == 0:
-        return empty
+        return empty, count
     for k in range(3):
         if not distance[faces[seed_face, k]] <= radius:
-            return empty
+            return empty, count
     queue = np.empty(count, dtype=np.int64)
     queue[0] = seed_face
     state[seed_face] = 2
@@ -274,11 +287,15 @@ def _disk_faces(faces, graph_start, graph_faces, degree, incident_start, inciden
     kept = 0
     for i in range(count):
         if state[near[i]] == 2 or state[near[i]] == 4:
-            near[kept] = near[i]
             kept += 1
-    result = near[:kept].copy()
+    result = np.empty(kept, dtype=np.int64)
+    kept = 0
+    for i in range(count):
+        if state[near[i]] == 2 or state[near[i]] == 4:
+            result[kept] = near[i]
+            kept += 1
     result.sort()
-    return result
+    return result, count
 
 
 def _pair(source: _Mesh, target: _Mesh, anchors: Anchors, support: np.ndarray, centre: int, ds: GeodesicBall,
