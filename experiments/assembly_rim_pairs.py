@@ -13,7 +13,9 @@ with a target rim vertex point-to-plane only); `drop` (a source vertex's pair wi
 vertex left out); `plane3` (a source rim vertex's own pair point-to-point only when its target
 vertex is not on the target's rim); `farK` (... unless it is on the target's rim more than K
 edges away); `mutual` (... unless the target rim vertex's own nearest source vertex is not on the
-source's rim).
+source's rim); `silT` (... unless the source vertex or its target vertex is a silhouette rim:
+for every sensor of its frame, |normal . unit view direction| below T). Also printed: the share
+of the target's rim vertices that are silhouettes at T = 0.2, 0.3, 0.5.
 
 Answer (2-core machine, 2026-12-01, at a80f2e0; median / 95th percentile of the aligned
 source's error):
@@ -74,6 +76,12 @@ def patched(x, normals, target, target_normals, tree, limit, source_rim, point_t
         own_gap = np.concatenate([gap[found], np.zeros(pulls.sum())])
         far = target_rim[paired] & (own_gap > k * TARGET_RIM["edge"])
         share = np.where(source_rim[owner] & own_pair & ~far, 1.0, point_to_point)
+    if VARIANT.startswith("sil"):
+        tau = float(VARIANT[3:] or 0.3)
+        sil_s = TARGET_RIM["sil_source"](tau)
+        sil_t = TARGET_RIM["sil_target"](tau)
+        view = np.where(own_pair, sil_s[owner], False) | sil_t[paired]
+        share = np.where(source_rim[owner] & own_pair & ~view, 1.0, point_to_point)
     if VARIANT == "mutual":
         back_rim = np.isfinite(back_gap) & source_rim[back]  # the target vertex's nearest source vertex is a rim one
         alone = target_rim[paired] & ~back_rim[paired]  # a target rim vertex over the source's interior
@@ -105,6 +113,20 @@ def main():
     meshes = frame_meshes(scans.select(a, b + 1, b - a), o)
     (v0, f0), (v1, f1) = meshes[0], meshes[-1]
     TARGET_RIM["rim"] = A._rim(np.asarray(f1), len(v1))
+    def silhouette(v, f, sensors, rim):
+        n = vertex_normals(np.asarray(v), np.asarray(f))
+        def test(tau):
+            d = sensors[None, :, :] - np.asarray(v)[:, None, :]
+            d /= np.linalg.norm(d, axis=2, keepdims=True)
+            best = np.abs(np.einsum("nd,nkd->nk", n, d)).max(axis=1)
+            return rim & (best < tau)
+        return test
+    fa, fb = scans.frames[a], scans.frames[b]
+    print("sensors", None if fa.sensors is None else fa.sensors.shape)
+    TARGET_RIM["sil_source"] = silhouette(v0, f0, fa.sensors, A._rim(np.asarray(f0), len(v0)))
+    TARGET_RIM["sil_target"] = silhouette(v1, f1, fb.sensors, A._rim(np.asarray(f1), len(v1)))
+    for tau in (0.2, 0.3, 0.5):
+        print("rim share that is silhouette at", tau, round(TARGET_RIM["sil_target"](tau).sum() / max(A._rim(np.asarray(f1), len(v1)).sum(), 1), 3))
     TARGET_RIM["edge"] = A.median_edge_length(np.asarray(v0), np.asarray(f0))
     diag = truth.diagonal()
     if len(truth.faces):
