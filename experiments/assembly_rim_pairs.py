@@ -15,7 +15,10 @@ vertex is not on the target's rim); `farK` (... unless it is on the target's rim
 edges away); `mutual` (... unless the target rim vertex's own nearest source vertex is not on the
 source's rim); `silT` (... unless the source vertex or its target vertex is a silhouette rim:
 for every sensor of its frame, |normal . unit view direction| below T). Also printed: the share
-of the target's rim vertices that are silhouettes at T = 0.2, 0.3, 0.5.
+of the target's rim vertices that are silhouettes at T = 0.2, 0.3, 0.5. `still` (... unless a
+source rim vertex's pair with a target rim vertex is nearer where the source vertex was before
+the alignment than where it is now: a rim that stayed put in the world while the surface moved
+through it).
 
 Answer (2-core machine, 2026-12-01, at a80f2e0; median / 95th percentile of the aligned
 source's error):
@@ -82,6 +85,13 @@ def patched(x, normals, target, target_normals, tree, limit, source_rim, point_t
         sil_t = TARGET_RIM["sil_target"](tau)
         view = np.where(own_pair, sil_s[owner], False) | sil_t[paired]
         share = np.where(source_rim[owner] & own_pair & ~view, 1.0, point_to_point)
+    if VARIANT == "still":
+        src = TARGET_RIM["source"]
+        rim_pair = source_rim[owner] & own_pair & target_rim[paired]
+        moved_gap = np.linalg.norm(x[owner] - target[paired], axis=1)
+        still_gap = np.linalg.norm(src[owner] - target[paired], axis=1)
+        view = rim_pair & (still_gap < moved_gap)
+        share = np.where(source_rim[owner] & own_pair & ~view, 1.0, point_to_point)
     if VARIANT == "mutual":
         back_rim = np.isfinite(back_gap) & source_rim[back]  # the target vertex's nearest source vertex is a rim one
         alone = target_rim[paired] & ~back_rim[paired]  # a target rim vertex over the source's interior
@@ -127,6 +137,7 @@ def main():
     TARGET_RIM["sil_target"] = silhouette(v1, f1, fb.sensors, A._rim(np.asarray(f1), len(v1)))
     for tau in (0.2, 0.3, 0.5):
         print("rim share that is silhouette at", tau, round(TARGET_RIM["sil_target"](tau).sum() / max(A._rim(np.asarray(f1), len(v1)).sum(), 1), 3))
+    TARGET_RIM["source"] = np.asarray(v0, dtype=np.float64)
     TARGET_RIM["edge"] = A.median_edge_length(np.asarray(v0), np.asarray(f0))
     diag = truth.diagonal()
     if len(truth.faces):
