@@ -366,6 +366,22 @@ def test_merges_started_as_their_blocks_are_ready_are_those_of_the_levels(monkey
         assert reports == [(firsts[a], firsts[b], (lasts[a], firsts[b])) for a, b in tree]
 
 
+def test_the_merge_tree_merges_consecutive_blocks_level_by_level():
+    """Powers of two merge lengths 1, 2, 4, ... (figure 5.2); for every count each block is
+    merged once, only with its neighbour, and one block holds the whole sequence at the end."""
+    from fourd.methods.assembly import hierarchy
+
+    assert hierarchy.merge_tree(8) == [(0, 1), (2, 3), (4, 5), (6, 7), (8, 9), (10, 11), (12, 13)]
+    for count in range(1, 40):
+        tree = hierarchy.merge_tree(count)
+        assert len(tree) == count - 1
+        spans = {node: (node, node + 1) for node in range(count)}
+        for k, (a, b) in enumerate(tree):
+            assert spans[a][1] == spans[b][0]  # consecutive
+            spans[count + k] = (spans.pop(a)[0], spans.pop(b)[1])
+        assert list(spans.values()) == [(0, count)]
+
+
 def test_a_merge_run_in_this_process_sees_its_own_thread_environment(monkeypatch):
     # with processes for the merges, the last level's single merge runs here: numba refuses to
     # compile a kernel here once its threads run if the environment asks for another count
