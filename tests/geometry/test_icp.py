@@ -1,5 +1,5 @@
-"""Rigid point-to-plane ICP recovers a known rigid motion, also with outliers among the
-source points."""
+"""Rigid point-to-plane ICP recovers a known rigid motion (or a translation alone), also
+with outliers among the source points."""
 
 import numpy as np
 import pytest
@@ -44,6 +44,17 @@ def test_outliers_are_trimmed():
     fit = rigid_icp(noisy, target, normals)  # the 85th percentile of the distances
     assert np.allclose(fit.rotation, turn, atol=1e-2)
     assert np.linalg.norm(fit.translation) < 1e-2
+
+
+def test_a_translation_alone_when_asked():
+    rng = np.random.default_rng(2)
+    target = _bumpy_blob(6000, rng)
+    normals = _normals(target)
+    shift = np.array([0.03, 0.01, -0.02])
+    source = _bumpy_blob(3000, rng) @ _rotation(np.array([0.0, 0.0, 0.05])).T - shift
+    fit = rigid_icp(source, target, normals, trim=100, rotate=False)
+    assert np.array_equal(fit.rotation, np.eye(3))
+    assert np.allclose(fit.translation, shift, atol=1e-2)
 
 
 def test_bad_shapes_are_refused():

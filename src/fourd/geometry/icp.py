@@ -56,6 +56,7 @@ def rigid_icp(
     trim: float = 85.0,
     max_angle: float = 45.0,
     tolerance: float = 1e-7,
+    rotate: bool = True,
 ) -> RigidFit:
     """Rigid motion moving ``source`` [P, 3] onto the surface of ``target`` [Q, 3] with unit
     ``target_normals`` [Q, 3] by point-to-plane ICP.
@@ -71,6 +72,8 @@ def rigid_icp(
     tolerance : float
         Stop when the update moves no point by more than this fraction of the source's
         extent.
+    rotate : bool
+        False: a translation only (the rotation stays the identity).
 
     Examples
     --------
@@ -114,10 +117,12 @@ def rigid_icp(
         p = moved[keep] - centre
         q = target[nearest[keep]] - centre
         n = target_normals[nearest[keep]]
-        rows = np.concatenate([np.cross(p, n), n], axis=1)
+        rows = np.concatenate([np.cross(p, n), n], axis=1) if rotate else n
         residual = np.einsum("ij,ij->i", q - p, n)
         rms = float(np.sqrt(np.mean(residual**2)))
         update, *_ = np.linalg.lstsq(rows, residual, rcond=None)
+        if not rotate:
+            update = np.concatenate([np.zeros(3), update])
         turn = _rotation(update[:3])
         # x -> turn (x - centre) + centre + shift, composed with the current motion
         rotation = turn @ rotation

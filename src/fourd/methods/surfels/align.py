@@ -31,6 +31,11 @@ from fourd.methods.surfels.model import Model
 from fourd.methods.surfels.optimizer import GaussNewtonOptions, free_unknowns, gauss_newton
 from fourd.methods.surfels.state import layout, surfel_state
 
+#: The rigid start keeps its rotation only when that lowers the point-to-plane rms of a
+#: translation alone by more than this fraction; otherwise the surface does not determine the
+#: rotation (a ball spinning about its axis) and the noise and the deformation chose it.
+ROTATION_EVIDENCE = 0.1
+
 
 class Alignment(NamedTuple):
     """The left range's surfels carried into the right range's first frame.
@@ -67,11 +72,17 @@ def align_ranges(
     With ``rigid_start`` the second frame starts from the left surfels moved by a rigid
     point-to-plane ICP onto the points (:func:`fourd.geometry.icp.rigid_icp`) instead of
     from a copy (the paper): the conjugate gradients of a step resolve the global, smooth
-    part of a motion slowest, so a non-rigid alignment from a copy stops short of it."""
+    part of a motion slowest, so a non-rigid alignment from a copy stops short of it. The
+    rotation is kept only when it explains more of the data than a translation alone does
+    (:data:`ROTATION_EVIDENCE`): the alignment has no tangential pull, so a spin the surface
+    does not determine would stay in the correspondences."""
     last = left.state.frames - 1
     p, n = left.state.positions[last], left.state.normals[last]
     if rigid_start:
         fit = rigid_icp(p, points, normals, source_normals=n)
+        shift = rigid_icp(p, points, normals, source_normals=n, rotate=False)
+        if fit.rms > (1.0 - ROTATION_EVIDENCE) * shift.rms:
+            fit = shift
         moved, turned = p @ fit.rotation.T + fit.translation, n @ fit.rotation.T
         state = surfel_state(
             np.stack([p, moved]),
