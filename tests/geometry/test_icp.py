@@ -57,8 +57,38 @@ def test_a_translation_alone_when_asked():
     assert np.allclose(fit.translation, shift, atol=1e-2)
 
 
+def test_a_rotation_the_surface_does_not_determine_is_not_applied():
+    # a spheroid seen from one side, squashed: its spin about the axis is free
+    rng = np.random.default_rng(3)
+    view = np.array([1.0, 0.4, 0.5]) / np.linalg.norm([1.0, 0.4, 0.5])
+
+    def spheroid(radii, count):
+        points = rng.normal(size=(count, 3))
+        points *= radii / np.linalg.norm(points, axis=1, keepdims=True)
+        normals = points / np.square(radii)
+        normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+        seen = normals @ view > 0.2
+        return points[seen] + rng.normal(scale=0.004, size=(seen.sum(), 3)), normals[seen]
+
+    (source, source_normals), (target, normals) = (
+        spheroid([1, 1, 0.8], 4000),
+        spheroid([1.06, 1.06, 0.72], 8000),
+    )
+    free = rigid_icp(source, target, normals, source_normals=source_normals)
+    kept = rigid_icp(source, target, normals, source_normals=source_normals, rotation_evidence=0.1)
+    assert np.degrees(np.arccos((np.trace(free.rotation) - 1) / 2)) > 10  # measured: 25
+    assert np.array_equal(kept.rotation, np.eye(3))
+    # a rotation the surface does determine is kept
+    target = _bumpy_blob(6000, rng)
+    turn = _rotation(np.array([0.05, -0.08, 0.1]))
+    fit = rigid_icp(_bumpy_blob(3000, rng) @ turn, target, _normals(target), rotation_evidence=0.1)
+    assert np.allclose(fit.rotation, turn, atol=1e-2)
+
+
 def test_bad_shapes_are_refused():
     with pytest.raises(ValueError, match="source"):
         rigid_icp(np.zeros((2, 3)), np.zeros((5, 3)), np.ones((5, 3)))
     with pytest.raises(ValueError, match="trim"):
         rigid_icp(np.zeros((5, 3)), np.zeros((5, 3)), np.ones((5, 3)), trim=0)
+    with pytest.raises(ValueError, match="rotation_evidence"):
+        rigid_icp(np.zeros((5, 3)), np.zeros((5, 3)), np.ones((5, 3)), rotation_evidence=1)

@@ -57,6 +57,7 @@ def rigid_icp(
     max_angle: float = 45.0,
     tolerance: float = 1e-7,
     rotate: bool = True,
+    rotation_evidence: float = 0.0,
 ) -> RigidFit:
     """Rigid motion moving ``source`` [P, 3] onto the surface of ``target`` [Q, 3] with unit
     ``target_normals`` [Q, 3] by point-to-plane ICP.
@@ -74,6 +75,12 @@ def rigid_icp(
         extent.
     rotate : bool
         False: a translation only (the rotation stays the identity).
+    rotation_evidence : float
+        With a value above 0, a translation alone is fitted too and returned unless the
+        rigid motion's rms is lower than the translation's by more than this fraction: a
+        rotation that explains so little is not determined by the surface (the spin of a
+        surface of revolution about its axis, any turn of a sphere) and was chosen by the
+        noise and the deformation.
 
     Examples
     --------
@@ -98,7 +105,22 @@ def rigid_icp(
         raise ValueError("target_normals must have the target's shape")
     if not 0 < trim <= 100:
         raise ValueError(f"trim must lie in (0, 100], got {trim}")
+    if not 0 <= rotation_evidence < 1:
+        raise ValueError(f"rotation_evidence must lie in [0, 1), got {rotation_evidence}")
     tree = cKDTree(target)
+    pairs = (source, source_normals, tree, target, target_normals)
+    settings = (iterations, trim, max_angle, tolerance)
+    fit = _fit(*pairs, *settings, rotate=rotate)
+    if rotate and rotation_evidence > 0:
+        shift = _fit(*pairs, *settings, rotate=False)
+        if fit.rms > (1.0 - rotation_evidence) * shift.rms:
+            return shift
+    return fit
+
+
+def _fit(source, source_normals, tree, target, target_normals, iterations, trim, max_angle,
+         tolerance, *, rotate):  # fmt: skip
+    """The ICP iterations of :func:`rigid_icp` (``tree``: the target's k-d tree)."""
     extent = float(np.linalg.norm(np.ptp(source, axis=0))) or 1.0
     centre = source.mean(axis=0)
     rotation, translation = np.eye(3), np.zeros(3)

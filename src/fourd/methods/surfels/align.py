@@ -32,8 +32,7 @@ from fourd.methods.surfels.optimizer import GaussNewtonOptions, free_unknowns, g
 from fourd.methods.surfels.state import layout, surfel_state
 
 #: The rigid start keeps its rotation only when that lowers the point-to-plane rms of a
-#: translation alone by more than this fraction; otherwise the surface does not determine the
-#: rotation (a ball spinning about its axis) and the noise and the deformation chose it.
+#: translation alone by more than this fraction (``rigid_icp``'s ``rotation_evidence``).
 ROTATION_EVIDENCE = 0.1
 
 
@@ -79,10 +78,7 @@ def align_ranges(
     last = left.state.frames - 1
     p, n = left.state.positions[last], left.state.normals[last]
     if rigid_start:
-        fit = rigid_icp(p, points, normals, source_normals=n)
-        shift = rigid_icp(p, points, normals, source_normals=n, rotate=False)
-        if fit.rms > (1.0 - ROTATION_EVIDENCE) * shift.rms:
-            fit = shift
+        fit = rigid_icp(p, points, normals, source_normals=n, rotation_evidence=ROTATION_EVIDENCE)
         moved, turned = p @ fit.rotation.T + fit.translation, n @ fit.rotation.T
         state = surfel_state(
             np.stack([p, moved]),
