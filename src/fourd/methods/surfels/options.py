@@ -103,6 +103,17 @@ class Options:
         Meshing: marching-cubes cell in ``eps_sampl``.
     mesh_clip : float
         Meshing: border clipping threshold (:class:`~.meshing.MeshingOptions` ``clip``).
+    fit_frames : bool
+        Move every frame's mesh vertices along their normals onto that frame's preprocessed
+        points (:func:`fourd.geometry.surface_fit.fit_along_normals`), so the surface is the
+        data's where there is data, not the blend of surfel planes ``eps_sampl`` apart; the
+        vertices do not move along the surface, so the correspondences stay. Off: the
+        paper's mesh.
+    fit_radius : float
+        Width of that fit's Gaussian weights along the surface, in point spacings ``s``.
+    fit_reach : float
+        The fit ignores points farther than this from a vertex's tangent plane and moves no
+        vertex farther, in point spacings ``s``.
     reference : int
         The frame whose surfels are meshed and carried to every other frame and to the
         urshape (the result's ``rest``; without an urshape, this frame's mesh).
@@ -140,12 +151,23 @@ class Options:
     mesh_sigma: float = 0.75
     mesh_cell: float = 0.5
     mesh_clip: float = 0.3
+    fit_frames: bool = True
+    fit_radius: float = 2.0
+    fit_reach: float = 4.0
     reference: int = 0
     normals_k: int = 16
     cache_dir: str | None = None
 
     def __post_init__(self):
-        for name in ("sampling", "max_stretch", "mesh_sigma", "mesh_cell", "cg_tolerance"):
+        for name in (
+            "sampling",
+            "max_stretch",
+            "mesh_sigma",
+            "mesh_cell",
+            "cg_tolerance",
+            "fit_radius",
+            "fit_reach",
+        ):
             if not getattr(self, name) > 0:
                 raise ValueError(f"{name} must be positive, got {getattr(self, name)}")
         for name in (
@@ -175,7 +197,9 @@ class Options:
             if getattr(self, name) < 0:
                 raise ValueError(f"{name} must not be negative")
         if self.urshape not in URSHAPE_STAGES:
-            raise ValueError(f"urshape must be one of {', '.join(URSHAPE_STAGES)}, got {self.urshape!r}")
+            raise ValueError(
+                f"urshape must be one of {', '.join(URSHAPE_STAGES)}, got {self.urshape!r}"
+            )
         if self.normals_k < 3:
             raise ValueError(f"normals_k must be at least 3, got {self.normals_k}")
 

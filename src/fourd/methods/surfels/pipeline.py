@@ -1,11 +1,13 @@
 """The ``surfels`` pipeline (Wand et al. 2007, fig. 1): preprocessing of every frame (tensor
 voting, normals), a seed model per frame, the iterative model assembly in a binary scheme,
 a final global optimisation with increased rigidity and acceleration weights and the
-urshape, and the animated mesh (sec. 3.3).
+urshape, the animated mesh (sec. 3.3), and (beyond the paper) every frame's vertices fitted
+along their normals to that frame's points.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import time as _time
 
@@ -15,6 +17,7 @@ from fourd.animation import AnimatedMesh
 from fourd.cache import StageCache, cached, option_values, report_resumed, stage_key
 from fourd.errors import InputError
 from fourd.geometry.neighbors import point_spacing
+from fourd.geometry.surface_fit import fit_along_normals
 from fourd.methods.surfels.assembly import Schedule, assemble, optimize_model
 from fourd.methods.surfels.match import MatchOptions
 from fourd.methods.surfels.meshing import MeshingOptions, surfel_mesh
@@ -127,6 +130,9 @@ def reconstruct(seq: PointCloudSequence, options: Options | None = None) -> Anim
         "mesh_sigma",
         "mesh_cell",
         "mesh_clip",
+        "fit_frames",
+        "fit_radius",
+        "fit_reach",
         "reference",
         "final_rigid",
         "final_accel",
@@ -169,9 +175,18 @@ def reconstruct(seq: PointCloudSequence, options: Options | None = None) -> Anim
             sigma=options.mesh_sigma, cell=options.mesh_cell, clip=options.mesh_clip
         ),
     )
+    if options.fit_frames:
+        fit = fit_along_normals(
+            mesh.vertices,
+            mesh.faces,
+            [frame.points for frame in frames],
+            radius=options.fit_radius * spacing,
+            reach=options.fit_reach * spacing,
+        )
+        mesh = dataclasses.replace(mesh, vertices=fit.vertices)
     log.info(
         "surfels: %d frames, %d surfels, %d vertices in %.2f s (preprocessing and seeds %.2f, "
-        "merging %.2f, final optimisation %.2f, meshing %.2f)",
+        "merging %.2f, final optimisation %.2f, meshing and fit %.2f)",
         len(seq),
         model.state.count,
         mesh.vertices.shape[1],
