@@ -34,6 +34,10 @@ from fourd.methods.surfels.state import layout, surfel_state
 #: The rigid start keeps its rotation only when that lowers the point-to-plane rms of a
 #: translation alone by more than this fraction (``rigid_icp``'s ``rotation_evidence``).
 ROTATION_EVIDENCE = 0.1
+#: Nor when it turns by more than this many degrees: two adjacent frames of a capture are not
+#: a quarter turn apart, and such a turn is an ICP minimum that a deformation chose (a ball
+#: squashing matches itself turned by 90 degrees).
+MAX_START_TURN = 30.0
 
 
 class Alignment(NamedTuple):
@@ -73,12 +77,15 @@ def align_ranges(
     from a copy (the paper): the conjugate gradients of a step resolve the global, smooth
     part of a motion slowest, so a non-rigid alignment from a copy stops short of it. The
     rotation is kept only when it explains more of the data than a translation alone does
-    (:data:`ROTATION_EVIDENCE`): the alignment has no tangential pull, so a spin the surface
-    does not determine would stay in the correspondences."""
+    (:data:`ROTATION_EVIDENCE`) and turns by less than :data:`MAX_START_TURN`: the alignment
+    has no tangential pull, so a turn the surface does not determine would stay in the
+    correspondences."""
     last = left.state.frames - 1
     p, n = left.state.positions[last], left.state.normals[last]
     if rigid_start:
         fit = rigid_icp(p, points, normals, source_normals=n, rotation_evidence=ROTATION_EVIDENCE)
+        if np.trace(fit.rotation) < 1 + 2 * np.cos(np.radians(MAX_START_TURN)):
+            fit = rigid_icp(p, points, normals, source_normals=n, rotate=False)
         moved, turned = p @ fit.rotation.T + fit.translation, n @ fit.rotation.T
         state = surfel_state(
             np.stack([p, moved]),
