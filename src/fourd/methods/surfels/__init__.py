@@ -32,9 +32,11 @@ by a statistical model and assembled frame range by frame range (Wand et al. 200
 
 Beyond the paper (measured in benchmarks/METHODS.md): the alignment pulls towards the right
 frame's measured points (not its surfels) and starts from a rigid point-to-plane ICP
-(:func:`fourd.geometry.icp.rigid_icp`); a small tangential share of the point distance in the
-data term outside the alignment (``tangential``, ``linked_tangential``), which keeps open
-patches from shrinking. Slow: tens of seconds per frame at a standard scan, against the
+(:func:`fourd.geometry.icp.rigid_icp`), whose turn is kept only where the data determine it
+and below 30 degrees; a small tangential share of the point distance in the data term
+outside the alignment (``tangential``, ``linked_tangential``), which keeps open patches from
+shrinking; every frame's mesh fitted along its normals to that frame's points
+(``fit_frames``). Slow: tens of seconds per frame at a standard scan, against the
 issue's 2 s target.
 
 References
