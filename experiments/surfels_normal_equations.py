@@ -57,8 +57,10 @@ def main():
     def recording(state, topology, data, matches, weights=None, match=None, **options):
         if options.get("derivatives", True) and options.get("columns") is None:
             if state.count * state.frames >= largest.get("size", 0):
-                largest.update(size=state.count * state.frames,
-                               call=(state, topology, data, matches, weights, match))
+                largest.update(
+                    size=state.count * state.frames,
+                    call=(state, topology, data, matches, weights, match),
+                )
         return original(state, topology, data, matches, weights, match, **options)
 
     optimizer.total_energy = recording
@@ -70,7 +72,9 @@ def main():
     state, topology, data, matches, w, options = largest["call"]
     builders = {
         "match": lambda: match_terms.match_term(state, data, matches, w.match, options),
-        "smooth_position": lambda: smoothness.smooth_position_term(state, topology, w.smooth_position),
+        "smooth_position": lambda: smoothness.smooth_position_term(
+            state, topology, w.smooth_position
+        ),
         "smooth_normal": lambda: smoothness.smooth_normal_term(state, topology, w.smooth_normal),
         "laplace": lambda: smoothness.laplace_term(state, topology, w.laplace),
         "rigid": lambda: motion.rigid_term(state, topology, w.rigid, w.rigid_normal),
@@ -85,8 +89,10 @@ def main():
         build_total += seconds
         product_total += product
         parts.append(jacobian)
-        print(f"{name:16s} J {jacobian.nnz:9d} entries, H {hessian.nnz:9d} nonzeros; "
-              f"term {seconds:.3f} s, J^T J {product:.3f} s")
+        print(
+            f"{name:16s} J {jacobian.nnz:9d} entries, H {hessian.nnz:9d} nonzeros; "
+            f"term {seconds:.3f} s, J^T J {product:.3f} s"
+        )
     size = parts[0].shape[1]
 
     def summed():
@@ -104,9 +110,11 @@ def main():
     vector = np.random.default_rng(0).normal(size=size)
     seconds_product, _ = best_of(lambda: hessian @ vector, repeats=10)
     print(f"unknowns {size}, Hessian {hessian.nnz} nonzeros ({hessian.nnz / size:.0f} a row)")
-    print(f"terms {build_total:.3f} s; products {product_total:.3f} s; "
-          f"summed products {seconds_sum:.3f} s; one stacked product {seconds_stack:.3f} s; "
-          f"one Hessian-vector product {seconds_product * 1000:.1f} ms")
+    print(
+        f"terms {build_total:.3f} s; products {product_total:.3f} s; "
+        f"summed products {seconds_sum:.3f} s; one stacked product {seconds_stack:.3f} s; "
+        f"one Hessian-vector product {seconds_product * 1000:.1f} ms"
+    )
 
 
 if __name__ == "__main__":
