@@ -33,31 +33,16 @@ from __future__ import annotations
 import sys
 import time
 
-from fourd import synth
+from normal_fit import figures, scans_of  # the same scan and scores (experiments/)
+
 from fourd.animation import AnimatedMesh
-from fourd.bench.suite import HELD_OUT_SCENES, PROTOCOL, STANDARD_SCENES
 from fourd.geometry.neighbors import point_spacing
 from fourd.geometry.outliers import distance_ratio_inliers
 from fourd.geometry.surface_fit import fit_along_normals
 from fourd.methods import reconstruct
-from fourd.metrics import evaluate
 
-SAMPLES = 20000
 CELLS = (0.5,)
 FITS = ((2, 4), (2, 8), (3, 8))
-
-
-def scans_of(label: str):
-    scene = next(s for s in STANDARD_SCENES + HELD_OUT_SCENES if s.key == label)
-    truth = synth.scene(scene.name, frames=scene.frames, seed=0, **scene.options)
-    scans = synth.scan(truth, resolution=scene.resolution, seed=0, **{**PROTOCOL, **scene.scan})
-    return truth, scans
-
-
-def figures(result, truth) -> str:
-    r = evaluate(result, truth, samples=SAMPLES, seed=0)
-    keys = ("chamfer", "accuracy", "completeness_95", "correspondence_mean", "correspondence_last")
-    return " ".join(f"{k}={(r.get(k) if r.get(k) is not None else float('nan')):.4f}" for k in keys)
 
 
 def main(labels) -> None:
