@@ -90,5 +90,7 @@ def test_bad_shapes_are_refused():
         rigid_icp(np.zeros((2, 3)), np.zeros((5, 3)), np.ones((5, 3)))
     with pytest.raises(ValueError, match="trim"):
         rigid_icp(np.zeros((5, 3)), np.zeros((5, 3)), np.ones((5, 3)), trim=0)
+    with pytest.raises(ValueError, match="max_turn"):
+        rigid_icp(np.zeros((5, 3)), np.zeros((5, 3)), np.ones((5, 3)), max_turn=-1)
     with pytest.raises(ValueError, match="rotation_evidence"):
         rigid_icp(np.zeros((5, 3)), np.zeros((5, 3)), np.ones((5, 3)), rotation_evidence=1)

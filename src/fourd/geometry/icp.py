@@ -58,6 +58,7 @@ def rigid_icp(
     tolerance: float = 1e-7,
     rotate: bool = True,
     rotation_evidence: float = 0.0,
+    max_turn: float = 180.0,
 ) -> RigidFit:
     """Rigid motion moving ``source`` [P, 3] onto the surface of ``target`` [Q, 3] with unit
     ``target_normals`` [Q, 3] by point-to-plane ICP.
@@ -81,6 +82,10 @@ def rigid_icp(
         rotation that explains so little is not determined by the surface (the spin of a
         surface of revolution about its axis, any turn of a sphere) and was chosen by the
         noise and the deformation.
+    max_turn : float
+        Below 180, the translation alone is returned too when the rigid motion turns by more
+        than this many degrees (between two adjacent frames of a capture such a turn is an
+        ICP minimum a deformation chose: a ball squashing matches itself turned on its side).
 
     Examples
     --------
@@ -107,13 +112,16 @@ def rigid_icp(
         raise ValueError(f"trim must lie in (0, 100], got {trim}")
     if not 0 <= rotation_evidence < 1:
         raise ValueError(f"rotation_evidence must lie in [0, 1), got {rotation_evidence}")
+    if not 0 <= max_turn <= 180:
+        raise ValueError(f"max_turn must lie in [0, 180] degrees, got {max_turn}")
     tree = cKDTree(target)
     pairs = (source, source_normals, tree, target, target_normals)
     settings = (iterations, trim, max_angle, tolerance)
     fit = _fit(*pairs, *settings, rotate=rotate)
-    if rotate and rotation_evidence > 0:
+    if rotate and (rotation_evidence > 0 or max_turn < 180):
         shift = _fit(*pairs, *settings, rotate=False)
-        if fit.rms > (1.0 - rotation_evidence) * shift.rms:
+        turned = np.trace(fit.rotation) < 1 + 2 * np.cos(np.radians(max_turn))
+        if turned or fit.rms > (1.0 - rotation_evidence) * shift.rms:
             return shift
     return fit
 

@@ -83,9 +83,14 @@ def align_ranges(
     last = left.state.frames - 1
     p, n = left.state.positions[last], left.state.normals[last]
     if rigid_start:
-        fit = rigid_icp(p, points, normals, source_normals=n, rotation_evidence=ROTATION_EVIDENCE)
-        if np.trace(fit.rotation) < 1 + 2 * np.cos(np.radians(MAX_START_TURN)):
-            fit = rigid_icp(p, points, normals, source_normals=n, rotate=False)
+        fit = rigid_icp(
+            p,
+            points,
+            normals,
+            source_normals=n,
+            rotation_evidence=ROTATION_EVIDENCE,
+            max_turn=MAX_START_TURN,
+        )
         moved, turned = p @ fit.rotation.T + fit.translation, n @ fit.rotation.T
         state = surfel_state(
             np.stack([p, moved]),
