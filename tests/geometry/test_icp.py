@@ -78,6 +78,11 @@ def test_a_rotation_the_surface_does_not_determine_is_not_applied():
     kept = rigid_icp(source, target, normals, source_normals=source_normals, rotation_evidence=0.1)
     assert np.degrees(np.arccos((np.trace(free.rotation) - 1) / 2)) > 10  # measured: 25
     assert np.array_equal(kept.rotation, np.eye(3))
+    # max_turn alone refuses only a turn above it
+    capped = rigid_icp(source, target, normals, source_normals=source_normals, max_turn=5)
+    allowed = rigid_icp(source, target, normals, source_normals=source_normals, max_turn=90)
+    assert np.array_equal(capped.rotation, np.eye(3))
+    assert np.array_equal(allowed.rotation, free.rotation)
     # a rotation the surface does determine is kept
     target = _bumpy_blob(6000, rng)
     turn = _rotation(np.array([0.05, -0.08, 0.1]))

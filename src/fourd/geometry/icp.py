@@ -121,7 +121,7 @@ def rigid_icp(
     if rotate and (rotation_evidence > 0 or max_turn < 180):
         shift = _fit(*pairs, *settings, rotate=False)
         turned = np.trace(fit.rotation) < 1 + 2 * np.cos(np.radians(max_turn))
-        if turned or fit.rms > (1.0 - rotation_evidence) * shift.rms:
+        if turned or (rotation_evidence > 0 and fit.rms > (1.0 - rotation_evidence) * shift.rms):
             return shift
     return fit
 
