@@ -142,3 +142,27 @@ def test_a_coarse_fraction_outside_zero_to_one_is_refused():
         with pytest.raises(ValueError, match="alignment_coarse"):
             Options(alignment_coarse=value)
     assert Options(alignment_coarse=0.5).alignment_coarse == 0.5
+
+
+def test_a_prolate_ball_squashing_is_not_turned_on_its_side():
+    """The rigid start of a merge: point-to-plane ICP matches a ball squashing from prolate to
+    oblate with the ball turned on its side, a deformation and not a turn between two adjacent
+    frames (``MAX_START_TURN``)."""
+    rng = np.random.default_rng(0)
+    view = np.array([1.0, 0.4, 0.5]) / np.linalg.norm([1.0, 0.4, 0.5])
+
+    def spheroid(radii, count):
+        points = rng.normal(size=(count, 3))
+        points *= radii / np.linalg.norm(points, axis=1, keepdims=True)
+        normals = points / np.square(radii)
+        normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+        seen = normals @ view > 0.2
+        return points[seen], normals[seen]
+
+    (source, source_normals), (target, target_normals) = (
+        spheroid([0.85, 0.85, 1.2], 3000),
+        spheroid([1.1, 1.1, 0.75], 6000),
+    )
+    moved = alignment_module.rigid_icp(source, source_normals, target, target_normals)
+    top = source[:, 2] > 0.8
+    assert np.median(moved[top, 2]) > 0.5  # measured: 0.76; without the cap, 0.09
