@@ -79,8 +79,12 @@ def test_the_coarse_alignment_brings_a_bent_arm_along(monkeypatch):
     """The stiff iterations on the arm decimated to half its faces (1,042 vertices to 522),
     twice as many, the soft ones on the arm itself: the forearm still comes along (measured:
     95th percentile 4.96 edges, 3.57 at full resolution; 13.4 with as many iterations as at
-    full resolution, 13.6 at a quarter of the faces)."""
+    full resolution, 13.6 at a quarter of the faces). The rigid start keeps its 6.5-degree turn
+    (``START_EVIDENCE`` off): frames 0 and 5 are far apart, the forearm has swung out of reach and
+    the turn lowers no rms, yet from a translation alone the coarse iterations leave 10.1 (the
+    full-resolution alignment of the test above does not need it)."""
     monkeypatch.setattr(alignment_module, "COARSE_VERTICES", 0)
+    monkeypatch.setattr(alignment_module, "START_EVIDENCE", 0.0)
     aligned, at_anchors = _bent_arm_errors(coarse=0.5)
     assert np.percentile(aligned, 95) < 6.0
     assert np.percentile(at_anchors, 95) < 6.0

@@ -70,10 +70,13 @@ SETTLED_ITERATIONS = 3
 #: few: on crane's and dfaust-hopping's pairs (29,000-35,000 vertices) 5,000 move every vertex
 #: within 0.03-0.2 edges of the fit on all of them, in a quarter of the time.
 RIGID_POINTS = 5000
-#: A rigid start turned by more than this many degrees is replaced by a translation alone: the
-#: two frames of a merge are adjacent frames of a capture, not a twelfth of a turn apart, and
-#: such a turn is an ICP minimum a deformation chose (a ball squashing from prolate to oblate
-#: matches itself turned on its side; squash-ball's starts turned by up to 90 degrees).
+#: A rigid start keeps its rotation only when that lowers the rms of a translation alone by
+#: more than this fraction (:func:`fourd.geometry.icp.rigid_icp`'s ``rotation_evidence``): a
+#: turn the surface does not determine (the spin of a ball) stays in the correspondences.
+START_EVIDENCE = 0.1
+#: Nor when it turns by more than this many degrees: the two frames of a merge are adjacent
+#: frames of a capture, not a twelfth of a turn apart, and such a turn is an ICP minimum a
+#: deformation chose (a ball squashing from prolate to oblate matches itself turned on its side).
 MAX_START_TURN = 30.0
 
 
@@ -113,15 +116,17 @@ def rigid_icp(source, source_normals, target, target_normals, *, iterations: int
     module docstring, :func:`fourd.geometry.icp.rigid_icp`); returns the moved points
     ``[N, 3]``. ICP runs twice, from where the source is and with its centroid moved onto the
     target's, and the fit with the smaller median gap wins (a part that moves alone, an arm
-    bending, drags the centroid away); a fit that turns by more than :data:`MAX_START_TURN` is
-    a translation instead. Each fit uses an even subset of at most about
+    bending, drags the centroid away); a fit whose turn explains less than
+    :data:`START_EVIDENCE` of the rms, or turns by more than :data:`MAX_START_TURN`, is a
+    translation instead. Each fit uses an even subset of at most about
     :data:`RIGID_POINTS` source points. ``tree``: the target's k-d tree, when the caller has it."""
     tree = cKDTree(target) if tree is None else tree
     best, best_gap = source, np.inf
     every = max(1, len(source) // RIGID_POINTS)
     for start in (source, source - source.mean(axis=0) + target.mean(axis=0)):
         fit = point_to_plane_icp(start[::every], target, target_normals, source_normals=source_normals[::every],
-                                 iterations=iterations, max_turn=MAX_START_TURN)
+                                 iterations=iterations, rotation_evidence=START_EVIDENCE,
+                                 max_turn=MAX_START_TURN)
         moved = start @ fit.rotation.T + fit.translation
         gap, _, usable = _pairs(moved, source_normals @ fit.rotation.T, tree, target_normals)
         median = float(np.median(gap[usable])) if usable.any() else np.inf
