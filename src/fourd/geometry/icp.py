@@ -118,10 +118,13 @@ def rigid_icp(
     pairs = (source, source_normals, tree, target, target_normals)
     settings = (iterations, trim, max_angle, tolerance)
     fit = _fit(*pairs, *settings, rotate=rotate)
-    if rotate and (rotation_evidence > 0 or max_turn < 180):
+    if not rotate:
+        return fit
+    if np.trace(fit.rotation) < 1 + 2 * np.cos(np.radians(max_turn)):
+        return _fit(*pairs, *settings, rotate=False)
+    if rotation_evidence > 0:
         shift = _fit(*pairs, *settings, rotate=False)
-        turned = np.trace(fit.rotation) < 1 + 2 * np.cos(np.radians(max_turn))
-        if turned or (rotation_evidence > 0 and fit.rms > (1.0 - rotation_evidence) * shift.rms):
+        if fit.rms > (1.0 - rotation_evidence) * shift.rms:
             return shift
     return fit
 
