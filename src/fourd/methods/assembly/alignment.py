@@ -44,6 +44,7 @@ from fourd.methods.assembly.anchors import (
     returned_points,
     spread_anchors,
 )
+from fourd.methods.assembly.guides import MatchedGuides
 
 #: Least cosine between a source and a target normal for their vertices to match.
 NORMAL_AGREEMENT = 0.3
@@ -195,6 +196,8 @@ def nonrigid_icp(
     point_to_point: float = 0.05,
     settle: float = 0.0,
     tree: cKDTree | None = None,
+    pins: tuple[np.ndarray, np.ndarray] | None = None,
+    pin_weight: float = 1.0,
 ) -> np.ndarray:
     """The source ``[N, 3]`` (mesh ``faces``) registered onto the target's vertices ``[M, 3]``
     with unit ``target_normals``, from the positions ``start [N, 3]``: as-rigid-as-possible
@@ -217,7 +220,10 @@ def nonrigid_icp(
     over-relaxation) of less than this for 99% of the vertices, the template has come to rest, and the schedule goes on with its last
     :data:`SETTLED_ITERATIONS` stiff iterations (the smallest radii: pairs that only a large
     radius finds, across a gap that opened, let go there) and the refining ones. ``tree``:
-    the target's k-d tree, when the caller has it.
+    the target's k-d tree, when the caller has it. ``pins`` (vertex ids ``[K]``, points
+    ``[K, 3]``): vertices with a known place on the target (anchors from the video or the
+    user), each pulled towards it point to point with ``pin_weight`` times a full data term,
+    every iteration: they give the tangential pull the point-to-plane data lacks.
     """
     count = len(source)
     laplacian = uniform_laplacian(count, faces).tocsr()
@@ -242,6 +248,9 @@ def nonrigid_icp(
                               diag_pivot_thresh=0.0, options={"SymmetricMode": True})
         quadric, goal = _data_terms(x, vertex_normals(x, faces), target, target_normals, tree, radius * edge,
                                     source_rim, point_to_point)
+        if pins is not None and len(pins[0]):
+            quadric[pins[0]] += pin_weight * np.eye(3)
+            goal[pins[0]] += pin_weight * pins[1]
         rhs = arap_right_hand_side(edges, source, one_ring_rotations(edges, source, x)) + w * goal
 
         def apply(v, w=w, quadric=quadric):
@@ -266,9 +275,10 @@ def nonrigid_icp(
 
 
 def _coarse_then_fine(source, faces, target, target_normals, rigid, tree, edge, reduction, *, iterations, weight,
-                      settle=0.0):
+                      settle=0.0, pins=None, pin_weight=1.0):
     """:func:`nonrigid_icp`'s stiff iterations on the decimated source, its soft ones on the
-    source itself, from the rigidly aligned ``rigid`` (:func:`geometric_anchors`' ``coarse``)."""
+    source itself, from the rigidly aligned ``rigid`` (:func:`geometric_anchors`' ``coarse``);
+    ``pins`` pull in the soft ones only."""
     coarse = decimate(source, faces, reduction)
     fit = procrustes(source, rigid)
     start = coarse.vertices @ fit.rotation.T + fit.translation
@@ -284,7 +294,8 @@ def _coarse_then_fine(source, faces, target, target_normals, rigid, tree, edge, 
                          refine_iterations=0, settle=settle * ratio, tree=tree)
     # the non-rigid part only: inverse-distance weights reproduce a translation, not a turn
     followed = rigid + coarse.carry(moved - start + coarse.vertices)
-    return nonrigid_icp(source, faces, target, target_normals, followed, iterations=0, tree=tree)
+    return nonrigid_icp(source, faces, target, target_normals, followed, iterations=0, tree=tree, pins=pins,
+                        pin_weight=pin_weight)
 
 
 def geometric_anchors(
@@ -302,6 +313,8 @@ def geometric_anchors(
     coarse: float = 0.0,
     settle: float = 0.0,
     seed: int = 0,
+    guides: MatchedGuides | None = None,
+    guide_pull: float = 1.0,
 ) -> Alignment:
     """Anchors from the source to the target by a coarse non-rigid alignment (module docstring).
 
@@ -336,6 +349,13 @@ def geometric_anchors(
         :func:`nonrigid_icp`'s ``settle`` (source edges; 0: every stiff iteration runs).
     seed : int
         Seed of the anchors' spreading.
+    guides : MatchedGuides, optional
+        Anchors from the video or the user (:func:`~fourd.methods.assembly.guides.guide_anchors`):
+        they pull the non-rigid alignment (:func:`nonrigid_icp`'s ``pins``, ``guide_pull``
+        times a data term), and those the alignment lands within ``tolerance`` of join the
+        anchors, kept before the geometric ones where the two crowd.
+    guide_pull : float
+        Their weight in the alignment.
 
     Returns
     -------
@@ -348,21 +368,23 @@ def geometric_anchors(
     source_normals = vertex_normals(source, sfaces)
     tree = cKDTree(target)
     aligned = rigid_icp(source, source_normals, target, target_normals, iterations=rigid_iterations, tree=tree)
+    pins = None if guides is None or not len(guides.vertices) else (guides.vertices, guides.points)
     if coarse > 0.0 and len(source) >= COARSE_VERTICES:
         aligned = _coarse_then_fine(source, sfaces, target, target_normals, aligned, tree, edge, coarse,
-                                    iterations=iterations, weight=weight, settle=settle)
+                                    iterations=iterations, weight=weight, settle=settle, pins=pins,
+                                    pin_weight=guide_pull)
     else:
         aligned = nonrigid_icp(source, sfaces, target, target_normals, aligned, iterations=iterations, weight=weight,
-                               settle=settle, tree=tree)
+                               settle=settle, tree=tree, pins=pins, pin_weight=guide_pull)
 
     # anchors: near candidates, oversampled, checked, then spread to the final density
     normals = vertex_normals(aligned, sfaces)
     distance, nearest, usable = _pairs(aligned, normals, tree, target_normals)
     past_rim = _rim(tfaces, len(target))[nearest] & (distance > gap * edge)
     candidates = np.flatnonzero(usable & (distance <= gap * edge + edge))
-    empty = Anchors(np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros((0, 3)))
+    followed = _followed_guides(guides, aligned, tolerance * edge)
     if len(candidates) < 3:
-        return Alignment(empty, aligned, edge, past_rim)
+        return Alignment(followed, aligned, edge, past_rim)
     dense = Anchors(candidates, candidates, np.zeros((len(candidates), 3)))
     candidates = candidates[spread_anchors(dense, source, 0.5 * spacing * edge, priority=-distance[candidates],
                                            seed=seed)]
@@ -371,6 +393,17 @@ def geometric_anchors(
     near = exact <= gap * edge
     _, back = cKDTree(aligned).query(target, workers=-1)
     ok = near & consistent_anchors(anchors, source, returned_points(anchors, tfaces, source[back]), tolerance * edge)
-    anchors = anchors.subset(ok)
-    kept = spread_anchors(anchors, source, spacing * edge, priority=-exact[ok], seed=seed)
+    anchors = Anchors.join(followed, anchors.subset(ok))
+    # the guides first, then the geometric anchors nearest the target
+    priority = np.r_[np.full(len(followed.source), np.inf), -exact[ok]]
+    kept = spread_anchors(anchors, source, spacing * edge, priority=priority, seed=seed)
     return Alignment(anchors.subset(kept), aligned, edge, past_rim)
+
+
+def _followed_guides(guides: MatchedGuides | None, aligned: np.ndarray, tolerance: float) -> Anchors:
+    """The anchors of the ``guides`` whose source vertex the alignment brought within
+    ``tolerance`` of its point (the others disagree with the motion around them)."""
+    if guides is None or not len(guides.vertices):
+        return Anchors(np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros((0, 3)))
+    near = np.linalg.norm(aligned[guides.vertices] - guides.points, axis=1) <= tolerance
+    return guides.anchors.subset(near)

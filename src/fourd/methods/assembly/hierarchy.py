@@ -60,6 +60,7 @@ from fourd.geometry.rotations import procrustes
 from fourd.methods.assembly.alignment import geometric_anchors
 from fourd.methods.assembly.analysis import Analysis, inconsistent_regions, passes_stretch_test
 from fourd.methods.assembly.completion import Paste, paste_target_only, place_pasted
+from fourd.methods.assembly.guides import Guide, guide_anchors
 from fourd.methods.assembly.options import Options
 from fourd.methods.assembly.pair import cross_parameterize_pair
 from fourd.methods.assembly.registration import register_by_laplacian
@@ -146,19 +147,26 @@ class MergeMap(NamedTuple):
 
 
 def map_pair(source: np.ndarray, faces: np.ndarray, target: np.ndarray, target_faces: np.ndarray,
-             options: Options | None = None) -> MergeMap:
+             options: Options | None = None, guide: Guide | None = None) -> MergeMap:
     """The first half of a merge (module docstring): the source frame ``[N, 3]`` (mesh
     ``faces``) mapped onto the target frame ``[M, 3]`` (mesh ``target_faces``) by anchors from
     the coarse alignment and the pair's cross-parameterisation, with the map analysed and its
     inconsistent regions unmapped when ``correct`` is on. It needs only those two frames, so a
     merge's map can be made while the right block is still being assembled (when its first
-    frame is final, :func:`_merge_as_ready`)."""
+    frame is final, :func:`_merge_as_ready`). ``guide``: anchors of this frame pair from the
+    video or the user (:mod:`~fourd.methods.assembly.guides`), which pull the alignment and
+    join its anchors."""
     options = Options() if options is None else options
+    matched = None
+    if guide is not None and len(guide.source):
+        gap = options.anchor_gap * median_edge_length(source, faces)
+        matched = guide_anchors(guide, source, target, target_faces, gap)
     alignment = geometric_anchors(
         source, faces, target, target_faces,
         spacing=options.anchor_spacing, gap=options.anchor_gap, tolerance=options.anchor_tolerance,
         iterations=options.alignment_iterations, weight=options.alignment_weight,
         coarse=options.alignment_coarse, settle=options.alignment_settle, seed=options.seed,
+        guides=matched, guide_pull=options.guide_pull,
     )
     count = len(source)
     if len(alignment.anchors.source) >= 3:
@@ -184,7 +192,8 @@ def map_pair(source: np.ndarray, faces: np.ndarray, target: np.ndarray, target_f
     return MergeMap(len(alignment.anchors.source), map_faces, bary, mapped, analysis)
 
 
-def merge_blocks(left: Block, right: Block, options: Options | None = None) -> tuple[Block, MergeReport]:
+def merge_blocks(left: Block, right: Block, options: Options | None = None,
+                 guide: Guide | None = None) -> tuple[Block, MergeReport]:
     """Merge two consecutive blocks into one (module docstring): :func:`map_pair` of the
     left block's last frame onto the right block's first, then :func:`join_blocks`.
 
@@ -193,6 +202,8 @@ def merge_blocks(left: Block, right: Block, options: Options | None = None) -> t
     left, right : Block
         ``left``'s last frame comes just before ``right``'s first.
     options : Options, optional
+    guide : Guide, optional
+        Anchors of that frame pair from the video or the user (:func:`map_pair`).
 
     Returns
     -------
@@ -202,7 +213,7 @@ def merge_blocks(left: Block, right: Block, options: Options | None = None) -> t
     MergeReport
     """
     options = Options() if options is None else options
-    pair = map_pair(left.vertices[-1], left.faces, right.vertices[0], right.faces, options)
+    pair = map_pair(left.vertices[-1], left.faces, right.vertices[0], right.faces, options, guide)
     return join_blocks(left, right, pair, options)
 
 
@@ -350,7 +361,8 @@ def merge_tree(count: int) -> list[tuple[int, int]]:
     return merges
 
 
-def _merge_as_ready(blocks: list[Block], options: Options, pool: MergePool | None, on_merge):
+def _merge_as_ready(blocks: list[Block], options: Options, pool: MergePool | None, on_merge,
+                    guides: list[Guide] | None = None):
     """The merges of :func:`merge_tree`, each in two steps (:func:`merge_blocks`): the pair map
     (:func:`map_pair`), run in ``pool`` once its left block is there and its target frame is
     known, then the join (:func:`join_blocks`, here) once the right block is there too.
@@ -362,7 +374,9 @@ def _merge_as_ready(blocks: list[Block], options: Options, pool: MergePool | Non
     merges' sources come from are made first, and the rest fill the cores beside the last
     maps. A map that is alone (nothing else running or ready), and every one without a pool,
     runs here, with this process's thread pools. The same maps of the same frames as merging
-    level by level. Returns the last block and the reports in merge order."""
+    level by level. ``guides[t]``: the anchors of base blocks ``t`` and ``t + 1``, for the
+    merge whose source is block ``t``'s last frame. Returns the last block and the reports in
+    merge order."""
     count = len(blocks)
     merges = merge_tree(count)
     if not merges:
@@ -383,7 +397,8 @@ def _merge_as_ready(blocks: list[Block], options: Options, pool: MergePool | Non
         right = ready.get(b, base[first[b]] if known_first else None)
         if a not in ready or right is None:
             return None
-        return ready[a].vertices[-1], ready[a].faces, right.vertices[0], right.faces
+        guide = None if guides is None else guides[first[b] - 1]
+        return ready[a].vertices[-1], ready[a].faces, right.vertices[0], right.faces, options, guide
 
     def startable() -> list[int]:
         return sorted((node for node in pending if frames(node) is not None), key=lambda node: (-chain[node], node))
@@ -396,7 +411,7 @@ def _merge_as_ready(blocks: list[Block], options: Options, pool: MergePool | Non
 
     def fill():
         for node in startable()[:max(pool.workers - len(running), 0)]:
-            running[pool.submit(map_pair, *take(node), options)] = node
+            running[pool.submit(map_pair, *take(node))] = node
 
     while last not in ready:
         joinable = [node for node in maps if merges[node - count][1] in ready]
@@ -410,7 +425,7 @@ def _merge_as_ready(blocks: list[Block], options: Options, pool: MergePool | Non
             raise RuntimeError("the assembly's merges stalled: no map can start")  # a bug, not the input
         if pool is None or (len(now) == 1 and not running):
             for node in now if pool is None else now[:1]:
-                maps[node] = map_pair(*take(node), options)
+                maps[node] = map_pair(*take(node))
             continue
         fill()
         if running:
@@ -471,7 +486,7 @@ def merge_pool(workers: int):
 
 
 def assemble(blocks: list[Block], options: Options | None = None, *, on_merge=None,
-             pool: MergePool | None = None) -> tuple[Block, list[MergeReport]]:
+             pool: MergePool | None = None, guides: list[Guide] | None = None) -> tuple[Block, list[MergeReport]]:
     """Merge ``blocks`` (consecutive, usually one frame each) level by level into one block
     (module docstring).
 
@@ -486,6 +501,10 @@ def assemble(blocks: list[Block], options: Options | None = None, *, on_merge=No
     pool : MergePool, optional
         Processes to run the merges in (:func:`merge_pool`), instead of a pool of
         :meth:`~Options.merge_workers` started here.
+    guides : list of Guide, optional
+        ``len(blocks) - 1`` anchor sets from the video or the user
+        (:mod:`~fourd.methods.assembly.guides`), ``guides[t]`` for the merge whose source is
+        block ``t``'s last frame and whose target is block ``t + 1``'s first.
 
     Returns
     -------
@@ -498,7 +517,9 @@ def assemble(blocks: list[Block], options: Options | None = None, *, on_merge=No
     if not blocks:
         raise ValueError("nothing to assemble")
     blocks = list(blocks)
+    if guides is not None and len(guides) != len(blocks) - 1:
+        raise ValueError(f"{len(guides)} guides for {len(blocks)} blocks (one per consecutive pair)")
     if pool is not None:
-        return _merge_as_ready(blocks, options, pool, on_merge)
+        return _merge_as_ready(blocks, options, pool, on_merge, guides)
     with merge_pool(options.merge_workers(blocks[0].vertices.shape[1])) as started:
-        return _merge_as_ready(blocks, options, started, on_merge)
+        return _merge_as_ready(blocks, options, started, on_merge, guides)

@@ -7,7 +7,9 @@ assembly of :mod:`~fourd.methods.assembly.hierarchy`.
    cached per frame when ``cache_dir`` is set. A frame whose mesh comes out empty (too few
    points) takes the nearest non-empty frame's mesh, every vertex unobserved.
 2. The binary hierarchy merges consecutive sub-sequences into one consistent sequence with the
-   first frame's connectivity, grown by the geometry only later frames have (5.3, 5.6).
+   first frame's connectivity, grown by the geometry only later frames have (5.3, 5.6); each
+   merge's anchors come from the geometry, and with ``anchors`` from the capture's video or a
+   file too (:mod:`~fourd.methods.assembly.guides`).
 3. The holes no frame filled are closed by the membrane of 3.6.2 (``close_holes``), placed in
    every frame from that frame's rim, unobserved (:func:`close_small_holes`).
 """
@@ -24,6 +26,7 @@ from fourd.cache import report_resumed
 from fourd.errors import InputError
 from fourd.geometry.frame_surface import SurfaceSettings, frame_surfaces
 from fourd.geometry.hole_filling import fill_holes, membrane_positions, small_holes
+from fourd.methods.assembly.guides import Guide, read_guides, video_guides
 from fourd.methods.assembly.hierarchy import Block, MergePool, assemble, merge_pool
 from fourd.methods.assembly.options import Options
 from fourd.methods.base import Reconstruction
@@ -122,6 +125,16 @@ def close_small_holes(block: Block, max_fraction: float, smoothness: float = 1.0
     return Block(filled.faces, frames, observed)
 
 
+def frame_pair_guides(seq: PointCloudSequence, options: Options) -> list[Guide] | None:
+    """The anchors of every consecutive frame pair from ``options.anchors``' source (the
+    video or a file, :mod:`~fourd.methods.assembly.guides`); None for ``geometry``."""
+    if options.anchors == "geometry":
+        return None
+    if options.anchors == "video":
+        return video_guides(seq, options.anchor_texture)
+    return read_guides(options.anchors, seq)
+
+
 def reconstruct_with_diagnostics(seq: PointCloudSequence, options: Options | None = None) -> Reconstruction:
     """:func:`reconstruct`, with an :class:`AssemblyDiagnostics`."""
     options = Options() if options is None else options
@@ -137,9 +150,10 @@ def reconstruct_with_diagnostics(seq: PointCloudSequence, options: Options | Non
         if found:
             report_resumed(log, f"{found} of {len(seq.frames)} frames' meshes")
         blocks = base_blocks(seq, meshes)
+        guides = frame_pair_guides(seq, options)
         log.info("assembling %d frames (%d merges)", len(blocks), len(blocks) - 1)
         with progress(total=len(blocks) - 1, desc="assembly merges", unit="merge") as bar:
-            block, reports = assemble(blocks, options, on_merge=lambda: bar.update(1), pool=pool)
+            block, reports = assemble(blocks, options, on_merge=lambda: bar.update(1), pool=pool, guides=guides)
     if options.close_holes > 0:
         block = close_small_holes(block, options.close_holes, options.close_smoothness)
     result = AnimatedMesh(block.faces, block.vertices, seq.times, block.observed, rest=block.vertices[0])

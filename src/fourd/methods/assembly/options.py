@@ -15,6 +15,9 @@ from fourd.geometry.frame_surface import SurfaceSettings
 #: starting a worker process costs a few seconds.
 PARALLEL_VERTICES = 5000
 
+#: Named sources of anchors (``Options.anchors``; else the path of an anchors file).
+ANCHOR_SOURCES = ("geometry", "video")
+
 
 @dataclass(frozen=True)
 class CrossParamOptions:
@@ -204,6 +207,19 @@ class Options(SurfaceSettings):
 
     Attributes
     ----------
+    anchors : str
+        Where each merge's anchors come from besides the geometry (thesis 5.4.1,
+        :mod:`~fourd.methods.assembly.guides`): ``geometry``, none (a coarse non-rigid
+        alignment and closest points alone); ``video``, the optical-flow anchor tracks of the
+        capture's calibrated video (``cameras.json`` and ``video/`` beside the frames), which
+        pull the alignment and join its anchors; or the path of an ``.npz`` anchors file
+        (its format in :mod:`~fourd.methods.assembly.guides`), used the same way.
+    anchor_texture : float
+        With ``anchors="video"``, only tracks that start where the image's hue texture is at
+        least this many times the noise's count (0: all; ``kinematic``'s ``anchor_texture``).
+    guide_pull : float
+        Weight of each video or file anchor in the coarse alignment, in data terms
+        (:func:`~fourd.methods.assembly.alignment.nonrigid_icp`'s ``pin_weight``).
     anchor_spacing : float
         Geometric anchors about this far apart on each source mesh (edges; 2 maps 81% of
         crane's vertices frames 0 -> 4 remeshed apart, 3 and 4 only 54%, at the same error,
@@ -326,6 +342,9 @@ class Options(SurfaceSettings):
         and these options (``fourd reconstruct --cache``).
     """
 
+    anchors: str = "geometry"
+    anchor_texture: float = 3.0
+    guide_pull: float = 1.0
     anchor_spacing: float = 2.0
     anchor_gap: float = 1.0
     anchor_tolerance: float = 1.5
@@ -361,7 +380,10 @@ class Options(SurfaceSettings):
             value = getattr(self, name)
             if not (np.isfinite(value) and value > 0):
                 raise ValueError(f"{name} must be positive, got {value!r}")
-        for name in ("alignment_settle", "patch_spacing"):
+        if self.anchors not in ANCHOR_SOURCES and not str(self.anchors).endswith(".npz"):
+            raise ValueError(f"anchors must be one of {', '.join(ANCHOR_SOURCES)} or the path of an .npz "
+                             f"anchors file, got {self.anchors!r}")
+        for name in ("alignment_settle", "patch_spacing", "anchor_texture", "guide_pull"):
             value = getattr(self, name)
             if not (np.isfinite(value) and value >= 0.0):
                 raise ValueError(f"{name} must be non-negative, got {value!r}")
