@@ -127,10 +127,11 @@ def close_small_holes(block: Block, max_fraction: float, smoothness: float = 1.0
 
 def frame_pair_guides(seq: PointCloudSequence, options: Options) -> list[Guide] | None:
     """The anchors of every consecutive frame pair from ``options.anchors``' source (the
-    video or a file, :mod:`~fourd.methods.assembly.guides`); None for ``geometry``."""
-    if options.anchors == "geometry":
+    video or a file, :mod:`~fourd.methods.assembly.guides`); None for ``geometry``, and for
+    ``auto`` when the input has no video."""
+    if options.anchors == "geometry" or (options.anchors == "auto" and getattr(seq, "video", None) is None):
         return None
-    if options.anchors == "video":
+    if options.anchors in ("auto", "video"):
         return video_guides(seq, options.anchor_texture)
     return read_guides(options.anchors, seq)
 

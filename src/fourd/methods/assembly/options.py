@@ -16,7 +16,7 @@ from fourd.geometry.frame_surface import SurfaceSettings
 PARALLEL_VERTICES = 5000
 
 #: Named sources of anchors (``Options.anchors``; else the path of an anchors file).
-ANCHOR_SOURCES = ("geometry", "video")
+ANCHOR_SOURCES = ("auto", "geometry", "video")
 
 
 @dataclass(frozen=True)
@@ -212,8 +212,11 @@ class Options(SurfaceSettings):
         :mod:`~fourd.methods.assembly.guides`): ``geometry``, none (a coarse non-rigid
         alignment and closest points alone); ``video``, the optical-flow anchor tracks of the
         capture's calibrated video (``cameras.json`` and ``video/`` beside the frames), which
-        pull the alignment and join its anchors; or the path of an ``.npz`` anchors file
-        (its format in :mod:`~fourd.methods.assembly.guides`), used the same way.
+        pull the alignment and join its anchors; ``auto`` (the default), ``video`` when the
+        input has video, else ``geometry``; or the path of an ``.npz`` anchors file (its
+        format in :mod:`~fourd.methods.assembly.guides`), used as the video's. The video's
+        anchors cut the bench's drift on printed cloth by 2-3 times (bending-arm-cloth-video
+        correspondence 0.0272 / 0.0526 -> 0.0128 / 0.0237, ``benchmarks/METHODS.md``).
     anchor_texture : float
         With ``anchors="video"``, only tracks that start where the image's hue texture is at
         least this many times the noise's count (0: all; ``kinematic``'s ``anchor_texture``).
@@ -342,9 +345,9 @@ class Options(SurfaceSettings):
         and these options (``fourd reconstruct --cache``).
     """
 
-    anchors: str = "geometry"
+    anchors: str = "auto"
     anchor_texture: float = 3.0
-    guide_pull: float = 1.0
+    guide_pull: float = 16.0
     anchor_spacing: float = 2.0
     anchor_gap: float = 1.0
     anchor_tolerance: float = 1.5
