@@ -46,7 +46,7 @@ def main(name: str, appearance: str, overrides: dict) -> None:
     for anchors in ("geometry", "video"):
         result = reconstruct(scans, "assembly", anchors=anchors, **overrides)
         scores = evaluate(result, truth, samples=20000)
-        curve = scores["_per_frame_correspondence"]
+        curve = scores["per_frame"]["correspondence"]
         print(f"{anchors}: correspondence {scores['correspondence_mean']:.4f} / {scores['correspondence_last']:.4f}, "
               f"Chamfer {scores['chamfer']:.4f}; per frame "
               + " ".join(f"{t}:{curve[t]:.4f}" for t in range(0, len(curve), 3)))

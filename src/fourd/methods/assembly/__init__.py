@@ -7,8 +7,10 @@ Frames that are meshes are used as they are; point clouds are meshed per frame f
 
 - :mod:`.anchors`: sparse source-to-target correspondences, the forward-backward check and
   spreading to a uniform density (section 5.4.1);
-- :mod:`.alignment`: anchors from geometry alone (a coarse non-rigid alignment, then closest
-  points), the method's default since scans carry no optical flow;
+- :mod:`.alignment`: anchors from geometry (a coarse non-rigid alignment, then closest
+  points), every merge's;
+- :mod:`.guides`: anchors from the capture's video (optical flow, 5.4.1) or the user's file,
+  which pull that alignment and join its anchors;
 - :mod:`.patches`: matching disk-shaped patches grown around anchors (5.4.2);
 - :mod:`.crossparam`: the local patch cross-parameterisation, each patch pair flattened
   (ABF++ or LSCM, :mod:`fourd.geometry.flattening`), aligned by its anchors and the most

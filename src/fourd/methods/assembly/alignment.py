@@ -1,7 +1,9 @@
 """Anchors from geometry alone: a coarse non-rigid alignment of the source onto the target,
 then closest points (the fallback of thesis section 5.4, "without any correspondences,
 geometric proximity is the only way to initialize such a parameterization"; the thesis takes
-its anchors from optical flow, 5.4.1, which scans without video do not have).
+its anchors from optical flow, 5.4.1, which scans without video do not have). Anchors from the
+video or the user (:mod:`~fourd.methods.assembly.guides`), when given, pull the non-rigid
+alignment point to point and join the anchors.
 
 1. Rigid ICP: the source is moved by the trimmed point-to-plane ICP of
    :func:`fourd.geometry.icp.rigid_icp` (pairs whose normals disagree or that lie beyond the
