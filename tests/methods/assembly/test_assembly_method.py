@@ -334,12 +334,14 @@ def test_merges_started_as_their_blocks_are_ready_are_those_of_the_levels(monkey
     """The scheduler with a pool (threads here) maps the same frames and joins the same blocks
     as merging level by level: the frames come out in order, one report per merge in merge
     order, each map from the left block's last frame to the right block's first, whether the
-    map starts before the right block is assembled (by default) or after (``paste``)."""
+    map starts before the right block is assembled (by default) or after (``paste``), with
+    the anchors of the source frame's pair (``guides``)."""
     from concurrent.futures import ThreadPoolExecutor
 
     from fourd.methods.assembly import hierarchy
 
-    def map_pair(source, faces, target, target_faces, options):
+    def map_pair(source, faces, target, target_faces, options, guide):
+        assert guide == f"pair {int(source[0, 0])}"
         return int(source[0, 0]), int(target[0, 0])
 
     def join(left, right, pair, options):
@@ -353,9 +355,10 @@ def test_merges_started_as_their_blocks_are_ready_are_those_of_the_levels(monkey
     blocks = [hierarchy.Block(faces, np.full((1, 3, 3), float(t)), np.ones((1, 3), dtype=bool))
               for t in range(count)]
     options = Options(paste=paste)
-    serial = hierarchy._merge_as_ready(blocks, options, None, None)
+    guides = [f"pair {t}" for t in range(count - 1)]
+    serial = hierarchy._merge_as_ready(blocks, options, None, None, guides)
     with ThreadPoolExecutor(2) as pool:
-        parallel = hierarchy._merge_as_ready(blocks, options, hierarchy.MergePool(pool, 2), None)
+        parallel = hierarchy._merge_as_ready(blocks, options, hierarchy.MergePool(pool, 2), None, guides)
     tree = hierarchy.merge_tree(count)
     firsts, lasts = list(range(count)), list(range(count))
     for a, b in tree:
@@ -389,7 +392,7 @@ def test_a_merge_run_in_this_process_sees_its_own_thread_environment(monkeypatch
 
     seen = []
 
-    def map_pair(source, faces, target, target_faces, options):
+    def map_pair(source, faces, target, target_faces, options, guide):
         seen.append(os.environ.get("NUMBA_NUM_THREADS"))
 
     def join(left, right, pair, options):

@@ -39,7 +39,7 @@ log = logging.getLogger("fourd.methods.assembly")
 MIN_FRAMES = 2
 RESULT = AnimatedMesh
 #: The options users change first (``fourd options assembly``; the others under ``--all``).
-COMMON_OPTIONS = ("anchor_spacing", "max_radius", "relax_sweeps", "close_holes", "workers")
+COMMON_OPTIONS = ("anchors", "anchor_spacing", "max_radius", "relax_sweeps", "close_holes", "workers")
 #: The cache entries of the frames' meshes.
 STAGE = "assembly-surface"
 #: Fewest faces a frame's mesh needs to take part.
