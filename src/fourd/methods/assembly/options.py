@@ -216,7 +216,7 @@ class Options(SurfaceSettings):
         input has video, else ``geometry``; or the path of an ``.npz`` anchors file (its
         format in :mod:`~fourd.methods.assembly.guides`), used as the video's. The video's
         anchors cut the bench's drift on printed cloth by 2-3 times (bending-arm-cloth-video
-        correspondence 0.0272 / 0.0526 -> 0.0128 / 0.0237, ``benchmarks/METHODS.md``).
+        correspondence 0.0272 / 0.0526 -> 0.0129 / 0.0239, ``benchmarks/METHODS.md``).
     anchor_texture : float
         With ``anchors="video"``, only tracks that start where the image's hue texture is at
         least this many times the noise's count (0: all; ``kinematic``'s ``anchor_texture``).
