@@ -10,7 +10,9 @@ assembly of :mod:`~fourd.methods.assembly.hierarchy`.
    first frame's connectivity, grown by the geometry only later frames have (5.3, 5.6); each
    merge's anchors come from the geometry, and with ``anchors`` from the capture's video or a
    file too (:mod:`~fourd.methods.assembly.guides`).
-3. The holes no frame filled are closed by the membrane of 3.6.2 (``close_holes``), placed in
+3. With colours in the input, every frame slid along its own surface to where the first
+   frame's colours are (``color_fit``, :mod:`~fourd.methods.assembly.color_fit`).
+4. The holes no frame filled are closed by the membrane of 3.6.2 (``close_holes``), placed in
    every frame from that frame's rim, unobserved (:func:`close_small_holes`).
 """
 
@@ -26,6 +28,7 @@ from fourd.cache import report_resumed
 from fourd.errors import InputError
 from fourd.geometry.frame_surface import SurfaceSettings, frame_surfaces
 from fourd.geometry.hole_filling import fill_holes, membrane_positions, small_holes
+from fourd.methods.assembly.color_fit import fit_colors, frame_colors
 from fourd.methods.assembly.guides import Guide, read_guides, video_guides
 from fourd.methods.assembly.hierarchy import Block, MergePool, assemble, merge_pool
 from fourd.methods.assembly.options import Options
@@ -136,6 +139,17 @@ def frame_pair_guides(seq: PointCloudSequence, options: Options) -> list[Guide] 
     return read_guides(options.anchors, seq)
 
 
+def _fit_colors(seq: PointCloudSequence, meshes, block: Block, options: Options) -> Block:
+    """``block`` slid to the first frame's colours (:mod:`~fourd.methods.assembly.color_fit`)
+    when the input has colours, else as it is."""
+    colors = frame_colors(seq, meshes)
+    if colors is None:
+        return block
+    vertices = fit_colors(block.vertices, block.faces, block.observed, meshes, colors, radius=options.color_radius,
+                          scale=options.color_scale)
+    return Block(block.faces, vertices, block.observed)
+
+
 def reconstruct_with_diagnostics(seq: PointCloudSequence, options: Options | None = None) -> Reconstruction:
     """:func:`reconstruct`, with an :class:`AssemblyDiagnostics`."""
     options = Options() if options is None else options
@@ -155,6 +169,8 @@ def reconstruct_with_diagnostics(seq: PointCloudSequence, options: Options | Non
         log.info("assembling %d frames (%d merges)", len(blocks), len(blocks) - 1)
         with progress(total=len(blocks) - 1, desc="assembly merges", unit="merge") as bar:
             block, reports = assemble(blocks, options, on_merge=lambda: bar.update(1), pool=pool, guides=guides)
+    if options.color_fit:
+        block = _fit_colors(seq, meshes, block, options)
     if options.close_holes > 0:
         block = close_small_holes(block, options.close_holes, options.close_smoothness)
     result = AnimatedMesh(block.faces, block.vertices, seq.times, block.observed, rest=block.vertices[0])

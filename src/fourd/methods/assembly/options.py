@@ -223,6 +223,16 @@ class Options(SurfaceSettings):
     guide_pull : float
         Weight of each video or file anchor in the coarse alignment, in data terms
         (:func:`~fourd.methods.assembly.alignment.nonrigid_icp`'s ``pin_weight``).
+    color_fit : bool
+        When the input has colours (every frame's points coloured, or calibrated video), slide
+        each assembled frame along its own surface to where the first frame's colours are
+        (:mod:`~fourd.methods.assembly.color_fit`: per-vertex Lucas-Kanade against the first
+        frame, so the pair maps' errors stop adding up); silent without colours.
+    color_radius : float
+        Patch radius of that Lucas-Kanade, in the assembled mesh's edges.
+    color_scale : float
+        A vertex whose colour shift has this uncertainty (edges) counts exp(-1); the weight
+        falls as ``exp(-(uncertainty / scale)^2)``.
     anchor_spacing : float
         Geometric anchors about this far apart on each source mesh (edges; 2 maps 81% of
         crane's vertices frames 0 -> 4 remeshed apart, 3 and 4 only 54%, at the same error,
@@ -348,6 +358,9 @@ class Options(SurfaceSettings):
     anchors: str = "auto"
     anchor_texture: float = 3.0
     guide_pull: float = 16.0
+    color_fit: bool = True
+    color_radius: float = 3.0
+    color_scale: float = 0.5
     anchor_spacing: float = 2.0
     anchor_gap: float = 1.0
     anchor_tolerance: float = 1.5
@@ -379,7 +392,7 @@ class Options(SurfaceSettings):
         if not self.correct_stretch > 1:
             raise ValueError(f"correct_stretch must be > 1, got {self.correct_stretch!r}")
         for name in ("anchor_spacing", "anchor_gap", "anchor_tolerance", "correct_motion", "alignment_weight",
-                     "map_agreement"):
+                     "map_agreement", "color_radius", "color_scale"):
             value = getattr(self, name)
             if not (np.isfinite(value) and value > 0):
                 raise ValueError(f"{name} must be positive, got {value!r}")
