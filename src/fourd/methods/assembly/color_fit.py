@@ -79,7 +79,7 @@ def _thin(points: np.ndarray, cell: float) -> np.ndarray:
 
 
 def fit_colors(positions: np.ndarray, faces: np.ndarray, observed: np.ndarray, meshes, colors, *,
-               radius: float = 3.0, scale: float = 0.5, smoothness: float = 10.0,
+               radius: float = 5.0, scale: float = 0.5, smoothness: float = 10.0,
                iterations: int = 2) -> np.ndarray:
     """The assembled ``positions [T, N, 3]`` (mesh ``faces``, ``observed [T, N]``) slid along
     each frame's surface to where the first frame's colours are (module docstring).

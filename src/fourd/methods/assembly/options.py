@@ -359,7 +359,7 @@ class Options(SurfaceSettings):
     anchor_texture: float = 3.0
     guide_pull: float = 16.0
     color_fit: bool = True
-    color_radius: float = 3.0
+    color_radius: float = 5.0
     color_scale: float = 0.5
     anchor_spacing: float = 2.0
     anchor_gap: float = 1.0
