@@ -39,3 +39,18 @@ def test_a_mesh_with_fewer_triangles_than_candidates_and_no_points():
     assert len(closest_points_on_mesh(square, faces, np.zeros((0, 3))).triangle) == 0
     with pytest.raises(ValueError, match="no faces"):
         closest_points_on_mesh(square, np.zeros((0, 3), dtype=int), [[0.0, 0, 0]])
+
+
+def test_zero_area_triangles_give_their_edges_closest_point_not_nan():
+    rng = np.random.default_rng(1)
+    points = rng.normal(size=(300, 3))
+    a = np.zeros((300, 3))
+    # collinear corners, and two corners at one place
+    for b, c in (([1.0, 0, 0], [2.0, 0, 0]), ([1.0, 0, 0], [1.0, 0, 0]), ([0.0, 0, 0], [0.0, 1, 0])):
+        bary = closest_on_triangles(points, a, np.tile(b, (300, 1)), np.tile(c, (300, 1)))
+        assert np.isfinite(bary).all() and (bary >= 0).all() and np.allclose(bary.sum(axis=1), 1.0)
+        found = bary @ np.array([[0.0, 0, 0], b, c])
+        # the closest point of the segment the corners span
+        end = np.array(c if np.linalg.norm(c) >= np.linalg.norm(b) else b)
+        t = np.clip(points @ end / (end @ end), 0.0, 1.0)
+        np.testing.assert_allclose(found, t[:, None] * end, atol=1e-12)

@@ -85,6 +85,29 @@ def closest_on_triangles(points: np.ndarray, a: np.ndarray, b: np.ndarray, c: np
         v = vb / denom
         w = vc / denom
         put(np.ones(m, dtype=bool), 1.0 - v - w, v, w)  # interior
+    flat = ~np.isfinite(out).all(axis=1)  # a zero-area triangle whose walk reached the interior
+    if flat.any():
+        out[flat] = _closest_on_edges(p[flat], a[flat], b[flat], c[flat])
+    return out
+
+
+def _closest_on_edges(p, a, b, c) -> np.ndarray:
+    """Barycentric coordinates ``[M, 3]`` of the closest point to ``p`` on the three edges
+    of each triangle (for zero-area triangles, whose closest point lies on an edge)."""
+    best = np.full(len(p), np.inf)
+    out = np.zeros((len(p), 3))
+    for i, j in ((0, 1), (1, 2), (2, 0)):
+        start, end = (a, b, c)[i], (a, b, c)[j]
+        along = end - start
+        length = np.einsum("ij,ij->i", along, along)
+        t = np.clip(np.einsum("ij,ij->i", p - start, along) / np.where(length > 0, length, 1.0), 0.0, 1.0)
+        t[length == 0] = 0.0
+        distance = np.linalg.norm(start + t[:, None] * along - p, axis=1)
+        nearer = distance < best
+        best[nearer] = distance[nearer]
+        out[nearer] = 0.0
+        out[nearer, i] = 1.0 - t[nearer]
+        out[nearer, j] = t[nearer]
     return out
 
 

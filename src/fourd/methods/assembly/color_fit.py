@@ -122,13 +122,14 @@ def fit_colors(positions: np.ndarray, faces: np.ndarray, observed: np.ndarray, m
         seen = observed[t]
         for _ in range(iterations):
             result = photometric_shift(x[sample], vertex_normals(x, faces)[sample], reference, field, radius=radius * edge)
-            uncertainty = np.nan_to_num(result.uncertainty, posinf=1e30)
+            # a degenerate patch (a sheet's edge, too few neighbours) gives no shift
+            usable = seen[sample] & np.isfinite(result.uncertainty) & np.isfinite(result.shift).all(axis=1)
             weight = np.zeros(count)
-            weight[sample] = np.where(seen[sample], np.exp(-((uncertainty / (scale * edge)) ** 2)), 0.0)
+            weight[sample[usable]] = np.exp(-((result.uncertainty[usable] / (scale * edge)) ** 2))
             if weight.sum() < 1.0:
                 break
             shift = np.zeros((count, 3))
-            shift[sample] = result.shift
+            shift[sample[usable]] = result.shift[usable]
             system = (sp.diags(weight) + smoothness * laplacian + 1e-6 * sp.identity(count)).tocsc()
             factor = splu(system, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0, options={"SymmetricMode": True})
             x = x + factor.solve(weight[:, None] * shift)
