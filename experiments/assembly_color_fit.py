@@ -1,0 +1,65 @@
+"""Question: how far does `assembly`'s colour fit (``color_fit``) bring an assembled sequence
+back to the first frame's colours, and how do its settings matter?
+
+Setup: a bench scene scanned with the bench protocol, printed cloth, with the rig's 3-camera
+video at 256 pixels (the bench's ``*-cloth-video`` scenes); `assembly` once with
+``color_fit=false`` (kept in ``/tmp`` between runs), then
+:func:`fourd.methods.assembly.color_fit.fit_colors` on its result with the settings given as
+``KEY=VALUE`` (several sets separated by ``/``); correspondence mean / last, Chamfer (20,000
+samples) and the correspondence every fourth frame.
+
+Run: ``.venv/bin/python experiments/assembly_color_fit.py bending-arm radius=3 / radius=5``
+
+Answer: see ``benchmarks/METHODS.md``, `assembly`, "The colour fit".
+"""
+
+from __future__ import annotations
+
+import os
+import pickle
+import sys
+import time
+
+from fourd import synth
+from fourd.animation import AnimatedMesh
+from fourd.bench.suite import PROTOCOL, STANDARD_SCENES
+from fourd.methods import reconstruct
+from fourd.methods.assembly import Options
+from fourd.methods.assembly.color_fit import fit_colors, frame_colors
+from fourd.methods.assembly.method import frame_meshes
+from fourd.metrics import evaluate
+
+
+def _score(result, truth, label: str) -> None:
+    scores = evaluate(result, truth, samples=20000)
+    curve = scores["per_frame"]["correspondence"]
+    print(f"{label}: correspondence {scores['correspondence_mean']:.4f} / {scores['correspondence_last']:.4f}, "
+          f"Chamfer {scores['chamfer']:.4f}; " + " ".join(f"{curve[t]:.4f}" for t in range(0, len(curve), 4)),
+          flush=True)
+
+
+def main(name: str, settings: list[dict]) -> None:
+    scene = next(s for s in STANDARD_SCENES if s.key == name)
+    truth = synth.scene(scene.name, frames=scene.frames, seed=0, **scene.options)
+    scans = synth.scan(truth, resolution=scene.resolution, seed=0, appearance="cloth", video=True,
+                       video_resolution=256, **PROTOCOL)
+    path = f"/tmp/fourd_assembly_color_fit_{name}.pkl"
+    if not os.path.exists(path):
+        with open(path, "wb") as file:
+            pickle.dump(reconstruct(scans, "assembly", color_fit=False), file)
+    with open(path, "rb") as file:
+        assembled = pickle.load(file)
+    meshes = frame_meshes(scans, Options())
+    colors = frame_colors(scans, meshes)
+    _score(assembled, truth, "assembled")
+    for values in settings:
+        started = time.perf_counter()
+        vertices = fit_colors(assembled.vertices, assembled.faces, assembled.observed, meshes, colors, **values)
+        fitted = AnimatedMesh(assembled.faces, vertices, assembled.times, assembled.observed, rest=vertices[0])
+        _score(fitted, truth, f"{values} ({time.perf_counter() - started:.1f} s)")
+
+
+if __name__ == "__main__":
+    groups = " ".join(sys.argv[2:]).split("/") if len(sys.argv) > 2 else [""]
+    main(sys.argv[1], [{k: float(v) if "." in v else int(v) for k, v in (a.split("=", 1) for a in g.split())}
+                       for g in groups])
