@@ -227,7 +227,9 @@ class Options(SurfaceSettings):
         When the input has colours (every frame's points coloured, or calibrated video), slide
         each assembled frame along its own surface to where the first frame's colours are
         (:mod:`~fourd.methods.assembly.color_fit`: per-vertex Lucas-Kanade against the first
-        frame, so the pair maps' errors stop adding up); silent without colours.
+        frame, so the pair maps' errors stop adding up); silent without colours. On the
+        bench's printed cloth 1.3-3 times less drift (waving-sheet-cloth-video 0.0091 / 0.0177
+        -> 0.0029 / 0.0045) for 1-2 s a frame; none on skin (``benchmarks/METHODS.md``).
     color_radius : float
         Patch radius of that Lucas-Kanade, in the assembled mesh's edges.
     color_scale : float
