@@ -97,7 +97,7 @@ def fit_colors(positions: np.ndarray, faces: np.ndarray, observed: np.ndarray, m
     smoothness : float
         Weight of the correction's Laplacian against the shifts' weights.
     iterations : int
-        Shift, smooth and project rounds per frame.
+        Shift and smooth rounds per frame.
 
     Returns
     -------
@@ -110,6 +110,8 @@ def fit_colors(positions: np.ndarray, faces: np.ndarray, observed: np.ndarray, m
     edge = median_edge_length(positions[0], faces)
     sample = np.flatnonzero(observed[0])
     sample = sample[_thin(positions[0][sample], SAMPLE_SPACING * edge)]
+    if len(sample) < 8:  # too little of the first frame observed to read its colours
+        return positions
     reference = _field(*meshes[0], colors[0], len(sample)).sample(positions[0][sample])
     laplacian = uniform_laplacian(count, faces).tocsr()
     carried = np.zeros((count, 3))
