@@ -12,8 +12,9 @@ Run: ``.venv/bin/python experiments/assembly_whole_capture_video.py [KEY=VALUE,K
 
 Answer (2026-12-02; correspondence mean / last, Chamfer): geometry alone 0.0200 / 0.0353,
 0.0041; video anchors without the colour fit 0.0331 / 0.0560, 0.0044; the default (anchors and
-colour fit) 0.0251 / 0.0481, 0.0059. The video's anchors hurt at the whole-volume rig (the
-performer a few pixels wide); see ``benchmarks/METHODS.md``, `assembly`, "The whole crane
+colour fit) 0.0251 / 0.0481, 0.0059; the colour fit alone (``anchors=geometry``) 0.0105 /
+0.0203, 0.0039. The video's anchors hurt at the whole-volume rig (the performer a few pixels
+wide), the colours halve the chain's drift; see ``benchmarks/METHODS.md``, `assembly`, "The whole crane
 capture at the sparse rig".
 """
 
