@@ -316,7 +316,7 @@ def geometric_anchors(
     settle: float = 0.0,
     seed: int = 0,
     guides: MatchedGuides | None = None,
-    guide_pull: float = 1.0,
+    guide_pull: float = 16.0,
 ) -> Alignment:
     """Anchors from the source to the target by a coarse non-rigid alignment (module docstring).
 
