@@ -1,7 +1,8 @@
 """Question: how far does `assembly`'s colour fit (``color_fit``) bring an assembled sequence
 back to the first frame's colours, and how do its settings matter?
 
-Setup: a bench scene scanned with the bench protocol, printed cloth, with the rig's 3-camera
+Setup: a bench scene scanned with the bench protocol, in its appearance (printed cloth unless
+the scene names another, e.g. ``crane-skin-video``), with the rig's 3-camera
 video at 256 pixels (the bench's ``*-cloth-video`` scenes); `assembly` once with
 ``color_fit=false`` (kept in ``/tmp`` between runs), then
 :func:`fourd.methods.assembly.color_fit.fit_colors` on its result with the settings given as
@@ -22,7 +23,7 @@ import time
 
 from fourd import synth
 from fourd.animation import AnimatedMesh
-from fourd.bench.suite import PROTOCOL, STANDARD_SCENES
+from fourd.bench.suite import APPEARANCE_SCENES, PROTOCOL, STANDARD_SCENES
 from fourd.methods import reconstruct
 from fourd.methods.assembly import Options
 from fourd.methods.assembly.color_fit import fit_colors, frame_colors
@@ -39,9 +40,11 @@ def _score(result, truth, label: str) -> None:
 
 
 def main(name: str, settings: list[dict]) -> None:
-    scene = next(s for s in STANDARD_SCENES if s.key == name)
+    scene = next(s for s in STANDARD_SCENES + APPEARANCE_SCENES if s.key == name)
+    name = scene.key
     truth = synth.scene(scene.name, frames=scene.frames, seed=0, **scene.options)
-    scans = synth.scan(truth, resolution=scene.resolution, seed=0, appearance="cloth", video=True,
+    appearance = scene.appearance or "cloth"
+    scans = synth.scan(truth, resolution=scene.resolution, seed=0, appearance=appearance, video=True,
                        video_resolution=256, **PROTOCOL)
     path = f"/tmp/fourd_assembly_color_fit_{name}.pkl"
     if not os.path.exists(path):

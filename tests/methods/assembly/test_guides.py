@@ -4,6 +4,8 @@ geometry alone cannot see turn, followed once the file says where its points wen
 
 from __future__ import annotations
 
+import types
+
 import numpy as np
 import pytest
 import trimesh
@@ -141,3 +143,16 @@ def test_the_colour_fit_slides_every_frame_to_the_first_frames_colours():
         assert np.median(error) < 0.2 and np.percentile(error, 95) < 0.3, (t, np.median(error))
         # every vertex stays on the frame's surface
         assert np.abs(np.linalg.norm(fitted.vertices[t], axis=1) - 1.0).max() < 0.01
+
+
+def test_auto_takes_the_video_anchors_only_without_the_colour_fit(monkeypatch):
+    from fourd.methods.assembly import method
+
+    seq, _, _ = _spinning_sphere(frames=3)
+    monkeypatch.setattr(method, "video_guides", lambda seq, texture: ["from the video"])
+    assert method.frame_pair_guides(seq, Options()) is None  # no video
+    seq = types.SimpleNamespace(frames=seq.frames, video=object())  # a video the stand-in never reads
+    assert method.frame_pair_guides(seq, Options()) is None  # the colour fit reads it instead
+    assert method.frame_pair_guides(seq, Options(color_fit=False)) == ["from the video"]
+    assert method.frame_pair_guides(seq, Options(anchors="video")) == ["from the video"]
+    assert method.frame_pair_guides(seq, Options(anchors="geometry", color_fit=False)) is None

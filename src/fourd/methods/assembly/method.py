@@ -131,8 +131,10 @@ def close_small_holes(block: Block, max_fraction: float, smoothness: float = 1.0
 def frame_pair_guides(seq: PointCloudSequence, options: Options) -> list[Guide] | None:
     """The anchors of every consecutive frame pair from ``options.anchors``' source (the
     video or a file, :mod:`~fourd.methods.assembly.guides`); None for ``geometry``, and for
-    ``auto`` when the input has no video."""
-    if options.anchors == "geometry" or (options.anchors == "auto" and getattr(seq, "video", None) is None):
+    ``auto`` unless the input has video and ``color_fit`` is off (the colour fit reads the
+    same video against the first frame, where the anchors' errors add up along the chain)."""
+    video = getattr(seq, "video", None) is not None
+    if options.anchors == "geometry" or (options.anchors == "auto" and (not video or options.color_fit)):
         return None
     if options.anchors in ("auto", "video"):
         return video_guides(seq, options.anchor_texture)

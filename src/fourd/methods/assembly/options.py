@@ -213,10 +213,12 @@ class Options(SurfaceSettings):
         alignment and closest points alone); ``video``, the optical-flow anchor tracks of the
         capture's calibrated video (``cameras.json`` and ``video/`` beside the frames), which
         pull the alignment and join its anchors; ``auto`` (the default), ``video`` when the
-        input has video, else ``geometry``; or the path of an ``.npz`` anchors file (its
-        format in :mod:`~fourd.methods.assembly.guides`), used as the video's. The video's
-        anchors cut the bench's drift on printed cloth by 2-3 times (bending-arm-cloth-video
-        correspondence 0.0272 / 0.0526 -> 0.0129 / 0.0239, ``benchmarks/METHODS.md``).
+        input has video and ``color_fit`` is off, else ``geometry``; or the path of an
+        ``.npz`` anchors file (its format in :mod:`~fourd.methods.assembly.guides`), used as
+        the video's. Without the colour fit the video's anchors cut the bench's drift on
+        printed cloth by 2-3 times (bending-arm-cloth-video correspondence 0.0272 / 0.0526 ->
+        0.0129 / 0.0239); with it they add little on 20 frames and, chained pair after pair,
+        double the drift over the whole 175-frame crane capture (``benchmarks/METHODS.md``).
     anchor_texture : float
         With ``anchors="video"``, only tracks that start where the image's hue texture is at
         least this many times the noise's count (0: all; ``kinematic``'s ``anchor_texture``).
