@@ -9,6 +9,7 @@ from fourd.geometry.grid import (
     fit_grid,
     grid_points,
     occupied_cells,
+    one_per_cube,
     padded_bounds,
     point_cells,
     vertices_near,
@@ -128,3 +129,19 @@ def test_vertices_near_matches_brute_force():
     found = vertices_near(grid, points, distance)
     nearest, _ = cKDTree(points).query(grid_points(grid))
     assert np.array_equal(found, np.flatnonzero(nearest <= distance))
+
+
+def test_one_per_cube_keeps_the_highest_priority_of_each_cube():
+    rng = np.random.default_rng(0)
+    points = rng.uniform(-1, 1, (2000, 3))
+    priority = rng.uniform(size=len(points))
+    kept = one_per_cube(points, 0.5, priority)
+    cubes = np.floor(points / 0.5).astype(int)
+    assert len(kept) == len(np.unique(cubes, axis=0)) == 64  # every occupied cube, once
+    for i in kept:
+        same = np.all(cubes == cubes[i], axis=1)
+        assert priority[i] == priority[same].max()
+    assert np.all(np.diff(kept) > 0)
+    first = one_per_cube(points, 0.5)  # no priority: the lowest index of each cube
+    assert all(i == np.flatnonzero(np.all(cubes == cubes[i], axis=1))[0] for i in first)
+    assert len(one_per_cube(np.zeros((0, 3)), 1.0)) == 0

@@ -71,6 +71,7 @@ from fourd.appearance.flow import (
 )
 from fourd.appearance.texture import texture_significance
 from fourd.errors import InputError
+from fourd.geometry.grid import one_per_cube
 from fourd.progress import progress
 
 logger = logging.getLogger("fourd.appearance.anchor_tracks")
@@ -400,17 +401,6 @@ def merge_tracks(index, camera, target, reliability, camera_count: int, toleranc
     return points[keep], merged, confidence, views[keep].astype(np.int64), int(views.sum())
 
 
-def _thin(source, confidence, cell: float) -> np.ndarray:
-    """Indices keeping the most confident anchor per cube of side ``cell``."""
-    order = np.argsort(-confidence, kind="stable")
-    keys = np.floor(source[order] / cell).astype(np.int64)
-    keys -= keys.min(axis=0)
-    extent = keys.max(axis=0) + 1
-    flat = (keys[:, 0] * extent[1] + keys[:, 1]) * extent[2] + keys[:, 2]  # one int per cube
-    _, first = np.unique(flat, return_index=True)
-    return np.sort(order[first])
-
-
 def _setup(seq, first: int, options: AnchorOptions):
     if not 0 <= first < len(seq) - 1:
         raise InputError(f"frame {first} has no next frame (the sequence has {len(seq)} frames)")
@@ -458,7 +448,7 @@ def anchor_pair(seq, first: int, options: AnchorOptions | None = None, *, cache=
     candidates = None
     if options.sources > 0 and len(points0):
         candidates = np.zeros(len(points0), dtype=bool)
-        candidates[_thin(points0, np.zeros(len(points0)), options.sources * spacing)] = True
+        candidates[one_per_cube(points0, options.sources * spacing)] = True
     indices, cameras, targets, reliabilities = [], [], [], []
     for c, camera in enumerate(video.cameras):
         pixels = pixel_spacing(camera, points0, spacing)
@@ -490,7 +480,7 @@ def anchor_pair(seq, first: int, options: AnchorOptions | None = None, *, cache=
     keep = views >= options.min_cameras
     index, target, confidence, views = index[keep], target[keep], confidence[keep], views[keep]
     if options.thin > 0 and len(index):
-        kept = _thin(points0[index], confidence, options.thin * spacing)
+        kept = one_per_cube(points0[index], options.thin * spacing, confidence)
         index, target, confidence, views = index[kept], target[kept], confidence[kept], views[kept]
     counts["anchors"] = len(index)
     cache.pop(("inliers", first), None)

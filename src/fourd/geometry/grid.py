@@ -166,6 +166,22 @@ def occupied_cells(grid: Grid, points: np.ndarray) -> np.ndarray:
     return mask
 
 
+def one_per_cube(points: np.ndarray, cell: float, priority: np.ndarray | None = None) -> np.ndarray:
+    """Sorted indices ``[S]`` of ``points [P, 3]`` keeping one per cube of side ``cell`` (cubes
+    at ``floor(points / cell)``): the one of highest ``priority [P]`` there, ties and no
+    ``priority`` to the lowest index."""
+    points = np.asarray(points, dtype=np.float64)
+    if not len(points):
+        return np.zeros(0, dtype=np.int64)
+    order = np.arange(len(points)) if priority is None else np.argsort(-np.asarray(priority), kind="stable")
+    keys = np.floor(points[order] / cell).astype(np.int64)
+    keys -= keys.min(axis=0)
+    extent = keys.max(axis=0) + 1
+    flat = (keys[:, 0] * extent[1] + keys[:, 1]) * extent[2] + keys[:, 2]  # one int per cube
+    _, first = np.unique(flat, return_index=True)
+    return np.sort(order[first])
+
+
 def cells_near(
     grid: Grid, points: np.ndarray, distance: float, *, tree: cKDTree | None = None
 ) -> np.ndarray:

@@ -35,6 +35,7 @@ from fourd.appearance.color_guide import colors_of_cleaned
 from fourd.appearance.photometric import photometric_shift
 from fourd.appearance.surface_color import ColorField
 from fourd.geometry.closest_point import closest_points_on_mesh
+from fourd.geometry.grid import one_per_cube
 from fourd.geometry.laplacian import uniform_laplacian
 from fourd.geometry.meshes import median_edge_length
 from fourd.geometry.normals import vertex_normals
@@ -71,13 +72,6 @@ def _field(vertices, faces, colors, count: int) -> ColorField:
     return ColorField(vertices[::stride], normals[::stride], colors[::stride])
 
 
-def _thin(points: np.ndarray, cell: float) -> np.ndarray:
-    """Indices of one point per cube of side ``cell``."""
-    keys = np.floor(points / cell).astype(np.int64)
-    _, first = np.unique(keys, axis=0, return_index=True)
-    return np.sort(first)
-
-
 def fit_colors(positions: np.ndarray, faces: np.ndarray, observed: np.ndarray, meshes, colors, *,
                radius: float = 5.0, scale: float = 0.5, smoothness: float = 10.0,
                iterations: int = 2) -> np.ndarray:
@@ -109,7 +103,7 @@ def fit_colors(positions: np.ndarray, faces: np.ndarray, observed: np.ndarray, m
         return positions
     edge = median_edge_length(positions[0], faces)
     sample = np.flatnonzero(observed[0])
-    sample = sample[_thin(positions[0][sample], SAMPLE_SPACING * edge)]
+    sample = sample[one_per_cube(positions[0][sample], SAMPLE_SPACING * edge)]
     if len(sample) < 8:  # too little of the first frame observed to read its colours
         return positions
     reference = _field(*meshes[0], colors[0], len(sample)).sample(positions[0][sample])

@@ -392,7 +392,8 @@ def _merge_as_ready(blocks: list[Block], options: Options, pool: MergePool | Non
     pending = {count + k: pair for k, pair in enumerate(merges)}  # no map yet
     maps, running, reports = {}, {}, [None] * len(merges)
 
-    def frames(node):
+    def map_inputs(node):
+        """The arguments of map_pair for merge ``node``, None while its two frames are not there."""
         a, b = merges[node - count]
         right = ready.get(b, base[first[b]] if known_first else None)
         if a not in ready or right is None:
@@ -401,10 +402,10 @@ def _merge_as_ready(blocks: list[Block], options: Options, pool: MergePool | Non
         return ready[a].vertices[-1], ready[a].faces, right.vertices[0], right.faces, options, guide
 
     def startable() -> list[int]:
-        return sorted((node for node in pending if frames(node) is not None), key=lambda node: (-chain[node], node))
+        return sorted((node for node in pending if map_inputs(node) is not None), key=lambda node: (-chain[node], node))
 
     def take(node):
-        inputs = frames(node)
+        inputs = map_inputs(node)
         del pending[node]
         base[first[merges[node - count][1]]] = None  # its frame is in the inputs: let it go once joined
         return inputs

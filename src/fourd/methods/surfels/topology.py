@@ -14,6 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
+from fourd.geometry.grid import one_per_cube
 from fourd.geometry.neighbors import point_spacing
 
 #: ``eps_sampl`` in point spacings by default: a surfel stands for about four data points
@@ -38,13 +39,8 @@ def sample_surfels(points: np.ndarray, sampling: float) -> np.ndarray:
     if sampling <= 0:
         raise ValueError(f"sampling must be positive, got {sampling}")
     scaled = (points - points.min(axis=0)) / sampling
-    cells = np.floor(scaled).astype(np.int64)
-    off_centre = np.sum((scaled - cells - 0.5) ** 2, axis=1)
-    order = np.lexsort((off_centre, cells[:, 2], cells[:, 1], cells[:, 0]))
-    ordered = cells[order]
-    first = np.ones(len(order), dtype=bool)
-    first[1:] = np.any(ordered[1:] != ordered[:-1], axis=1)
-    return np.sort(order[first])
+    off_centre = np.sum((scaled - np.floor(scaled) - 0.5) ** 2, axis=1)
+    return one_per_cube(scaled, 1.0, -off_centre)
 
 
 @dataclass(frozen=True)
