@@ -407,3 +407,30 @@ def test_a_merge_run_in_this_process_sees_its_own_thread_environment(monkeypatch
     merged, _ = hierarchy.assemble([block, block], Options(workers=2))
     assert merged.vertices.shape == (2, 3, 3)
     assert seen == [None]
+
+
+def test_a_rerun_with_a_cache_reads_every_merges_map_back(tmp_path, monkeypatch, caplog):
+    """With ``cache_dir`` each merge's map is kept, so a rerun (an interrupted one resumes the
+    same way) makes no map again and gives the same result; an option that acts on the maps
+    misses the entries, one that acts after them (the holes) does not."""
+    import logging
+
+    from fourd.methods.assembly import hierarchy
+
+    seq, _ = _remeshed_sequence(frames=3)
+    first = reconstruct(seq, Options(cache_dir=str(tmp_path)))
+    assert len(list(tmp_path.glob("assembly-map-*.npz"))) == 2
+
+    def no_map(*args):
+        raise AssertionError("a map was made again")
+
+    monkeypatch.setattr(hierarchy, "map_pair", no_map)
+    with caplog.at_level(logging.INFO, logger="fourd.methods.assembly.hierarchy"):
+        again = reconstruct(seq, Options(cache_dir=str(tmp_path), close_holes=0.5))
+    assert "resumed: 2 of 2 merges' maps from the cache" in caplog.text
+    second = reconstruct(seq, Options(cache_dir=str(tmp_path)))
+    np.testing.assert_array_equal(second.vertices, first.vertices)
+    np.testing.assert_array_equal(second.faces, first.faces)
+    assert again.vertices.shape[1] >= first.vertices.shape[1]
+    with pytest.raises(AssertionError, match="made again"):
+        reconstruct(seq, Options(cache_dir=str(tmp_path), anchor_spacing=3.0))

@@ -54,13 +54,15 @@ from typing import NamedTuple
 import numpy as np
 from scipy.spatial import cKDTree
 
+from fourd.cache import StageCache, report_resumed
 from fourd.geometry.closest_point import closest_points_on_mesh
 from fourd.geometry.meshes import median_edge_length
 from fourd.geometry.rotations import procrustes
 from fourd.methods.assembly.alignment import geometric_anchors
-from fourd.methods.assembly.analysis import Analysis, inconsistent_regions, passes_stretch_test
+from fourd.methods.assembly.analysis import inconsistent_regions, passes_stretch_test
 from fourd.methods.assembly.completion import Paste, paste_target_only, place_pasted
 from fourd.methods.assembly.guides import Guide, guide_anchors
+from fourd.methods.assembly.merge_map import MergeMap, load_map, map_key, save_map
 from fourd.methods.assembly.options import Options
 from fourd.methods.assembly.pair import cross_parameterize_pair
 from fourd.methods.assembly.registration import register_by_laplacian
@@ -125,27 +127,6 @@ def _closest_map(aligned, target_vertices, target_faces):
     return found.triangle, found.barycentric
 
 
-class MergeMap(NamedTuple):
-    """The map of a merge's source frame onto its target frame (:func:`map_pair`).
-
-    anchors : int
-        Geometric anchors the pair map started from.
-    faces : int64 [N]
-        Target triangle of each source vertex (meaningful where ``mapped``).
-    barycentric : float64 [N, 3]
-    mapped : bool [N]
-        Source vertices the map places (the rest are filled in by registration).
-    analysis : Analysis or None
-        The inconsistent regions (``correct``), their vertices already unmapped.
-    """
-
-    anchors: int
-    faces: np.ndarray
-    barycentric: np.ndarray
-    mapped: np.ndarray
-    analysis: Analysis | None = None
-
-
 def map_pair(source: np.ndarray, faces: np.ndarray, target: np.ndarray, target_faces: np.ndarray,
              options: Options | None = None, guide: Guide | None = None) -> MergeMap:
     """The first half of a merge (module docstring): the source frame ``[N, 3]`` (mesh
@@ -190,6 +171,20 @@ def map_pair(source: np.ndarray, faces: np.ndarray, target: np.ndarray, target_f
         map_faces, bary = _closest_map(alignment.aligned, target, target_faces)
         mapped = np.ones(count, dtype=bool)
     return MergeMap(len(alignment.anchors.source), map_faces, bary, mapped, analysis)
+
+
+def _map_or_resume(source, faces, target, target_faces, options: Options, guide: Guide | None):
+    """:func:`map_pair`, read from ``options.cache_dir`` when it holds this map and stored there
+    when not (:mod:`~fourd.methods.assembly.merge_map`): ``(map, whether it was read)``."""
+    if options.cache_dir is None:
+        return map_pair(source, faces, target, target_faces, options, guide), False
+    cache, key = StageCache(options.cache_dir), map_key(source, faces, target, target_faces, options, guide)
+    stored = load_map(cache, key)
+    if stored is not None:
+        return stored, True
+    pair = map_pair(source, faces, target, target_faces, options, guide)
+    save_map(cache, key, pair)
+    return pair, False
 
 
 def merge_blocks(left: Block, right: Block, options: Options | None = None,
@@ -391,6 +386,7 @@ def _merge_as_ready(blocks: list[Block], options: Options, pool: MergePool | Non
     ready = dict(enumerate(blocks))
     pending = {count + k: pair for k, pair in enumerate(merges)}  # no map yet
     maps, running, reports = {}, {}, [None] * len(merges)
+    resumed = 0
 
     def map_inputs(node):
         """The arguments of map_pair for merge ``node``, None while its two frames are not there."""
@@ -412,7 +408,7 @@ def _merge_as_ready(blocks: list[Block], options: Options, pool: MergePool | Non
 
     def fill():
         for node in startable()[:max(pool.workers - len(running), 0)]:
-            running[pool.submit(map_pair, *take(node))] = node
+            running[pool.submit(_map_or_resume, *take(node))] = node
 
     while last not in ready:
         joinable = [node for node in maps if merges[node - count][1] in ready]
@@ -426,14 +422,18 @@ def _merge_as_ready(blocks: list[Block], options: Options, pool: MergePool | Non
             raise RuntimeError("the assembly's merges stalled: no map can start")  # a bug, not the input
         if pool is None or (len(now) == 1 and not running):
             for node in now if pool is None else now[:1]:
-                maps[node] = map_pair(*take(node))
+                maps[node], read = _map_or_resume(*take(node))
+                resumed += read
             continue
         fill()
         if running:
             done, _ = wait(running, return_when=FIRST_COMPLETED)
             for future in done:
-                maps[running.pop(future)] = future.result()
+                maps[running.pop(future)], read = future.result()
+                resumed += read
             fill()  # before the joins, which take a while here
+    if resumed:
+        report_resumed(log, f"{resumed} of {len(merges)} merges' maps")
     return ready[last], reports
 
 

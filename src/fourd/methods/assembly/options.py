@@ -355,8 +355,9 @@ class Options(SurfaceSettings):
         scheduler's address (``tcp://HOST:PORT``); the same surfaces either way
         (:func:`fourd.pipeline.map_frames`).
     cache_dir : str or None
-        Folder where each frame's mesh (point-cloud input) is kept, keyed by the frame's data
-        and these options (``fourd reconstruct --cache``).
+        Folder where each frame's mesh (point-cloud input) and each merge's map are kept,
+        keyed by their data and the options that act on them (``fourd reconstruct --cache``):
+        a stopped run resumes at the merge it stopped in.
     """
 
     anchors: str = "auto"
