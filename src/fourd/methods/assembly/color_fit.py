@@ -34,6 +34,7 @@ from scipy.sparse.linalg import splu
 from fourd.appearance.color_guide import colors_of_cleaned
 from fourd.appearance.photometric import photometric_shift
 from fourd.appearance.surface_color import ColorField
+from fourd.cache import NO_CACHE, Chain, StageCache, report_resumed, stage_key
 from fourd.geometry.closest_point import closest_points_on_mesh
 from fourd.geometry.grid import one_per_cube
 from fourd.geometry.laplacian import uniform_laplacian
@@ -42,6 +43,9 @@ from fourd.geometry.normals import vertex_normals
 from fourd.progress import progress
 
 log = logging.getLogger("fourd.methods.assembly.color_fit")
+
+#: The cache entries of the colour fit's frames.
+STAGE = "assembly-color-fit"
 
 #: A frame's colour field keeps about this many of its surface's vertices per shifted vertex.
 FIELD_POINTS_PER_VERTEX = 4
@@ -74,7 +78,7 @@ def _field(vertices, faces, colors, count: int) -> ColorField:
 
 def fit_colors(positions: np.ndarray, faces: np.ndarray, observed: np.ndarray, meshes, colors, *,
                radius: float = 5.0, scale: float = 0.5, smoothness: float = 10.0,
-               iterations: int = 2) -> np.ndarray:
+               iterations: int = 2, cache: StageCache = NO_CACHE) -> np.ndarray:
     """The assembled ``positions [T, N, 3]`` (mesh ``faces``, ``observed [T, N]``) slid along
     each frame's surface to where the first frame's colours are (module docstring).
 
@@ -92,6 +96,9 @@ def fit_colors(positions: np.ndarray, faces: np.ndarray, observed: np.ndarray, m
         Weight of the correction's Laplacian against the shifts' weights.
     iterations : int
         Shift and smooth rounds per frame.
+    cache : StageCache
+        Where each frame's result is kept (:data:`STAGE`, a :class:`~fourd.cache.Chain`: frame
+        ``t``'s entry holds only after the same frames before it), so a stopped run resumes.
 
     Returns
     -------
@@ -109,9 +116,18 @@ def fit_colors(positions: np.ndarray, faces: np.ndarray, observed: np.ndarray, m
     reference = _field(*meshes[0], colors[0], len(sample)).sample(positions[0][sample])
     laplacian = uniform_laplacian(count, faces).tocsr()
     carried = np.zeros((count, 3))
-    for t in progress(range(1, len(positions)), desc="assembly colour fit", unit="frame"):
+    chain = Chain.of(cache, STAGE, stage_key(positions, faces, observed, meshes[0], colors[0], radius, scale, smoothness,
+                                             iterations, SAMPLE_SPACING, FIELD_POINTS_PER_VERTEX),
+                     [(meshes[t], colors[t]) for t in range(1, len(positions))])
+    done = chain.prefix() if cache.enabled else []
+    for t, entry in enumerate(done, start=1):
+        positions[t], carried = entry["positions"], entry["carried"]
+    if done:
+        report_resumed(log, f"{len(done)} of {len(chain)} frames' colour fit")
+    for t in progress(range(len(done) + 1, len(positions)), desc="assembly colour fit", unit="frame"):
         vertices, mesh_faces = meshes[t]
         if colors[t] is None or not len(mesh_faces):
+            chain.save(t - 1, {"positions": positions[t], "carried": carried})
             continue
         field = _field(vertices, mesh_faces, colors[t], len(sample))
         x = positions[t] + carried
@@ -132,6 +148,7 @@ def fit_colors(positions: np.ndarray, faces: np.ndarray, observed: np.ndarray, m
         x[seen] = closest_points_on_mesh(vertices, mesh_faces, x[seen]).points
         carried = x - positions[t]
         positions[t] = x
+        chain.save(t - 1, {"positions": x, "carried": carried})
         log.debug("colour fit frame %d: median correction %.3f edges", t,
                   float(np.median(np.linalg.norm(carried, axis=1))) / edge)
     return positions

@@ -25,7 +25,7 @@ import logging
 import numpy as np
 
 from fourd.animation import AnimatedMesh
-from fourd.cache import report_resumed
+from fourd.cache import StageCache, report_resumed
 from fourd.errors import InputError
 from fourd.geometry.frame_surface import SurfaceSettings, frame_surfaces
 from fourd.geometry.hole_filling import fill_holes, membrane_positions, small_holes
@@ -149,7 +149,7 @@ def _fit_colors(seq: PointCloudSequence, meshes, block: Block, options: Options)
     if colors is None:
         return block
     vertices = fit_colors(block.vertices, block.faces, block.observed, meshes, colors, radius=options.color_radius,
-                          scale=options.color_scale)
+                          scale=options.color_scale, cache=StageCache(options.cache_dir))
     return Block(block.faces, vertices, block.observed)
 
 
