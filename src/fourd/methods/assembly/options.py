@@ -230,8 +230,10 @@ class Options(SurfaceSettings):
         each assembled frame along its own surface to where the first frame's colours are
         (:mod:`~fourd.methods.assembly.color_fit`: per-vertex Lucas-Kanade against the first
         frame, so the pair maps' errors stop adding up); silent without colours. On the
-        bench's printed cloth 1.3-3 times less drift (waving-sheet-cloth-video 0.0091 / 0.0177
-        -> 0.0029 / 0.0045) for 1-2 s a frame; none on skin (``benchmarks/METHODS.md``).
+        bench's printed cloth 3-20 times less drift than geometry alone (waving-sheet-cloth-video
+        0.0647 / 0.1209 -> 0.0032 / 0.0055), the whole 175-frame crane capture half
+        (0.0200 / 0.0353 -> 0.0105 / 0.0203), for 1-2 s a frame; none on skin
+        (``benchmarks/METHODS.md``).
     color_radius : float
         Patch radius of that Lucas-Kanade, in the assembled mesh's edges.
     color_scale : float
