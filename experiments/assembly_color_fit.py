@@ -3,8 +3,9 @@ back to the first frame's colours, and how do its settings matter?
 
 Setup: a bench scene scanned with the bench protocol, in its appearance (printed cloth unless
 the scene names another, e.g. ``crane-skin-video``), with the rig's 3-camera
-video at 256 pixels (the bench's ``*-cloth-video`` scenes); `assembly` once with
-``color_fit=false`` (kept in ``/tmp`` between runs), then
+video at 256 pixels (the bench's ``*-cloth-video`` scenes; ``crane-full-mid``, the whole
+capture, too); `assembly` once with ``color_fit=false`` and ``anchors`` from the environment's
+``ANCHORS`` (``geometry`` unless set; kept in ``/tmp`` between runs), then
 :func:`fourd.methods.assembly.color_fit.fit_colors` on its result with the settings given as
 ``KEY=VALUE`` (several sets separated by ``/``); correspondence mean / last, Chamfer (20,000
 samples) and the correspondence every fourth frame.
@@ -23,7 +24,7 @@ import time
 
 from fourd import synth
 from fourd.animation import AnimatedMesh
-from fourd.bench.suite import APPEARANCE_SCENES, PROTOCOL, STANDARD_SCENES
+from fourd.bench.suite import APPEARANCE_SCENES, PROTOCOL, STANDARD_SCENES, WHOLE_CAPTURE_SCENES
 from fourd.methods import reconstruct
 from fourd.methods.assembly import Options
 from fourd.methods.assembly.color_fit import fit_colors, frame_colors
@@ -35,21 +36,22 @@ def _score(result, truth, label: str) -> None:
     scores = evaluate(result, truth, samples=20000)
     curve = scores["per_frame"]["correspondence"]
     print(f"{label}: correspondence {scores['correspondence_mean']:.4f} / {scores['correspondence_last']:.4f}, "
-          f"Chamfer {scores['chamfer']:.4f}; " + " ".join(f"{curve[t]:.4f}" for t in range(0, len(curve), 4)),
+          f"Chamfer {scores['chamfer']:.4f}; " + " ".join(f"{curve[t]:.4f}" for t in range(0, len(curve), max(4, len(curve) // 7))),
           flush=True)
 
 
 def main(name: str, settings: list[dict]) -> None:
-    scene = next(s for s in STANDARD_SCENES + APPEARANCE_SCENES if s.key == name)
+    scene = next(s for s in STANDARD_SCENES + APPEARANCE_SCENES + WHOLE_CAPTURE_SCENES if s.key == name)
     name = scene.key
     truth = synth.scene(scene.name, frames=scene.frames, seed=0, **scene.options)
     appearance = scene.appearance or "cloth"
     scans = synth.scan(truth, resolution=scene.resolution, seed=0, appearance=appearance, video=True,
                        video_resolution=256, **PROTOCOL)
-    path = f"/tmp/fourd_assembly_color_fit_{name}.pkl"
+    anchors = os.environ.get("ANCHORS", "geometry")
+    path = f"/tmp/fourd_assembly_color_fit_{name}_{anchors}.pkl"
     if not os.path.exists(path):
         with open(path, "wb") as file:
-            pickle.dump(reconstruct(scans, "assembly", color_fit=False), file)
+            pickle.dump(reconstruct(scans, "assembly", anchors=anchors, color_fit=False), file)
     with open(path, "rb") as file:
         assembled = pickle.load(file)
     meshes = frame_meshes(scans, Options())

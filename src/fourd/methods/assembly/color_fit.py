@@ -121,13 +121,15 @@ def fit_colors(positions: np.ndarray, faces: np.ndarray, observed: np.ndarray, m
                      [(meshes[t], colors[t]) for t in range(1, len(positions))])
     done = chain.prefix() if cache.enabled else []
     for t, entry in enumerate(done, start=1):
-        positions[t], carried = entry["positions"], entry["carried"]
+        if not entry["skipped"]:
+            carried = entry["positions"] - positions[t]
+            positions[t] = entry["positions"]
     if done:
         report_resumed(log, f"{len(done)} of {len(chain)} frames' colour fit")
     for t in progress(range(len(done) + 1, len(positions)), desc="assembly colour fit", unit="frame"):
         vertices, mesh_faces = meshes[t]
         if colors[t] is None or not len(mesh_faces):
-            chain.save(t - 1, {"positions": positions[t], "carried": carried})
+            chain.save(t - 1, {"positions": np.zeros((0, 3)), "skipped": np.True_})
             continue
         field = _field(vertices, mesh_faces, colors[t], len(sample))
         x = positions[t] + carried
@@ -148,7 +150,7 @@ def fit_colors(positions: np.ndarray, faces: np.ndarray, observed: np.ndarray, m
         x[seen] = closest_points_on_mesh(vertices, mesh_faces, x[seen]).points
         carried = x - positions[t]
         positions[t] = x
-        chain.save(t - 1, {"positions": x, "carried": carried})
+        chain.save(t - 1, {"positions": x, "skipped": np.False_})
         log.debug("colour fit frame %d: median correction %.3f edges", t,
                   float(np.median(np.linalg.norm(carried, axis=1))) / edge)
     return positions
