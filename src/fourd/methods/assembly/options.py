@@ -217,8 +217,9 @@ class Options(SurfaceSettings):
         ``.npz`` anchors file (its format in :mod:`~fourd.methods.assembly.guides`), used as
         the video's. Without the colour fit the video's anchors cut the bench's drift on
         printed cloth by 2-3 times (bending-arm-cloth-video correspondence 0.0272 / 0.0526 ->
-        0.0129 / 0.0239); with it they add little on 20 frames and, chained pair after pair,
-        double the drift over the whole 175-frame crane capture (``benchmarks/METHODS.md``).
+        0.0129 / 0.0239); with it they add 0-40% on the bench's 20-frame close-ups and, chained
+        pair after pair, double the drift over the whole 175-frame crane capture filmed from
+        afar (``benchmarks/METHODS.md``).
     anchor_texture : float
         With ``anchors="video"``, only tracks that start where the image's hue texture is at
         least this many times the noise's count (0: all; ``kinematic``'s ``anchor_texture``).
@@ -232,7 +233,7 @@ class Options(SurfaceSettings):
         frame, so the pair maps' errors stop adding up); silent without colours. On the
         bench's printed cloth 3-20 times less drift than geometry alone (waving-sheet-cloth-video
         0.0647 / 0.1209 -> 0.0032 / 0.0055), the whole 175-frame crane capture half
-        (0.0200 / 0.0353 -> 0.0105 / 0.0203), for 1-2 s a frame; none on skin
+        (0.0200 / 0.0353 -> 0.0105 / 0.0203), for 0.3-2 s a frame; none on skin
         (``benchmarks/METHODS.md``).
     color_radius : float
         Patch radius of that Lucas-Kanade, in the assembled mesh's edges.
@@ -357,9 +358,9 @@ class Options(SurfaceSettings):
         scheduler's address (``tcp://HOST:PORT``); the same surfaces either way
         (:func:`fourd.pipeline.map_frames`).
     cache_dir : str or None
-        Folder where each frame's mesh (point-cloud input) and each merge's map are kept,
-        keyed by their data and the options that act on them (``fourd reconstruct --cache``):
-        a stopped run resumes at the merge it stopped in.
+        Folder where each frame's mesh (point-cloud input), each merge's map and each
+        frame's colour fit are kept, keyed by their data and the options that act on them
+        (``fourd reconstruct --cache``): a stopped run resumes where it stopped.
     """
 
     anchors: str = "auto"
