@@ -7,7 +7,8 @@ video at 256 pixels (the bench's ``*-cloth-video`` scenes; ``crane-full-mid``, t
 capture, too); `assembly` once with ``color_fit=false`` and ``anchors`` from the environment's
 ``ANCHORS`` (``geometry`` unless set; kept in ``/tmp`` between runs), then
 :func:`fourd.methods.assembly.color_fit.fit_colors` on its result with the settings given as
-``KEY=VALUE`` (several sets separated by ``/``); correspondence mean / last, Chamfer (20,000
+``KEY=VALUE`` (``passes=N``: the fit run N times, each on the last one's result; several sets
+separated by ``/``); correspondence mean / last, Chamfer (20,000
 samples) and the correspondence every fourth frame.
 
 Run: ``.venv/bin/python experiments/assembly_color_fit.py bending-arm radius=3 / radius=5``
@@ -58,8 +59,13 @@ def main(name: str, settings: list[dict]) -> None:
     colors = frame_colors(scans, meshes)
     _score(assembled, truth, "assembled")
     for values in settings:
+        values = dict(values)
+        passes = int(values.pop("passes", 1))  # the fit run again on its own result
         started = time.perf_counter()
-        vertices = fit_colors(assembled.vertices, assembled.faces, assembled.observed, meshes, colors, **values)
+        vertices = assembled.vertices
+        for _ in range(passes):
+            vertices = fit_colors(vertices, assembled.faces, assembled.observed, meshes, colors, **values)
+        values = values | ({"passes": passes} if passes > 1 else {})
         fitted = AnimatedMesh(assembled.faces, vertices, assembled.times, assembled.observed, rest=vertices[0])
         _score(fitted, truth, f"{values} ({time.perf_counter() - started:.1f} s)")
 
