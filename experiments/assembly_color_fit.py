@@ -7,7 +7,8 @@ video at 256 pixels (the bench's ``*-cloth-video`` scenes; ``crane-full-mid``, t
 capture, too); `assembly` once with ``color_fit=false`` and ``anchors`` from the environment's
 ``ANCHORS`` (``geometry`` unless set; kept in ``/tmp`` between runs), then
 :func:`fourd.methods.assembly.color_fit.fit_colors` on its result with the settings given as
-``KEY=VALUE`` (``passes=N``: the fit run N times, each on the last one's result; several sets
+``KEY=VALUE`` (``passes=N``: the fit run N times, each on the last one's result; ``coarse=1``: first a pass
+on colour fields blurred over 32 neighbours at radius 10 and scale 2; several sets
 separated by ``/``); correspondence mean / last, Chamfer (20,000
 samples) and the correspondence every fourth frame.
 
@@ -25,9 +26,11 @@ import time
 
 from fourd import synth
 from fourd.animation import AnimatedMesh
+from fourd.appearance.surface_color import ColorField
 from fourd.bench.suite import APPEARANCE_SCENES, PROTOCOL, STANDARD_SCENES, WHOLE_CAPTURE_SCENES
+from fourd.geometry.normals import vertex_normals
 from fourd.methods import reconstruct
-from fourd.methods.assembly import Options
+from fourd.methods.assembly import Options, color_fit
 from fourd.methods.assembly.color_fit import fit_colors, frame_colors
 from fourd.methods.assembly.method import frame_meshes
 from fourd.metrics import evaluate
@@ -39,6 +42,12 @@ def _score(result, truth, label: str) -> None:
     print(f"{label}: correspondence {scores['correspondence_mean']:.4f} / {scores['correspondence_last']:.4f}, "
           f"Chamfer {scores['chamfer']:.4f}; " + " ".join(f"{curve[t]:.4f}" for t in range(0, len(curve), max(4, len(curve) // 7))),
           flush=True)
+
+
+def _blurred_field(vertices, faces, colors, count: int) -> ColorField:
+    stride = max(1, len(vertices) // (color_fit.FIELD_POINTS_PER_VERTEX * count))
+    normals = vertex_normals(vertices, faces)
+    return ColorField(vertices[::stride], normals[::stride], colors[::stride], smoothing=32)
 
 
 def main(name: str, settings: list[dict]) -> None:
@@ -61,11 +70,19 @@ def main(name: str, settings: list[dict]) -> None:
     for values in settings:
         values = dict(values)
         passes = int(values.pop("passes", 1))  # the fit run again on its own result
+        coarse = int(values.pop("coarse", 0))
         started = time.perf_counter()
         vertices = assembled.vertices
+        if coarse:  # first a pass on blurred colour fields (32 neighbours), radius 10, scale 2
+            fine, color_fit._field = color_fit._field, _blurred_field
+            try:
+                vertices = fit_colors(vertices, assembled.faces, assembled.observed, meshes, colors, radius=10.0,
+                                      scale=2.0)
+            finally:
+                color_fit._field = fine
         for _ in range(passes):
             vertices = fit_colors(vertices, assembled.faces, assembled.observed, meshes, colors, **values)
-        values = values | ({"passes": passes} if passes > 1 else {})
+        values = values | ({"passes": passes} if passes > 1 else {}) | ({"coarse": 1} if coarse else {})
         fitted = AnimatedMesh(assembled.faces, vertices, assembled.times, assembled.observed, rest=vertices[0])
         _score(fitted, truth, f"{values} ({time.perf_counter() - started:.1f} s)")
 
