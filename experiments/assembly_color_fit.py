@@ -26,7 +26,7 @@ import time
 
 from fourd import synth
 from fourd.animation import AnimatedMesh
-from fourd.appearance.surface_color import ColorField
+from fourd.appearance.surface_color import FIELD_POINTS_PER_READ, ColorField
 from fourd.bench.suite import APPEARANCE_SCENES, PROTOCOL, STANDARD_SCENES, WHOLE_CAPTURE_SCENES
 from fourd.geometry.normals import vertex_normals
 from fourd.methods import reconstruct
@@ -45,7 +45,7 @@ def _score(result, truth, label: str) -> None:
 
 
 def _blurred_field(vertices, faces, colors, count: int) -> ColorField:
-    stride = max(1, len(vertices) // (color_fit.FIELD_POINTS_PER_VERTEX * count))
+    stride = max(1, len(vertices) // (FIELD_POINTS_PER_READ * count))
     normals = vertex_normals(vertices, faces)
     return ColorField(vertices[::stride], normals[::stride], colors[::stride], smoothing=32)
 

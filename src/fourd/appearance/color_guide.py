@@ -21,16 +21,12 @@ from scipy.spatial import cKDTree
 
 from fourd.appearance.guide import Guide
 from fourd.appearance.photometric import photometric_shift
-from fourd.appearance.surface_color import ColorField
+from fourd.appearance.surface_color import ColorField, field_for_reads
 from fourd.geometry.normals import vertex_normals
 
 __all__ = ["PhotometricGuides", "colors_of_cleaned"]
 
 log = logging.getLogger("fourd.appearance.color_guide")
-
-#: The colour field of a frame keeps about this many of its points per template vertex (every
-#: ``P // (4 N)``-th point).
-FIELD_POINTS_PER_VERTEX = 4
 
 
 def colors_of_cleaned(raw_points, raw_colors, cleaned) -> np.ndarray | None:
@@ -83,9 +79,8 @@ class PhotometricGuides(Sequence):
         return k >= 0 and self.colors[k] is not None and len(self.points[k]) >= 8
 
     def _field(self, k: int) -> ColorField:
-        # the field is read at the template's vertices: a few points per vertex are enough
-        stride = max(1, len(self.points[k]) // (FIELD_POINTS_PER_VERTEX * self.vertex_count))
-        return ColorField(self.points[k][::stride], self.normals[k][::stride], self.colors[k][::stride])
+        # the field is read at the template's vertices
+        return field_for_reads(self.points[k], self.normals[k], self.colors[k], self.vertex_count)
 
     def __len__(self) -> int:
         return len(self.frames)

@@ -26,7 +26,7 @@ from scipy.spatial import cKDTree
 
 from fourd.errors import InputError
 
-__all__ = ["ColorField", "LOG_OFFSET"]
+__all__ = ["ColorField", "FIELD_POINTS_PER_READ", "LOG_OFFSET", "field_for_reads"]
 
 #: Added to colours before the logarithm, so that black does not go to minus infinity.
 LOG_OFFSET = 0.02
@@ -99,6 +99,18 @@ class ColorField:
             noise = self.gradient_noise[nearest].reshape(positions.shape[:-1] + (values.shape[-1],))
             return values, gradients.reshape(positions.shape[:-1] + gradients.shape[-2:]), noise
         return values
+
+
+#: A colour field read at ``R`` places keeps about this many of its points per place (every
+#: ``P // (4 R)``-th point): a few per read are enough.
+FIELD_POINTS_PER_READ = 4
+
+
+def field_for_reads(points: np.ndarray, normals: np.ndarray, colors: np.ndarray, reads: int) -> ColorField:
+    """The :class:`ColorField` of ``points [P, 3]`` (``normals``, ``colors [P, C]``) that will be
+    read at about ``reads`` places: every ``P // (FIELD_POINTS_PER_READ * reads)``-th point."""
+    stride = max(1, len(points) // (FIELD_POINTS_PER_READ * max(1, int(reads))))
+    return ColorField(points[::stride], normals[::stride], colors[::stride])
 
 
 def _local_linear_fit(tree, points, normals, values, k, at):

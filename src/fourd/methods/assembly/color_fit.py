@@ -33,7 +33,7 @@ from scipy.sparse.linalg import splu
 
 from fourd.appearance.color_guide import colors_of_cleaned
 from fourd.appearance.photometric import photometric_shift
-from fourd.appearance.surface_color import ColorField
+from fourd.appearance.surface_color import FIELD_POINTS_PER_READ, ColorField, field_for_reads
 from fourd.cache import NO_CACHE, Chain, StageCache, report_resumed, stage_key
 from fourd.geometry.closest_point import closest_points_on_mesh
 from fourd.geometry.grid import one_per_cube
@@ -46,9 +46,6 @@ log = logging.getLogger("fourd.methods.assembly.color_fit")
 
 #: The cache entries of the colour fit's frames.
 STAGE = "assembly-color-fit"
-
-#: A frame's colour field keeps about this many of its surface's vertices per shifted vertex.
-FIELD_POINTS_PER_VERTEX = 4
 
 #: The Lucas-Kanade runs at about one vertex per cube of this many edges (those observed in the
 #: first frame); the smooth correction carries it to the rest.
@@ -71,9 +68,7 @@ def frame_colors(seq, meshes) -> list[np.ndarray | None] | None:
 
 
 def _field(vertices, faces, colors, count: int) -> ColorField:
-    stride = max(1, len(vertices) // (FIELD_POINTS_PER_VERTEX * count))
-    normals = vertex_normals(vertices, faces)
-    return ColorField(vertices[::stride], normals[::stride], colors[::stride])
+    return field_for_reads(vertices, vertex_normals(vertices, faces), colors, count)
 
 
 def fit_colors(positions: np.ndarray, faces: np.ndarray, observed: np.ndarray, meshes, colors, *,
@@ -116,20 +111,23 @@ def fit_colors(positions: np.ndarray, faces: np.ndarray, observed: np.ndarray, m
     reference = _field(*meshes[0], colors[0], len(sample)).sample(positions[0][sample])
     laplacian = uniform_laplacian(count, faces).tocsr()
     carried = np.zeros((count, 3))
-    chain = Chain.of(cache, STAGE, stage_key(positions, faces, observed, meshes[0], colors[0], radius, scale, smoothness,
-                                             iterations, SAMPLE_SPACING, FIELD_POINTS_PER_VERTEX),
-                     [(meshes[t], colors[t]) for t in range(1, len(positions))])
-    done = chain.prefix() if cache.enabled else []
+    chain, done = None, []
+    if cache.enabled:  # the keys hash every frame: only when there is a cache
+        chain = Chain.of(cache, STAGE, stage_key(positions, faces, observed, meshes[0], colors[0], radius, scale,
+                                                 smoothness, iterations, SAMPLE_SPACING, FIELD_POINTS_PER_READ),
+                         [(meshes[t], colors[t]) for t in range(1, len(positions))])
+        done = chain.prefix()
     for t, entry in enumerate(done, start=1):
         if not entry["skipped"]:
             carried = entry["positions"] - positions[t]
             positions[t] = entry["positions"]
     if done:
-        report_resumed(log, f"{len(done)} of {len(chain)} frames' colour fit")
+        report_resumed(log, f"{len(done)} of {len(positions) - 1} frames' colour fit")
     for t in progress(range(len(done) + 1, len(positions)), desc="assembly colour fit", unit="frame"):
         vertices, mesh_faces = meshes[t]
         if colors[t] is None or not len(mesh_faces):
-            chain.save(t - 1, {"positions": np.zeros((0, 3)), "skipped": np.True_})
+            if chain is not None:
+                chain.save(t - 1, {"positions": np.zeros((0, 3)), "skipped": np.True_})
             continue
         field = _field(vertices, mesh_faces, colors[t], len(sample))
         x = positions[t] + carried
@@ -150,7 +148,8 @@ def fit_colors(positions: np.ndarray, faces: np.ndarray, observed: np.ndarray, m
         x[seen] = closest_points_on_mesh(vertices, mesh_faces, x[seen]).points
         carried = x - positions[t]
         positions[t] = x
-        chain.save(t - 1, {"positions": x, "skipped": np.False_})
+        if chain is not None:
+            chain.save(t - 1, {"positions": x, "skipped": np.False_})
         log.debug("colour fit frame %d: median correction %.3f edges", t,
                   float(np.median(np.linalg.norm(carried, axis=1))) / edge)
     return positions
