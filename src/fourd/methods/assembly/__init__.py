@@ -25,7 +25,9 @@ Frames that are meshes are used as they are; point clouds are meshed per frame f
 - :mod:`.completion`: geometry only the later frame has glued into the union mesh along a
   zipped seam, placed in the earlier frames by Laplacian coordinates (5.6, second half);
 - :mod:`.method`: the pipeline (``reconstruct``), the holes no frame fills closed at the end
-  by the membrane of 3.6.2 (``close_small_holes``); :mod:`.options` its ``Options``.
+  by the membrane of 3.6.2 (``close_small_holes``); :mod:`.options` its ``Options``;
+- :mod:`.stream`: the same over a whole capture a window of frames at a time, written frame by
+  frame (``reconstruct_streamed``, ``fourd reconstruct --stream``; issue 56).
 
 - :mod:`.analysis`: the pair map checked against the gradual change assumption (5.5),
   inconsistent vertices flagged and clustered; the method's ``correct`` option tries the
@@ -61,17 +63,21 @@ from fourd.methods.assembly.hierarchy import (
     join_blocks,
     map_pair,
     merge_blocks,
+    merge_tree,
 )
 from fourd.methods.assembly.method import (
     COMMON_OPTIONS,
     MIN_FRAMES,
     RESULT,
     AssemblyDiagnostics,
+    HoleClosing,
     close_small_holes,
+    holes_to_close,
     reconstruct,
     reconstruct_with_diagnostics,
 )
 from fourd.methods.assembly.options import (
+    STREAM_WINDOW,
     CrossParamOptions,
     Options,
     PairOptions,
@@ -83,11 +89,18 @@ from fourd.methods.assembly.patches import GrownPatches, Patch, PatchPair, grow_
 from fourd.methods.assembly.refine import Refinement, refine_anchors
 from fourd.methods.assembly.registration import register_by_laplacian
 from fourd.methods.assembly.relax import RelaxedMap, flipped_triangles, mapped_points, relax_map
+from fourd.methods.assembly.stream import StreamSummary, reconstruct_streamed
 
 __all__ = [
     "COMMON_OPTIONS",
     "MIN_FRAMES",
     "RESULT",
+    "STREAM_WINDOW",
+    "HoleClosing",
+    "StreamSummary",
+    "holes_to_close",
+    "merge_tree",
+    "reconstruct_streamed",
     "Alignment",
     "Analysis",
     "edge_ratios",

@@ -71,6 +71,81 @@ def _field(vertices, faces, colors, count: int) -> ColorField:
     return field_for_reads(vertices, vertex_normals(vertices, faces), colors, count)
 
 
+class ColorFit:
+    """The colour fit's state from one frame to the next (module docstring): the first frame's
+    colours at the sample vertices, the mesh's Laplacian, and the correction the last fitted
+    frame took (the next frame starts from it). :meth:`start` makes it from the first frame;
+    :meth:`frame` fits the frames after it, in order."""
+
+    def __init__(self, faces: np.ndarray, sample: np.ndarray, reference: np.ndarray, edge: float, count: int, *,
+                 radius: float = 5.0, scale: float = 0.5, smoothness: float = 10.0, iterations: int = 2):
+        """The fit of a mesh of ``count`` vertices (``faces``) whose ``sample`` vertices read
+        the first frame's log colours ``reference [S, 3]``; ``edge`` its median edge in the
+        first frame; the rest as :func:`fit_colors` has them."""
+        self.faces, self.sample, self.reference, self.edge = faces, sample, reference, edge
+        self.radius, self.scale, self.smoothness, self.iterations = radius, scale, smoothness, iterations
+        self.laplacian = uniform_laplacian(count, faces).tocsr()
+        self.carried = np.zeros((count, 3))
+
+    @classmethod
+    def start(cls, first: np.ndarray, faces: np.ndarray, observed: np.ndarray, mesh, colors, *,
+              radius: float = 5.0, scale: float = 0.5, smoothness: float = 10.0,
+              iterations: int = 2) -> ColorFit | None:
+        """The fit against the first frame: its assembled positions ``first [N, 3]`` (mesh
+        ``faces``, ``observed [N]``), its own surface ``mesh`` (vertices, faces) and that
+        surface's ``colors`` (or None). None when the first frame gives no colours to fit to
+        (none, or too little of it observed); :func:`fit_colors` has the parameters."""
+        if colors is None or not len(mesh[1]):
+            return None
+        edge = median_edge_length(first, faces)
+        sample = np.flatnonzero(observed)
+        sample = sample[one_per_cube(first[sample], SAMPLE_SPACING * edge)]
+        if len(sample) < 8:  # too little of the first frame observed to read its colours
+            return None
+        reference = _field(*mesh, colors, len(sample)).sample(first[sample])
+        return cls(faces, sample, reference, edge, len(first), radius=radius, scale=scale, smoothness=smoothness,
+                   iterations=iterations)
+
+    def key(self) -> str:
+        """What the fit of a frame depends on besides that frame (for the cache)."""
+        return stage_key(self.faces, self.sample, self.reference, self.edge, self.radius, self.scale,
+                         self.smoothness, self.iterations, SAMPLE_SPACING, FIELD_POINTS_PER_READ)
+
+    def resume(self, assembled: np.ndarray, fitted: np.ndarray) -> None:
+        """Carry on after a frame fitted before (read from the cache): its ``assembled`` and
+        ``fitted`` positions ``[N, 3]``."""
+        self.carried = fitted - assembled
+
+    def frame(self, assembled: np.ndarray, observed: np.ndarray, mesh, colors) -> np.ndarray | None:
+        """The next frame's ``assembled [N, 3]`` positions slid to the first frame's colours
+        (``observed [N]`` in that frame; its own surface ``mesh`` and that surface's
+        ``colors``); None for a frame without colours, left as assembled."""
+        vertices, mesh_faces = mesh
+        if colors is None or not len(mesh_faces):
+            return None
+        faces, sample, edge, count = self.faces, self.sample, self.edge, len(assembled)
+        field = _field(vertices, mesh_faces, colors, len(sample))
+        x = assembled + self.carried
+        for _ in range(self.iterations):
+            result = photometric_shift(x[sample], vertex_normals(x, faces)[sample], self.reference, field,
+                                       radius=self.radius * edge)
+            # a degenerate patch (a sheet's edge, too few neighbours) gives no shift
+            usable = observed[sample] & np.isfinite(result.uncertainty) & np.isfinite(result.shift).all(axis=1)
+            weight = np.zeros(count)
+            weight[sample[usable]] = np.exp(-((result.uncertainty[usable] / (self.scale * edge)) ** 2))
+            if weight.sum() < 1.0:
+                break
+            shift = np.zeros((count, 3))
+            shift[sample[usable]] = result.shift[usable]
+            system = (sp.diags(weight) + self.smoothness * self.laplacian + 1e-6 * sp.identity(count)).tocsc()
+            factor = splu(system, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0, options={"SymmetricMode": True})
+            x = x + factor.solve(weight[:, None] * shift)
+        x[observed] = closest_points_on_mesh(vertices, mesh_faces, x[observed]).points
+        self.carried = x - assembled
+        log.debug("colour fit: median correction %.3f edges", float(np.median(np.linalg.norm(self.carried, axis=1))) / edge)
+        return x
+
+
 def fit_colors(positions: np.ndarray, faces: np.ndarray, observed: np.ndarray, meshes, colors, *,
                radius: float = 5.0, scale: float = 0.5, smoothness: float = 10.0,
                iterations: int = 2, cache: StageCache = NO_CACHE) -> np.ndarray:
@@ -100,56 +175,28 @@ def fit_colors(positions: np.ndarray, faces: np.ndarray, observed: np.ndarray, m
     float64 [T, N, 3]
     """
     positions = np.array(positions, dtype=np.float64)
-    count = positions.shape[1]
-    if colors is None or colors[0] is None or not len(meshes[0][1]):
+    if colors is None:
         return positions
-    edge = median_edge_length(positions[0], faces)
-    sample = np.flatnonzero(observed[0])
-    sample = sample[one_per_cube(positions[0][sample], SAMPLE_SPACING * edge)]
-    if len(sample) < 8:  # too little of the first frame observed to read its colours
+    fit = ColorFit.start(positions[0], faces, observed[0], meshes[0], colors[0], radius=radius, scale=scale,
+                         smoothness=smoothness, iterations=iterations)
+    if fit is None:
         return positions
-    reference = _field(*meshes[0], colors[0], len(sample)).sample(positions[0][sample])
-    laplacian = uniform_laplacian(count, faces).tocsr()
-    carried = np.zeros((count, 3))
     chain, done = None, []
     if cache.enabled:  # the keys hash every frame: only when there is a cache
-        chain = Chain.of(cache, STAGE, stage_key(positions, faces, observed, meshes[0], colors[0], radius, scale,
-                                                 smoothness, iterations, SAMPLE_SPACING, FIELD_POINTS_PER_READ),
+        chain = Chain.of(cache, STAGE, stage_key(fit.key(), positions, observed),
                          [(meshes[t], colors[t]) for t in range(1, len(positions))])
         done = chain.prefix()
     for t, entry in enumerate(done, start=1):
         if not entry["skipped"]:
-            carried = entry["positions"] - positions[t]
+            fit.resume(positions[t], entry["positions"])
             positions[t] = entry["positions"]
     if done:
         report_resumed(log, f"{len(done)} of {len(positions) - 1} frames' colour fit")
     for t in progress(range(len(done) + 1, len(positions)), desc="assembly colour fit", unit="frame"):
-        vertices, mesh_faces = meshes[t]
-        if colors[t] is None or not len(mesh_faces):
-            if chain is not None:
-                chain.save(t - 1, {"positions": np.zeros((0, 3)), "skipped": np.True_})
-            continue
-        field = _field(vertices, mesh_faces, colors[t], len(sample))
-        x = positions[t] + carried
-        seen = observed[t]
-        for _ in range(iterations):
-            result = photometric_shift(x[sample], vertex_normals(x, faces)[sample], reference, field, radius=radius * edge)
-            # a degenerate patch (a sheet's edge, too few neighbours) gives no shift
-            usable = seen[sample] & np.isfinite(result.uncertainty) & np.isfinite(result.shift).all(axis=1)
-            weight = np.zeros(count)
-            weight[sample[usable]] = np.exp(-((result.uncertainty[usable] / (scale * edge)) ** 2))
-            if weight.sum() < 1.0:
-                break
-            shift = np.zeros((count, 3))
-            shift[sample[usable]] = result.shift[usable]
-            system = (sp.diags(weight) + smoothness * laplacian + 1e-6 * sp.identity(count)).tocsc()
-            factor = splu(system, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0, options={"SymmetricMode": True})
-            x = x + factor.solve(weight[:, None] * shift)
-        x[seen] = closest_points_on_mesh(vertices, mesh_faces, x[seen]).points
-        carried = x - positions[t]
-        positions[t] = x
+        fitted = fit.frame(positions[t], observed[t], meshes[t], colors[t])
+        if fitted is not None:
+            positions[t] = fitted
         if chain is not None:
-            chain.save(t - 1, {"positions": x, "skipped": np.False_})
-        log.debug("colour fit frame %d: median correction %.3f edges", t,
-                  float(np.median(np.linalg.norm(carried, axis=1))) / edge)
+            skipped = fitted is None
+            chain.save(t - 1, {"positions": np.zeros((0, 3)) if skipped else fitted, "skipped": np.bool_(skipped)})
     return positions

@@ -336,28 +336,50 @@ def _test_replacements(union: _Union, paste: Paste, placed, region, drop, option
     return _keep(union, keep), paste._replace(target=paste.target[kept_new], patch=paste.patch[kept_new]), len(replaced)
 
 
-def merge_tree(count: int) -> list[tuple[int, int]]:
+def merge_tree(count: int, window: int = 0, *, onto: bool = False) -> list[tuple[int, int]]:
     """The merges of the hierarchy over ``count`` blocks, level by level: pairs of node ids,
     ``0 .. count - 1`` the blocks and ``count + k`` the result of the ``k``-th merge (an odd
     last node waits for the next level).
 
+    With ``window``, one hierarchy over each ``window`` consecutive blocks, and each window's
+    result merged onto the result of the windows before it, in order (``Options.window``).
+    With ``onto``, block 0 is a result made before (a streamed run's frames so far): a
+    hierarchy over the other blocks (windowed as above), merged onto it last.
+
     >>> merge_tree(5)
     [(0, 1), (2, 3), (5, 6), (7, 4)]
+    >>> merge_tree(5, 2)
+    [(0, 1), (2, 3), (5, 6), (7, 4)]
+    >>> merge_tree(6, 3)
+    [(0, 1), (6, 2), (3, 4), (8, 5), (7, 9)]
+    >>> merge_tree(4, onto=True)
+    [(1, 2), (4, 3), (0, 5)]
     """
-    level, merges = list(range(count)), []
-    while len(level) > 1:
-        following = []
-        for i in range(0, len(level) - 1, 2):
-            merges.append((level[i], level[i + 1]))
-            following.append(count + len(merges) - 1)
-        if len(level) % 2:
-            following.append(level[-1])
-        level = following
+    merges: list[tuple[int, int]] = []
+
+    def hierarchy(level: list[int]) -> int:
+        while len(level) > 1:
+            following = []
+            for i in range(0, len(level) - 1, 2):
+                merges.append((level[i], level[i + 1]))
+                following.append(count + len(merges) - 1)
+            if len(level) % 2:
+                following.append(level[-1])
+            level = following
+        return level[0]
+
+    start = 1 if onto and count > 1 else 0
+    step = window if window > 0 else max(count - start, 1)
+    roots = [hierarchy(list(range(a, min(a + step, count)))) for a in range(start, count, step)]
+    result = 0 if start else roots.pop(0)
+    for root in roots:
+        merges.append((result, root))
+        result = count + len(merges) - 1
     return merges
 
 
 def _merge_as_ready(blocks: list[Block], options: Options, pool: MergePool | None, on_merge,
-                    guides: list[Guide] | None = None):
+                    guides: list[Guide] | None = None, onto: bool = False):
     """The merges of :func:`merge_tree`, each in two steps (:func:`merge_blocks`): the pair map
     (:func:`map_pair`), run in ``pool`` once its left block is there and its target frame is
     known, then the join (:func:`join_blocks`, here) once the right block is there too.
@@ -373,7 +395,7 @@ def _merge_as_ready(blocks: list[Block], options: Options, pool: MergePool | Non
     merge whose source is block ``t``'s last frame. Returns the last block and the reports in
     merge order."""
     count = len(blocks)
-    merges = merge_tree(count)
+    merges = merge_tree(count, options.window, onto=onto)
     if not merges:
         return blocks[0], []
     last = count + len(merges) - 1
@@ -487,9 +509,10 @@ def merge_pool(workers: int):
 
 
 def assemble(blocks: list[Block], options: Options | None = None, *, on_merge=None,
-             pool: MergePool | None = None, guides: list[Guide] | None = None) -> tuple[Block, list[MergeReport]]:
+             pool: MergePool | None = None, guides: list[Guide] | None = None,
+             onto: bool = False) -> tuple[Block, list[MergeReport]]:
     """Merge ``blocks`` (consecutive, usually one frame each) level by level into one block
-    (module docstring).
+    (module docstring), in windows of ``options.window`` blocks (:func:`merge_tree`).
 
     Parameters
     ----------
@@ -506,6 +529,9 @@ def assemble(blocks: list[Block], options: Options | None = None, *, on_merge=No
         ``len(blocks) - 1`` anchor sets from the video or the user
         (:mod:`~fourd.methods.assembly.guides`), ``guides[t]`` for the merge whose source is
         block ``t``'s last frame and whose target is block ``t + 1``'s first.
+    onto : bool
+        ``blocks[0]`` is a result made before (a streamed run's frames so far, or its last
+        frame alone): the others are assembled and merged onto it last.
 
     Returns
     -------
@@ -521,6 +547,6 @@ def assemble(blocks: list[Block], options: Options | None = None, *, on_merge=No
     if guides is not None and len(guides) != len(blocks) - 1:
         raise ValueError(f"{len(guides)} guides for {len(blocks)} blocks (one per consecutive pair)")
     if pool is not None:
-        return _merge_as_ready(blocks, options, pool, on_merge, guides)
+        return _merge_as_ready(blocks, options, pool, on_merge, guides, onto)
     with merge_pool(options.merge_workers(blocks[0].vertices.shape[1])) as started:
-        return _merge_as_ready(blocks, options, started, on_merge, guides)
+        return _merge_as_ready(blocks, options, started, on_merge, guides, onto)

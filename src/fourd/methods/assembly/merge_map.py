@@ -22,7 +22,7 @@ STAGE = "assembly-map"
 #: Options that do not act on a map: the joins', the colour fit's, the holes', where it runs,
 #: and where the anchors come from (the anchors themselves are in the key).
 NOT_IN_MAP = ("anchors", "anchor_texture", "color_fit", "color_radius", "color_scale", "paste", "paste_gap",
-              "close_holes", "close_smoothness", "workers", "scheduler")
+              "close_holes", "close_smoothness", "window", "workers", "scheduler")
 
 
 class MergeMap(NamedTuple):

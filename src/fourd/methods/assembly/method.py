@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import dataclasses
 import logging
+from typing import NamedTuple
 
 import numpy as np
 
@@ -32,7 +33,7 @@ from fourd.geometry.hole_filling import fill_holes, membrane_positions, small_ho
 from fourd.methods.assembly.color_fit import fit_colors, frame_colors
 from fourd.methods.assembly.guides import Guide, read_guides, video_guides
 from fourd.methods.assembly.hierarchy import Block, MergePool, assemble, merge_pool
-from fourd.methods.assembly.options import Options
+from fourd.methods.assembly.options import ANCHOR_SOURCES, Options
 from fourd.methods.base import Reconstruction
 from fourd.progress import progress
 from fourd.sequence import PointCloudSequence
@@ -65,10 +66,12 @@ class AssemblyDiagnostics:
     observed_fraction: float
 
 
-def frame_meshes(seq: PointCloudSequence, options: Options) -> list[tuple[np.ndarray, np.ndarray]]:
+def frame_meshes(seq: PointCloudSequence, options: Options,
+                 pool: MergePool | None = None) -> list[tuple[np.ndarray, np.ndarray]]:
     """Every frame's mesh (step 1 of the module docstring), empty ones included: its own faces
-    when it has them, else :func:`~fourd.geometry.frame_surface.frame_surface` (cached)."""
-    meshes, found = _frame_meshes(seq, options)
+    when it has them, else :func:`~fourd.geometry.frame_surface.frame_surface` (cached), made
+    in ``pool``'s processes when given."""
+    meshes, found = _frame_meshes(seq, options, pool)
     if found:
         report_resumed(log, f"{found} of {len(seq.frames)} frames' meshes")
     return meshes
@@ -85,12 +88,14 @@ def _frame_meshes(seq: PointCloudSequence, options: Options, pool: MergePool | N
 
 
 def base_blocks(seq: PointCloudSequence, meshes) -> list[Block]:
-    """One block per frame; an empty frame borrows the nearest non-empty frame's mesh, all of
-    it unobserved. :class:`InputError` when every frame is empty."""
+    """One block per frame of ``seq`` (``meshes``: their meshes); an empty frame borrows the
+    nearest non-empty frame's mesh, all of it unobserved. :class:`InputError` when every
+    frame is empty."""
     usable = [i for i, (_, faces) in enumerate(meshes) if len(faces) >= MIN_FACES]
     if not usable:
         raise InputError(
-            f"no frame gives a surface to assemble (each has fewer than {MIN_FACES} faces, or "
+            f"no frame of {seq.names[0]} .. {seq.names[-1]} gives a surface to assemble (each has "
+            f"fewer than {MIN_FACES} faces, or "
             f"too few points to mesh): the assembly method needs per-frame meshes or denser scans"
         )
     blocks = []
@@ -105,28 +110,60 @@ def base_blocks(seq: PointCloudSequence, meshes) -> list[Block]:
     return blocks
 
 
+class HoleClosing(NamedTuple):
+    """The membranes of :func:`close_small_holes`, made in the first frame, to place in every
+    frame: the closed mesh's ``faces``, its ``vertices`` in the first frame (the assembled ones
+    first, then the membranes'), the ``filled [N']`` membrane vertices, the ``holes``' rims and
+    the C1 weight ``smoothness``."""
+
+    faces: np.ndarray
+    vertices: np.ndarray
+    filled: np.ndarray
+    holes: list
+    smoothness: float
+
+    def apply(self, block: Block) -> Block:
+        """``block`` (any of the frames of the block the holes were found in) with the holes
+        closed: the membranes placed in each of its frames from that frame's rim, unobserved."""
+        frames, count = len(block.vertices), block.vertices.shape[1]
+        added = len(self.vertices) - count
+        vertices = np.concatenate([block.vertices, np.repeat(self.vertices[None, count:], frames, axis=0)], axis=1)
+        vertices = membrane_positions(vertices, self.faces, self.filled, self.holes, smooth=self.smoothness)
+        observed = np.concatenate([block.observed, np.zeros((frames, added), dtype=bool)], axis=1)
+        return Block(self.faces, vertices, observed)
+
+
+def holes_to_close(first: np.ndarray, faces: np.ndarray, max_fraction: float,
+                   smoothness: float = 1.0) -> HoleClosing | None:
+    """The membranes closing the holes of the mesh ``faces`` at its first frame's positions
+    ``first [N, 3]`` (:func:`close_small_holes`); None when there is none to close."""
+    holes = small_holes(first, faces, max_fraction=max_fraction)
+    if not holes:
+        return None
+    try:
+        filled = fill_holes(first, faces, holes=holes, area_matched=True, smooth=smoothness)
+    except InputError as error:  # a degenerate rim: keep the assembled result rather than lose it
+        log.warning("holes left open: %s", error)
+        return None
+    # the membrane may add no vertex: a small hole closed by its rim's triangles
+    log.info("closing %d holes with %d membrane vertices", len(holes), len(filled.vertices) - len(first))
+    return HoleClosing(filled.faces, filled.vertices, filled.filled, filled.holes, smoothness)
+
+
 def close_small_holes(block: Block, max_fraction: float, smoothness: float = 1.0) -> Block:
     """``block`` with its holes of flat area at most ``max_fraction`` of their piece's area
     (:func:`~fourd.geometry.hole_filling.small_holes`, in the first frame) filled by the
     membrane of 3.6.2 (``smoothness``: weight of its C1 terms, 1 the thesis' membrane, 0 the
     flat one): the disks triangulated in the first frame, their vertices placed in every frame
     by the membrane over that frame's rim, ``observed`` False."""
-    holes = small_holes(block.vertices[0], block.faces, max_fraction=max_fraction)
-    if not holes:
-        return block
-    try:
-        filled = fill_holes(block.vertices[0], block.faces, holes=holes, area_matched=True, smooth=smoothness)
-    except InputError as error:  # a degenerate rim: keep the assembled result rather than lose it
-        log.warning("holes left open: %s", error)
-        return block
-    count = block.vertices.shape[1]
-    added = len(filled.vertices) - count  # may be 0: a small hole closed by its rim's triangles
-    frames = np.concatenate([block.vertices, np.repeat(filled.vertices[None, count:], len(block.vertices), axis=0)],
-                            axis=1)
-    frames = membrane_positions(frames, filled.faces, filled.filled, filled.holes, smooth=smoothness)
-    observed = np.concatenate([block.observed, np.zeros((len(block.vertices), added), dtype=bool)], axis=1)
-    log.info("closed %d holes with %d membrane vertices", len(holes), added)
-    return Block(filled.faces, frames, observed)
+    closing = holes_to_close(block.vertices[0], block.faces, max_fraction, smoothness)
+    return block if closing is None else closing.apply(block)
+
+
+def takes_video_anchors(options: Options, video: bool) -> bool:
+    """Whether the merges' anchors come from the capture's video (``video``: the input has
+    one): ``anchors='video'``, or ``auto`` with video and ``color_fit`` off."""
+    return options.anchors == "video" or (options.anchors == "auto" and video and not options.color_fit)
 
 
 def frame_pair_guides(seq: PointCloudSequence, options: Options) -> list[Guide] | None:
@@ -134,10 +171,9 @@ def frame_pair_guides(seq: PointCloudSequence, options: Options) -> list[Guide] 
     video or a file, :mod:`~fourd.methods.assembly.guides`); None for ``geometry``, and for
     ``auto`` unless the input has video and ``color_fit`` is off (the colour fit reads the
     same video against the first frame, where the anchors' errors add up along the chain)."""
-    video = getattr(seq, "video", None) is not None
-    if options.anchors == "geometry" or (options.anchors == "auto" and (not video or options.color_fit)):
-        return None
-    if options.anchors in ("auto", "video"):
+    if options.anchors in ANCHOR_SOURCES:
+        if not takes_video_anchors(options, getattr(seq, "video", None) is not None):
+            return None
         return video_guides(seq, options.anchor_texture)
     return read_guides(options.anchors, seq)
 

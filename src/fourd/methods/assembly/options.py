@@ -15,6 +15,9 @@ from fourd.geometry.frame_surface import SurfaceSettings
 #: starting a worker process costs a few seconds.
 PARALLEL_VERTICES = 5000
 
+#: Frames per window of a streamed run when ``Options.window`` is 0.
+STREAM_WINDOW = 16
+
 #: Named sources of anchors (``Options.anchors``; else the path of an anchors file).
 ANCHOR_SOURCES = ("auto", "geometry", "video")
 
@@ -347,6 +350,14 @@ class Options(SurfaceSettings):
         0.0048), touching-spheres 0.0047 / 0.0488 -> 0.0041 / 0.0216 (C1 0.0026 / 0.0076, flat
         0.0061 / 0.0373), dfaust-hopping 0.0026 / 0.0153 -> 0.0027 / 0.0101; see
         ``benchmarks/METHODS.md``.
+    window : int
+        Frames per window: the hierarchy runs within windows of this many frames, and each
+        window's block is merged onto the result so far, one after another (issue 56), so the
+        run needs one window of frames at a time (``fourd reconstruct --stream``, where 0
+        takes :data:`STREAM_WINDOW`). 0 (the default, in memory): one hierarchy over the whole
+        sequence. Every consecutive frame pair is mapped once either way; the windows change
+        which frame's connectivity a later map starts from. ``paste`` and ``correct`` rewrite
+        frames already assembled, so a streamed run refuses them.
     workers : int
         Merges of one level of the hierarchy run in this many processes (they are
         independent, 5.3), with the same result; 1 runs them one after the other; 0 (the
@@ -391,6 +402,7 @@ class Options(SurfaceSettings):
     paste_gap: float = 2.0
     close_holes: float = 0.25
     close_smoothness: float = 0.1
+    window: int = 0
     workers: int = 0
     scheduler: str = "sync"
     cache_dir: str | None = None
@@ -425,6 +437,8 @@ class Options(SurfaceSettings):
                 raise ValueError(f"{name} must be a fraction in [0, 1], got {value!r}")
         if int(self.relax_walks) != self.relax_walks or self.relax_walks < 1:
             raise ValueError(f"relax_walks must be a positive integer, got {self.relax_walks!r}")
+        if int(self.window) != self.window or self.window < 0 or self.window == 1:
+            raise ValueError(f"window must be 0 or at least 2 frames, got {self.window!r}")
         if int(self.workers) != self.workers or self.workers < 0:
             raise ValueError(f"workers must be a non-negative integer (0: one per core), got {self.workers!r}")
         # the pair map's own checks (radius, flattening)

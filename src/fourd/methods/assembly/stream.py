@@ -1,0 +1,328 @@
+"""``assembly`` over a whole capture with memory bounded by a window of frames (issue 56):
+frames read window by window from a :class:`~fourd.frame_source.FrameSource`, each window
+assembled by its own hierarchy and merged onto the frames before it, and the animated mesh
+written frame by frame.
+
+With ``paste`` and ``correct`` off a merge never changes its left block's frames: the merged
+block is the left block's frames followed by the right block's, carried into the left
+block's connectivity by the pair map of the left block's last frame. So once a window is
+merged onto the frames before it, its frames are final, and the next window's merge needs
+only its last frame (assembled, before the colour fit). Each window's merges are
+:func:`~fourd.methods.assembly.hierarchy.assemble`'s with ``onto`` (that last frame as block
+0, the window's frames as the others): the maps of the window's pairs and the seam's pair run
+side by side in the merge processes.
+
+The result is :func:`~fourd.methods.assembly.reconstruct` with ``window`` set (the hierarchy
+of :func:`~fourd.methods.assembly.hierarchy.merge_tree` in windows), computed in another
+order: the same maps of the same frames, the colour fit carried from frame to frame across
+the windows (:class:`~fourd.methods.assembly.color_fit.ColorFit`, against the first frame's
+colours), the holes found in the first frame and closed in every frame
+(:class:`~fourd.methods.assembly.method.HoleClosing`). What the run in memory decides from all
+frames is decided per window: where the colours come from (the points' when every frame of
+the window has them, else the video), and which frame an empty frame borrows its mesh from.
+With video anchors each window tracks its pairs from two frames before its first (the
+tracking of a pair reuses the images as the pair before left them), the seam's pair
+included.
+
+Memory holds a window of frames, their meshes and the window's block, plus the output's
+observed flags; the positions go to the output as they are final. With ``options.cache_dir``
+each frame's mesh and each map are kept (as in memory), and each finished window (its frames
+as written and what the next window starts from), keyed by the frames read so far and the
+options: a rerun resumes after the last finished window.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import time as _time
+from contextlib import ExitStack
+from pathlib import Path
+from typing import NamedTuple
+
+import numpy as np
+
+from fourd.cache import StageCache, option_values, report_resumed, stage_key
+from fourd.errors import InputError
+from fourd.frame_source import FrameSource
+from fourd.io.npz import npz_frames, streamed_output
+from fourd.methods.assembly.color_fit import ColorFit, frame_colors
+from fourd.methods.assembly.hierarchy import Block, assemble, merge_pool
+from fourd.methods.assembly.method import (
+    MIN_FRAMES,
+    HoleClosing,
+    base_blocks,
+    frame_meshes,
+    frame_pair_guides,
+    holes_to_close,
+    takes_video_anchors,
+)
+from fourd.methods.assembly.options import ANCHOR_SOURCES, STREAM_WINDOW, Options
+from fourd.progress import progress
+
+log = logging.getLogger("fourd.methods.assembly")
+
+#: The cache entries of finished windows.
+STAGE = "assembly-stream"
+
+
+class StreamSummary(NamedTuple):
+    """What :func:`reconstruct_streamed` did: ``frames`` written to ``output``, the result's
+    ``vertices``, the number of ``windows`` (``resumed`` of them loaded from the cache) and the
+    wall ``seconds``."""
+
+    output: Path
+    frames: int
+    vertices: int
+    windows: int
+    resumed: int
+    seconds: float
+
+
+def window_spans(count: int, window: int) -> list[tuple[int, int]]:
+    """The windows ``(first, stop)`` of a streamed run over ``count`` frames.
+
+    >>> window_spans(7, 3)
+    [(0, 3), (3, 6), (6, 7)]
+    """
+    return [(first, min(first + window, count)) for first in range(0, count, window)]
+
+
+def reconstruct_streamed(
+    source: FrameSource, output, options: Options | None = None
+) -> StreamSummary:
+    """Animated mesh of ``source`` by ``assembly``, window by window (module docstring),
+    written to ``output`` (a fourd ``.npz``, atomically: it appears when every frame is
+    written).
+
+    Parameters
+    ----------
+    source : FrameSource
+        The capture, read a window at a time (:func:`fourd.io.frames.open_sequence`).
+    output : path-like
+        The ``.npz`` to write (:mod:`fourd.io.npz`'s layout; ``rest`` the first frame).
+    options : Options
+        ``window`` frames per window (0: :data:`~fourd.methods.assembly.options.STREAM_WINDOW`);
+        ``paste`` and ``correct`` off; ``anchors`` not a file; ``cache_dir`` keeps every
+        finished window.
+
+    Raises
+    ------
+    InputError
+        Too few frames, options a streamed run cannot take, an output that is not ``.npz``, a
+        window whose frames give no surface.
+
+    References
+    ----------
+    004_f87f5acf96d50b57.txt chapter 5 (5.3, 5.6); the windows are this project's (issue 56).
+    """
+    options = options or Options()
+    output = streamed_output(output)
+    if len(source) < MIN_FRAMES:
+        raise InputError(
+            f"the assembly method needs at least {MIN_FRAMES} frames, got {len(source)}"
+        )
+    for name in ("paste", "correct"):
+        if getattr(options, name):
+            raise InputError(
+                f"assembly: {name} changes frames already assembled, which a streamed run has "
+                f"written: run it in memory (without --stream) or set {name}=false"
+            )
+    if options.anchors not in ANCHOR_SOURCES:
+        raise InputError(
+            f"assembly: an anchors file ({options.anchors}) is read for the whole sequence: "
+            f"run it in memory (without --stream)"
+        )
+    options = dataclasses.replace(options, window=options.window or STREAM_WINDOW)
+    started = _time.perf_counter()
+    spans = window_spans(len(source), options.window)
+    cache = StageCache(options.cache_dir)
+    run = _Run(source, options)
+    key = ""
+    if cache.enabled:
+        video = None if source.video is None else source.video.fingerprint()
+        key = stage_key(
+            STAGE,
+            option_values(options, without=("workers", "scheduler", "cache_dir")),
+            source.times,
+            video,
+        )
+    resumed = 0
+    first = source.read(0, 1)
+    size = max(len(first.frames[0].points), 1)
+    with ExitStack() as stack:
+        pool = stack.enter_context(merge_pool(options.merge_workers(size)))
+        writer = None
+        bar = stack.enter_context(
+            progress(total=len(source) - 1, desc="assembly merges", unit="merge")
+        )
+        for index, (start, stop) in enumerate(spans):
+            seq = source.read(start, stop)
+            if cache.enabled:
+                key = stage_key(
+                    key,
+                    index,
+                    [stage_key(f.points, f.normals, f.colors, f.faces) for f in seq.frames],
+                )
+            entry = cache.load(STAGE, key) if cache.enabled else None
+            if entry is not None:
+                written = run.restore(entry)
+                resumed += 1
+                bar.update(stop - start - (index == 0))
+            else:
+                if resumed and resumed == index:
+                    report_resumed(log, f"{resumed} of {len(spans)} windows")
+                written = run.window(seq, start, pool, on_merge=lambda: bar.update(1))
+                if cache.enabled:
+                    cache.save(STAGE, key, run.entry(written))
+            if writer is None:
+                writer = stack.enter_context(
+                    npz_frames(
+                        output, faces=run.closed_faces, times=source.times, rest=written.vertices[0]
+                    )
+                )
+            writer.write(written.vertices, written.observed)
+            log.info(
+                "window %d of %d (frames %d-%d): %.1f s so far",
+                index + 1,
+                len(spans),
+                start,
+                stop - 1,
+                _time.perf_counter() - started,
+            )
+    if resumed == len(spans):
+        report_resumed(log, f"all {resumed} windows")
+    seconds = _time.perf_counter() - started
+    log.info("assembly, streamed: %d frames in %.1f s", len(source), seconds)
+    return StreamSummary(output, len(source), run.vertex_count, len(spans), resumed, seconds)
+
+
+class _Run:
+    """What goes from one window to the next: the last frame as assembled (the next seam's
+    source), the colour fit's state and the holes' membranes, both made in the first frame."""
+
+    def __init__(self, source: FrameSource, options: Options):
+        self.source, self.options = source, options
+        self.video_anchors = takes_video_anchors(options, source.video is not None)
+        self.last: Block | None = None  # the last frame written, as assembled
+        self.color_fit: ColorFit | None = None
+        self.closing: HoleClosing | None = None
+        self.first: Block | None = (
+            None  # the first frame as assembled (what the two above come from)
+        )
+
+    @property
+    def closed_faces(self) -> np.ndarray:
+        return self.last.faces if self.closing is None else self.closing.faces
+
+    @property
+    def vertex_count(self) -> int:
+        return self.last.vertices.shape[1] if self.closing is None else len(self.closing.vertices)
+
+    def window(self, seq, start: int, pool, on_merge) -> Block:
+        """Assemble the frames ``seq`` (from frame ``start`` on) onto the frames before: the
+        window's frames as written (colour fit, holes closed)."""
+        options = self.options
+        meshes = frame_meshes(seq, options, pool)
+        blocks = base_blocks(seq, meshes)
+        guides = self._guides(seq, start)
+        if self.last is None:
+            block, _ = assemble(blocks, options, on_merge=on_merge, pool=pool, guides=guides)
+        else:
+            block, _ = assemble(
+                [self.last] + blocks,
+                options,
+                on_merge=on_merge,
+                pool=pool,
+                guides=guides,
+                onto=True,
+            )
+            block = Block(block.faces, block.vertices[1:], block.observed[1:])
+        self.last = Block(block.faces, block.vertices[-1:], block.observed[-1:])
+        colors = frame_colors(seq, meshes) if options.color_fit else None
+        if self.first is None:
+            self.first = Block(block.faces, block.vertices[:1], block.observed[:1])
+            self._start(meshes, colors)
+        vertices = block.vertices.copy()
+        if self.color_fit is not None and colors is not None:
+            for t in range(1 if start == 0 else 0, len(vertices)):
+                fitted = self.color_fit.frame(vertices[t], block.observed[t], meshes[t], colors[t])
+                if fitted is not None:
+                    vertices[t] = fitted
+        written = Block(block.faces, vertices, block.observed)
+        return written if self.closing is None else self.closing.apply(written)
+
+    def _start(self, meshes, colors) -> None:
+        """The colour fit and the holes' membranes, from the first frame (``meshes`` and their
+        ``colors``: the first window's)."""
+        options, first = self.options, self.first
+        if colors is not None:
+            self.color_fit = ColorFit.start(
+                first.vertices[0],
+                first.faces,
+                first.observed[0],
+                meshes[0],
+                colors[0],
+                radius=options.color_radius,
+                scale=options.color_scale,
+            )
+        if options.close_holes > 0:
+            self.closing = holes_to_close(
+                first.vertices[0], first.faces, options.close_holes, options.close_smoothness
+            )
+
+    def _guides(self, seq, start: int):
+        """The video's anchors of the window's pairs, the seam's pair first (None without)."""
+        if not self.video_anchors:
+            return None
+        if start == 0:
+            return frame_pair_guides(seq, self.options)
+        lead = max(start - 2, 0)
+        guides = frame_pair_guides(self.source.read(lead, start + len(seq)), self.options)
+        return guides[start - 1 - lead :]
+
+    def entry(self, written: Block) -> dict[str, np.ndarray]:
+        """The cache entry of a finished window: its frames as ``written`` and the state the
+        next window starts from."""
+        arrays = {
+            "vertices": written.vertices,
+            "observed": written.observed,
+            "faces": self.last.faces,
+            "last": self.last.vertices[0],
+            "last_observed": self.last.observed[0],
+            "first": self.first.vertices[0],
+            "first_observed": self.first.observed[0],
+        }
+        if self.color_fit is not None:
+            fit = self.color_fit
+            arrays |= {
+                "color_sample": fit.sample,
+                "color_reference": fit.reference,
+                "color_edge": np.float64(fit.edge),
+                "color_carried": fit.carried,
+            }
+        return arrays
+
+    def restore(self, entry: dict[str, np.ndarray]) -> Block:
+        """The state after a window read from the cache (:meth:`entry`); its frames as written."""
+        faces, options = entry["faces"], self.options
+        self.last = Block(faces, entry["last"][None], entry["last_observed"][None])
+        if self.first is None:
+            self.first = Block(faces, entry["first"][None], entry["first_observed"][None])
+            if "color_sample" in entry:
+                self.color_fit = ColorFit(
+                    faces,
+                    entry["color_sample"],
+                    entry["color_reference"],
+                    float(entry["color_edge"]),
+                    len(entry["last"]),
+                    radius=options.color_radius,
+                    scale=options.color_scale,
+                )
+            if options.close_holes > 0:
+                self.closing = holes_to_close(
+                    self.first.vertices[0], faces, options.close_holes, options.close_smoothness
+                )
+        if self.color_fit is not None:
+            self.color_fit.carried = entry["color_carried"]
+        return Block(faces, entry["vertices"], entry["observed"])

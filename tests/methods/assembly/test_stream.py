@@ -1,0 +1,200 @@
+"""``assembly`` in windows and streamed (issue 56): each window's hierarchy merged onto the
+frames before it, the frames written as they are final, the same result as the windows in
+memory, a rerun resuming after the last finished window."""
+
+from __future__ import annotations
+
+import logging
+
+import numpy as np
+import pytest
+import trimesh
+from scipy.spatial.transform import Rotation
+
+from fourd.errors import InputError
+from fourd.frame_source import FrameSource
+from fourd.geometry.marching import compact
+from fourd.io.npz import read_npz
+from fourd.methods.assembly import (
+    Options,
+    hierarchy,
+    merge_tree,
+    reconstruct,
+    reconstruct_streamed,
+    stream,
+)
+from fourd.sequence import Frame, PointCloudSequence
+
+
+def _painted(points):
+    return 0.5 + 0.4 * np.stack(
+        [
+            np.sin(7.0 * points[:, 0] + 2.0 * points[:, 2]),
+            np.sin(6.0 * points[:, 1] - 3.0 * points[:, 0]),
+            np.sin(5.0 * points[:, 2] + 4.0 * points[:, 1]),
+        ],
+        axis=1,
+    )
+
+
+def _turning_capture(frames=5):
+    """A painted bumpy ellipsoid turning and drifting, every frame remeshed on its own (so
+    each map finds its way between two triangulations), its cap at +x never seen (a hole to
+    close). Returns the sequence, the truth's motion of frame 0's vertices [T, N, 3] and the
+    edge."""
+    from fourd.synth.remesh import remesh_surface
+
+    sphere = trimesh.creation.icosphere(subdivisions=4)
+    unit = np.asarray(sphere.vertices)
+    shape = (
+        unit
+        * [1.0, 0.7, 0.5]
+        * (1.0 + 0.1 * np.sin(3.0 * unit[:, [0]]) * np.cos(2.0 * unit[:, [1]]))
+    )
+    faces = np.asarray(sphere.faces, dtype=np.int64)
+    edge = float(np.median(np.linalg.norm(shape[faces] - shape[np.roll(faces, 1, axis=1)], axis=2)))
+    seq, truth = [], []
+    for t in range(frames):
+        rotation = Rotation.from_rotvec([0.03 * t, -0.04 * t, 0.05 * t]).as_matrix()
+        shift = np.array([0.02, 0.01, -0.01]) * t
+        mesh = remesh_surface(
+            shape, faces, spacing=3.0 * edge, offset=[0.1 * t, 0.3, 0.7 * t % 1.0]
+        )
+        body, body_faces = compact(
+            mesh.vertices, mesh.faces[~(mesh.vertices[mesh.faces].mean(axis=1)[:, 0] > 0.85)]
+        )
+        seq.append(
+            Frame(body @ rotation.T + shift, faces=body_faces, colors=_painted(body), time=float(t))
+        )
+        if t == 0:
+            first, first_faces = body, body_faces
+        truth.append(first @ rotation.T + shift)
+    mesh_edge = float(
+        np.median(
+            np.linalg.norm(first[first_faces] - first[np.roll(first_faces, 1, axis=1)], axis=2)
+        )
+    )
+    return PointCloudSequence(seq), np.array(truth), mesh_edge
+
+
+@pytest.mark.parametrize("onto", [False, True])
+def test_the_merge_tree_in_windows_merges_each_window_then_the_windows_in_order(onto):
+    for count in range(1, 30):
+        for window in (0, 2, 3, 4, 7):
+            tree = merge_tree(count, window, onto=onto)
+            assert len(tree) == count - 1
+            spans = {node: (node, node + 1) for node in range(count)}
+            for k, (a, b) in enumerate(tree):
+                assert spans[a][1] == spans[b][0]  # consecutive
+                spans[count + k] = (spans.pop(a)[0], spans.pop(b)[1])
+            assert list(spans.values()) == [(0, count)]
+            start = 1 if onto and count > 1 else 0
+            if window and count - start > window:
+                # the last merge puts the last window onto all the frames before it
+                a, b = tree[-1]
+                last_first = start + (count - start - 1) // window * window
+                assert spans_of(tree, count)[a] == (0, last_first)
+    assert merge_tree(4, onto=True)[-1] == (0, 5)
+
+
+def spans_of(tree, count):
+    spans = {node: (node, node + 1) for node in range(count)}
+    for k, (a, b) in enumerate(tree):
+        spans[count + k] = (spans[a][0], spans[b][1])
+    return spans
+
+
+def test_a_streamed_run_writes_the_windowed_run_in_memory(tmp_path):
+    """Windows of 3 over 7 frames (the last of one frame): the seams' maps, the colour fit
+    carried from window to window and the membrane closing the cap in every frame give the
+    run in memory's result (to the file's float32)."""
+    seq, truth, edge = _turning_capture(frames=7)
+    options = Options(relax_sweeps=2, workers=1, window=3)
+    in_memory = reconstruct(seq, options)
+    summary = reconstruct_streamed(FrameSource.of(seq), tmp_path / "take.npz", options)
+    assert (summary.frames, summary.windows, summary.resumed) == (7, 3, 0)
+    written = read_npz(summary.output)
+    np.testing.assert_array_equal(written.faces, in_memory.faces)
+    np.testing.assert_array_equal(written.observed, in_memory.observed)
+    np.testing.assert_allclose(written.vertices, in_memory.vertices, atol=1e-6)
+    assert summary.vertices == in_memory.vertices.shape[1] > truth.shape[1]  # the cap closed
+    # and it follows the truth: the colour fit holds every frame to the first frame's colours
+    count = truth.shape[1]
+    error = np.linalg.norm(written.vertices[:, :count] - truth, axis=2) / edge
+    # measured: median 0.03 edges, 95th percentile 0.07
+    assert np.median(error) < 0.2 and np.percentile(error, 95) < 0.5, np.percentile(error, [50, 95])
+
+
+def test_windows_give_the_result_of_one_hierarchy_within_tolerance():
+    """The windows change which frame's mesh a seam's map starts from, not what it finds."""
+    seq, truth, edge = _turning_capture()
+    whole = reconstruct(seq, Options(relax_sweeps=2, workers=1, color_fit=False))
+    windowed = reconstruct(seq, Options(relax_sweeps=2, workers=1, color_fit=False, window=3))
+    assert windowed.vertices.shape == whole.vertices.shape
+    gap = np.linalg.norm(windowed.vertices - whole.vertices, axis=2) / edge
+    # measured: median 0, 99th percentile 0.14 edges, largest 0.61 (frames 3 and 4 reached
+    # from frame 2's mesh instead of frame 0's)
+    assert np.median(gap) < 0.05 and np.percentile(gap, 99) < 0.5, np.percentile(gap, [50, 99])
+    assert gap[:3].max() < 1e-9  # the first window is the same hierarchy's
+    error = np.linalg.norm(windowed.vertices[:, : truth.shape[1]] - truth, axis=2) / edge
+    assert np.percentile(error, 95) < 0.3
+
+
+def test_a_stopped_streamed_run_resumes_after_its_last_finished_window(
+    tmp_path, monkeypatch, caplog
+):
+    seq, _, _ = _turning_capture(frames=7)
+    options = Options(relax_sweeps=2, workers=1, window=3, cache_dir=str(tmp_path / "cache"))
+    plain = read_npz(
+        reconstruct_streamed(
+            FrameSource.of(seq),
+            tmp_path / "plain.npz",
+            Options(relax_sweeps=2, workers=1, window=3),
+        ).output
+    )
+    made = stream._Run.window
+    calls = []
+
+    def stopped_at_the_third(self, *args, **kwargs):
+        calls.append(1)
+        if len(calls) == 3:
+            raise KeyboardInterrupt
+        return made(self, *args, **kwargs)
+
+    monkeypatch.setattr(stream._Run, "window", stopped_at_the_third)
+    with pytest.raises(KeyboardInterrupt):
+        reconstruct_streamed(FrameSource.of(seq), tmp_path / "take.npz", options)
+    assert not (tmp_path / "take.npz").exists()  # nothing half written
+    monkeypatch.setattr(stream._Run, "window", made)
+
+    def no_map(*args):
+        raise AssertionError("a map was made again")
+
+    with caplog.at_level(logging.INFO, logger="fourd.methods.assembly"):
+        summary = reconstruct_streamed(FrameSource.of(seq), tmp_path / "take.npz", options)
+    assert summary.resumed == 2
+    assert "resumed: 2 of 3 windows" in caplog.text
+    again = read_npz(summary.output)
+    np.testing.assert_array_equal(again.vertices, plain.vertices)
+    np.testing.assert_array_equal(again.observed, plain.observed)
+    # a second rerun reads every window back and makes no map
+    monkeypatch.setattr(hierarchy, "map_pair", no_map)
+    summary = reconstruct_streamed(FrameSource.of(seq), tmp_path / "take.npz", options)
+    assert summary.resumed == 3
+    np.testing.assert_array_equal(read_npz(summary.output).vertices, plain.vertices)
+
+
+@pytest.mark.parametrize(
+    ("change", "match"),
+    [
+        ({"paste": True}, "paste changes frames already assembled"),
+        ({"correct": True}, "correct changes frames already assembled"),
+        ({"anchors": "pairs.npz"}, "anchors file"),
+    ],
+)
+def test_a_streamed_run_refuses_what_it_cannot_stream(tmp_path, change, match):
+    seq, _, _ = _turning_capture(frames=2)
+    with pytest.raises(InputError, match=match):
+        reconstruct_streamed(FrameSource.of(seq), tmp_path / "take.npz", Options(**change))
+    with pytest.raises(ValueError, match="window"):
+        Options(window=1)
