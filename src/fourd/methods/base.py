@@ -31,6 +31,7 @@ registry entry.
 from __future__ import annotations
 
 import dataclasses
+from pathlib import Path
 from types import ModuleType
 from typing import Any, NamedTuple, Protocol, runtime_checkable
 
@@ -40,6 +41,7 @@ from fourd.sequence import PointCloudSequence
 __all__ = [
     "MethodModule",
     "Reconstruction",
+    "StreamSummary",
     "check_method_module",
     "diagnostic_figures",
 ]
@@ -55,6 +57,19 @@ class Reconstruction(NamedTuple):
 
     result: AnimatedMesh | MeshSequence
     diagnostics: Any = None
+
+
+class StreamSummary(NamedTuple):
+    """What a streamed run (``reconstruct_streamed``) of an animated-mesh method did:
+    ``frames`` written to ``output``, the result's ``vertices``, the number of ``windows``
+    (``resumed`` of them loaded from the cache) and the wall ``seconds``."""
+
+    output: Path
+    frames: int
+    vertices: int
+    windows: int
+    resumed: int
+    seconds: float
 
 
 @runtime_checkable

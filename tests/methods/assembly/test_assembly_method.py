@@ -3,6 +3,7 @@ each output frame on its own input mesh; a rigidly moving shape maps vertices to
 
 from __future__ import annotations
 
+import itertools
 import os
 
 import numpy as np
@@ -375,14 +376,23 @@ def test_the_merge_tree_merges_consecutive_blocks_level_by_level():
     from fourd.methods.assembly import hierarchy
 
     assert hierarchy.merge_tree(8) == [(0, 1), (2, 3), (4, 5), (6, 7), (8, 9), (10, 11), (12, 13)]
-    for count in range(1, 40):
-        tree = hierarchy.merge_tree(count)
+    # in windows (Options.window), and onto a result made before (a streamed run's seams)
+    assert hierarchy.merge_tree(6, 3) == [(0, 1), (6, 2), (3, 4), (8, 5), (7, 9)]
+    assert hierarchy.merge_tree(4, onto=True) == [(1, 2), (4, 3), (0, 5)]
+    for count, window, onto in itertools.product(range(1, 40), (0, 2, 3, 7), (False, True)):
+        tree = hierarchy.merge_tree(count, window, onto=onto)
         assert len(tree) == count - 1
         spans = {node: (node, node + 1) for node in range(count)}
+        made = dict(spans)
         for k, (a, b) in enumerate(tree):
             assert spans[a][1] == spans[b][0]  # consecutive
-            spans[count + k] = (spans.pop(a)[0], spans.pop(b)[1])
+            spans[count + k] = made[count + k] = (spans.pop(a)[0], spans.pop(b)[1])
         assert list(spans.values()) == [(0, count)]
+        start = 1 if onto and count > 1 else 0
+        if (window and count - start > window) or start:
+            # the last merge puts the last window onto all the frames before it
+            last_first = start + (count - start - 1) // window * window if window else start
+            assert made[tree[-1][0]] == (0, last_first), (count, window, onto)
 
 
 def test_a_merge_run_in_this_process_sees_its_own_thread_environment(monkeypatch):

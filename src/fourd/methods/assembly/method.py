@@ -66,14 +66,15 @@ class AssemblyDiagnostics:
     observed_fraction: float
 
 
-def frame_meshes(seq: PointCloudSequence, options: Options,
-                 pool: MergePool | None = None) -> list[tuple[np.ndarray, np.ndarray]]:
-    """Every frame's mesh (step 1 of the module docstring), empty ones included: its own faces
-    when it has them, else :func:`~fourd.geometry.frame_surface.frame_surface` (cached), made
-    in ``pool``'s processes when given."""
-    meshes, found = _frame_meshes(seq, options, pool)
+def frame_meshes(seq: PointCloudSequence, options: Options, pool: MergePool | None = None,
+                 frames: slice = slice(None)) -> list[tuple[np.ndarray, np.ndarray]]:
+    """The mesh of each of the ``frames`` (step 1 of the module docstring), empty ones
+    included: its own faces when it has them, else
+    :func:`~fourd.geometry.frame_surface.frame_surface` (cached), made in ``pool``'s processes
+    when given."""
+    meshes, found = _frame_meshes(seq, options, pool, frames)
     if found:
-        report_resumed(log, f"{found} of {len(seq.frames)} frames' meshes")
+        report_resumed(log, f"{found} of {len(meshes)} frames' meshes")
     return meshes
 
 

@@ -37,8 +37,6 @@ import dataclasses
 import logging
 import time as _time
 from contextlib import ExitStack
-from pathlib import Path
-from typing import NamedTuple
 
 import numpy as np
 
@@ -58,25 +56,13 @@ from fourd.methods.assembly.method import (
     takes_video_anchors,
 )
 from fourd.methods.assembly.options import ANCHOR_SOURCES, STREAM_WINDOW, Options
+from fourd.methods.base import StreamSummary
 from fourd.progress import progress
 
 log = logging.getLogger("fourd.methods.assembly")
 
 #: The cache entries of finished windows.
 STAGE = "assembly-stream"
-
-
-class StreamSummary(NamedTuple):
-    """What :func:`reconstruct_streamed` did: ``frames`` written to ``output``, the result's
-    ``vertices``, the number of ``windows`` (``resumed`` of them loaded from the cache) and the
-    wall ``seconds``."""
-
-    output: Path
-    frames: int
-    vertices: int
-    windows: int
-    resumed: int
-    seconds: float
 
 
 def window_spans(count: int, window: int) -> list[tuple[int, int]]:
@@ -148,8 +134,10 @@ def reconstruct_streamed(
             video,
         )
     resumed = 0
+    # the first frame's mesh decides the merge processes (its size, as in memory)
     first = source.read(0, 1)
-    size = max(len(first.frames[0].points), 1)
+    run.first_mesh = frame_meshes(first, options)[0]
+    size = len(run.first_mesh[0]) or len(first.frames[0].points)
     with ExitStack() as stack:
         pool = stack.enter_context(merge_pool(options.merge_workers(size)))
         writer = None
@@ -207,9 +195,9 @@ class _Run:
         self.last: Block | None = None  # the last frame written, as assembled
         self.color_fit: ColorFit | None = None
         self.closing: HoleClosing | None = None
-        self.first: Block | None = (
-            None  # the first frame as assembled (what the two above come from)
-        )
+        # the first frame as assembled (what the two above come from), and its own mesh
+        self.first: Block | None = None
+        self.first_mesh = None
 
     @property
     def closed_faces(self) -> np.ndarray:
@@ -223,7 +211,11 @@ class _Run:
         """Assemble the frames ``seq`` (from frame ``start`` on) onto the frames before: the
         window's frames as written (colour fit, holes closed)."""
         options = self.options
-        meshes = frame_meshes(seq, options, pool)
+        if self.first_mesh is not None and start == 0:
+            rest = frame_meshes(seq, options, pool, frames=slice(1, None))
+            meshes = [self.first_mesh] + rest
+        else:
+            meshes = frame_meshes(seq, options, pool)
         blocks = base_blocks(seq, meshes)
         guides = self._guides(seq, start)
         if self.last is None:

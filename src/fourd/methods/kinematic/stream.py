@@ -30,8 +30,6 @@ from __future__ import annotations
 import logging
 import time as _time
 from contextlib import ExitStack
-from pathlib import Path
-from typing import NamedTuple
 
 import numpy as np
 
@@ -42,6 +40,7 @@ from fourd.frame_source import FrameSource
 from fourd.geometry.meshes import median_edge_length
 from fourd.geometry.neighbors import point_spacing
 from fourd.io.npz import npz_frames, streamed_output
+from fourd.methods.base import StreamSummary
 from fourd.methods.kinematic.animate import (
     FrameSurfaces,
     slide_settings,
@@ -64,19 +63,6 @@ log = logging.getLogger("fourd.methods.kinematic")
 STREAM_WINDOW = 20
 #: The cache entries of finished windows.
 STAGE = "kinematic-stream"
-
-
-class StreamSummary(NamedTuple):
-    """What :func:`reconstruct_streamed` did: ``frames`` written to ``output``, the urshape's
-    ``vertices``, the number of ``windows`` (``resumed`` of them loaded from the cache) and
-    the wall ``seconds``."""
-
-    output: Path
-    frames: int
-    vertices: int
-    windows: int
-    resumed: int
-    seconds: float
 
 
 def reconstruct_streamed(

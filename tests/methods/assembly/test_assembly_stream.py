@@ -18,7 +18,6 @@ from fourd.io.npz import read_npz
 from fourd.methods.assembly import (
     Options,
     hierarchy,
-    merge_tree,
     reconstruct,
     reconstruct_streamed,
     stream,
@@ -75,33 +74,6 @@ def _turning_capture(frames=5):
         )
     )
     return PointCloudSequence(seq), np.array(truth), mesh_edge
-
-
-@pytest.mark.parametrize("onto", [False, True])
-def test_the_merge_tree_in_windows_merges_each_window_then_the_windows_in_order(onto):
-    for count in range(1, 30):
-        for window in (0, 2, 3, 4, 7):
-            tree = merge_tree(count, window, onto=onto)
-            assert len(tree) == count - 1
-            spans = {node: (node, node + 1) for node in range(count)}
-            for k, (a, b) in enumerate(tree):
-                assert spans[a][1] == spans[b][0]  # consecutive
-                spans[count + k] = (spans.pop(a)[0], spans.pop(b)[1])
-            assert list(spans.values()) == [(0, count)]
-            start = 1 if onto and count > 1 else 0
-            if window and count - start > window:
-                # the last merge puts the last window onto all the frames before it
-                a, b = tree[-1]
-                last_first = start + (count - start - 1) // window * window
-                assert spans_of(tree, count)[a] == (0, last_first)
-    assert merge_tree(4, onto=True)[-1] == (0, 5)
-
-
-def spans_of(tree, count):
-    spans = {node: (node, node + 1) for node in range(count)}
-    for k, (a, b) in enumerate(tree):
-        spans[count + k] = (spans[a][0], spans[b][1])
-    return spans
 
 
 def test_a_streamed_run_writes_the_windowed_run_in_memory(tmp_path):
