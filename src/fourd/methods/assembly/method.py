@@ -10,7 +10,9 @@ assembly of :mod:`~fourd.methods.assembly.hierarchy`.
    first frame's connectivity, grown by the geometry only later frames have (5.3, 5.6); each
    merge's anchors come from the geometry, and with ``anchors`` from the capture's video or a
    file too (:mod:`~fourd.methods.assembly.guides`); each merge's map is cached when
-   ``cache_dir`` is set (:mod:`~fourd.methods.assembly.merge_map`).
+   ``cache_dir`` is set (:mod:`~fourd.methods.assembly.merge_map`). With ``window``, one
+   hierarchy per window of frames, the windows merged in order: what a streamed run does
+   (:mod:`~fourd.methods.assembly.stream`).
 3. With colours in the input, every frame slid along its own surface to where the first
    frame's colours are (``color_fit``, :mod:`~fourd.methods.assembly.color_fit`).
 4. The holes no frame filled are closed by the membrane of 3.6.2 (``close_holes``), placed in
