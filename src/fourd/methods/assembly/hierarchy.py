@@ -128,7 +128,7 @@ def _closest_map(aligned, target_vertices, target_faces):
 
 
 def map_pair(source: np.ndarray, faces: np.ndarray, target: np.ndarray, target_faces: np.ndarray,
-             options: Options | None = None, guide: Guide | None = None, rest: np.ndarray | None = None) -> MergeMap:
+             options: Options | None = None, guide: Guide | None = None) -> MergeMap:
     """The first half of a merge (module docstring): the source frame ``[N, 3]`` (mesh
     ``faces``) mapped onto the target frame ``[M, 3]`` (mesh ``target_faces``) by anchors from
     the coarse alignment and the pair's cross-parameterisation, with the map analysed and its
@@ -136,8 +136,7 @@ def map_pair(source: np.ndarray, faces: np.ndarray, target: np.ndarray, target_f
     merge's map can be made while the right block is still being assembled (when its first
     frame is final, :func:`_merge_as_ready`). ``guide``: anchors of this frame pair from the
     video or the user (:mod:`~fourd.methods.assembly.guides`), which pull the alignment and
-    join its anchors. ``rest [N, 3]``: the shape whose Laplacian coordinates the relaxation
-    keeps (``relax_rest``: the left block's first frame), else the source's."""
+    join its anchors."""
     options = Options() if options is None else options
     matched = None
     if guide is not None and len(guide.source):
@@ -152,8 +151,7 @@ def map_pair(source: np.ndarray, faces: np.ndarray, target: np.ndarray, target_f
     )
     count = len(source)
     if len(alignment.anchors.source) >= 3:
-        pair = cross_parameterize_pair(source, faces, target, target_faces, alignment.anchors, options.pair_options(),
-                                       rest=rest)
+        pair = cross_parameterize_pair(source, faces, target, target_faces, alignment.anchors, options.pair_options())
         map_faces, bary = pair.faces, pair.barycentric
     else:
         map_faces, bary = np.full(count, -1), np.zeros((count, 3))
@@ -175,16 +173,16 @@ def map_pair(source: np.ndarray, faces: np.ndarray, target: np.ndarray, target_f
     return MergeMap(len(alignment.anchors.source), map_faces, bary, mapped, analysis)
 
 
-def _map_or_resume(source, faces, target, target_faces, options: Options, guide: Guide | None, rest=None):
+def _map_or_resume(source, faces, target, target_faces, options: Options, guide: Guide | None):
     """:func:`map_pair`, read from ``options.cache_dir`` when it holds this map and stored there
     when not (:mod:`~fourd.methods.assembly.merge_map`): ``(map, whether it was read)``."""
     if options.cache_dir is None:
-        return map_pair(source, faces, target, target_faces, options, guide, rest), False
-    cache, key = StageCache(options.cache_dir), map_key(source, faces, target, target_faces, options, guide, rest)
+        return map_pair(source, faces, target, target_faces, options, guide), False
+    cache, key = StageCache(options.cache_dir), map_key(source, faces, target, target_faces, options, guide)
     stored = load_map(cache, key)
     if stored is not None:
         return stored, True
-    pair = map_pair(source, faces, target, target_faces, options, guide, rest)
+    pair = map_pair(source, faces, target, target_faces, options, guide)
     save_map(cache, key, pair)
     return pair, False
 
@@ -419,8 +417,7 @@ def _merge_as_ready(blocks: list[Block], options: Options, pool: MergePool | Non
         if a not in ready or right is None:
             return None
         guide = None if guides is None else guides[first[b] - 1]
-        rest = ready[a].vertices[0] if options.relax_rest else None
-        return ready[a].vertices[-1], ready[a].faces, right.vertices[0], right.faces, options, guide, rest
+        return ready[a].vertices[-1], ready[a].faces, right.vertices[0], right.faces, options, guide
 
     def startable() -> list[int]:
         return sorted((node for node in pending if map_inputs(node) is not None), key=lambda node: (-chain[node], node))

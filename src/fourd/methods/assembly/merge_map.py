@@ -46,12 +46,11 @@ class MergeMap(NamedTuple):
     analysis: Analysis | None = None
 
 
-def map_key(source, faces, target, target_faces, options, guide, rest=None) -> str:
-    """The cache key of ``map_pair(source, faces, target, target_faces, options, guide, rest)``."""
+def map_key(source, faces, target, target_faces, options, guide) -> str:
+    """The cache key of ``map_pair(source, faces, target, target_faces, options, guide)``."""
     anchors = None if guide is None else (np.asarray(guide.source), np.asarray(guide.target))
-    parts = () if rest is None else (np.asarray(rest),)
     return stage_key(STAGE, np.asarray(source), np.asarray(faces), np.asarray(target), np.asarray(target_faces),
-                     option_values(options, without=NOT_IN_MAP), anchors, *parts)
+                     option_values(options, without=NOT_IN_MAP), anchors)
 
 
 def save_map(cache: StageCache, key: str, pair: MergeMap) -> None:

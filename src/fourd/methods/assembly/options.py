@@ -302,11 +302,6 @@ class Options(SurfaceSettings):
         of the energy it started from (0: every sweep runs). 0.01 saved crane and dfaust-hopping
         6% with the same correspondence, the held-out crane stretches nothing, and cost
         crane-90's last frame 7% (``benchmarks/METHODS.md``), so it is off by default.
-    relax_rest : bool
-        The relaxation keeps the Laplacian coordinates of the left block's first frame (its
-        own mesh as scanned) instead of those of the source frame, which carries the shape
-        errors of every map before it: the map is pulled back towards the shape the surface
-        had when first seen, turned by each vertex's rotation (a near-isometric motion).
     registration_iterations : int
         Rotation fits of the Laplacian registration that places the vertices a pair map
         cannot (thesis 5.6, [LSA+05]).
@@ -399,7 +394,6 @@ class Options(SurfaceSettings):
     relax_sweeps: int = 6
     relax_walks: int = 8
     relax_tolerance: float = 0.0
-    relax_rest: bool = False
     registration_iterations: int = 16
     correct: bool = False
     correct_stretch: float = 2.0

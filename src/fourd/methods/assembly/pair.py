@@ -57,7 +57,6 @@ def cross_parameterize_pair(
     target_faces: np.ndarray,
     anchors: Anchors,
     options: PairOptions | None = None,
-    rest: np.ndarray | None = None,
 ) -> PairMap:
     """Map the source mesh's vertices onto the target surface (module docstring).
 
@@ -70,8 +69,6 @@ def cross_parameterize_pair(
         Both meshes oriented the same way (outward normals).
     anchors : Anchors
     options : PairOptions, optional
-    rest : array [N, 3], optional
-        The shape whose Laplacian coordinates the relaxation keeps (:func:`relax_map`).
 
     Returns
     -------
@@ -86,5 +83,5 @@ def cross_parameterize_pair(
         refinement = refine_anchors(*meshes, anchors, first.faces, first.barycentric, options.refine)
         anchors = refinement.anchors
     patch_map = cross_parameterize(*meshes, anchors, options.crossparam)
-    relaxed = relax_map(*meshes, patch_map.faces, patch_map.barycentric, options.relax, rest=rest)
+    relaxed = relax_map(*meshes, patch_map.faces, patch_map.barycentric, options.relax)
     return PairMap(relaxed.faces, relaxed.barycentric, relaxed.points, anchors, patch_map, relaxed, refinement)

@@ -351,7 +351,6 @@ def relax_map(
     options: RelaxOptions | None = None,
     *,
     fixed: np.ndarray | None = None,
-    rest: np.ndarray | None = None,
 ) -> RelaxedMap:
     """Relax a map of the source vertices onto the target surface (thesis section 5.4.3;
     module docstring).
@@ -370,9 +369,6 @@ def relax_map(
     options : RelaxOptions, optional
     fixed : bool array [N], optional
         Vertices that keep their mapped point.
-    rest : array [N, 3], optional
-        The shape whose Laplacian coordinates the map keeps (turned by each vertex's
-        rotation), in the source's connectivity; None: the source's own.
 
     Returns
     -------
@@ -391,8 +387,7 @@ def relax_map(
         raise ValueError("faces index target triangles out of range")
     mapped = faces >= 0
     fixed = np.zeros(count, dtype=bool) if fixed is None else np.asarray(fixed, dtype=bool).reshape(-1)
-    shape = source_vertices if rest is None else np.asarray(rest, dtype=np.float64).reshape(-1, 3)
-    problem = _problem(shape, source_faces, target_vertices, target_faces, mapped, options.laplacian)
+    problem = _problem(source_vertices, source_faces, target_vertices, target_faces, mapped, options.laplacian)
     movable = mapped & ~fixed & (problem.weight > 0)
     points = np.nan_to_num(mapped_points(target_vertices, target_faces, faces, bary))
     rng = np.random.default_rng(options.seed)
@@ -400,14 +395,14 @@ def relax_map(
     def flips() -> int:
         return int(flipped_triangles(source_faces, target_vertices, target_faces, faces, bary).sum())
 
-    energy, flipped, moved = [_energy(problem, shape, points)], [flips()], []
+    energy, flipped, moved = [_energy(problem, source_vertices, points)], [flips()], []
     for _ in range(options.sweeps):
-        residual = _residual(problem, points, _goals(problem, shape, points))
+        residual = _residual(problem, points, _goals(problem, source_vertices, points))
         error = np.sum(residual**2, axis=1)
         total = 0
         for batch in _batches(problem.near, error, movable, rng):
             total += _move(problem, batch, faces, bary, points, residual, rng, options)
-        energy.append(_energy(problem, shape, points))
+        energy.append(_energy(problem, source_vertices, points))
         flipped.append(flips())
         moved.append(total)
         if options.tolerance > 0 and energy[-2] - energy[-1] < options.tolerance * energy[0]:

@@ -221,18 +221,15 @@ class _Run:
         if self.last is None:
             block, _ = assemble(blocks, options, on_merge=on_merge, pool=pool, guides=guides)
         else:
-            # the frames so far as the run in memory holds them for the seam's map: its
-            # first (``relax_rest``) and its last
-            first, last = self.first, self.last
-            before = Block(
-                last.faces,
-                np.concatenate([first.vertices, last.vertices]),
-                np.concatenate([first.observed, last.observed]),
-            )
             block, _ = assemble(
-                [before] + blocks, options, on_merge=on_merge, pool=pool, guides=guides, onto=True
+                [self.last] + blocks,
+                options,
+                on_merge=on_merge,
+                pool=pool,
+                guides=guides,
+                onto=True,
             )
-            block = Block(block.faces, block.vertices[2:], block.observed[2:])
+            block = Block(block.faces, block.vertices[1:], block.observed[1:])
         self.last = Block(block.faces, block.vertices[-1:], block.observed[-1:])
         colors = frame_colors(seq, meshes) if options.color_fit else None
         if self.first is None:
