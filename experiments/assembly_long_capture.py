@@ -19,6 +19,7 @@ Run from the repository root::
     .venv/bin/python experiments/assembly_long_capture.py run 40 [RAYS]      # streamed
     .venv/bin/python experiments/assembly_long_capture.py memory 175 [RAYS]  # in memory
     .venv/bin/python experiments/assembly_long_capture.py score 40 [RAYS] [memory]
+    .venv/bin/python experiments/assembly_long_capture.py run 1000 160 relax_rest=true  # options
 """
 
 from __future__ import annotations
@@ -35,32 +36,36 @@ from long_capture import score
 OUT = Path(tempfile.gettempdir()) / "fourd-assembly-long-capture"
 
 
-def _name(frames: int, rays: int, memory: bool) -> str:
-    return f"{frames}-{rays}{'-memory' if memory else ''}"
+def _name(frames: int, rays: int, memory: bool, settings: str = "") -> str:
+    return f"{frames}-{rays}{'-memory' if memory else ''}{'-' + settings if settings else ''}"
 
 
-def run(frames: int, rays: int, memory: bool) -> dict:
+def run(frames: int, rays: int, memory: bool, settings: str = "") -> dict:
     from fourd.io.npz import write_npz
-    from fourd.methods.assembly import Options, reconstruct, reconstruct_streamed
+    from fourd.methods import method_options
+    from fourd.methods.assembly import reconstruct, reconstruct_streamed
     from fourd.synth.whole_capture import long_capture
 
     OUT.mkdir(exist_ok=True)
     capture = long_capture(frames, resolution=rays)
-    path = OUT / f"{_name(frames, rays, memory)}.npz"
+    path = OUT / f"{_name(frames, rays, memory, settings)}.npz"
+    values = dict(pair.split("=", 1) for pair in settings.split(",")) if settings else {}
+    options = method_options("assembly", values)
     started = time.perf_counter()
     if memory:
-        result = reconstruct(capture.source.read(0, frames), Options())
+        result = reconstruct(capture.source.read(0, frames), options)
         seconds = time.perf_counter() - started
         write_npz(path, result)
         vertices, windows = result.vertices.shape[1], 1
     else:
-        summary = reconstruct_streamed(capture.source, path, Options())
+        summary = reconstruct_streamed(capture.source, path, options)
         seconds = time.perf_counter() - started
         vertices, windows = summary.vertices, summary.windows
     row = {
         "frames": frames,
         "rays": rays,
         "memory": memory,
+        "settings": settings,
         "windows": windows,
         "vertices": vertices,
         "s_per_frame": round(seconds / frames, 3),
@@ -75,13 +80,14 @@ def run(frames: int, rays: int, memory: bool) -> dict:
 if __name__ == "__main__":
     kind, frames = sys.argv[1], int(sys.argv[2])
     rays = int(sys.argv[3]) if len(sys.argv) > 3 else 400
+    settings = next((arg for arg in sys.argv[4:] if "=" in arg), "")
     if kind == "score":
-        memory = len(sys.argv) > 4 and sys.argv[4] == "memory"
-        target = OUT / f"{_name(frames, rays, memory)}.npz"
+        memory = "memory" in sys.argv[4:]
+        target = OUT / f"{_name(frames, rays, memory, settings)}.npz"
         link = OUT / "scored" / f"{frames}.npz"
         link.parent.mkdir(exist_ok=True)
         link.unlink(missing_ok=True)
         link.symlink_to(target)
         score(frames, link.parent)
     else:
-        run(frames, rays, kind == "memory")
+        run(frames, rays, kind == "memory", settings)
