@@ -170,3 +170,31 @@ def test_a_streamed_run_refuses_what_it_cannot_stream(tmp_path, change, match):
         reconstruct_streamed(FrameSource.of(seq), tmp_path / "take.npz", Options(**change))
     with pytest.raises(ValueError, match="window"):
         Options(window=1)
+
+
+def test_each_window_takes_the_video_anchors_of_its_pairs_and_of_its_seam(tmp_path, monkeypatch):
+    """With the video's anchors, a window is read from two frames before it (their tracking
+    needs the pair before), and its merges get the anchors of the seam's pair and its own."""
+    from fourd.methods.assembly.guides import Guide
+    from fourd.methods.assembly.hierarchy import Block
+
+    seq, _, _ = _turning_capture(frames=7)
+    taken, read = [], []
+
+    def pair_guides(frames, options):
+        read.append(frames.times.tolist())
+        times = frames.times
+        return [Guide(np.full((1, 3), times[k]), np.full((1, 3), times[k + 1])) for k in range(len(times) - 1)]
+
+    def assemble(blocks, options, *, guides=None, onto=False, **kwargs):
+        taken.append([float(g.source[0, 0]) for g in guides])
+        count = blocks[0].vertices.shape[1]  # every block as the first's mesh: only the order matters
+        frames = sum(len(b.vertices) for b in blocks)
+        return Block(blocks[0].faces, np.zeros((frames, count, 3)), np.ones((frames, count), bool)), []
+
+    monkeypatch.setattr(stream, "frame_pair_guides", pair_guides)
+    monkeypatch.setattr(stream, "assemble", assemble)
+    options = Options(anchors="video", color_fit=False, close_holes=0, window=3, workers=1)
+    reconstruct_streamed(FrameSource.of(seq), tmp_path / "take.npz", options)
+    assert read == [[0, 1, 2], [1, 2, 3, 4, 5], [4, 5, 6]]
+    assert taken == [[0, 1], [2, 3, 4], [5]]

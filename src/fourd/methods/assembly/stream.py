@@ -145,7 +145,9 @@ def reconstruct_streamed(
             progress(total=len(source) - 1, desc="assembly merges", unit="merge")
         )
         for index, (start, stop) in enumerate(spans):
-            seq = source.read(start, stop)
+            lead = run.lead(start)
+            read = source.read(start - lead, stop)
+            seq = read[lead:]
             if cache.enabled:
                 key = stage_key(
                     key,
@@ -160,7 +162,7 @@ def reconstruct_streamed(
             else:
                 if resumed and resumed == index:
                     report_resumed(log, f"{resumed} of {len(spans)} windows")
-                written = run.window(seq, start, pool, on_merge=lambda: bar.update(1))
+                written = run.window(read, lead, pool, on_merge=lambda: bar.update(1))
                 if cache.enabled:
                     cache.save(STAGE, key, run.entry(written))
             if writer is None:
@@ -207,18 +209,24 @@ class _Run:
     def vertex_count(self) -> int:
         return self.last.vertices.shape[1] if self.closing is None else len(self.closing.vertices)
 
-    def window(self, seq, start: int, pool, on_merge) -> Block:
-        """Assemble the frames ``seq`` (from frame ``start`` on) onto the frames before: the
-        window's frames as written (colour fit, holes closed)."""
-        options = self.options
-        if self.first_mesh is not None and start == 0:
+    def lead(self, start: int) -> int:
+        """Frames read before a window starting at frame ``start``: the video's anchors track
+        its pairs from two frames before it (the tracking of a pair reuses the images as the
+        pair before left them), the seam's pair included."""
+        return min(start, 2) if self.video_anchors else 0
+
+    def window(self, read, lead: int, pool, on_merge) -> Block:
+        """Assemble the window's frames (``read``, after its first ``lead`` frames) onto the
+        frames before: the window's frames as written (colour fit, holes closed)."""
+        options, seq, first_window = self.options, read[lead:], self.last is None
+        if first_window and self.first_mesh is not None:
             rest = frame_meshes(seq, options, pool, frames=slice(1, None))
             meshes = [self.first_mesh] + rest
         else:
             meshes = frame_meshes(seq, options, pool)
         blocks = base_blocks(seq, meshes)
-        guides = self._guides(seq, start)
-        if self.last is None:
+        guides = self._guides(read, lead, first_window)
+        if first_window:
             block, _ = assemble(blocks, options, on_merge=on_merge, pool=pool, guides=guides)
         else:
             block, _ = assemble(
@@ -231,13 +239,15 @@ class _Run:
             )
             block = Block(block.faces, block.vertices[1:], block.observed[1:])
         self.last = Block(block.faces, block.vertices[-1:], block.observed[-1:])
-        colors = frame_colors(seq, meshes) if options.color_fit else None
-        if self.first is None:
+        # the colours (from the video, a render per frame) only while the fit can use them
+        wanted = options.color_fit and (first_window or self.color_fit is not None)
+        colors = frame_colors(seq, meshes) if wanted else None
+        if first_window:
             self.first = Block(block.faces, block.vertices[:1], block.observed[:1])
             self._start(meshes, colors)
         vertices = block.vertices.copy()
         if self.color_fit is not None and colors is not None:
-            for t in range(1 if start == 0 else 0, len(vertices)):
+            for t in range(1 if first_window else 0, len(vertices)):
                 fitted = self.color_fit.frame(vertices[t], block.observed[t], meshes[t], colors[t])
                 if fitted is not None:
                     vertices[t] = fitted
@@ -263,15 +273,13 @@ class _Run:
                 first.vertices[0], first.faces, options.close_holes, options.close_smoothness
             )
 
-    def _guides(self, seq, start: int):
-        """The video's anchors of the window's pairs, the seam's pair first (None without)."""
+    def _guides(self, read, lead: int, first_window: bool):
+        """The video's anchors of the window's pairs, the seam's pair first (None without):
+        tracked over all the frames ``read``, those of the pairs before the seam dropped."""
         if not self.video_anchors:
             return None
-        if start == 0:
-            return frame_pair_guides(seq, self.options)
-        lead = max(start - 2, 0)
-        guides = frame_pair_guides(self.source.read(lead, start + len(seq)), self.options)
-        return guides[start - 1 - lead :]
+        guides = frame_pair_guides(read, self.options)
+        return guides if first_window else guides[lead - 1 :]
 
     def entry(self, written: Block) -> dict[str, np.ndarray]:
         """The cache entry of a finished window: its frames as ``written`` and the state the
