@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from fourd.geometry.closest_point import closest_on_triangles, closest_points_on_mesh
+from fourd.geometry.closest_point import MeshLocator, closest_on_triangles, closest_points_on_mesh
 
 
 def _brute_force(vertices, faces, points):
@@ -54,3 +54,30 @@ def test_zero_area_triangles_give_their_edges_closest_point_not_nan():
         end = np.array(c if np.linalg.norm(c) >= np.linalg.norm(b) else b)
         t = np.clip(points @ end / (end @ end), 0.0, 1.0)
         np.testing.assert_allclose(found, t[:, None] * end, atol=1e-12)
+
+
+def test_the_compiled_locator_finds_what_the_vectorised_search_finds():
+    sphere = trimesh.creation.icosphere(subdivisions=3)
+    rng = np.random.default_rng(2)
+    vertices = sphere.vertices * (1.0 + 0.05 * rng.standard_normal((len(sphere.vertices), 1)))
+    edge = float(np.median(sphere.edges_unique_length))
+    points = vertices[rng.integers(0, len(vertices), 400)] + rng.normal(scale=edge, size=(400, 3))
+    locator = MeshLocator(vertices, sphere.faces)
+    for batch in (points, points[:7] + 0.1 * edge):  # one tree, several queries
+        found, expected = locator.closest(batch), closest_points_on_mesh(vertices, sphere.faces, batch)
+        np.testing.assert_allclose(found.distances, expected.distances, atol=1e-12)
+        np.testing.assert_allclose(found.points, expected.points, atol=1e-12)
+        on_triangle = np.einsum("mk,mkd->md", found.barycentric, vertices[sphere.faces[found.triangle]])
+        np.testing.assert_allclose(on_triangle, found.points, atol=1e-12)
+    # zero-area triangles (collinear corners, two corners at one place: divisions by zero
+    # on the way) give their edges' closest point, as the vectorised search does
+    corners = np.array([[0.0, 0, 0], [1, 0, 0], [2, 0, 0], [1, 0, 0], [0, 1, 0]])
+    points = np.random.default_rng(3).normal(size=(300, 3))
+    for triangle in ([0, 1, 2], [0, 1, 3], [0, 0, 4], [1, 1, 1]):
+        found = MeshLocator(corners, [triangle]).closest(points)
+        expected = closest_points_on_mesh(corners, [triangle], points)
+        assert np.isfinite(found.points).all() and (found.triangle == 0).all()
+        np.testing.assert_allclose(found.distances, expected.distances, atol=1e-12)
+    line = corners[:3]
+    with pytest.raises(ValueError, match="no faces"):
+        MeshLocator(line, np.zeros((0, 3), dtype=int))
