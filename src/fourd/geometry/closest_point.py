@@ -183,11 +183,20 @@ class MeshLocator:
         self.tree = cKDTree(self.corners.mean(axis=1))
         self.candidates = min(int(candidates), len(faces))
 
-    def closest(self, points: np.ndarray) -> ClosestPoints:
-        """The closest mesh point of each of ``points [M, 3]`` (over its candidates)."""
+    def nearest_triangles(self, points: np.ndarray) -> np.ndarray:
+        """The ``candidates`` triangles ``[M, k]`` with the centroids nearest each of ``points
+        [M, 3]``."""
+        points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+        near = self.tree.query(points, k=self.candidates, workers=-1)[1]
+        return np.ascontiguousarray(near, dtype=np.int64).reshape(len(points), self.candidates)
+
+    def closest(self, points: np.ndarray, candidates: np.ndarray | None = None) -> ClosestPoints:
+        """The closest mesh point of each of ``points [M, 3]`` over its candidate triangles:
+        ``candidates [M, k]`` (from :meth:`nearest_triangles` of points near these: a fit
+        whose vertices moved little since can keep them), else its nearest ones."""
         points = np.ascontiguousarray(np.asarray(points, dtype=np.float64).reshape(-1, 3))
-        near = self.tree.query(points, k=self.candidates, workers=-1)[1].reshape(len(points), self.candidates)
-        return ClosestPoints(*_closest_compiled(points, self.corners, np.ascontiguousarray(near, dtype=np.int64)))
+        near = self.nearest_triangles(points) if candidates is None else np.ascontiguousarray(candidates, np.int64)
+        return ClosestPoints(*_closest_compiled(points, self.corners, near))
 
 
 @numba.njit(cache=True, nogil=True, parallel=True, error_model="numpy")

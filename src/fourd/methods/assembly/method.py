@@ -13,8 +13,10 @@ assembly of :mod:`~fourd.methods.assembly.hierarchy`.
    ``cache_dir`` is set (:mod:`~fourd.methods.assembly.merge_map`). With ``window``, one
    hierarchy per window of frames, the windows merged in order: what a streamed run does
    (:mod:`~fourd.methods.assembly.stream`).
-3. With colours in the input, every frame slid along its own surface to where the first
-   frame's colours are (``color_fit``, :mod:`~fourd.methods.assembly.color_fit`).
+3. Every frame slid along its own surface towards the shape most as-rigid-as-possible to the
+   first frame's (``rest_fit``, :mod:`~fourd.methods.assembly.rest_fit`); then, with colours
+   in the input, to where the first frame's colours are (``color_fit``,
+   :mod:`~fourd.methods.assembly.color_fit`).
 4. The holes no frame filled are closed by the membrane of 3.6.2 (``close_holes``), placed in
    every frame from that frame's rim, unobserved (:func:`close_small_holes`).
 """
@@ -36,6 +38,7 @@ from fourd.methods.assembly.color_fit import fit_colors, frame_colors
 from fourd.methods.assembly.guides import Guide, read_guides, video_guides
 from fourd.methods.assembly.hierarchy import Block, MergePool, assemble, merge_pool
 from fourd.methods.assembly.options import ANCHOR_SOURCES, Options
+from fourd.methods.assembly.rest_fit import fit_rest
 from fourd.methods.base import Reconstruction
 from fourd.progress import progress
 from fourd.sequence import PointCloudSequence
@@ -211,6 +214,10 @@ def reconstruct_with_diagnostics(seq: PointCloudSequence, options: Options | Non
         log.info("assembling %d frames (%d merges)", len(blocks), len(blocks) - 1)
         with progress(total=len(blocks) - 1, desc="assembly merges", unit="merge") as bar:
             block, reports = assemble(blocks, options, on_merge=lambda: bar.update(1), pool=pool, guides=guides)
+    if options.rest_fit:
+        block = Block(block.faces, fit_rest(block.vertices, block.faces, block.observed, meshes,
+                                            iterations=options.rest_fit, weight=options.rest_weight,
+                                            cache=StageCache(options.cache_dir)), block.observed)
     if options.color_fit:
         block = _fit_colors(seq, meshes, block, options)
     if options.close_holes > 0:

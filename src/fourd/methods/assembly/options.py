@@ -238,6 +238,16 @@ class Options(SurfaceSettings):
         0.0647 / 0.1209 -> 0.0032 / 0.0055), the whole 175-frame crane capture half
         (0.0200 / 0.0353 -> 0.0105 / 0.0203), for 0.3-2 s a frame; none on skin
         (``benchmarks/METHODS.md``).
+    rest_fit : int
+        ARAP-ICP rounds per frame that slide each assembled frame along its own surface towards
+        the shape most as-rigid-as-possible to the first frame
+        (:mod:`~fourd.methods.assembly.rest_fit`), before the colour fit; 0: off. Each pair
+        map's relaxation keeps its source's shape, so its slides and distortions add up along
+        the chain of maps; measured against the first frame they do not.
+    rest_weight : float
+        The frame's surface's pull in that fit, against the ARAP energy (relative to the first
+        frame's cotangent Laplacian's mean diagonal): smaller lets the vertices slide further
+        along the surface per round.
     color_radius : float
         Patch radius of that Lucas-Kanade, in the assembled mesh's edges.
     color_scale : float
@@ -378,6 +388,8 @@ class Options(SurfaceSettings):
     anchor_texture: float = 3.0
     guide_pull: float = 16.0
     color_fit: bool = True
+    rest_fit: int = 16
+    rest_weight: float = 0.03
     color_radius: float = 5.0
     color_scale: float = 0.5
     anchor_spacing: float = 2.0
@@ -412,7 +424,7 @@ class Options(SurfaceSettings):
         if not self.correct_stretch > 1:
             raise ValueError(f"correct_stretch must be > 1, got {self.correct_stretch!r}")
         for name in ("anchor_spacing", "anchor_gap", "anchor_tolerance", "correct_motion", "alignment_weight",
-                     "map_agreement", "color_radius", "color_scale"):
+                     "map_agreement", "color_radius", "color_scale", "rest_weight"):
             value = getattr(self, name)
             if not (np.isfinite(value) and value > 0):
                 raise ValueError(f"{name} must be positive, got {value!r}")
@@ -427,7 +439,7 @@ class Options(SurfaceSettings):
             raise ValueError(f"relax_tolerance must lie in [0, 1), got {self.relax_tolerance!r}")
         if not 0.0 <= self.alignment_coarse < 1.0:
             raise ValueError(f"alignment_coarse must lie in [0, 1), got {self.alignment_coarse!r}")
-        for name in ("alignment_iterations", "relax_sweeps", "registration_iterations"):
+        for name in ("alignment_iterations", "relax_sweeps", "registration_iterations", "rest_fit"):
             value = getattr(self, name)
             if int(value) != value or value < 0:
                 raise ValueError(f"{name} must be a non-negative integer, got {value!r}")

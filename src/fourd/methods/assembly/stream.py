@@ -14,9 +14,10 @@ side by side in the merge processes.
 
 The result is :func:`~fourd.methods.assembly.reconstruct` with ``window`` set (the hierarchy
 of :func:`~fourd.methods.assembly.hierarchy.merge_tree` in windows), computed in another
-order: the same maps of the same frames, the colour fit carried from frame to frame across
-the windows (:class:`~fourd.methods.assembly.color_fit.ColorFit`, against the first frame's
-colours), the holes found in the first frame and closed in every frame
+order: the same maps of the same frames, the rest fit and the colour fit carried from frame to
+frame across the windows (:class:`~fourd.methods.assembly.rest_fit.RestFit`, against the first
+frame's shape, and :class:`~fourd.methods.assembly.color_fit.ColorFit`, against its colours),
+the holes found in the first frame and closed in every frame
 (:class:`~fourd.methods.assembly.method.HoleClosing`). What the run in memory decides from all
 frames is decided per window: where the colours come from (the points' when every frame of
 the window has them, else the video), and which frame an empty frame borrows its mesh from.
@@ -56,6 +57,7 @@ from fourd.methods.assembly.method import (
     takes_video_anchors,
 )
 from fourd.methods.assembly.options import ANCHOR_SOURCES, STREAM_WINDOW, Options
+from fourd.methods.assembly.rest_fit import RestFit
 from fourd.methods.base import StreamSummary
 from fourd.progress import progress
 
@@ -189,12 +191,14 @@ def reconstruct_streamed(
 
 class _Run:
     """What goes from one window to the next: the last frame as assembled (the next seam's
-    source), the colour fit's state and the holes' membranes, both made in the first frame."""
+    source), the rest fit's and the colour fit's state and the holes' membranes, all made in
+    the first frame."""
 
     def __init__(self, source: FrameSource, options: Options):
         self.source, self.options = source, options
         self.video_anchors = takes_video_anchors(options, source.video is not None)
         self.last: Block | None = None  # the last frame written, as assembled
+        self.rest_fit: RestFit | None = None
         self.color_fit: ColorFit | None = None
         self.closing: HoleClosing | None = None
         # the first frame as assembled (what the two above come from), and its own mesh
@@ -246,6 +250,9 @@ class _Run:
             self.first = Block(block.faces, block.vertices[:1], block.observed[:1])
             self._start(meshes, colors)
         vertices = block.vertices.copy()
+        if self.rest_fit is not None:
+            for t in range(1 if first_window else 0, len(vertices)):
+                vertices[t] = self.rest_fit.frame(vertices[t], block.observed[t], meshes[t])
         if self.color_fit is not None and colors is not None:
             for t in range(1 if first_window else 0, len(vertices)):
                 fitted = self.color_fit.frame(vertices[t], block.observed[t], meshes[t], colors[t])
@@ -255,9 +262,12 @@ class _Run:
         return written if self.closing is None else self.closing.apply(written)
 
     def _start(self, meshes, colors) -> None:
-        """The colour fit and the holes' membranes, from the first frame (``meshes`` and their
-        ``colors``: the first window's)."""
+        """The rest fit, the colour fit and the holes' membranes, from the first frame
+        (``meshes`` and their ``colors``: the first window's)."""
         options, first = self.options, self.first
+        if options.rest_fit:
+            self.rest_fit = RestFit(first.vertices[0], first.faces, iterations=options.rest_fit,
+                                    weight=options.rest_weight)
         if colors is not None:
             self.color_fit = ColorFit.start(
                 first.vertices[0],
@@ -293,6 +303,8 @@ class _Run:
             "first": self.first.vertices[0],
             "first_observed": self.first.observed[0],
         }
+        if self.rest_fit is not None:
+            arrays["rest_carried"] = self.rest_fit.carried
         if self.color_fit is not None:
             fit = self.color_fit
             arrays |= {
@@ -319,10 +331,15 @@ class _Run:
                     radius=options.color_radius,
                     scale=options.color_scale,
                 )
+            if options.rest_fit:
+                self.rest_fit = RestFit(self.first.vertices[0], faces, iterations=options.rest_fit,
+                                        weight=options.rest_weight)
             if options.close_holes > 0:
                 self.closing = holes_to_close(
                     self.first.vertices[0], faces, options.close_holes, options.close_smoothness
                 )
+        if self.rest_fit is not None:
+            self.rest_fit.carried = entry["rest_carried"]
         if self.color_fit is not None:
             self.color_fit.carried = entry["color_carried"]
         return Block(faces, entry["vertices"], entry["observed"])
