@@ -7,10 +7,10 @@ With ``paste`` and ``correct`` off a merge never changes its left block's frames
 block is the left block's frames followed by the right block's, carried into the left
 block's connectivity by the pair map of the left block's last frame. So once a window is
 merged onto the frames before it, its frames are final, and the next window's merge needs
-only its last frame (assembled, before the colour fit). Each window's merges are
-:func:`~fourd.methods.assembly.hierarchy.assemble`'s with ``onto`` (that last frame as block
-0, the window's frames as the others): the maps of the window's pairs and the seam's pair run
-side by side in the merge processes.
+only its last frame (assembled, before the rest fit and the colour fit). Each window's
+merges are :func:`~fourd.methods.assembly.hierarchy.assemble`'s with ``onto`` (that last
+frame as block 0, the window's frames as the others): the maps of the window's pairs and the
+seam's pair run side by side in the merge processes.
 
 The result is :func:`~fourd.methods.assembly.reconstruct` with ``window`` set (the hierarchy
 of :func:`~fourd.methods.assembly.hierarchy.merge_tree` in windows), computed in another
@@ -265,9 +265,7 @@ class _Run:
         """The rest fit, the colour fit and the holes' membranes, from the first frame
         (``meshes`` and their ``colors``: the first window's)."""
         options, first = self.options, self.first
-        if options.rest_fit:
-            self.rest_fit = RestFit(first.vertices[0], first.faces, iterations=options.rest_fit,
-                                    weight=options.rest_weight)
+        self._start_rest_fit()
         if colors is not None:
             self.color_fit = ColorFit.start(
                 first.vertices[0],
@@ -281,6 +279,17 @@ class _Run:
         if options.close_holes > 0:
             self.closing = holes_to_close(
                 first.vertices[0], first.faces, options.close_holes, options.close_smoothness
+            )
+
+    def _start_rest_fit(self) -> None:
+        """The rest fit against the first frame as assembled, when ``rest_fit`` is on."""
+        options = self.options
+        if options.rest_fit:
+            self.rest_fit = RestFit(
+                self.first.vertices[0],
+                self.first.faces,
+                iterations=options.rest_fit,
+                weight=options.rest_weight,
             )
 
     def _guides(self, read, lead: int, first_window: bool):
@@ -331,9 +340,7 @@ class _Run:
                     radius=options.color_radius,
                     scale=options.color_scale,
                 )
-            if options.rest_fit:
-                self.rest_fit = RestFit(self.first.vertices[0], faces, iterations=options.rest_fit,
-                                        weight=options.rest_weight)
+            self._start_rest_fit()
             if options.close_holes > 0:
                 self.closing = holes_to_close(
                     self.first.vertices[0], faces, options.close_holes, options.close_smoothness
