@@ -239,11 +239,12 @@ class Options(SurfaceSettings):
         (0.0200 / 0.0353 -> 0.0105 / 0.0203), for 0.3-2 s a frame; none on skin
         (``benchmarks/METHODS.md``).
     rest_fit : int
-        ARAP-ICP rounds per frame that slide each assembled frame along its own surface towards
-        the shape most as-rigid-as-possible to the first frame
-        (:mod:`~fourd.methods.assembly.rest_fit`), before the colour fit; 0: off. Each pair
-        map's relaxation keeps its source's shape, so its slides and distortions add up along
-        the chain of maps; measured against the first frame they do not.
+        At most this many ARAP-ICP rounds per frame slide each assembled frame along its own
+        surface towards the shape most as-rigid-as-possible to the first frame
+        (:mod:`~fourd.methods.assembly.rest_fit`), before the colour fit; fewer once a round
+        barely moves the vertices; 0: off. Each pair map's relaxation keeps its source's shape,
+        so its slides and distortions add up along the chain of maps; measured against the
+        first frame they do not.
     rest_weight : float
         The frame's surface's pull in that fit, against the ARAP energy (relative to the first
         frame's cotangent Laplacian's mean diagonal): smaller lets the vertices slide further
