@@ -147,12 +147,13 @@ class RestFit:
             for _ in range(self.iterations):
                 rotations = one_ring_rotations(self.edges, self.first, x)
                 right = arap_right_hand_side(self.edges, self.first, rotations)
-                stale = np.linalg.norm(x[seen] - queried, axis=1) > REQUERY * self.edge
+                on = x[seen]
+                stale = np.linalg.norm(on - queried, axis=1) > REQUERY * self.edge
                 if stale.any():
-                    queried[stale] = x[seen][stale]
+                    queried[stale] = on[stale]
                     near[stale] = surface.nearest_triangles(queried[stale])
                 target = x.copy()
-                target[seen] = surface.closest(x[seen], near).points
+                target[seen] = surface.closest(on, near).points
                 moved, x = x, self._solve(right + self.pull * target)
                 if np.median(np.linalg.norm(x - moved, axis=1)) < self.settled * self.edge:
                     break
