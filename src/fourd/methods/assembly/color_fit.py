@@ -34,13 +34,13 @@ from scipy.sparse.linalg import splu
 from fourd.appearance.color_guide import colors_of_cleaned
 from fourd.appearance.photometric import photometric_shift
 from fourd.appearance.surface_color import FIELD_POINTS_PER_READ, ColorField, field_for_reads
-from fourd.cache import NO_CACHE, Chain, StageCache, report_resumed, stage_key
+from fourd.cache import NO_CACHE, StageCache, stage_key
 from fourd.geometry.closest_point import closest_points_on_mesh
 from fourd.geometry.grid import one_per_cube
 from fourd.geometry.laplacian import uniform_laplacian
 from fourd.geometry.meshes import median_edge_length
 from fourd.geometry.normals import vertex_normals
-from fourd.progress import progress
+from fourd.methods.assembly.frame_fits import fit_frames
 
 log = logging.getLogger("fourd.methods.assembly.color_fit")
 
@@ -181,22 +181,7 @@ def fit_colors(positions: np.ndarray, faces: np.ndarray, observed: np.ndarray, m
                          smoothness=smoothness, iterations=iterations)
     if fit is None:
         return positions
-    chain, done = None, []
-    if cache.enabled:  # the keys hash every frame: only when there is a cache
-        chain = Chain.of(cache, STAGE, stage_key(fit.key(), positions, observed),
-                         [(meshes[t], colors[t]) for t in range(1, len(positions))])
-        done = chain.prefix()
-    for t, entry in enumerate(done, start=1):
-        if not entry["skipped"]:
-            fit.resume(positions[t], entry["positions"])
-            positions[t] = entry["positions"]
-    if done:
-        report_resumed(log, f"{len(done)} of {len(positions) - 1} frames' colour fit")
-    for t in progress(range(len(done) + 1, len(positions)), desc="assembly colour fit", unit="frame"):
-        fitted = fit.frame(positions[t], observed[t], meshes[t], colors[t])
-        if fitted is not None:
-            positions[t] = fitted
-        if chain is not None:
-            skipped = fitted is None
-            chain.save(t - 1, {"positions": np.zeros((0, 3)) if skipped else fitted, "skipped": np.bool_(skipped)})
-    return positions
+    return fit_frames(fit, positions, lambda t: fit.frame(positions[t], observed[t], meshes[t], colors[t]),
+                      stage=STAGE, key=stage_key(fit.key(), positions, observed),
+                      inputs=[(meshes[t], colors[t]) for t in range(1, len(positions))], label="colour fit",
+                      cache=cache)

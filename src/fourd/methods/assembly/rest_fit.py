@@ -42,7 +42,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.linalg import splu
 
-from fourd.cache import NO_CACHE, Chain, StageCache, report_resumed, stage_key
+from fourd.cache import NO_CACHE, StageCache, stage_key
 from fourd.geometry.closest_point import MeshLocator
 from fourd.geometry.factors import (
     TriangularFactors,
@@ -53,7 +53,7 @@ from fourd.geometry.factors import (
 from fourd.geometry.laplacian import cotangent_weights, weights_laplacian
 from fourd.geometry.meshes import median_edge_length
 from fourd.geometry.rotations import arap_right_hand_side, one_ring_rotations
-from fourd.progress import progress
+from fourd.methods.assembly.frame_fits import fit_frames
 
 log = logging.getLogger("fourd.methods.assembly.rest_fit")
 
@@ -200,22 +200,13 @@ def fit_rest(
     if iterations <= 0 or len(positions) < 2:
         return positions
     fit = RestFit(positions[0], faces, iterations=iterations, weight=weight, settled=settled)
-    chain, done = None, []
-    if cache.enabled:  # the keys hash every frame: only when there is a cache
-        chain = Chain.of(
-            cache,
-            STAGE,
-            stage_key(fit.key(), positions, observed),
-            [meshes[t] for t in range(1, len(positions))],
-        )
-        done = chain.prefix()
-    for t, entry in enumerate(done, start=1):
-        fit.resume(positions[t], entry["positions"])
-        positions[t] = entry["positions"]
-    if done:
-        report_resumed(log, f"{len(done)} of {len(positions) - 1} frames' rest fit")
-    for t in progress(range(len(done) + 1, len(positions)), desc="assembly rest fit", unit="frame"):
-        positions[t] = fit.frame(positions[t], observed[t], meshes[t])
-        if chain is not None:
-            chain.save(t - 1, {"positions": positions[t]})
-    return positions
+    return fit_frames(
+        fit,
+        positions,
+        lambda t: fit.frame(positions[t], observed[t], meshes[t]),
+        stage=STAGE,
+        key=stage_key(fit.key(), positions, observed),
+        inputs=[meshes[t] for t in range(1, len(positions))],
+        label="rest fit",
+        cache=cache,
+    )
