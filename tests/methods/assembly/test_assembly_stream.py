@@ -4,6 +4,7 @@ memory, a rerun resuming after the last finished window."""
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 
 import numpy as np
@@ -95,6 +96,31 @@ def test_a_streamed_run_writes_the_windowed_run_in_memory(tmp_path):
     error = np.linalg.norm(written.vertices[:, :count] - truth, axis=2) / edge
     # measured: median 0.03 edges, 95th percentile 0.07
     assert np.median(error) < 0.2 and np.percentile(error, 95) < 0.5, np.percentile(error, [50, 95])
+
+
+def test_each_seam_starts_from_the_last_frame_as_fitted(tmp_path, monkeypatch):
+    """The seam's map starts from the window before's last frame as written (rest fit and
+    colour fit done), not as the chain of maps left it: the fits' corrections are not carried
+    into the next window's maps as wear."""
+    seq, _, _ = _turning_capture(frames=5)
+    sources, real = [], stream.assemble
+
+    def spy(blocks, options, **kwargs):
+        if kwargs.get("onto"):
+            sources.append(blocks[0].vertices[0].copy())
+        return real(blocks, options, **kwargs)
+
+    monkeypatch.setattr(stream, "assemble", spy)
+    options = Options(relax_sweeps=2, workers=1, window=2)
+    summary = reconstruct_streamed(FrameSource.of(seq), tmp_path / "take.npz", options)
+    written = read_npz(summary.output).vertices
+    assert len(sources) == 2  # the seams before frames 2 and 4
+    count = len(sources[0])  # the written frames have the holes' membranes after these
+    for source, last in zip(sources, (1, 3), strict=True):
+        np.testing.assert_allclose(source, written[last, :count], atol=1e-6)  # the file's float32
+    # and the fits did move those frames: the seam would have started elsewhere
+    unfitted = reconstruct(seq, dataclasses.replace(options, rest_fit=0, color_fit=False))
+    assert np.abs(unfitted.vertices[1, :count] - sources[0]).max() > 1e-4
 
 
 def test_windows_give_the_result_of_one_hierarchy_within_tolerance():

@@ -367,8 +367,11 @@ class Options(SurfaceSettings):
         run needs one window of frames at a time (``fourd reconstruct --stream``, where 0
         takes :data:`STREAM_WINDOW`). 0 (the default, in memory): one hierarchy over the whole
         sequence. Every consecutive frame pair is mapped once either way; the windows change
-        which frame's connectivity a later map starts from. ``paste`` and ``correct`` rewrite
-        frames already assembled, so a streamed run refuses them.
+        which frame's connectivity a later map starts from, and each window's frames are
+        fitted (``rest_fit``, ``color_fit``) before the next window's seam starts from its last
+        frame as fitted, so the chain of maps does not carry its wear past a window (over a
+        1,000-frame take its drift stops climbing). ``paste``, ``correct`` and an anchors file
+        need the whole sequence at once, so a run in windows refuses them.
     workers : int
         Merges of one level of the hierarchy run in this many processes (they are
         independent, 5.3), with the same result; 1 runs them one after the other; 0 (the

@@ -7,23 +7,27 @@ With ``paste`` and ``correct`` off a merge never changes its left block's frames
 block is the left block's frames followed by the right block's, carried into the left
 block's connectivity by the pair map of the left block's last frame. So once a window is
 merged onto the frames before it, its frames are final, and the next window's merge needs
-only its last frame (assembled, before the rest fit and the colour fit). Each window's
-merges are :func:`~fourd.methods.assembly.hierarchy.assemble`'s with ``onto`` (that last
-frame as block 0, the window's frames as the others): the maps of the window's pairs and the
-seam's pair run side by side in the merge processes.
+only its last frame. Each window's merges are
+:func:`~fourd.methods.assembly.hierarchy.assemble`'s with ``onto`` (that last frame as block
+0, the window's frames as the others): the maps of the window's pairs and the seam's pair run
+side by side in the merge processes. Then the window's frames are fitted, each from the one
+before: the rest fit (:class:`~fourd.methods.assembly.rest_fit.RestFit`, against the first
+frame's shape) and the colour fit (:class:`~fourd.methods.assembly.color_fit.ColorFit`,
+against its colours); the holes found in the first frame are closed in every frame
+(:class:`~fourd.methods.assembly.method.HoleClosing`).
 
-The result is :func:`~fourd.methods.assembly.reconstruct` with ``window`` set (the hierarchy
-of :func:`~fourd.methods.assembly.hierarchy.merge_tree` in windows), computed in another
-order: the same maps of the same frames, the rest fit and the colour fit carried from frame to
-frame across the windows (:class:`~fourd.methods.assembly.rest_fit.RestFit`, against the first
-frame's shape, and :class:`~fourd.methods.assembly.color_fit.ColorFit`, against its colours),
-the holes found in the first frame and closed in every frame
-(:class:`~fourd.methods.assembly.method.HoleClosing`). What the run in memory decides from all
-frames is decided per window: where the colours come from (the points' when every frame of
-the window has them, else the video), and which frame an empty frame borrows its mesh from.
-With video anchors each window tracks its pairs from two frames before its first (the
-tracking of a pair reuses the images as the pair before left them), the seam's pair
-included.
+The seam's map starts from the previous window's last frame **as fitted**, not as assembled,
+and the fits' corrections start again from nothing: a chain of pair maps slides and wears
+the mesh from map to map, and without this the next window's maps would start from the
+worn mesh, so over a long take the wear grew until a seam's map failed (a sparse take of
+1,000 frames: correspondence 0.058 mean, 0.16 last, climbing 0.01 per 100 frames; re-anchored
+at every seam 0.028 / 0.041, 0.0015 per 100 frames; ``benchmarks/METHODS.md``). The
+windows in memory (``reconstruct`` with ``window``, :func:`assemble_in_windows`) are this
+same loop. What the run over a whole sequence decides from all frames is decided per window:
+where the colours come from (the points' when every frame of the window has them, else the
+video), and which frame an empty frame borrows its mesh from. With video anchors each window
+tracks its pairs from two frames before its first (the tracking of a pair reuses the images
+as the pair before left them), the seam's pair included.
 
 Memory holds a window of frames, their meshes and the window's block, plus the output's
 observed flags; the positions go to the output as they are final. With ``options.cache_dir``
@@ -46,7 +50,7 @@ from fourd.errors import InputError
 from fourd.frame_source import FrameSource
 from fourd.io.npz import npz_frames, streamed_output
 from fourd.methods.assembly.color_fit import ColorFit, frame_colors
-from fourd.methods.assembly.hierarchy import Block, assemble, merge_pool
+from fourd.methods.assembly.hierarchy import Block, MergeReport, assemble, merge_pool
 from fourd.methods.assembly.method import (
     MIN_FRAMES,
     HoleClosing,
@@ -104,28 +108,73 @@ def reconstruct_streamed(
     ----------
     004_f87f5acf96d50b57.txt chapter 5 (5.3, 5.6); the windows are this project's (issue 56).
     """
-    options = options or Options()
+    options = streamable(options or Options(), len(source))
     output = streamed_output(output)
-    if len(source) < MIN_FRAMES:
-        raise InputError(
-            f"the assembly method needs at least {MIN_FRAMES} frames, got {len(source)}"
-        )
+    started = _time.perf_counter()
+    with ExitStack() as stack:
+        writer, run = None, _Run(source, options)
+        for written in _assembled_windows(run):
+            if writer is None:
+                writer = stack.enter_context(
+                    npz_frames(
+                        output, faces=run.closed_faces, times=source.times, rest=written.vertices[0]
+                    )
+                )
+            writer.write(written.vertices, written.observed)
+            log.info(
+                "window %d of %d: %.1f s so far",
+                run.windows_done,
+                len(run.spans),
+                _time.perf_counter() - started,
+            )
+    seconds = _time.perf_counter() - started
+    log.info("assembly, streamed: %d frames in %.1f s", len(source), seconds)
+    return StreamSummary(
+        output, len(source), run.vertex_count, len(run.spans), run.resumed, seconds
+    )
+
+
+def streamable(options: Options, frames: int) -> Options:
+    """``options`` with ``window`` set (0: :data:`STREAM_WINDOW`), after checking that a run
+    over ``frames`` frames can go window by window; InputError when it cannot (module
+    docstring)."""
+    if frames < MIN_FRAMES:
+        raise InputError(f"the assembly method needs at least {MIN_FRAMES} frames, got {frames}")
     for name in ("paste", "correct"):
         if getattr(options, name):
             raise InputError(
-                f"assembly: {name} changes frames already assembled, which a streamed run has "
-                f"written: run it in memory (without --stream) or set {name}=false"
+                f"assembly: {name} changes frames already assembled, which a run in windows "
+                f"has written: run the whole sequence at once (without --stream, window=0) or "
+                f"set {name}=false"
             )
     if options.anchors not in ANCHOR_SOURCES:
         raise InputError(
             f"assembly: an anchors file ({options.anchors}) is read for the whole sequence: "
-            f"run it in memory (without --stream)"
+            f"run it at once (without --stream, window=0)"
         )
-    options = dataclasses.replace(options, window=options.window or STREAM_WINDOW)
-    started = _time.perf_counter()
-    spans = window_spans(len(source), options.window)
+    return dataclasses.replace(options, window=options.window or STREAM_WINDOW)
+
+
+def assemble_in_windows(seq, options: Options) -> tuple[Block, list[MergeReport]]:
+    """The frames of ``seq`` (a :class:`~fourd.sequence.PointCloudSequence`) assembled window
+    by window as a streamed run writes them (fitted, holes closed), kept in memory; and the
+    merges' reports. ``options`` as :func:`streamable` takes them."""
+    options = streamable(options, len(seq))
+    run = _Run(FrameSource.of(seq), options)
+    windows = list(_assembled_windows(run))
+    block = Block(
+        windows[0].faces,
+        np.concatenate([w.vertices for w in windows]),
+        np.concatenate([w.observed for w in windows]),
+    )
+    return block, run.reports
+
+
+def _assembled_windows(run: _Run):
+    """Each window's frames as written (:meth:`_Run.window`, or read from the cache), in
+    order; ``run`` keeps the state between them."""
+    source, options, spans = run.source, run.options, run.spans
     cache = StageCache(options.cache_dir)
-    run = _Run(source, options)
     key = ""
     if cache.enabled:
         video = None if source.video is None else source.video.fingerprint()
@@ -135,14 +184,12 @@ def reconstruct_streamed(
             source.times,
             video,
         )
-    resumed = 0
     # the first frame's mesh decides the merge processes (its size, as in memory)
     first = source.read(0, 1)
     run.first_mesh = frame_meshes(first, options)[0]
     size = len(run.first_mesh[0]) or len(first.frames[0].points)
     with ExitStack() as stack:
         pool = stack.enter_context(merge_pool(options.merge_workers(size)))
-        writer = None
         bar = stack.enter_context(
             progress(total=len(source) - 1, desc="assembly merges", unit="merge")
         )
@@ -159,45 +206,32 @@ def reconstruct_streamed(
             entry = cache.load(STAGE, key) if cache.enabled else None
             if entry is not None:
                 written = run.restore(entry)
-                resumed += 1
+                run.resumed += 1
                 bar.update(stop - start - (index == 0))
             else:
-                if resumed and resumed == index:
-                    report_resumed(log, f"{resumed} of {len(spans)} windows")
+                if run.resumed and run.resumed == index:
+                    report_resumed(log, f"{run.resumed} of {len(spans)} windows")
                 written = run.window(read, lead, pool, on_merge=lambda: bar.update(1))
                 if cache.enabled:
                     cache.save(STAGE, key, run.entry(written))
-            if writer is None:
-                writer = stack.enter_context(
-                    npz_frames(
-                        output, faces=run.closed_faces, times=source.times, rest=written.vertices[0]
-                    )
-                )
-            writer.write(written.vertices, written.observed)
-            log.info(
-                "window %d of %d (frames %d-%d): %.1f s so far",
-                index + 1,
-                len(spans),
-                start,
-                stop - 1,
-                _time.perf_counter() - started,
-            )
-    if resumed == len(spans):
-        report_resumed(log, f"all {resumed} windows")
-    seconds = _time.perf_counter() - started
-    log.info("assembly, streamed: %d frames in %.1f s", len(source), seconds)
-    return StreamSummary(output, len(source), run.vertex_count, len(spans), resumed, seconds)
+            run.windows_done = index + 1
+            yield written
+    if run.resumed == len(spans):
+        report_resumed(log, f"all {run.resumed} windows")
 
 
 class _Run:
-    """What goes from one window to the next: the last frame as assembled (the next seam's
+    """What goes from one window to the next: the last frame as fitted (the next seam's
     source), the rest fit's and the colour fit's state and the holes' membranes, all made in
     the first frame."""
 
     def __init__(self, source: FrameSource, options: Options):
         self.source, self.options = source, options
+        self.spans = window_spans(len(source), options.window)
+        self.windows_done, self.resumed = 0, 0
+        self.reports: list[MergeReport] = []  # the merges' of the windows assembled here
         self.video_anchors = takes_video_anchors(options, source.video is not None)
-        self.last: Block | None = None  # the last frame written, as assembled
+        self.last: Block | None = None  # the last frame written, before the holes' membranes
         self.rest_fit: RestFit | None = None
         self.color_fit: ColorFit | None = None
         self.closing: HoleClosing | None = None
@@ -231,9 +265,9 @@ class _Run:
         blocks = base_blocks(seq, meshes)
         guides = self._guides(read, lead, first_window)
         if first_window:
-            block, _ = assemble(blocks, options, on_merge=on_merge, pool=pool, guides=guides)
+            block, reports = assemble(blocks, options, on_merge=on_merge, pool=pool, guides=guides)
         else:
-            block, _ = assemble(
+            block, reports = assemble(
                 [self.last] + blocks,
                 options,
                 on_merge=on_merge,
@@ -242,7 +276,7 @@ class _Run:
                 onto=True,
             )
             block = Block(block.faces, block.vertices[1:], block.observed[1:])
-        self.last = Block(block.faces, block.vertices[-1:], block.observed[-1:])
+        self.reports += reports
         # the colours (from the video, a render per frame) only while the fit can use them
         wanted = options.color_fit and (first_window or self.color_fit is not None)
         colors = frame_colors(seq, meshes) if wanted else None
@@ -258,6 +292,15 @@ class _Run:
                 fitted = self.color_fit.frame(vertices[t], block.observed[t], meshes[t], colors[t])
                 if fitted is not None:
                     vertices[t] = fitted
+        # the next seam's map starts from the last frame as fitted: what the fits took back
+        # of the chain's slides and wear stays taken back (over 1,000 frames of a sparse
+        # take, the drift no longer climbs; benchmarks/METHODS.md), and their corrections
+        # start again from nothing
+        self.last = Block(block.faces, vertices[-1:].copy(), block.observed[-1:])
+        if self.rest_fit is not None:
+            self.rest_fit.carried = np.zeros_like(self.rest_fit.carried)
+        if self.color_fit is not None:
+            self.color_fit.carried = np.zeros_like(self.color_fit.carried)
         written = Block(block.faces, vertices, block.observed)
         return written if self.closing is None else self.closing.apply(written)
 
