@@ -69,6 +69,9 @@ log = logging.getLogger("fourd.methods.assembly")
 
 #: The cache entries of finished windows.
 STAGE = "assembly-stream"
+#: Part of their keys: the windows kept before the seams started from the fitted frame hold
+#: another last frame, and must not be resumed from.
+SEAMS = "seams from the fitted frame"
 
 
 def window_spans(count: int, window: int) -> list[tuple[int, int]]:
@@ -180,6 +183,7 @@ def _assembled_windows(run: _Run):
         video = None if source.video is None else source.video.fingerprint()
         key = stage_key(
             STAGE,
+            SEAMS,
             option_values(options, without=("workers", "scheduler", "cache_dir")),
             source.times,
             video,
