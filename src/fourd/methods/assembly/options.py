@@ -15,8 +15,10 @@ from fourd.geometry.frame_surface import SurfaceSettings
 #: starting a worker process costs a few seconds.
 PARALLEL_VERTICES = 5000
 
-#: Frames per window of a streamed run when ``Options.window`` is 0.
-STREAM_WINDOW = 16
+#: Frames per window of a streamed run when ``Options.window`` is 0: each seam re-anchors the
+#: chain of maps to the fitted frame, so shorter windows drift less (1,000 sparse frames:
+#: correspondence 0.018 / 0.025 at 8, 0.028 / 0.041 at 16, and no slower).
+STREAM_WINDOW = 8
 
 #: Named sources of anchors (``Options.anchors``; else the path of an anchors file).
 ANCHOR_SOURCES = ("auto", "geometry", "video")
