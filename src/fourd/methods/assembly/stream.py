@@ -116,7 +116,7 @@ def reconstruct_streamed(
     started = _time.perf_counter()
     with ExitStack() as stack:
         writer, run = None, _Run(source, options)
-        for written in _assembled_windows(run):
+        for index, written in enumerate(_assembled_windows(run)):
             if writer is None:
                 writer = stack.enter_context(
                     npz_frames(
@@ -126,7 +126,7 @@ def reconstruct_streamed(
             writer.write(written.vertices, written.observed)
             log.info(
                 "window %d of %d: %.1f s so far",
-                run.windows_done,
+                index + 1,
                 len(run.spans),
                 _time.perf_counter() - started,
             )
@@ -218,7 +218,6 @@ def _assembled_windows(run: _Run):
                 written = run.window(read, lead, pool, on_merge=lambda: bar.update(1))
                 if cache.enabled:
                     cache.save(STAGE, key, run.entry(written))
-            run.windows_done = index + 1
             yield written
     if run.resumed == len(spans):
         report_resumed(log, f"all {run.resumed} windows")
@@ -232,7 +231,7 @@ class _Run:
     def __init__(self, source: FrameSource, options: Options):
         self.source, self.options = source, options
         self.spans = window_spans(len(source), options.window)
-        self.windows_done, self.resumed = 0, 0
+        self.resumed = 0
         self.reports: list[MergeReport] = []  # the merges' of the windows assembled here
         self.video_anchors = takes_video_anchors(options, source.video is not None)
         self.last: Block | None = None  # the last frame written, before the holes' membranes
