@@ -376,11 +376,10 @@ def test_the_merge_tree_merges_consecutive_blocks_level_by_level():
     from fourd.methods.assembly import hierarchy
 
     assert hierarchy.merge_tree(8) == [(0, 1), (2, 3), (4, 5), (6, 7), (8, 9), (10, 11), (12, 13)]
-    # in windows (Options.window), and onto a result made before (a streamed run's seams)
-    assert hierarchy.merge_tree(6, 3) == [(0, 1), (6, 2), (3, 4), (8, 5), (7, 9)]
+    # onto a result made before (the seams of a run in windows)
     assert hierarchy.merge_tree(4, onto=True) == [(1, 2), (4, 3), (0, 5)]
-    for count, window, onto in itertools.product(range(1, 40), (0, 2, 3, 7), (False, True)):
-        tree = hierarchy.merge_tree(count, window, onto=onto)
+    for count, onto in itertools.product(range(1, 40), (False, True)):
+        tree = hierarchy.merge_tree(count, onto=onto)
         assert len(tree) == count - 1
         spans = {node: (node, node + 1) for node in range(count)}
         made = dict(spans)
@@ -388,11 +387,9 @@ def test_the_merge_tree_merges_consecutive_blocks_level_by_level():
             assert spans[a][1] == spans[b][0]  # consecutive
             spans[count + k] = made[count + k] = (spans.pop(a)[0], spans.pop(b)[1])
         assert list(spans.values()) == [(0, count)]
-        start = 1 if onto and count > 1 else 0
-        if (window and count - start > window) or start:
-            # the last merge puts the last window onto all the frames before it
-            last_first = start + (count - start - 1) // window * window if window else start
-            assert made[tree[-1][0]] == (0, last_first), (count, window, onto)
+        if onto and count > 1:
+            # the last merge puts all the new blocks onto the result made before
+            assert tree[-1][0] == 0 and made[tree[-1][1]] == (1, count), count
 
 
 def test_a_merge_run_in_this_process_sees_its_own_thread_environment(monkeypatch):

@@ -336,22 +336,17 @@ def _test_replacements(union: _Union, paste: Paste, placed, region, drop, option
     return _keep(union, keep), paste._replace(target=paste.target[kept_new], patch=paste.patch[kept_new]), len(replaced)
 
 
-def merge_tree(count: int, window: int = 0, *, onto: bool = False) -> list[tuple[int, int]]:
+def merge_tree(count: int, *, onto: bool = False) -> list[tuple[int, int]]:
     """The merges of the hierarchy over ``count`` blocks, level by level: pairs of node ids,
     ``0 .. count - 1`` the blocks and ``count + k`` the result of the ``k``-th merge (an odd
     last node waits for the next level).
 
-    With ``window``, one hierarchy over each ``window`` consecutive blocks, and each window's
-    result merged onto the result of the windows before it, in order (``Options.window``).
-    With ``onto``, block 0 is a result made before (a streamed run's frames so far): a
-    hierarchy over the other blocks (windowed as above), merged onto it last.
+    With ``onto``, block 0 is a result made before (the frames so far of a run in windows,
+    :mod:`~fourd.methods.assembly.stream`): a hierarchy over the other blocks, merged onto it
+    last.
 
     >>> merge_tree(5)
     [(0, 1), (2, 3), (5, 6), (7, 4)]
-    >>> merge_tree(5, 2)
-    [(0, 1), (2, 3), (5, 6), (7, 4)]
-    >>> merge_tree(6, 3)
-    [(0, 1), (6, 2), (3, 4), (8, 5), (7, 9)]
     >>> merge_tree(4, onto=True)
     [(1, 2), (4, 3), (0, 5)]
     """
@@ -368,13 +363,10 @@ def merge_tree(count: int, window: int = 0, *, onto: bool = False) -> list[tuple
             level = following
         return level[0]
 
-    start = 1 if onto and count > 1 else 0
-    step = window if window > 0 else max(count - start, 1)
-    roots = [hierarchy(list(range(a, min(a + step, count)))) for a in range(start, count, step)]
-    result = 0 if start else roots.pop(0)
-    for root in roots:
-        merges.append((result, root))
-        result = count + len(merges) - 1
+    if onto and count > 1:
+        merges.append((0, hierarchy(list(range(1, count)))))
+    else:
+        hierarchy(list(range(count)))
     return merges
 
 
@@ -395,7 +387,7 @@ def _merge_as_ready(blocks: list[Block], options: Options, pool: MergePool | Non
     merge whose source is block ``t``'s last frame. Returns the last block and the reports in
     merge order."""
     count = len(blocks)
-    merges = merge_tree(count, options.window, onto=onto)
+    merges = merge_tree(count, onto=onto)
     if not merges:
         return blocks[0], []
     last = count + len(merges) - 1
@@ -512,7 +504,8 @@ def assemble(blocks: list[Block], options: Options | None = None, *, on_merge=No
              pool: MergePool | None = None, guides: list[Guide] | None = None,
              onto: bool = False) -> tuple[Block, list[MergeReport]]:
     """Merge ``blocks`` (consecutive, usually one frame each) level by level into one block
-    (module docstring), in windows of ``options.window`` blocks (:func:`merge_tree`).
+    (module docstring, :func:`merge_tree`); ``options.window`` plays no part here (windows
+    are :mod:`~fourd.methods.assembly.stream`'s).
 
     Parameters
     ----------
