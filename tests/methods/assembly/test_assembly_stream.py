@@ -138,6 +138,27 @@ def test_windows_give_the_result_of_one_hierarchy_within_tolerance():
     assert np.percentile(error, 95) < 0.3
 
 
+def test_a_long_sequence_runs_in_windows_by_default(monkeypatch):
+    """With ``window`` 0, a sequence longer than WINDOWED_FRAMES (here 4) runs in windows of
+    STREAM_WINDOW, a shorter one, or one that ``paste`` needs whole, in one hierarchy."""
+    from fourd.methods.assembly import options as options_module
+
+    seq, truth, edge = _turning_capture(frames=5)
+    monkeypatch.setattr(options_module, "WINDOWED_FRAMES", 4)
+    windows, real = [], stream.assemble_in_windows
+
+    def spy(seq, options):
+        windows.append(options.window)
+        return real(seq, options)
+
+    monkeypatch.setattr(stream, "assemble_in_windows", spy)
+    result = reconstruct(seq, Options(relax_sweeps=2, workers=1))
+    assert windows == [options_module.STREAM_WINDOW]
+    error = np.linalg.norm(result.vertices[:, : truth.shape[1]] - truth, axis=2) / edge
+    assert np.percentile(error, 95) < 0.3
+    assert Options().window_for(4) == 0 and Options(paste=True).window_for(5) == 0
+
+
 def test_a_stopped_streamed_run_resumes_after_its_last_finished_window(
     tmp_path, monkeypatch, caplog
 ):

@@ -10,10 +10,11 @@ assembly of :mod:`~fourd.methods.assembly.hierarchy`.
    first frame's connectivity, grown by the geometry only later frames have (5.3, 5.6); each
    merge's anchors come from the geometry, and with ``anchors`` from the capture's video or a
    file too (:mod:`~fourd.methods.assembly.guides`); each merge's map is cached when
-   ``cache_dir`` is set (:mod:`~fourd.methods.assembly.merge_map`). With ``window``, a
-   streamed run's loop in memory (:mod:`~fourd.methods.assembly.stream`): one hierarchy per
-   window of frames merged onto the frames before it, each window fitted (step 3) and closed
-   (step 4) before the next, whose seam starts from its last frame as fitted.
+   ``cache_dir`` is set (:mod:`~fourd.methods.assembly.merge_map`). With ``window`` (by
+   default over a long sequence, :meth:`Options.window_for`), a streamed run's loop in memory
+   (:mod:`~fourd.methods.assembly.stream`): one hierarchy per window of frames merged onto the
+   frames before it, each window fitted (step 3) and closed (step 4) before the next, whose
+   seam starts from its last frame as fitted.
 3. Every frame slid along its own surface towards the shape most as-rigid-as-possible to the
    first frame's (``rest_fit``, :mod:`~fourd.methods.assembly.rest_fit`); then, with colours
    in the input, to where the first frame's colours are (``color_fit``,
@@ -201,11 +202,12 @@ def reconstruct_with_diagnostics(seq: PointCloudSequence, options: Options | Non
     options = Options() if options is None else options
     if len(seq) < 2:
         raise InputError(f"the assembly method needs at least 2 frames, the input has {len(seq)}")
-    if options.window > 0:
+    window = options.window_for(len(seq))
+    if window > 0:
         # a streamed run's loop, kept in memory (stream builds on this module)
         from fourd.methods.assembly.stream import assemble_in_windows
 
-        block, reports = assemble_in_windows(seq, options)
+        block, reports = assemble_in_windows(seq, dataclasses.replace(options, window=window))
         return _reconstruction(seq, block, reports)
     # the first frame's mesh here decides the merge processes (its size, as assemble does);
     # they make the other frames' meshes before the merges
