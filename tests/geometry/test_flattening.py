@@ -3,6 +3,8 @@ isometrically; a curved cap flattens without flips, ABF++ keeping the angles at 
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import pytest
 import trimesh
@@ -135,3 +137,28 @@ def test_small_patches_solved_dense_flatten_as_the_sparse_solve_does(monkeypatch
     dense = lscm(vertices, faces).uv
     monkeypatch.setattr(flattening, "DENSE_UNKNOWNS", 0)
     assert np.allclose(lscm(vertices, faces).uv, dense, rtol=0, atol=1e-9)
+
+
+@pytest.mark.parametrize("dense", [True, False])
+def test_a_nearly_singular_layout_comes_back_nan_without_overflow_warnings(monkeypatch, dense):
+    import fourd.geometry.flattening as flattening
+
+    vertices, faces = _cap(height=0.3)
+    if not dense:
+        monkeypatch.setattr(flattening, "DENSE_UNKNOWNS", 0)
+    # a solve that sends the free vertices millions of diagonals away, as a nearly singular
+    # system does, instead of failing outright
+    real_zposv, real_spsolve = flattening.zposv, flattening.spsolve
+
+    def far_zposv(*args, **kwargs):
+        factor, solution, info = real_zposv(*args, **kwargs)
+        return factor, solution * 1e200, info
+
+    monkeypatch.setattr(flattening, "zposv", far_zposv)
+    monkeypatch.setattr(flattening, "spsolve", lambda *args, **kwargs: real_spsolve(*args, **kwargs) * 1e200)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)  # no overflow on the way
+        flat = lscm(vertices, faces)
+    assert np.isnan(flat.uv).all()
+    monkeypatch.undo()
+    assert np.isfinite(lscm(vertices, faces).uv).all()

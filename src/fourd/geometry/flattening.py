@@ -323,17 +323,23 @@ def _conformal_layout(
     solution = np.zeros(count, dtype=np.complex128)
     solution[pinned[1]] = distance
     rows, columns, values, rhs = _conformal_system(faces, local, index, size, float(distance))
+    solved = False
     if size <= DENSE_UNKNOWNS:
         # LAPACK's Cholesky solve called directly: scipy.linalg.solve's own checks cost four
         # times the solve on these small systems
         _, dense_solution, info = zposv(_dense(rows, columns, values, size), rhs, lower=False)
-        if info == 0:
+        solved = info == 0
+        if solved:
             solution[~is_fixed] = dense_solution
-            return np.stack([solution.real, solution.imag], axis=1)
         # not positive definite (a degenerate patch): the sparse solve says so as it always did
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", MatrixRankWarning)  # singular: NaN, which callers test
-        solution[~is_fixed] = spsolve(sp.csc_matrix((values, (rows, columns)), shape=(size, size)), rhs)
+    if not solved:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", MatrixRankWarning)  # singular: NaN, which callers test
+            solution[~is_fixed] = spsolve(sp.csc_matrix((values, (rows, columns)), shape=(size, size)), rhs)
+    # a nearly singular system solves to a layout millions of times the pins' distance across
+    # rather than to NaN: the same failure, so said the same way
+    if not np.all(np.abs(solution) <= SINGULAR_SPAN * distance):
+        solution[:] = complex(np.nan, np.nan)
     return np.stack([solution.real, solution.imag], axis=1)
 
 
@@ -389,6 +395,8 @@ def _dense(rows, columns, values, size):
 #: cross-parameterisation has about 70 vertices: 68 complex unknowns, where a sparse
 #: factorisation costs mostly its setting up).
 DENSE_UNKNOWNS = 300
+#: A layout reaching farther than this many times the pins' distance is a singular solve's.
+SINGULAR_SPAN = 1e6
 
 
 def _pins(vertices, faces, pinned) -> np.ndarray:
@@ -404,7 +412,7 @@ def _pins(vertices, faces, pinned) -> np.ndarray:
 def _to_area(uv: np.ndarray, faces: np.ndarray, area: float, pinned: np.ndarray) -> np.ndarray:
     """``uv`` scaled about the first pinned vertex so its total area is ``area``."""
     planar = float(np.abs(signed_uv_areas(faces, uv)).sum())
-    if planar <= 0:
+    if not planar > 0:  # degenerate, or NaN from a singular layout
         return uv
     return uv[pinned[0]] + (uv - uv[pinned[0]]) * np.sqrt(area / planar)
 
