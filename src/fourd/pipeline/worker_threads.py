@@ -5,12 +5,19 @@ thread pools one thread per core; two such workers on a 2-core machine then run 
 busy-waiting threads, and were four times slower than one process alone (``assembly``'s
 merges of 8 crane frames, ``workers=2``). :func:`threads_per_worker` sets the pools' sizes in
 the environment the workers inherit while they start.
+
+Work that runs in the workers or, when it is alone, in this process must not depend on where it
+ran: OpenBLAS's results depend on its thread count (``assembly``'s maps on 5 crane frames,
+``workers=2``: two runs apart by up to 0.03 in a vertex, identical with one BLAS thread).
+:func:`blas_threads_as_workers` gives this process the workers' BLAS pool while inside.
 """
 
 from __future__ import annotations
 
 import contextlib
 import os
+
+from threadpoolctl import threadpool_limits
 
 #: The environment variables the thread pools of numpy's BLAS, OpenMP and numba read at start.
 THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS")
@@ -29,7 +36,7 @@ def threads_per_worker(workers: int):
     >>> os.environ.get("OPENBLAS_NUM_THREADS") == before
     True
     """
-    threads = str(max(1, (os.cpu_count() or 1) // max(1, int(workers))))
+    threads = str(_threads(workers))
     saved = {name: os.environ.get(name) for name in THREAD_VARIABLES}
     for name in THREAD_VARIABLES:
         os.environ.setdefault(name, threads)
@@ -41,3 +48,17 @@ def threads_per_worker(workers: int):
                 os.environ.pop(name, None)
             else:
                 os.environ[name] = value
+
+
+@contextlib.contextmanager
+def blas_threads_as_workers(workers: int):
+    """While inside, this process's BLAS runs with the threads :func:`threads_per_worker` gives
+    each of ``workers`` workers (the user's ``OPENBLAS_NUM_THREADS`` when set), so that what it
+    computes here is what a worker would have."""
+    threads = os.environ.get("OPENBLAS_NUM_THREADS") or _threads(workers)
+    with threadpool_limits(limits=int(threads), user_api="blas"):
+        yield
+
+
+def _threads(workers: int) -> int:
+    return max(1, (os.cpu_count() or 1) // max(1, int(workers)))

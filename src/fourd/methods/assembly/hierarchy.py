@@ -66,7 +66,7 @@ from fourd.methods.assembly.merge_map import MergeMap, load_map, map_key, save_m
 from fourd.methods.assembly.options import Options
 from fourd.methods.assembly.pair import cross_parameterize_pair
 from fourd.methods.assembly.registration import register_by_laplacian
-from fourd.pipeline.worker_threads import threads_per_worker
+from fourd.pipeline.worker_threads import blas_threads_as_workers, threads_per_worker
 
 log = logging.getLogger("fourd.methods.assembly.hierarchy")
 
@@ -381,9 +381,10 @@ def _merge_as_ready(blocks: list[Block], options: Options, pool: MergePool | Non
     while its right block is still being assembled. Of the maps that can run, those with the
     longest chain of maps still to follow them go first (:func:`_chains`): the blocks the last
     merges' sources come from are made first, and the rest fill the cores beside the last
-    maps. A map that is alone (nothing else running or ready), and every one without a pool,
-    runs here, with this process's thread pools. The same maps of the same frames as merging
-    level by level. ``guides[t]``: the anchors of base blocks ``t`` and ``t + 1``, for the
+    maps. A map that is alone (nothing else running or ready) runs here, with this process's
+    numba threads and a worker's BLAS threads, so that it comes out as in a worker
+    (:mod:`fourd.pipeline.worker_threads`); without a pool every map runs here with this
+    process's thread pools. The same maps of the same frames as merging level by level. ``guides[t]``: the anchors of base blocks ``t`` and ``t + 1``, for the
     merge whose source is block ``t``'s last frame. Returns the last block and the reports in
     merge order."""
     count = len(blocks)
@@ -436,7 +437,8 @@ def _merge_as_ready(blocks: list[Block], options: Options, pool: MergePool | Non
             raise RuntimeError("the assembly's merges stalled: no map can start")  # a bug, not the input
         if pool is None or (len(now) == 1 and not running):
             for node in now if pool is None else now[:1]:
-                maps[node], read = _map_or_resume(*take(node))
+                with contextlib.nullcontext() if pool is None else blas_threads_as_workers(pool.workers):
+                    maps[node], read = _map_or_resume(*take(node))
                 resumed += read
             continue
         fill()
