@@ -384,9 +384,9 @@ def _merge_as_ready(blocks: list[Block], options: Options, pool: MergePool | Non
     maps. A map that is alone (nothing else running or ready) runs here, with this process's
     numba threads and a worker's BLAS threads, so that it comes out as in a worker
     (:mod:`fourd.pipeline.worker_threads`); without a pool every map runs here with this
-    process's thread pools. The same maps of the same frames as merging level by level. ``guides[t]``: the anchors of base blocks ``t`` and ``t + 1``, for the
-    merge whose source is block ``t``'s last frame. Returns the last block and the reports in
-    merge order."""
+    process's thread pools. The same maps of the same frames as merging level by level.
+    ``guides[t]``: the anchors of base blocks ``t`` and ``t + 1``, for the merge whose source
+    is block ``t``'s last frame. Returns the last block and the reports in merge order."""
     count = len(blocks)
     merges = merge_tree(count, onto=onto)
     if not merges:
@@ -436,10 +436,10 @@ def _merge_as_ready(blocks: list[Block], options: Options, pool: MergePool | Non
         if not (now or running or joinable):
             raise RuntimeError("the assembly's merges stalled: no map can start")  # a bug, not the input
         if pool is None or (len(now) == 1 and not running):
-            for node in now if pool is None else now[:1]:
-                with contextlib.nullcontext() if pool is None else blas_threads_as_workers(pool.workers):
+            with contextlib.nullcontext() if pool is None else blas_threads_as_workers(pool.workers):
+                for node in now if pool is None else now[:1]:
                     maps[node], read = _map_or_resume(*take(node))
-                resumed += read
+                    resumed += read
             continue
         fill()
         if running:
