@@ -10,7 +10,11 @@ compare; ``OPENBLAS_NUM_THREADS=1`` in front to take BLAS's threads out.
 Answer (2-core AMD EPYC, 2026-12-03): at 5c25111, ``workers=1`` 0.0 and ``workers=2`` 0.030
 (a map alone ran in this process with two BLAS threads, the others in workers with one; with
 ``OPENBLAS_NUM_THREADS=1`` 0.0). With the lone maps given a worker's BLAS threads
-(``blas_threads_as_workers``): ``workers=2`` 0.0 in three runs of the script.
+(e421f59): ``workers=2`` 0.0 in three runs of the script, but ``workers=1`` and ``workers=2``
+then differed (1.6e-4 on squash-ball, the test
+``test_merges_of_a_level_run_in_processes_with_the_same_result``). With every map made with
+one BLAS thread wherever it runs (``one_blas_thread`` on ``map_pair``): 0 here, and that test
+passes.
 """
 
 from __future__ import annotations

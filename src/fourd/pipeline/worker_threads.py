@@ -6,10 +6,10 @@ busy-waiting threads, and were four times slower than one process alone (``assem
 merges of 8 crane frames, ``workers=2``). :func:`threads_per_worker` sets the pools' sizes in
 the environment the workers inherit while they start.
 
-Work that runs in the workers or, when it is alone, in this process must not depend on where it
-ran: OpenBLAS's results depend on its thread count (``assembly``'s maps on 5 crane frames,
-``workers=2``: two runs apart by up to 0.03 in a vertex, identical with one BLAS thread).
-:func:`blas_threads_as_workers` gives this process the workers' BLAS pool while inside.
+Work that runs in a worker or in this process must not depend on where it ran, nor on how many
+workers there are: OpenBLAS's results depend on its thread count (``assembly``'s maps on 5
+crane frames, ``workers=2``: two runs apart by up to 0.03 in a vertex, identical with one BLAS
+thread). Such work runs inside :func:`one_blas_thread`.
 """
 
 from __future__ import annotations
@@ -36,7 +36,7 @@ def threads_per_worker(workers: int):
     >>> os.environ.get("OPENBLAS_NUM_THREADS") == before
     True
     """
-    threads = str(_threads(workers))
+    threads = str(max(1, (os.cpu_count() or 1) // max(1, int(workers))))
     saved = {name: os.environ.get(name) for name in THREAD_VARIABLES}
     for name in THREAD_VARIABLES:
         os.environ.setdefault(name, threads)
@@ -51,14 +51,8 @@ def threads_per_worker(workers: int):
 
 
 @contextlib.contextmanager
-def blas_threads_as_workers(workers: int):
-    """While inside, this process's BLAS runs with the threads :func:`threads_per_worker` gives
-    each of ``workers`` workers (the user's ``OPENBLAS_NUM_THREADS`` when set), so that what it
-    computes here is what a worker would have."""
-    threads = os.environ.get("OPENBLAS_NUM_THREADS") or _threads(workers)
-    with threadpool_limits(limits=int(threads), user_api="blas"):
+def one_blas_thread():
+    """While inside (or in a function it decorates), this process's BLAS runs one thread, so
+    what is computed there is the same in any process, whatever its thread pools."""
+    with threadpool_limits(limits=1, user_api="blas"):
         yield
-
-
-def _threads(workers: int) -> int:
-    return max(1, (os.cpu_count() or 1) // max(1, int(workers)))

@@ -66,7 +66,7 @@ from fourd.methods.assembly.merge_map import MergeMap, load_map, map_key, save_m
 from fourd.methods.assembly.options import Options
 from fourd.methods.assembly.pair import cross_parameterize_pair
 from fourd.methods.assembly.registration import register_by_laplacian
-from fourd.pipeline.worker_threads import blas_threads_as_workers, threads_per_worker
+from fourd.pipeline.worker_threads import one_blas_thread, threads_per_worker
 
 log = logging.getLogger("fourd.methods.assembly.hierarchy")
 
@@ -127,6 +127,7 @@ def _closest_map(aligned, target_vertices, target_faces):
     return found.triangle, found.barycentric
 
 
+@one_blas_thread()
 def map_pair(source: np.ndarray, faces: np.ndarray, target: np.ndarray, target_faces: np.ndarray,
              options: Options | None = None, guide: Guide | None = None) -> MergeMap:
     """The first half of a merge (module docstring): the source frame ``[N, 3]`` (mesh
@@ -136,7 +137,8 @@ def map_pair(source: np.ndarray, faces: np.ndarray, target: np.ndarray, target_f
     merge's map can be made while the right block is still being assembled (when its first
     frame is final, :func:`_merge_as_ready`). ``guide``: anchors of this frame pair from the
     video or the user (:mod:`~fourd.methods.assembly.guides`), which pull the alignment and
-    join its anchors."""
+    join its anchors. BLAS runs one thread here, so that a map is the same whichever process
+    made it (:mod:`fourd.pipeline.worker_threads`)."""
     options = Options() if options is None else options
     matched = None
     if guide is not None and len(guide.source):
@@ -381,12 +383,11 @@ def _merge_as_ready(blocks: list[Block], options: Options, pool: MergePool | Non
     while its right block is still being assembled. Of the maps that can run, those with the
     longest chain of maps still to follow them go first (:func:`_chains`): the blocks the last
     merges' sources come from are made first, and the rest fill the cores beside the last
-    maps. A map that is alone (nothing else running or ready) runs here, with this process's
-    numba threads and a worker's BLAS threads, so that it comes out as in a worker
-    (:mod:`fourd.pipeline.worker_threads`); without a pool every map runs here with this
-    process's thread pools. The same maps of the same frames as merging level by level.
-    ``guides[t]``: the anchors of base blocks ``t`` and ``t + 1``, for the merge whose source
-    is block ``t``'s last frame. Returns the last block and the reports in merge order."""
+    maps. A map that is alone (nothing else running or ready), and every one without a pool,
+    runs here, with this process's thread pools. The same maps of the same frames as merging
+    level by level. ``guides[t]``: the anchors of base blocks ``t`` and ``t + 1``, for the
+    merge whose source is block ``t``'s last frame. Returns the last block and the reports in
+    merge order."""
     count = len(blocks)
     merges = merge_tree(count, onto=onto)
     if not merges:
@@ -436,10 +437,9 @@ def _merge_as_ready(blocks: list[Block], options: Options, pool: MergePool | Non
         if not (now or running or joinable):
             raise RuntimeError("the assembly's merges stalled: no map can start")  # a bug, not the input
         if pool is None or (len(now) == 1 and not running):
-            with contextlib.nullcontext() if pool is None else blas_threads_as_workers(pool.workers):
-                for node in now if pool is None else now[:1]:
-                    maps[node], read = _map_or_resume(*take(node))
-                    resumed += read
+            for node in now if pool is None else now[:1]:
+                maps[node], read = _map_or_resume(*take(node))
+                resumed += read
             continue
         fill()
         if running:
