@@ -88,3 +88,23 @@ def test_polygon_triangulation_keeps_the_outline_and_covers_it():
     assert (areas > 0).all() and abs(areas.sum() - signed_area(polygon)) < 1e-9
     with pytest.raises(InputError):
         triangulate_polygon(polygon[::-1], 0.1)  # clockwise
+
+
+@pytest.mark.parametrize("kept", [0, 1, 2])
+def test_a_face_poking_into_a_hole_does_not_make_the_filled_mesh_non_manifold(kept):
+    """A hole around a face that juts into it (seen in assembly's dfaust-hopping result: 4
+    sides of 4 faces): one face of an icosphere split at its centre, two of the three parts
+    removed. The loop of four vertices has a chord that is a side of the kept part already;
+    the filled mesh must still be closed, manifold and oriented."""
+    from fourd.metrics.topology import topology
+
+    sphere = trimesh.creation.icosphere(2)
+    vertices, faces = np.asarray(sphere.vertices), np.asarray(sphere.faces)
+    a, b, c = faces[0]
+    centre = len(vertices)
+    vertices = np.vstack([vertices, vertices[faces[0]].mean(axis=0) * 1.01])
+    parts = np.array([[a, b, centre], [b, c, centre], [c, a, centre]])
+    faces = np.vstack([faces[1:], parts[kept]])
+    filled = fill_holes(vertices, faces)
+    found = topology(filled.faces, len(filled.vertices))
+    assert found.closed_manifold and found.oriented, found

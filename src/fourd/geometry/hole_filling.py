@@ -95,6 +95,7 @@ def fill_holes(
     all_faces = [faces]
     count = len(vertices)
     inner_sets = []
+    edges = _EdgeSet(faces, len(vertices))
     for loop in holes:
         loop = np.asarray(loop, dtype=np.int64)
         if len(loop) < 3:
@@ -102,9 +103,16 @@ def fill_holes(
         new_points, new_faces = _disk(vertices[loop], area_matched)
         inner = len(new_points) - len(loop)
         index = np.concatenate([loop[::-1], count + np.arange(inner)])  # disk order: loop reversed
+        hole_faces = index[new_faces]
+        if edges.clash(hole_faces, loop):
+            # a chord of the disk is already a side of the mesh (a face poking into the hole):
+            # a fan around one new vertex adds no chord
+            inner = 1
+            hole_faces = np.column_stack([np.roll(loop, -1), loop, np.full(len(loop), count)])
+        edges.add(hole_faces)
         start = vertices[loop].mean(axis=0)
         all_vertices.append(np.repeat(start[None], inner, axis=0))
-        all_faces.append(index[new_faces])
+        all_faces.append(hole_faces)
         inner_sets.append(count + np.arange(inner))
         count += inner
     out_vertices = np.concatenate(all_vertices)
@@ -114,6 +122,41 @@ def fill_holes(
     if inner_sets:
         out_vertices = _membrane(out_vertices, out_faces, filled, holes, smooth)
     return FilledMesh(out_vertices, out_faces, filled, list(holes))
+
+
+class _EdgeSet:
+    """The sides of a mesh's faces (over its ``count`` vertices, before any hole's), growing as
+    holes are filled, to tell whether a hole's new faces would repeat a side."""
+
+    def __init__(self, faces: np.ndarray, count: int):
+        self.count = count
+        self.keys = set(_side_keys(faces, count).tolist())
+
+    def clash(self, hole_faces: np.ndarray, loop: np.ndarray) -> bool:
+        """Whether a chord of ``hole_faces [G, 3]`` (a side joining two of the ``loop``'s
+        vertices that is not a side of the loop) is a side already: the filled mesh would have
+        a side of more than two faces there."""
+        sides = _side_keys(hole_faces, self.count)
+        chords = np.setdiff1d(sides, _pair_keys(np.column_stack([loop, np.roll(loop, -1)]), self.count))
+        return any(int(key) in self.keys for key in chords)
+
+    def add(self, hole_faces: np.ndarray) -> None:
+        self.keys.update(_side_keys(hole_faces, self.count).tolist())
+
+
+def _side_keys(faces: np.ndarray, count: int) -> np.ndarray:
+    """The distinct sides of ``faces [F, 3]`` between two of the first ``count`` vertices, as
+    :func:`_pair_keys`."""
+    faces = np.asarray(faces, dtype=np.int64)
+    return _pair_keys(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), count)
+
+
+def _pair_keys(pairs: np.ndarray, count: int) -> np.ndarray:
+    """The distinct vertex pairs ``[E, 2]`` between two of the first ``count`` vertices, as
+    ``low * count + high``."""
+    pairs = np.sort(np.asarray(pairs, dtype=np.int64), axis=1)
+    pairs = pairs[pairs[:, 1] < count]
+    return np.unique(pairs[:, 0] * np.int64(count) + pairs[:, 1])
 
 
 def _flat_area(ring: np.ndarray) -> float:
