@@ -54,6 +54,7 @@ def test_info_describes_an_animated_mesh_in_every_format(tmp_path, suffix, forma
     assert lines["connectivity"].startswith("one for all 4 frames")
     assert lines["frames"] == "4, times 2 .. 5"
     assert (lines["vertices"], lines["faces"]) == ("42", "80")
+    assert lines["surface"] == "closed and manifold, 1 piece, genus 0"
     assert lines["filled in (not observed)"] == filled
 
 
@@ -66,6 +67,7 @@ def test_info_describes_per_frame_meshes(tmp_path, suffix):
     assert lines["connectivity"].startswith("each frame its own")
     assert lines["frames"] == "2, times 0 .. 1"
     assert lines["vertices per frame"] == "8 .. 42" and lines["faces per frame"] == "12 .. 80"
+    assert lines["surface"] == "2 of 2 frames closed and manifold"
 
 
 def test_a_result_folder_is_not_read_as_scans(tmp_path, capsys):
@@ -96,3 +98,23 @@ def test_info_problems_are_one_line(tmp_path, capsys):
     assert main(["info", str(tmp_path / "bad.glb")]) == 2
     err = capsys.readouterr().err.strip()
     assert err.count("\n") == 0 and "bad.glb: not a glTF binary" in err
+
+
+def test_info_tells_a_closed_surface_its_genus_and_an_open_one_its_holes():
+    """What a user checks before texturing or printing: closed and manifold (and the genus),
+    or the boundary loops and the sides of more than two faces that keep it from being so."""
+    from fourd.info import describe_surface
+
+    sphere = trimesh.creation.icosphere(subdivisions=2)
+    torus = trimesh.creation.torus(major_radius=1.0, minor_radius=0.3)
+    two = np.vstack([torus.faces, sphere.faces + len(torus.vertices)])
+    assert describe_surface(sphere.faces, len(sphere.vertices)) == "closed and manifold, 1 piece, genus 0"
+    assert describe_surface(torus.faces, len(torus.vertices)) == "closed and manifold, 1 piece, genus 1"
+    assert describe_surface(two, len(torus.vertices) + len(sphere.vertices)) == (
+        "closed and manifold, 2 pieces, genus 1"
+    )
+    assert describe_surface(sphere.faces[2:], len(sphere.vertices)) == "not closed (1 boundary loop), 1 piece"
+    doubled = np.vstack([sphere.faces, sphere.faces[:1]])  # one face twice: three sides of 3 faces
+    assert describe_surface(doubled, len(sphere.vertices)) == (
+        "not closed (3 sides shared by more than two faces), 1 piece"
+    )

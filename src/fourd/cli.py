@@ -678,7 +678,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "(--long is the old name)")
 
     p = add("info", "describe an input folder or a result: kind, frames, vertices, faces, "
-                    "connectivity, time range", cmd_info)
+                    "connectivity, closed and manifold or not (with the genus), time range", cmd_info)
     p.add_argument("path", help="a folder of scans, or " + _RESULT_HELP)
     p = add("learn-material", "learn bending and shearing stiffness from an animated mesh's "
             "frames (thesis 004, 2.7)", cmd_learn_material)

@@ -93,10 +93,30 @@ def _range(values) -> str:
     return f"{lo}" if lo == hi else f"{lo} .. {hi}"
 
 
+def describe_surface(faces: np.ndarray, vertex_count: int) -> str:
+    """One mesh's topology in a few words: closed and manifold with its pieces and genus (the
+    sum over its pieces), or open with its boundary loops and the sides shared by more than
+    two faces."""
+    from fourd.metrics.topology import topology
+
+    found = topology(faces, vertex_count)
+    pieces = f"{found.components} piece{'' if found.components == 1 else 's'}"
+    if found.closed_manifold:
+        oriented = "" if found.oriented else " (faces not turned consistently)"
+        return f"closed and manifold{oriented}, {pieces}, genus {(2 * found.components - found.euler) // 2}"
+    problems = []
+    if found.boundary_loops:
+        problems.append(f"{found.boundary_loops} boundary loop{'' if found.boundary_loops == 1 else 's'}")
+    if found.nonmanifold_edges:
+        problems.append(f"{found.nonmanifold_edges} sides shared by more than two faces")
+    return f"not closed ({', '.join(problems)}), {pieces}"
+
+
 def describe_result(result, *, observed_stored: bool = True) -> str:
     """Lines ``kind``, ``connectivity``, ``frames`` (with the time range), ``vertices``,
-    ``faces`` and, for an AnimatedMesh, the filled-in share and the rest pose; then the
-    bounds. ``observed_stored`` False: the format does not hold the ``observed`` flags."""
+    ``faces``, ``surface`` (:func:`describe_surface`; per-frame meshes: how many frames are
+    closed and manifold) and, for an AnimatedMesh, the filled-in share and the rest pose; then
+    the bounds. ``observed_stored`` False: the format does not hold the ``observed`` flags."""
     frames = f"frames: {result.frame_count}, times {result.times[0]:g} .. {result.times[-1]:g}"
     if isinstance(result, AnimatedMesh):
         points_only = len(result.faces) == 0
@@ -111,6 +131,7 @@ def describe_result(result, *, observed_stored: bool = True) -> str:
             frames,
             f"vertices: {result.vertex_count}",
             f"faces: {len(result.faces)}",
+            *([] if points_only else [f"surface: {describe_surface(result.faces, result.vertex_count)}"]),
             f"filled in (not observed): {filled}",
             f"rest pose: {'yes' if result.rest is not None else 'no'}",
             f"UVs: {'yes' if result.uv is not None else 'no'}",
@@ -125,6 +146,7 @@ def describe_result(result, *, observed_stored: bool = True) -> str:
             frames,
             f"vertices per frame: {_range(vertices)}",
             f"faces per frame: {_range(faces)}",
+            f"surface: {_closed_frames(result)} of {result.frame_count} frames closed and manifold",
         ]
     else:
         raise InputError(f"not a result: {type(result).__name__}")
@@ -134,6 +156,12 @@ def describe_result(result, *, observed_stored: bool = True) -> str:
         f"(diagonal {result.diagonal():.4g})"
     )
     return "\n".join(lines)
+
+
+def _closed_frames(result: MeshSequence) -> int:
+    from fourd.metrics.topology import topology
+
+    return sum(topology(f, len(v)).closed_manifold for v, f in result.meshes if len(f))
 
 
 def describe(path) -> str:
