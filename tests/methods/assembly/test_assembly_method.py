@@ -211,7 +211,7 @@ def test_a_hole_of_one_triangle_closes_without_new_vertices():
 
 def test_a_hole_that_cannot_be_filled_leaves_the_assembled_result_as_it_is(monkeypatch):
     """A rim the membrane cannot span (a degenerate loop) costs the closing, not the run."""
-    import fourd.methods.assembly.method as method
+    import fourd.methods.assembly.closing as closing
 
     vertices, faces = _bumpy()
     keep = ~(vertices[faces].mean(axis=1)[:, 0] > 0.85)
@@ -220,8 +220,8 @@ def test_a_hole_that_cannot_be_filled_leaves_the_assembled_result_as_it_is(monke
     def degenerate(*args, **kwargs):
         raise InputError("a hole's boundary has no length")
 
-    monkeypatch.setattr(method, "fill_holes", degenerate)
-    assert method.close_small_holes(block, 0.25) is block
+    monkeypatch.setattr(closing, "fill_holes", degenerate)
+    assert closing.close_small_holes(block, 0.25) is block
 
 
 def test_a_region_missing_from_the_first_frame_is_pasted_in_from_the_next():

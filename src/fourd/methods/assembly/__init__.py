@@ -24,8 +24,9 @@ Frames that are meshes are used as they are; point clouds are meshed per frame f
   the right sub-sequence, unmapped vertices placed by Laplacian registration (5.6);
 - :mod:`.completion`: geometry only the later frame has glued into the union mesh along a
   zipped seam, placed in the earlier frames by Laplacian coordinates (5.6, second half);
-- :mod:`.method`: the pipeline (``reconstruct``), the holes no frame fills closed at the end
-  by the membrane of 3.6.2 (``close_small_holes``); :mod:`.options` its ``Options``;
+- :mod:`.method`: the pipeline (``reconstruct``); :mod:`.options` its ``Options``;
+- :mod:`.closing`: the holes no frame fills closed at the end by the membrane of 3.6.2, and
+  the first frame's small handles cut out and closed the same way (``close_small_holes``);
 - :mod:`.stream`: the same over a whole capture a window of frames at a time, written frame by
   frame (``reconstruct_streamed``, ``fourd reconstruct --stream``; issue 56).
 
@@ -48,6 +49,7 @@ from fourd.methods.assembly.anchors import (
     returned_points,
     spread_anchors,
 )
+from fourd.methods.assembly.closing import HoleClosing, close_small_holes, holes_to_close
 from fourd.methods.assembly.completion import Paste, paste_target_only, place_pasted, zip_strip
 from fourd.methods.assembly.crossparam import (
     CrossParameterization,
@@ -70,9 +72,6 @@ from fourd.methods.assembly.method import (
     MIN_FRAMES,
     RESULT,
     AssemblyDiagnostics,
-    HoleClosing,
-    close_small_holes,
-    holes_to_close,
     reconstruct,
     reconstruct_with_diagnostics,
 )

@@ -22,7 +22,7 @@ STAGE = "assembly-map"
 #: Options that do not act on a map: the joins', the rest fit's, the colour fit's, the holes',
 #: where it runs, and where the anchors come from (the anchors themselves are in the key).
 NOT_IN_MAP = ("anchors", "anchor_texture", "color_fit", "color_radius", "color_scale", "rest_fit", "rest_weight",
-              "paste", "paste_gap", "close_holes", "close_smoothness", "window", "workers", "scheduler")
+              "paste", "paste_gap", "close_holes", "close_smoothness", "open_handles", "window", "workers", "scheduler")
 
 
 class MergeMap(NamedTuple):

@@ -19,15 +19,16 @@ assembly of :mod:`~fourd.methods.assembly.hierarchy`.
    first frame's (``rest_fit``, :mod:`~fourd.methods.assembly.rest_fit`); then, with colours
    in the input, to where the first frame's colours are (``color_fit``,
    :mod:`~fourd.methods.assembly.color_fit`).
-4. The holes no frame filled are closed by the membrane of 3.6.2 (``close_holes``), placed in
-   every frame from that frame's rim, unobserved (:func:`close_small_holes`).
+4. The holes no frame filled are closed by the membrane of 3.6.2 (``close_holes``), and the
+   small handles the first frame's mesh grew are cut out and closed the same way
+   (``open_handles``), placed in every frame from that frame's rim, unobserved
+   (:func:`~fourd.methods.assembly.closing.close_small_holes`).
 """
 
 from __future__ import annotations
 
 import dataclasses
 import logging
-from typing import NamedTuple
 
 import numpy as np
 
@@ -35,7 +36,7 @@ from fourd.animation import AnimatedMesh
 from fourd.cache import StageCache, report_resumed
 from fourd.errors import InputError
 from fourd.geometry.frame_surface import SurfaceSettings, frame_surfaces
-from fourd.geometry.hole_filling import fill_holes, membrane_positions, small_holes
+from fourd.methods.assembly.closing import close_small_holes
 from fourd.methods.assembly.color_fit import fit_colors, frame_colors
 from fourd.methods.assembly.guides import Guide, read_guides, video_guides
 from fourd.methods.assembly.hierarchy import Block, MergePool, assemble, merge_pool
@@ -118,56 +119,6 @@ def base_blocks(seq: PointCloudSequence, meshes) -> list[Block]:
     return blocks
 
 
-class HoleClosing(NamedTuple):
-    """The membranes of :func:`close_small_holes`, made in the first frame, to place in every
-    frame: the closed mesh's ``faces``, its ``vertices`` in the first frame (the assembled ones
-    first, then the membranes'), the ``filled [N']`` membrane vertices, the ``holes``' rims and
-    the C1 weight ``smoothness``."""
-
-    faces: np.ndarray
-    vertices: np.ndarray
-    filled: np.ndarray
-    holes: list
-    smoothness: float
-
-    def apply(self, block: Block) -> Block:
-        """``block`` (any of the frames of the block the holes were found in) with the holes
-        closed: the membranes placed in each of its frames from that frame's rim, unobserved."""
-        frames, count = len(block.vertices), block.vertices.shape[1]
-        added = len(self.vertices) - count
-        vertices = np.concatenate([block.vertices, np.repeat(self.vertices[None, count:], frames, axis=0)], axis=1)
-        vertices = membrane_positions(vertices, self.faces, self.filled, self.holes, smooth=self.smoothness)
-        observed = np.concatenate([block.observed, np.zeros((frames, added), dtype=bool)], axis=1)
-        return Block(self.faces, vertices, observed)
-
-
-def holes_to_close(first: np.ndarray, faces: np.ndarray, max_fraction: float,
-                   smoothness: float = 1.0) -> HoleClosing | None:
-    """The membranes closing the holes of the mesh ``faces`` at its first frame's positions
-    ``first [N, 3]`` (:func:`close_small_holes`); None when there is none to close."""
-    holes = small_holes(first, faces, max_fraction=max_fraction)
-    if not holes:
-        return None
-    try:
-        filled = fill_holes(first, faces, holes=holes, area_matched=True, smooth=smoothness)
-    except InputError as error:  # a degenerate rim: keep the assembled result rather than lose it
-        log.warning("holes left open: %s", error)
-        return None
-    # the membrane may add no vertex: a small hole closed by its rim's triangles
-    log.info("closing %d holes with %d membrane vertices", len(holes), len(filled.vertices) - len(first))
-    return HoleClosing(filled.faces, filled.vertices, filled.filled, filled.holes, smoothness)
-
-
-def close_small_holes(block: Block, max_fraction: float, smoothness: float = 1.0) -> Block:
-    """``block`` with its holes of flat area at most ``max_fraction`` of their piece's area
-    (:func:`~fourd.geometry.hole_filling.small_holes`, in the first frame) filled by the
-    membrane of 3.6.2 (``smoothness``: weight of its C1 terms, 1 the thesis' membrane, 0 the
-    flat one): the disks triangulated in the first frame, their vertices placed in every frame
-    by the membrane over that frame's rim, ``observed`` False."""
-    closing = holes_to_close(block.vertices[0], block.faces, max_fraction, smoothness)
-    return block if closing is None else closing.apply(block)
-
-
 def takes_video_anchors(options: Options, video: bool) -> bool:
     """Whether the merges' anchors come from the capture's video (``video``: the input has
     one): ``anchors='video'``, or ``auto`` with video and ``color_fit`` off."""
@@ -230,7 +181,7 @@ def reconstruct_with_diagnostics(seq: PointCloudSequence, options: Options | Non
     if options.color_fit:
         block = _fit_colors(seq, meshes, block, options)
     if options.close_holes > 0:
-        block = close_small_holes(block, options.close_holes, options.close_smoothness)
+        block = close_small_holes(block, options.close_holes, options.close_smoothness, options.open_handles)
     return _reconstruction(seq, block, reports)
 
 

@@ -370,6 +370,12 @@ class Options(SurfaceSettings):
         0.0048), touching-spheres 0.0047 / 0.0488 -> 0.0041 / 0.0216 (C1 0.0026 / 0.0076, flat
         0.0061 / 0.0373), dfaust-hopping 0.0026 / 0.0153 -> 0.0027 / 0.0101; see
         ``benchmarks/METHODS.md``.
+    open_handles : int
+        With ``close_holes``, also cut out the closed mesh's small handles (topological noise:
+        a ball of this many edges that is not a disk, :mod:`fourd.geometry.handles`) and fill
+        the openings with the same membrane, so that the animation does not keep the tunnels a
+        scan's first frame grew between two sheets of skin a few spacings apart. A cut that
+        would split the surface (a thin part) is not made. 0 keeps every handle.
     window : int
         Frames per window: the hierarchy runs within windows of this many frames, and each
         window's block is merged onto the result so far, one after another (issue 56), so the
@@ -429,6 +435,7 @@ class Options(SurfaceSettings):
     paste_gap: float = 2.0
     close_holes: float = 0.25
     close_smoothness: float = 0.1
+    open_handles: int = 4
     window: int = 0
     workers: int = 0
     scheduler: str = "sync"
@@ -454,7 +461,7 @@ class Options(SurfaceSettings):
             raise ValueError(f"relax_tolerance must lie in [0, 1), got {self.relax_tolerance!r}")
         if not 0.0 <= self.alignment_coarse < 1.0:
             raise ValueError(f"alignment_coarse must lie in [0, 1), got {self.alignment_coarse!r}")
-        for name in ("alignment_iterations", "relax_sweeps", "registration_iterations", "rest_fit"):
+        for name in ("alignment_iterations", "relax_sweeps", "registration_iterations", "rest_fit", "open_handles"):
             value = getattr(self, name)
             if int(value) != value or value < 0:
                 raise ValueError(f"{name} must be a non-negative integer, got {value!r}")

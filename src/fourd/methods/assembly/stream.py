@@ -14,7 +14,7 @@ side by side in the merge processes. Then the window's frames are fitted, each f
 before: the rest fit (:class:`~fourd.methods.assembly.rest_fit.RestFit`, against the first
 frame's shape) and the colour fit (:class:`~fourd.methods.assembly.color_fit.ColorFit`,
 against its colours); the holes found in the first frame are closed in every frame
-(:class:`~fourd.methods.assembly.method.HoleClosing`).
+(:class:`~fourd.methods.assembly.closing.HoleClosing`).
 
 The seam's map starts from the previous window's last frame **as fitted**, not as assembled,
 and the fits' corrections start again from nothing: a chain of pair maps slides and wears
@@ -49,15 +49,14 @@ from fourd.cache import StageCache, option_values, report_resumed, stage_key
 from fourd.errors import InputError
 from fourd.frame_source import FrameSource
 from fourd.io.npz import npz_frames, streamed_output
+from fourd.methods.assembly.closing import HoleClosing, holes_to_close
 from fourd.methods.assembly.color_fit import ColorFit, frame_colors
 from fourd.methods.assembly.hierarchy import Block, MergeReport, assemble, merge_pool
 from fourd.methods.assembly.method import (
     MIN_FRAMES,
-    HoleClosing,
     base_blocks,
     frame_meshes,
     frame_pair_guides,
-    holes_to_close,
     takes_video_anchors,
 )
 from fourd.methods.assembly.options import ANCHOR_SOURCES, STREAM_WINDOW, Options
@@ -324,7 +323,8 @@ class _Run:
             )
         if options.close_holes > 0:
             self.closing = holes_to_close(
-                first.vertices[0], first.faces, options.close_holes, options.close_smoothness
+                first.vertices[0], first.faces, options.close_holes, options.close_smoothness,
+                options.open_handles,
             )
 
     def _start_rest_fit(self) -> None:
@@ -389,7 +389,8 @@ class _Run:
             self._start_rest_fit()
             if options.close_holes > 0:
                 self.closing = holes_to_close(
-                    self.first.vertices[0], faces, options.close_holes, options.close_smoothness
+                    self.first.vertices[0], faces, options.close_holes, options.close_smoothness,
+                    options.open_handles,
                 )
         if self.rest_fit is not None:
             self.rest_fit.carried = entry["rest_carried"]

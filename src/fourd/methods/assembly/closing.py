@@ -1,0 +1,152 @@
+"""The assembled mesh closed at the end: its small holes filled by the membrane of thesis 3.6.2
+and, before that, its small handles opened (topological noise).
+
+Both are found in the first frame and then applied to every frame, so one connectivity serves
+the whole sequence:
+
+1. the small holes (:func:`~fourd.geometry.hole_filling.small_holes`) are filled by the
+   membrane (:func:`~fourd.geometry.hole_filling.fill_holes`);
+2. with ``handle_hops``, the small handles of the closed mesh are cut out
+   (:func:`~fourd.geometry.handles.open_small_handles`: balls of that many edges that are not
+   disks) and their openings filled the same way, for a few rounds. The first frame's mesh
+   gives the whole animation its connectivity, and a per-frame surface perforates the gap
+   between two sheets of skin a few spacings apart into a web of tunnels (crane's first frame:
+   genus 0-22 with the scan's noise, ``experiments/assembly_handles.py``);
+3. in each frame, the vertices no face uses any more are dropped and every membrane vertex is
+   placed by the membrane over that frame's rim, unobserved (:meth:`HoleClosing.apply`).
+"""
+
+from __future__ import annotations
+
+import logging
+from typing import NamedTuple
+
+import numpy as np
+
+from fourd.errors import InputError
+from fourd.geometry.boundary_loops import boundary_edges, boundary_loops
+from fourd.geometry.handles import capped_genus, open_small_handles
+from fourd.geometry.hole_filling import fill_holes, membrane_positions, small_holes
+from fourd.methods.assembly.hierarchy import Block
+
+__all__ = ["HANDLE_ROUNDS", "HoleClosing", "close_small_holes", "holes_to_close"]
+
+log = logging.getLogger("fourd.methods.assembly")
+
+#: Rounds of handle opening, each with balls one edge wider than the last: cutting a handle out
+#: can leave a neighbour that no ball could hold beside the cut until the opening was filled
+#: (crane's first 4 frames: genus 22 -> 4 in one round of 4 edges, 3 over rounds of 4, 5 and 6;
+#: dfaust-hopping 2 -> 1 and 0; benchmarks/METHODS.md).
+HANDLE_ROUNDS = 3
+
+
+class HoleClosing(NamedTuple):
+    """The membranes of :func:`close_small_holes`, made in the first frame, to place in every
+    frame: the closed mesh's ``faces``, its ``vertices`` in the first frame (the assembled ones
+    kept first, then the membranes'), the ``filled [N']`` membrane vertices, the ``holes``'
+    rims, the C1 weight ``smoothness`` and the assembled vertices ``kept [K]`` (None: all; the
+    others were inside a handle cut out)."""
+
+    faces: np.ndarray
+    vertices: np.ndarray
+    filled: np.ndarray
+    holes: list
+    smoothness: float
+    kept: np.ndarray | None = None
+
+    def apply(self, block: Block) -> Block:
+        """``block`` (any of the frames of the block the holes were found in) with the holes
+        closed: the membranes placed in each of its frames from that frame's rim, unobserved."""
+        assembled, observed = block.vertices, block.observed
+        if self.kept is not None:
+            assembled, observed = assembled[:, self.kept], observed[:, self.kept]
+        frames, count = assembled.shape[:2]
+        added = len(self.vertices) - count
+        vertices = np.concatenate([assembled, np.repeat(self.vertices[None, count:], frames, axis=0)], axis=1)
+        vertices = membrane_positions(vertices, self.faces, self.filled, self.holes, smooth=self.smoothness)
+        observed = np.concatenate([observed, np.zeros((frames, added), dtype=bool)], axis=1)
+        return Block(self.faces, vertices, observed)
+
+
+def holes_to_close(first: np.ndarray, faces: np.ndarray, max_fraction: float, smoothness: float = 1.0,
+                   handle_hops: int = 0) -> HoleClosing | None:
+    """The membranes closing the holes of the mesh ``faces`` at its first frame's positions
+    ``first [N, 3]`` (:func:`close_small_holes`), after its small handles are opened when
+    ``handle_hops`` > 0 (the module docstring); None when there is nothing to do."""
+    count = len(first)
+    vertices, faces = np.asarray(first, dtype=np.float64), np.asarray(faces, dtype=np.int64)
+    assembled = faces
+    filled_holes: list = []
+    holes = small_holes(vertices, faces, max_fraction=max_fraction) if max_fraction > 0 else []
+    try:
+        if holes:
+            closed = fill_holes(vertices, faces, holes=holes, area_matched=True, smooth=smoothness)
+            # the membrane may add no vertex: a small hole closed by its rim's triangles
+            log.info("closing %d holes with %d membrane vertices", len(holes), len(closed.vertices) - count)
+            vertices, faces, filled_holes = closed.vertices, closed.faces, list(closed.holes)
+        if handle_hops > 0:
+            vertices, faces, opened = _open_handles(vertices, faces, smoothness, handle_hops)
+            filled_holes += opened
+    except InputError as error:  # a degenerate rim: keep the assembled result rather than lose it
+        log.warning("holes left open: %s", error)
+        return None
+    if len(vertices) == count and not filled_holes:
+        return None
+    return _closing(count, assembled, vertices, faces, filled_holes, smoothness)
+
+
+def _open_handles(vertices: np.ndarray, faces: np.ndarray, smoothness: float, hops: int):
+    """``(vertices, faces, holes)``: the mesh with its small handles cut out and the openings
+    filled, for up to :data:`HANDLE_ROUNDS` rounds of balls of ``hops``, ``hops + 1``, ...
+    edges (vertices of cut faces stay, unused)."""
+    genus = capped_genus(faces, len(vertices))
+    filled_holes, cuts = [], 0
+    for round_ in range(HANDLE_ROUNDS):
+        keep = open_small_handles(vertices, faces, hops=hops + round_)
+        if keep.all():
+            continue
+        rim_before = np.zeros(len(vertices), dtype=bool)
+        rim_before[boundary_edges(faces, len(vertices)).ravel()] = True
+        faces = faces[keep]
+        # the openings: the loops that no boundary loop of the mesh before had a vertex of
+        openings = [loop for loop in boundary_loops(faces, len(vertices)) if not rim_before[loop].any()]
+        closed = fill_holes(vertices, faces, holes=openings, area_matched=True, smooth=smoothness)
+        vertices, faces = closed.vertices, closed.faces
+        filled_holes += list(closed.holes)
+        cuts += int((~keep).sum())
+    if cuts:
+        log.info("opened small handles: %d faces cut out, genus %d -> %d", cuts, genus,
+                 capped_genus(faces, len(vertices)))
+    return vertices, faces, filled_holes
+
+
+def _closing(count: int, assembled: np.ndarray, vertices: np.ndarray, faces: np.ndarray, holes: list,
+             smoothness: float) -> HoleClosing:
+    """The :class:`HoleClosing` of the closed mesh ``(vertices, faces)`` whose first ``count``
+    vertices are the assembled ones (their faces ``assembled``): those a cut-out handle took
+    every face of are dropped, as are membrane vertices of a cut-out handle; ``holes``
+    renumbered to match."""
+    used = np.zeros(len(vertices), dtype=bool)
+    used[faces.ravel()] = True
+    used_before = np.zeros(count, dtype=bool)
+    used_before[assembled.ravel()] = True
+    kept = np.flatnonzero(used[:count] | ~used_before)
+    order = np.concatenate([kept, count + np.flatnonzero(used[count:])])
+    number = np.full(len(vertices), -1, dtype=np.int64)
+    number[order] = np.arange(len(order))
+    holes = [number[hole][number[hole] >= 0] for hole in holes]
+    filled = np.zeros(len(order), dtype=bool)
+    filled[len(kept):] = True
+    return HoleClosing(number[faces], vertices[order], filled, [h for h in holes if len(h)], smoothness,
+                       None if len(kept) == count else kept)
+
+
+def close_small_holes(block: Block, max_fraction: float, smoothness: float = 1.0, handle_hops: int = 0) -> Block:
+    """``block`` with its holes of flat area at most ``max_fraction`` of their piece's area
+    (:func:`~fourd.geometry.hole_filling.small_holes`, in the first frame) filled by the
+    membrane of 3.6.2 (``smoothness``: weight of its C1 terms, 1 the thesis' membrane, 0 the
+    flat one), and its small handles opened and filled the same way when ``handle_hops`` > 0:
+    the disks triangulated in the first frame, their vertices placed in every frame by the
+    membrane over that frame's rim, ``observed`` False."""
+    closing = holes_to_close(block.vertices[0], block.faces, max_fraction, smoothness, handle_hops)
+    return block if closing is None else closing.apply(block)

@@ -1,0 +1,39 @@
+"""The assembled mesh closed at the end: holes filled and small handles opened, in every frame."""
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from fourd.methods.assembly import Options, close_small_holes, holes_to_close
+from fourd.methods.assembly.hierarchy import Block
+from fourd.metrics.topology import topology
+from tests.geometry.test_handles import _body_with_an_arch
+
+
+def test_a_handle_of_the_first_frame_is_cut_out_of_every_frame():
+    """A body with a thin arch (genus 1) moving rigidly over 3 frames, with a hole in its side:
+    closed with the default ``open_handles``, one connectivity of genus 0 serves every frame;
+    the membranes (the hole's and the arch's openings) move with the body (the membrane is
+    affine-equivariant), are not observed, and every vertex kept keeps its track and flag."""
+    vertices, faces = _body_with_an_arch()
+    faces = faces[~(vertices[faces].mean(axis=1)[:, 0] > 0.93)]  # a hole on the side
+    turns = [Rotation.from_rotvec([0.0, 0.3 * t, 0.1 * t]).as_matrix() for t in range(3)]
+    frames = np.stack([vertices @ turn.T + [0.2 * t, 0.0, -0.1 * t] for t, turn in enumerate(turns)])
+    observed = np.ones((3, len(vertices)), dtype=bool)
+    observed[1, ::7] = False
+    block = Block(faces, frames, observed)
+    closed = close_small_holes(block, 0.25, 0.1, Options().open_handles)
+    found = topology(closed.faces, closed.vertices.shape[1])
+    assert found.closed_manifold and found.oriented and found.components == 1 and found.euler == 2
+    closing = holes_to_close(frames[0], faces, 0.25, 0.1, Options().open_handles)
+    kept, added = closing.kept, len(closing.vertices) - len(closing.kept)
+    assert 0 < len(vertices) - len(kept) < 0.02 * len(vertices) and added > 0
+    np.testing.assert_array_equal(closed.vertices[:, : len(kept)], frames[:, kept])
+    np.testing.assert_array_equal(closed.observed[:, : len(kept)], observed[:, kept])
+    assert not closed.observed[:, len(kept):].any()
+    for t, turn in enumerate(turns):
+        moved = closed.vertices[0, len(kept):] @ turn.T + [0.2 * t, 0.0, -0.1 * t]
+        np.testing.assert_allclose(closed.vertices[t, len(kept):], moved, atol=1e-9)
+    # without opening: the hole closed, the arch kept
+    kept_handle = close_small_holes(block, 0.25, 0.1, 0)
+    assert topology(kept_handle.faces, kept_handle.vertices.shape[1]).euler == 0
+    assert kept_handle.vertices.shape[1] >= len(vertices)
