@@ -24,9 +24,34 @@ def _body_with_an_arch(n=72):
     return vertices + x[0], faces[:, ::-1].astype(np.int64)
 
 
+def _pinched(faces):
+    """Vertices whose faces form more than one fan (joined by the sides through the vertex)."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    from fourd.geometry.meshes import face_adjacency
+
+    faces = np.asarray(faces)
+    pairs, sides = face_adjacency(faces)
+    links = []
+    for (f, g), side in zip(pairs.tolist(), sides.tolist()):
+        for v in side:
+            a = 3 * f + faces[f].tolist().index(v)
+            b = 3 * g + faces[g].tolist().index(v)
+            links.append((a, b))
+    links = np.array(links).reshape(-1, 2)
+    graph = coo_matrix((np.ones(len(links)), (links[:, 0], links[:, 1])), shape=(3 * len(faces),) * 2)
+    _, label = connected_components(graph, directed=False)
+    fans = {}
+    for c, v in enumerate(faces.ravel().tolist()):
+        fans.setdefault(v, set()).add(label[c])
+    return [v for v, found in fans.items() if len(found) > 1]
+
+
 def _genus(faces, count):
     found = topology(faces, count)
     assert found.closed_manifold and found.oriented, found
+    assert not _pinched(faces)
     return (2 * found.components - found.euler) // 2, found
 
 

@@ -30,20 +30,22 @@ from __future__ import annotations
 import numba
 import numpy as np
 import scipy.sparse as sp
+from scipy.sparse.csgraph import connected_components
 
 from fourd.geometry.boundary_loops import boundary_edges, boundary_loops
-from fourd.geometry.meshes import vertex_adjacency, vertex_components
+from fourd.geometry.meshes import face_adjacency, vertex_adjacency
 
 __all__ = ["ball_euler", "capped_genus", "open_small_handles"]
 
 
 def capped_genus(faces: np.ndarray, count: int) -> int:
     """The genus of the surface ``faces [F, 3]`` (``count`` vertices) would have with every
-    boundary loop capped by a disk: the sum over its pieces, ``(2 C - chi - loops) / 2``."""
+    boundary loop capped by a disk: the sum over its pieces (faces joined by sides),
+    ``(2 C - chi - loops) / 2``."""
     faces = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
     if len(faces) == 0:
         return 0
-    pieces = vertex_components(faces, count)[0] - _isolated(faces, count)
+    pieces = _pieces(faces)
     sides = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1)
     euler = len(np.unique(faces)) - len(np.unique(sides[:, 0] * np.int64(count) + sides[:, 1])) + len(faces)
     return (2 * pieces - euler - len(boundary_loops(faces, count))) // 2
@@ -153,7 +155,7 @@ def open_small_handles(vertices: np.ndarray, faces: np.ndarray, *, hops: int = 3
     euler = ball_euler(faces, count, hops)
     candidates = np.flatnonzero(euler <= 0)
     candidates = candidates[np.argsort(euler[candidates], kind="stable")]
-    pieces = vertex_components(faces, count)[0] - _isolated(faces, count)
+    pieces = _pieces(faces)
     adjacency = vertex_adjacency(faces, count)
     incidence = sp.csr_matrix((np.ones(3 * len(faces)), (faces.ravel(), np.repeat(np.arange(len(faces)), 3))),
                               shape=(count, len(faces)))
@@ -174,9 +176,7 @@ def open_small_handles(vertices: np.ndarray, faces: np.ndarray, *, hops: int = 3
         trial = keep.copy()
         trial[region] = False
         # an opening of one loop cannot split a piece; one of several may (a thin part cut through)
-        if len(boundary_loops(faces[region], count)) > 1 and (
-            vertex_components(faces[trial], count)[0] - _isolated(faces[trial], count) > pieces
-        ):
+        if len(boundary_loops(faces[region], count)) > 1 and _pieces(faces[trial]) > pieces:
             blocked[ball] = True
             continue
         keep = trial
@@ -184,6 +184,14 @@ def open_small_handles(vertices: np.ndarray, faces: np.ndarray, *, hops: int = 3
         blocked[_ball(adjacency, seed, 2 * hops + 1)] = True
         cut += 1
     return keep
+
+
+def _pieces(faces: np.ndarray) -> int:
+    """Pieces of surface: faces joined by shared sides (two pieces that only touch at a vertex
+    are two, as capping would leave them)."""
+    pairs, _ = face_adjacency(faces)
+    graph = sp.coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(len(faces), len(faces)))
+    return int(connected_components(graph, directed=False)[0])
 
 
 def _faces_at(incidence: sp.csr_matrix, vertices: np.ndarray) -> np.ndarray:
@@ -233,10 +241,3 @@ def _ball(adjacency: sp.csr_matrix, seed: int, hops: int) -> np.ndarray:
                     step.append(w)
         front = step
     return np.fromiter(reached, dtype=np.int64, count=len(reached))
-
-
-def _isolated(faces: np.ndarray, count: int) -> int:
-    """Vertices no face uses (each counts as a piece of :func:`vertex_components`)."""
-    used = np.zeros(count, dtype=bool)
-    used[faces.ravel()] = True
-    return int(count - used.sum())

@@ -6,7 +6,7 @@ from scipy.spatial.transform import Rotation
 from fourd.methods.assembly import Options, close_small_holes, holes_to_close
 from fourd.methods.assembly.hierarchy import Block
 from fourd.metrics.topology import topology
-from tests.geometry.test_handles import _body_with_an_arch
+from tests.geometry.test_handles import _body_with_an_arch, _pinched
 
 
 def test_a_handle_of_the_first_frame_is_cut_out_of_every_frame():
@@ -24,6 +24,7 @@ def test_a_handle_of_the_first_frame_is_cut_out_of_every_frame():
     closed = close_small_holes(block, 0.25, 0.1, Options().open_handles)
     found = topology(closed.faces, closed.vertices.shape[1])
     assert found.closed_manifold and found.oriented and found.components == 1 and found.euler == 2
+    assert not _pinched(closed.faces)
     closing = holes_to_close(frames[0], faces, 0.25, 0.1, Options().open_handles)
     kept, added = closing.kept, len(closing.vertices) - len(closing.kept)
     assert 0 < len(vertices) - len(kept) < 0.02 * len(vertices) and added > 0
