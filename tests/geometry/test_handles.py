@@ -93,3 +93,19 @@ def test_a_thin_ring_is_a_handle_everywhere_and_opens_into_a_sphere():
     filled = fill_holes(torus.vertices, torus.faces[keep])
     genus, found = _genus(filled.faces, len(filled.vertices))
     assert genus == 0 and found.components == 1
+
+
+def test_two_spheres_touching_at_a_vertex_have_no_handle():
+    """A pinch (two fans of faces at one vertex) counts as two vertices: the two spheres are
+    genus 0, not a surface of Euler characteristic 3, and nothing is cut."""
+    from fourd.geometry.handles import fan_count
+
+    sphere = trimesh.creation.icosphere(2)
+    count = len(sphere.vertices)
+    other = sphere.faces + count
+    other[other == count] = 0  # the second sphere's first vertex is the first sphere's
+    faces = np.vstack([sphere.faces, other])
+    assert fan_count(sphere.faces) == count and fan_count(faces) == 2 * count
+    assert capped_genus(faces, 2 * count) == 0
+    assert open_small_handles(np.zeros((2 * count, 3)), faces).all()
+    assert _pinched(faces) == [0]
