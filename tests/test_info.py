@@ -102,7 +102,8 @@ def test_info_problems_are_one_line(tmp_path, capsys):
 
 def test_info_tells_a_closed_surface_its_genus_and_an_open_one_its_holes():
     """What a user checks before texturing or printing: closed and manifold (and the genus),
-    or the boundary loops and the sides of more than two faces that keep it from being so."""
+    or the boundary loops, the sides of more than two faces and the pinched vertices that keep
+    it from being so."""
     from fourd.info import describe_surface
 
     sphere = trimesh.creation.icosphere(subdivisions=2)
@@ -113,8 +114,13 @@ def test_info_tells_a_closed_surface_its_genus_and_an_open_one_its_holes():
     assert describe_surface(two, len(torus.vertices) + len(sphere.vertices)) == (
         "closed and manifold, 2 pieces, genus 1"
     )
-    assert describe_surface(sphere.faces[2:], len(sphere.vertices)) == "not closed (1 boundary loop), 1 piece"
+    assert describe_surface(sphere.faces[1:], len(sphere.vertices)) == "not closed (1 boundary loop), 1 piece"
     doubled = np.vstack([sphere.faces, sphere.faces[:1]])  # one face twice: three sides of 3 faces
     assert describe_surface(doubled, len(sphere.vertices)) == (
-        "not closed (3 sides shared by more than two faces), 1 piece"
+        "closed but not manifold (3 sides shared by more than two faces), 1 piece"
+    )
+    count = len(sphere.vertices)
+    touching = np.vstack([sphere.faces, np.where(sphere.faces == 0, 0, sphere.faces + count)])  # share vertex 0
+    assert describe_surface(touching, 2 * count) == (
+        "closed but not manifold (1 pinched vertex where faces touch at a point only), 1 piece"
     )

@@ -95,8 +95,8 @@ def _range(values) -> str:
 
 def describe_surface(faces: np.ndarray, vertex_count: int) -> str:
     """One mesh's topology in a few words: closed and manifold with its pieces and genus (the
-    sum over its pieces), or open with its boundary loops and the sides shared by more than
-    two faces."""
+    sum over its pieces), or what keeps it from that: its boundary loops, the sides shared by
+    more than two faces and the pinched vertices."""
     from fourd.metrics.topology import topology
 
     found = topology(faces, vertex_count)
@@ -109,7 +109,11 @@ def describe_surface(faces: np.ndarray, vertex_count: int) -> str:
         problems.append(f"{found.boundary_loops} boundary loop{'' if found.boundary_loops == 1 else 's'}")
     if found.nonmanifold_edges:
         problems.append(f"{found.nonmanifold_edges} sides shared by more than two faces")
-    return f"not closed ({', '.join(problems)}), {pieces}"
+    if found.pinched_vertices:
+        problems.append(f"{found.pinched_vertices} pinched {'vertex' if found.pinched_vertices == 1 else 'vertices'}"
+                        " where faces touch at a point only")
+    state = "not closed" if found.boundary_loops else "closed but not manifold"
+    return f"{state} ({', '.join(problems)}), {pieces}"
 
 
 def describe_result(result, *, observed_stored: bool = True) -> str:

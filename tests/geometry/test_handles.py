@@ -98,7 +98,7 @@ def test_a_thin_ring_is_a_handle_everywhere_and_opens_into_a_sphere():
 def test_two_spheres_touching_at_a_vertex_have_no_handle():
     """A pinch (two fans of faces at one vertex) counts as two vertices: the two spheres are
     genus 0, not a surface of Euler characteristic 3, and nothing is cut."""
-    from fourd.geometry.handles import fan_count
+    from fourd.geometry.fans import fan_count
 
     sphere = trimesh.creation.icosphere(2)
     count = len(sphere.vertices)

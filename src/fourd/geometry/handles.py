@@ -33,9 +33,10 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
 from fourd.geometry.boundary_loops import boundary_edges, boundary_loops
+from fourd.geometry.fans import fan_count
 from fourd.geometry.meshes import face_adjacency, vertex_adjacency
 
-__all__ = ["ball_euler", "capped_genus", "fan_count", "open_small_handles"]
+__all__ = ["ball_euler", "capped_genus", "open_small_handles"]
 
 
 def capped_genus(faces: np.ndarray, count: int) -> int:
@@ -49,23 +50,6 @@ def capped_genus(faces: np.ndarray, count: int) -> int:
     sides = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1)
     euler = fan_count(faces) - len(np.unique(sides[:, 0] * np.int64(count) + sides[:, 1])) + len(faces)
     return (2 * _pieces(faces) - euler - len(boundary_loops(faces, count))) // 2
-
-
-def fan_count(faces: np.ndarray) -> int:
-    """The vertices of ``faces [F, 3]`` counted once per fan: the faces around a vertex joined
-    by the sides through it. A manifold vertex has one fan; a pinch, where two cones of faces
-    touch at one vertex, has two."""
-    faces = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
-    pairs, sides = face_adjacency(faces)
-    links = []
-    for end in (0, 1):
-        vertex = sides[:, end]
-        corner = [3 * pairs[:, k] + np.argmax(faces[pairs[:, k]] == vertex[:, None], axis=1) for k in (0, 1)]
-        links.append(np.stack(corner, axis=1))
-    links = np.concatenate(links) if links else np.zeros((0, 2), dtype=np.int64)
-    graph = sp.coo_matrix((np.ones(len(links)), (links[:, 0], links[:, 1])), shape=(3 * len(faces),) * 2)
-    _, label = connected_components(graph, directed=False)
-    return len(np.unique(faces.ravel() * np.int64(3 * len(faces)) + label))
 
 
 def ball_euler(faces: np.ndarray, count: int, hops: int, seeds: np.ndarray | None = None,

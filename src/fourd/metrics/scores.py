@@ -99,7 +99,8 @@ def _volumes(mesh, topologies: list[Topology]) -> list[float | None]:
     volumes = []
     for t, topo in enumerate(topologies):
         vertices, faces = mesh.frame(t)
-        ok = topo.closed_manifold and topo.oriented
+        # a pinch (pieces touching at a vertex) still bounds a volume
+        ok = topo.boundary_edges == 0 and topo.nonmanifold_edges == 0 and topo.oriented
         volumes.append(enclosed_volume(vertices, faces) if ok else None)
     return volumes
 
@@ -141,7 +142,8 @@ def evaluate(result, truth, *, samples: int = 60000, seed: int = 0, timing: dict
         ``filled_fraction``, ``correspondence_mean``, ``correspondence_first``,
         ``correspondence_last``, ``jitter`` (with ``jitter_output``, ``jitter_truth``),
         ``volume_change``, ``truth_volume_change``, ``closed_manifold`` (fraction of frames),
-        ``components_max``, ``boundary_loops_max``, ``nonmanifold_edges_max``; ``None`` where a
+        ``components_max``, ``boundary_loops_max``, ``nonmanifold_edges_max``,
+        ``pinched_vertices_max``; ``None`` where a
         metric does not apply. ``per_frame``: lists of ``accuracy``, ``completeness``,
         ``chamfer``, ``correspondence``, ``volume``, ``truth_volume``, ``components``,
         ``boundary_loops``, ``euler``, ``nonmanifold_edges``, ``closed_manifold``. Plus
@@ -234,6 +236,7 @@ def evaluate(result, truth, *, samples: int = 60000, seed: int = 0, timing: dict
             "components_max": max(topo.components for topo in topologies),
             "boundary_loops_max": max(topo.boundary_loops for topo in topologies),
             "nonmanifold_edges_max": max(topo.nonmanifold_edges for topo in topologies),
+            "pinched_vertices_max": max(topo.pinched_vertices for topo in topologies),
         }
     )
     report.update(_folds(result, truth) if folds else _NO_FOLDS)

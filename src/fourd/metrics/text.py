@@ -23,6 +23,7 @@ REPORT_ROWS = (
     ("components_max", "connected components (max)"),
     ("boundary_loops_max", "boundary loops (max)"),
     ("nonmanifold_edges_max", "non-manifold edges (max)"),
+    ("pinched_vertices_max", "pinched vertices (max)"),
     ("fold_recall", "truth folds found"),
 )
 

@@ -18,13 +18,16 @@ import numpy as np
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
+from fourd.geometry.fans import pinched_vertices
 from fourd.geometry.meshes import enclosed_volume
 
 __all__ = ["Topology", "enclosed_volume", "topology"]
 
 
 class Topology(NamedTuple):
-    """Combinatorial topology of one triangle mesh (only vertices used by faces count)."""
+    """Combinatorial topology of one triangle mesh (only vertices used by faces count).
+    ``closed_manifold``: no boundary side, no side of more than two faces and no pinched vertex
+    (two or more fans of faces meeting at it, :mod:`fourd.geometry.fans`)."""
 
     components: int
     boundary_loops: int
@@ -33,13 +36,15 @@ class Topology(NamedTuple):
     boundary_edges: int
     oriented: bool
     closed_manifold: bool
+    pinched_vertices: int = 0
 
 
 def topology(faces: np.ndarray, vertex_count: int | None = None) -> Topology:
     """Components, boundary loops, Euler characteristic and manifoldness of ``faces [F, 3]``.
 
     Faces with a repeated corner are ignored. Components are connected through shared vertices;
-    boundary loops are the connected pieces of the edges used by one face only.
+    boundary loops are the connected pieces of the edges used by one face only; a pinched vertex
+    is one where separate fans of faces meet.
     """
     faces = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
     faces = faces[(faces[:, 0] != faces[:, 1]) & (faces[:, 1] != faces[:, 2]) & (faces[:, 0] != faces[:, 2])]
@@ -67,5 +72,6 @@ def topology(faces: np.ndarray, vertex_count: int | None = None) -> Topology:
         loops = pieces(ba, bb, np.unique(np.concatenate([ba, bb])))
     else:
         loops = 0
-    closed = len(boundary) == 0 and nonmanifold == 0
-    return Topology(components, loops, int(euler), nonmanifold, int(len(boundary)), bool(oriented), closed)
+    pinched = len(pinched_vertices(faces))
+    closed = len(boundary) == 0 and nonmanifold == 0 and pinched == 0
+    return Topology(components, loops, int(euler), nonmanifold, int(len(boundary)), bool(oriented), closed, pinched)
