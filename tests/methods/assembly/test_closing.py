@@ -38,3 +38,31 @@ def test_a_handle_of_the_first_frame_is_cut_out_of_every_frame():
     kept_handle = close_small_holes(block, 0.25, 0.1, 0)
     assert topology(kept_handle.faces, kept_handle.vertices.shape[1]).euler == 0
     assert kept_handle.vertices.shape[1] >= len(vertices)
+
+
+def test_pieces_touching_at_a_vertex_come_out_as_two_closed_manifolds():
+    """Two spheres sharing one vertex (a pinch), one with a hole and a triangle hanging from it
+    by a vertex, over 2 frames: the flap is dropped with its own vertices, the hole is filled
+    and the pinch split into a copy per sphere, at the same place in every frame, with its
+    observed flag; each sphere is then a closed manifold of its own."""
+    import trimesh
+
+    sphere = trimesh.creation.icosphere(2)
+    count = len(sphere.vertices)
+    antipode = int(np.argmin(sphere.vertices @ sphere.vertices[0]))
+    other = sphere.faces + count
+    other[other == count + antipode] = 0  # the second sphere, beside the first, touches it at vertex 0
+    flap = [[5, 2 * count, 2 * count + 1]]  # a triangle hanging from the first sphere by vertex 5
+    faces = np.vstack([sphere.faces[1:], other, flap])  # the first sphere has a one-face hole
+    first = np.vstack([sphere.vertices, sphere.vertices + 2 * sphere.vertices[0], [[3, 3, 3], [3, 3, 4]]])
+    frames = np.stack([first, 1.5 * first + [0.1, 0.2, 0.3]])
+    observed = np.ones((2, 2 * count + 2), dtype=bool)
+    observed[1, 0] = False
+    closed = close_small_holes(Block(faces, frames, observed), 0.25, 1.0, Options().open_handles)
+    found = topology(closed.faces, closed.vertices.shape[1])
+    assert found.closed_manifold and found.components == 2 and found.euler == 4 and found.pinched_vertices == 0
+    copies = np.intersect1d(np.flatnonzero(np.all(closed.vertices[0] == first[0], axis=1)), closed.faces)
+    assert len(copies) == 2  # vertex 0 and its copy, together in both frames
+    np.testing.assert_array_equal(closed.vertices[1, copies], frames[1, [0, 0]])
+    assert not closed.observed[1, copies].any() and closed.observed[0, copies].all()
+    assert not (closed.vertices[0] == 3.0).any()  # the flap's own vertices are gone

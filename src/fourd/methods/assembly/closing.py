@@ -1,19 +1,24 @@
-"""The assembled mesh closed at the end: its small holes filled by the membrane of thesis 3.6.2
-and, before that, its small handles opened (topological noise).
+"""The assembled mesh closed at the end: its small holes filled by the membrane of thesis 3.6.2,
+and its small handles opened and closed the same way (topological noise).
 
-Both are found in the first frame and then applied to every frame, so one connectivity serves
+Each step is found in the first frame and then applied to every frame, so one connectivity serves
 the whole sequence:
 
-1. the small holes (:func:`~fourd.geometry.hole_filling.small_holes`) are filled by the
+1. a flap of a few faces hanging from the surface by a vertex (a piece at most a hundredth the
+   size of the one it touches, :func:`~fourd.geometry.fans.hanging_pieces`) is dropped;
+2. the small holes (:func:`~fourd.geometry.hole_filling.small_holes`) are filled by the
    membrane (:func:`~fourd.geometry.hole_filling.fill_holes`);
-2. with ``handle_hops``, the small handles of the closed mesh are cut out
+3. with ``handle_hops``, the small handles of the closed mesh are cut out
    (:func:`~fourd.geometry.handles.open_small_handles`: balls of that many edges that are not
    disks) and their openings filled the same way, for a few rounds. The first frame's mesh
    gives the whole animation its connectivity, and a per-frame surface perforates the gap
    between two sheets of skin a few spacings apart into a web of tunnels (crane's first frame:
    genus 0-22 with the scan's noise, ``experiments/assembly_handles.py``);
-3. in each frame, the vertices no face uses any more are dropped and every membrane vertex is
-   placed by the membrane over that frame's rim, unobserved (:meth:`HoleClosing.apply`).
+4. in each frame, the vertices no face uses any more are dropped and every membrane vertex is
+   placed by the membrane over that frame's rim, unobserved (:meth:`HoleClosing.apply`);
+5. a vertex where two fans of faces touch (a pinch: two pieces meeting at a point, a rim
+   crossing itself) is split into one copy per fan, at the same place
+   (:func:`~fourd.geometry.fans.split_pinches`), so the result is a manifold.
 """
 
 from __future__ import annotations
@@ -25,6 +30,7 @@ import numpy as np
 
 from fourd.errors import InputError
 from fourd.geometry.boundary_loops import boundary_edges, boundary_loops
+from fourd.geometry.fans import hanging_pieces, pinched_vertices, split_pinches
 from fourd.geometry.handles import capped_genus, open_small_handles
 from fourd.geometry.hole_filling import fill_holes, membrane_positions, small_holes
 from fourd.methods.assembly.hierarchy import Block
@@ -45,7 +51,8 @@ class HoleClosing(NamedTuple):
     frame: the closed mesh's ``faces``, its ``vertices`` in the first frame (the assembled ones
     kept first, then the membranes'), the ``filled [N']`` membrane vertices, the ``holes``'
     rims, the C1 weight ``smoothness`` and the assembled vertices ``kept [K]`` (None: all; the
-    others were inside a handle cut out)."""
+    others were inside a handle cut out). With pinches, ``split_faces`` are the faces given to
+    the result and ``copies [N' + P]`` the vertex of ``vertices`` each of its vertices copies."""
 
     faces: np.ndarray
     vertices: np.ndarray
@@ -53,6 +60,18 @@ class HoleClosing(NamedTuple):
     holes: list
     smoothness: float
     kept: np.ndarray | None = None
+    split_faces: np.ndarray | None = None
+    copies: np.ndarray | None = None
+
+    @property
+    def output_faces(self) -> np.ndarray:
+        """The result's faces: ``faces`` with the pinches split."""
+        return self.faces if self.split_faces is None else self.split_faces
+
+    @property
+    def output_count(self) -> int:
+        """The result's vertex count."""
+        return len(self.vertices) if self.copies is None else len(self.copies)
 
     def apply(self, block: Block) -> Block:
         """``block`` (any of the frames of the block the holes were found in) with the holes
@@ -65,6 +84,8 @@ class HoleClosing(NamedTuple):
         vertices = np.concatenate([assembled, np.repeat(self.vertices[None, count:], frames, axis=0)], axis=1)
         vertices = membrane_positions(vertices, self.faces, self.filled, self.holes, smooth=self.smoothness)
         observed = np.concatenate([observed, np.zeros((frames, added), dtype=bool)], axis=1)
+        if self.copies is not None:
+            return Block(self.split_faces, vertices[:, self.copies], observed[:, self.copies])
         return Block(self.faces, vertices, observed)
 
 
@@ -72,10 +93,15 @@ def holes_to_close(first: np.ndarray, faces: np.ndarray, max_fraction: float, sm
                    handle_hops: int = 0) -> HoleClosing | None:
     """The membranes closing the holes of the mesh ``faces`` at its first frame's positions
     ``first [N, 3]`` (:func:`close_small_holes`), after its small handles are opened when
-    ``handle_hops`` > 0 (the module docstring); None when there is nothing to do."""
+    ``handle_hops`` > 0, and its pinches split (the module docstring); None when there is
+    nothing to do."""
     count = len(first)
     vertices, faces = np.asarray(first, dtype=np.float64), np.asarray(faces, dtype=np.int64)
     assembled = faces
+    hanging = hanging_pieces(faces, count)
+    if hanging.any():
+        log.info("dropped %d faces hanging from the surface by a vertex", int(hanging.sum()))
+        faces = faces[~hanging]
     filled_holes: list = []
     holes = small_holes(vertices, faces, max_fraction=max_fraction) if max_fraction > 0 else []
     try:
@@ -90,7 +116,7 @@ def holes_to_close(first: np.ndarray, faces: np.ndarray, max_fraction: float, sm
     except InputError as error:  # a degenerate rim: keep the assembled result rather than lose it
         log.warning("holes left open: %s", error)
         return None
-    if len(vertices) == count and not filled_holes:
+    if len(vertices) == count and not filled_holes and not hanging.any() and not len(pinched_vertices(faces)):
         return None
     return _closing(count, assembled, vertices, faces, filled_holes, smoothness)
 
@@ -125,7 +151,7 @@ def _closing(count: int, assembled: np.ndarray, vertices: np.ndarray, faces: np.
     """The :class:`HoleClosing` of the closed mesh ``(vertices, faces)`` whose first ``count``
     vertices are the assembled ones (their faces ``assembled``): those a cut-out handle took
     every face of are dropped, as are membrane vertices of a cut-out handle; ``holes``
-    renumbered to match."""
+    renumbered to match; the pinches of the result split."""
     used = np.zeros(len(vertices), dtype=bool)
     used[faces.ravel()] = True
     used_before = np.zeros(count, dtype=bool)
@@ -137,8 +163,14 @@ def _closing(count: int, assembled: np.ndarray, vertices: np.ndarray, faces: np.
     holes = [number[hole][number[hole] >= 0] for hole in holes]
     filled = np.zeros(len(order), dtype=bool)
     filled[len(kept):] = True
-    return HoleClosing(number[faces], vertices[order], filled, [h for h in holes if len(h)], smoothness,
-                       None if len(kept) == count else kept)
+    faces = number[faces]
+    split, copies = split_pinches(faces, len(order))
+    if len(copies) > len(order):
+        log.info("split %d pinched vertices", len(copies) - len(order))
+    else:
+        split, copies = None, None
+    return HoleClosing(faces, vertices[order], filled, [h for h in holes if len(h)], smoothness,
+                       None if len(kept) == count else kept, split, copies)
 
 
 def close_small_holes(block: Block, max_fraction: float, smoothness: float = 1.0, handle_hops: int = 0) -> Block:

@@ -243,11 +243,11 @@ class _Run:
 
     @property
     def closed_faces(self) -> np.ndarray:
-        return self.last.faces if self.closing is None else self.closing.faces
+        return self.last.faces if self.closing is None else self.closing.output_faces
 
     @property
     def vertex_count(self) -> int:
-        return self.last.vertices.shape[1] if self.closing is None else len(self.closing.vertices)
+        return self.last.vertices.shape[1] if self.closing is None else self.closing.output_count
 
     def lead(self, start: int) -> int:
         """Frames read before a window starting at frame ``start``: the video's anchors track
