@@ -16,8 +16,8 @@ Answer (2026-12-04, standard scans, default options):
   hanging from the surface by one vertex (the per-frame surface fraying) has a loop of 3 sides,
   which the hole filling capped with the reverse triangle.
 - With such flaps dropped first (pieces at most a hundredth of the piece they touch,
-  ``geometry.fans.hanging_pieces``: 2 faces on crane-0, 3 on crane-130) and any pinch left
-  split: both results are one piece, closed, manifold, no pinch, Euler characteristic 2.
+  ``geometry.fans.fragments``: 2 faces on crane-0, 3 on crane-130) and any pinch left split:
+  both results are one piece, closed, manifold, no pinch, Euler characteristic 2.
 """
 
 import sys

@@ -78,10 +78,11 @@ def test_a_manifold_mesh_is_left_as_it_is():
     assert fan_count(torus.faces) == len(torus.vertices)
 
 
-def test_a_flap_hanging_by_a_vertex_is_found_and_a_touching_body_is_not():
+def test_a_flap_and_a_crumb_are_fragments_and_a_touching_body_and_a_small_object_are_not():
     """A triangle hanging from a sphere by one vertex is a flap; a second sphere touching the
-    first at a vertex is a body in contact and stays."""
-    from fourd.geometry.fans import hanging_pieces
+    first at a vertex is a body in contact and stays; a tetrahedron on its own is a crumb beside
+    a sphere of 5,120 faces (a thousandth) but an object of its own beside one of 320."""
+    from fourd.geometry.fans import fragments
 
     sphere = trimesh.creation.icosphere(2)
     count = len(sphere.vertices)
@@ -89,6 +90,11 @@ def test_a_flap_hanging_by_a_vertex_is_found_and_a_touching_body_is_not():
     other[other == count] = 0
     flap = [[5, 2 * count, 2 * count + 1]]
     faces = np.vstack([sphere.faces, other, flap])
-    hanging = hanging_pieces(faces, 2 * count + 2)
-    assert np.flatnonzero(hanging).tolist() == [len(faces) - 1]
-    assert not hanging_pieces(np.vstack([sphere.faces, other]), 2 * count).any()
+    assert np.flatnonzero(fragments(faces, 2 * count + 2)).tolist() == [len(faces) - 1]
+    assert not fragments(np.vstack([sphere.faces, other]), 2 * count).any()
+    tetrahedron = np.array([[0, 1, 2], [0, 3, 1], [1, 3, 2], [0, 2, 3]])
+    for subdivisions, crumb in ((4, True), (2, False)):
+        body = trimesh.creation.icosphere(subdivisions)
+        faces = np.vstack([body.faces, tetrahedron + len(body.vertices)])
+        found = fragments(faces, len(body.vertices) + 4)
+        assert found[len(body.faces):].all() == crumb and not found[: len(body.faces)].any()

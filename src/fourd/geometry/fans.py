@@ -26,7 +26,7 @@ from scipy.sparse.csgraph import connected_components
 
 from fourd.geometry.meshes import face_adjacency
 
-__all__ = ["corner_fans", "fan_count", "hanging_pieces", "pinched_vertices", "split_pinches"]
+__all__ = ["corner_fans", "fan_count", "fragments", "pinched_vertices", "split_pinches"]
 
 
 def corner_fans(faces: np.ndarray) -> np.ndarray:
@@ -80,11 +80,13 @@ def split_pinches(faces: np.ndarray, count: int) -> tuple[np.ndarray, np.ndarray
     return number[corner_fan].reshape(-1, 3), source
 
 
-def hanging_pieces(faces: np.ndarray, count: int, *, ratio: float = 100.0) -> np.ndarray:
-    """bool ``[F]``: the faces of ``faces [F, 3]`` (``count`` vertices) in a piece (faces joined
-    by sides) that touches a piece at least ``ratio`` times its face count at a vertex: a flap of
-    a few faces hanging from a surface by a pinch, which a scan's surface leaves where it frays.
-    Pieces of like size touching at a point (two bodies in contact) are not flagged."""
+def fragments(faces: np.ndarray, count: int, *, hanging: float = 100.0, loose: float = 1000.0) -> np.ndarray:
+    """bool ``[F]``: the faces of ``faces [F, 3]`` (``count`` vertices) in a fragment: a piece
+    (faces joined by sides) that touches a piece at least ``hanging`` times its face count at a
+    vertex (a flap hanging by a pinch, where a scan's surface frays), or that has at most
+    ``1 / loose`` of the largest piece's faces (a crumb a few point spacings across, below what
+    the sampling resolves). Pieces of like size touching at a point (two bodies in contact) and
+    a small object of its own are kept."""
     faces = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
     if len(faces) == 0:
         return np.zeros(0, dtype=bool)
@@ -95,6 +97,6 @@ def hanging_pieces(faces: np.ndarray, count: int, *, ratio: float = 100.0) -> np
     corner_piece, vertex = np.repeat(piece, 3), faces.ravel()
     largest = np.zeros(int(count), dtype=np.int64)
     np.maximum.at(largest, vertex, size[corner_piece])
-    hangs = np.zeros(pieces, dtype=bool)
-    np.logical_or.at(hangs, corner_piece, largest[vertex] >= ratio * size[corner_piece])
-    return hangs[piece]
+    dropped = loose * size <= size.max()
+    np.logical_or.at(dropped, corner_piece, largest[vertex] >= hanging * size[corner_piece])
+    return dropped[piece]

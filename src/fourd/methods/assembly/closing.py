@@ -4,8 +4,10 @@ and its small handles opened and closed the same way (topological noise).
 Each step is found in the first frame and then applied to every frame, so one connectivity serves
 the whole sequence:
 
-1. a flap of a few faces hanging from the surface by a vertex (a piece at most a hundredth the
-   size of the one it touches, :func:`~fourd.geometry.fans.hanging_pieces`) is dropped;
+1. fragments are dropped (:func:`~fourd.geometry.fans.fragments`): a flap of a few faces
+   hanging from the surface by a vertex (at most a hundredth of the piece it touches), whose
+   loop of 3 sides would be capped into a pillow, and a crumb of a few faces on its own (at
+   most a thousandth of the largest piece);
 2. the small holes (:func:`~fourd.geometry.hole_filling.small_holes`) are filled by the
    membrane (:func:`~fourd.geometry.hole_filling.fill_holes`);
 3. with ``handle_hops``, the small handles of the closed mesh are cut out
@@ -30,7 +32,7 @@ import numpy as np
 
 from fourd.errors import InputError
 from fourd.geometry.boundary_loops import boundary_edges, boundary_loops
-from fourd.geometry.fans import hanging_pieces, pinched_vertices, split_pinches
+from fourd.geometry.fans import fragments, pinched_vertices, split_pinches
 from fourd.geometry.handles import capped_genus, open_small_handles
 from fourd.geometry.hole_filling import fill_holes, membrane_positions, small_holes
 from fourd.methods.assembly.hierarchy import Block
@@ -98,10 +100,10 @@ def holes_to_close(first: np.ndarray, faces: np.ndarray, max_fraction: float, sm
     count = len(first)
     vertices, faces = np.asarray(first, dtype=np.float64), np.asarray(faces, dtype=np.int64)
     assembled = faces
-    hanging = hanging_pieces(faces, count)
-    if hanging.any():
-        log.info("dropped %d faces hanging from the surface by a vertex", int(hanging.sum()))
-        faces = faces[~hanging]
+    dropped = fragments(faces, count)
+    if dropped.any():
+        log.info("dropped %d faces of fragments (flaps hanging by a vertex, crumbs)", int(dropped.sum()))
+        faces = faces[~dropped]
     filled_holes: list = []
     holes = small_holes(vertices, faces, max_fraction=max_fraction) if max_fraction > 0 else []
     try:
@@ -116,7 +118,7 @@ def holes_to_close(first: np.ndarray, faces: np.ndarray, max_fraction: float, sm
     except InputError as error:  # a degenerate rim: keep the assembled result rather than lose it
         log.warning("holes left open: %s", error)
         return None
-    if len(vertices) == count and not filled_holes and not hanging.any() and not len(pinched_vertices(faces)):
+    if len(vertices) == count and not filled_holes and not dropped.any() and not len(pinched_vertices(faces)):
         return None
     return _closing(count, assembled, vertices, faces, filled_holes, smoothness)
 
