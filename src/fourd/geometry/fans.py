@@ -24,7 +24,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
-from fourd.geometry.meshes import face_adjacency
+from fourd.geometry.meshes import face_adjacency, face_pieces
 
 __all__ = ["corner_fans", "fan_count", "fragments", "pinched_vertices", "split_pinches"]
 
@@ -90,9 +90,7 @@ def fragments(faces: np.ndarray, count: int, *, hanging: float = 100.0, loose: f
     faces = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
     if len(faces) == 0:
         return np.zeros(0, dtype=bool)
-    pairs, _ = face_adjacency(faces)
-    graph = sp.coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(len(faces),) * 2)
-    pieces, piece = connected_components(graph, directed=False)
+    pieces, piece = face_pieces(faces)
     size = np.bincount(piece, minlength=pieces)
     corner_piece, vertex = np.repeat(piece, 3), faces.ravel()
     largest = np.zeros(int(count), dtype=np.int64)

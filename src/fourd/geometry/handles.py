@@ -30,11 +30,10 @@ from __future__ import annotations
 import numba
 import numpy as np
 import scipy.sparse as sp
-from scipy.sparse.csgraph import connected_components
 
 from fourd.geometry.boundary_loops import boundary_edges, boundary_loops
 from fourd.geometry.fans import fan_count
-from fourd.geometry.meshes import face_adjacency, vertex_adjacency
+from fourd.geometry.meshes import face_pieces, vertex_adjacency
 
 __all__ = ["ball_euler", "capped_genus", "open_small_handles"]
 
@@ -49,7 +48,7 @@ def capped_genus(faces: np.ndarray, count: int) -> int:
         return 0
     sides = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1)
     euler = fan_count(faces) - len(np.unique(sides[:, 0] * np.int64(count) + sides[:, 1])) + len(faces)
-    return (2 * _pieces(faces) - euler - len(boundary_loops(faces, count))) // 2
+    return (2 * face_pieces(faces)[0] - euler - len(boundary_loops(faces, count))) // 2
 
 
 def ball_euler(faces: np.ndarray, count: int, hops: int, seeds: np.ndarray | None = None,
@@ -156,7 +155,7 @@ def open_small_handles(vertices: np.ndarray, faces: np.ndarray, *, hops: int = 3
     euler = ball_euler(faces, count, hops)
     candidates = np.flatnonzero(euler <= 0)
     candidates = candidates[np.argsort(euler[candidates], kind="stable")]
-    pieces = _pieces(faces)
+    pieces = face_pieces(faces)[0]
     adjacency = vertex_adjacency(faces, count)
     incidence = sp.csr_matrix((np.ones(3 * len(faces)), (faces.ravel(), np.repeat(np.arange(len(faces)), 3))),
                               shape=(count, len(faces)))
@@ -177,7 +176,7 @@ def open_small_handles(vertices: np.ndarray, faces: np.ndarray, *, hops: int = 3
         trial = keep.copy()
         trial[region] = False
         # an opening of one loop cannot split a piece; one of several may (a thin part cut through)
-        if len(boundary_loops(faces[region], count)) > 1 and _pieces(faces[trial]) > pieces:
+        if len(boundary_loops(faces[region], count)) > 1 and face_pieces(faces[trial])[0] > pieces:
             blocked[ball] = True
             continue
         keep = trial
@@ -185,14 +184,6 @@ def open_small_handles(vertices: np.ndarray, faces: np.ndarray, *, hops: int = 3
         blocked[_ball(adjacency, seed, 2 * hops + 1)] = True
         cut += 1
     return keep
-
-
-def _pieces(faces: np.ndarray) -> int:
-    """Pieces of surface: faces joined by shared sides (two pieces that only touch at a vertex
-    are two, as capping would leave them)."""
-    pairs, _ = face_adjacency(faces)
-    graph = sp.coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(len(faces), len(faces)))
-    return int(connected_components(graph, directed=False)[0])
 
 
 def _faces_at(incidence: sp.csr_matrix, vertices: np.ndarray) -> np.ndarray:

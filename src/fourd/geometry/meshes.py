@@ -178,3 +178,13 @@ def face_adjacency(faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     first, second = owner[:-1][same], owner[1:][same]
     pairs = np.stack([np.minimum(first, second), np.maximum(first, second)], axis=1)
     return pairs, edges[:-1][same]
+
+
+def face_pieces(faces: np.ndarray) -> tuple[int, np.ndarray]:
+    """Pieces of surface: faces joined by shared sides (:func:`face_adjacency`), so two pieces
+    that only touch at a vertex are two. ``(count, labels [F])``."""
+    faces = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
+    pairs, _ = face_adjacency(faces)
+    graph = sp.coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(len(faces),) * 2)
+    count, labels = connected_components(graph, directed=False)
+    return int(count), labels

@@ -32,7 +32,7 @@ import numpy as np
 
 from fourd.errors import InputError
 from fourd.geometry.boundary_loops import boundary_edges, boundary_loops
-from fourd.geometry.fans import fragments, pinched_vertices, split_pinches
+from fourd.geometry.fans import fragments, split_pinches
 from fourd.geometry.handles import capped_genus, open_small_handles
 from fourd.geometry.hole_filling import fill_holes, membrane_positions, small_holes
 from fourd.methods.assembly.hierarchy import Block
@@ -118,9 +118,10 @@ def holes_to_close(first: np.ndarray, faces: np.ndarray, max_fraction: float, sm
     except InputError as error:  # a degenerate rim: keep the assembled result rather than lose it
         log.warning("holes left open: %s", error)
         return None
-    if len(vertices) == count and not filled_holes and not dropped.any() and not len(pinched_vertices(faces)):
+    closing = _closing(count, assembled, vertices, faces, filled_holes, smoothness)
+    if len(vertices) == count and not filled_holes and not dropped.any() and closing.copies is None:
         return None
-    return _closing(count, assembled, vertices, faces, filled_holes, smoothness)
+    return closing
 
 
 def _open_handles(vertices: np.ndarray, faces: np.ndarray, smoothness: float, hops: int):
