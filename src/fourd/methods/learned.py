@@ -60,7 +60,8 @@ def reconstruct(seq: PointCloudSequence, options: Options | None = None) -> Anim
     """Track with ``kinematic``, learn the stiffness from its frames, track again with it."""
     options = Options() if options is None else options
     base = kinematic.Options(**{f.name: getattr(options, f.name) for f in dataclasses.fields(kinematic.Options)})
-    first = kinematic.reconstruct(seq, base)
+    # the second tracking's stiffness is per edge of the urshape as the sliding has it
+    first = kinematic.reconstruct(seq, base, split_pinched=False)
     material = learn_material(first.rest, first.vertices, first.faces, epsilon=options.stiffness_floor)
     _, edges = face_adjacency(first.faces)
     log.info(
@@ -68,6 +69,6 @@ def reconstruct(seq: PointCloudSequence, options: Options | None = None) -> Anim
         100 * float((material.bending < 0.5).mean()),
     )
     second = kinematic.reconstruct(seq, base, edge_stiffness=(edges, material.bending))
-    if second.vertices.shape[1] != first.vertices.shape[1]:
+    if len(second.faces) != len(first.faces):
         raise InputError("the second tracking's template differs from the first's")  # pragma: no cover
     return second

@@ -132,6 +132,8 @@ def test_a_limb_that_starts_to_move_is_registered():
     metrics = _kinematic_on_crane(frames=4, start=140, step=2)
     assert metrics["correspondence_mean"] < 0.004
     assert metrics["correspondence_last"] < 0.0055
+    # the urshape's cells near the data meet at 34 pinched vertices: each got a copy per fan
+    assert metrics["pinched_vertices_max"] == 0
 
 
 @pytest.mark.slow
@@ -150,3 +152,21 @@ def test_a_still_crane_does_not_creep(still_normals):
         assert growth > 0.001  # the defect this guards against is still there
     else:
         assert growth < 0.0005 and drift[-1] < 0.0025, np.round(drift, 4)
+
+
+def test_a_pinched_vertex_gets_a_copy_per_fan_that_moves_with_it():
+    from fourd.animation import AnimatedMesh
+    from fourd.geometry.fans import pinched_vertices
+    from fourd.methods.kinematic.pipeline import without_pinches
+
+    bow_tie = np.array([[0, 1, 2], [0, 3, 4]])  # two triangles touching at vertex 0
+    vertices = np.random.default_rng(0).normal(size=(3, 5, 3))
+    observed = np.ones((3, 5), dtype=bool)
+    observed[1, 0] = False
+    split = without_pinches(AnimatedMesh(bow_tie, vertices, observed=observed, rest=vertices[0]))
+    assert len(pinched_vertices(split.faces)) == 0 and split.vertex_count == 6
+    copy = split.faces[1, 0]
+    assert copy == 5 and np.array_equal(split.vertices[:, copy], vertices[:, 0])
+    assert np.array_equal(split.observed[:, copy], observed[:, 0])
+    assert np.array_equal(split.rest[copy], vertices[0, 0])
+    assert np.array_equal(split.vertices[:, :5], vertices)

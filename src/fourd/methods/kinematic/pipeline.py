@@ -4,6 +4,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import time as _time
 
@@ -13,6 +14,7 @@ from fourd.animation import AnimatedMesh
 from fourd.appearance.color_guide import colors_of_cleaned
 from fourd.cache import StageCache
 from fourd.errors import InputError
+from fourd.geometry.fans import split_pinches
 from fourd.geometry.neighbors import point_spacing
 from fourd.methods.kinematic.animate import animate
 from fourd.methods.kinematic.field import fit_key, fit_windows, space_time_points
@@ -29,7 +31,8 @@ ANCHOR_SOURCES = 2.0
 
 
 def reconstruct(
-    seq: PointCloudSequence, options: Options | None = None, *, edge_stiffness: tuple | None = None
+    seq: PointCloudSequence, options: Options | None = None, *, edge_stiffness: tuple | None = None,
+    split_pinched: bool = True,
 ) -> AnimatedMesh:
     """Animated mesh from a point-cloud sequence by 4D MPU + urshape + ARAP sliding.
 
@@ -40,6 +43,11 @@ def reconstruct(
     With ``options.cache_dir``, the prepared frames, the 4D fit (each window), the urshape
     and every slid frame are kept there as they finish, and a rerun resumes after the last
     one (:mod:`fourd.cache`).
+
+    ``edge_stiffness`` (edges as pairs of vertex ids, and their weights) is passed to the
+    sliding (:attr:`~fourd.methods.kinematic.sliding.SlideOptions.edge_stiffness`); its ids are those of a result made with
+    ``split_pinched`` False, which leaves the urshape's pinched vertices as they are (else each
+    gets a copy per fan of faces, :func:`without_pinches`).
 
     References
     ----------
@@ -89,6 +97,8 @@ def reconstruct(
         field, points, normals, times, spacing=spacing, options=options, cache=cache,
         field_key=key, edge_stiffness=edge_stiffness, anchors=anchors, colors=colors,
     )
+    if split_pinched:
+        result = without_pinches(result)
     finished = _time.perf_counter()
     log.info(
         "kinematic: %d frames in %.2f s (fit %.2f, urshape and sliding %.2f)",
@@ -98,6 +108,22 @@ def reconstruct(
         finished - fitted,
     )
     return result
+
+
+def without_pinches(result: AnimatedMesh) -> AnimatedMesh:
+    """``result`` with one copy of each pinched vertex per fan of faces
+    (:func:`~fourd.geometry.fans.split_pinches`): the urshape's marching cubes, kept only in
+    cells near the data, leaves vertices where two fans of faces meet at a point, which the
+    tools a result goes to reject. The copies move with their vertex in every frame, so the
+    surface and its motion are the sliding's, to the bit."""
+    faces, source = split_pinches(result.faces, result.vertex_count)
+    if len(source) == result.vertex_count:
+        return result
+    return dataclasses.replace(
+        result, faces=faces, vertices=result.vertices[:, source], observed=result.observed[:, source],
+        rest=None if result.rest is None else result.rest[source],
+        colors=None if result.colors is None else result.colors[:, source],
+    )
 
 
 def video_anchors(points, times, video, options: Options, names=()):

@@ -37,6 +37,7 @@ from fourd.appearance.color_guide import PhotometricGuides, colors_of_cleaned
 from fourd.cache import StageCache, report_resumed, stage_key
 from fourd.errors import InputError
 from fourd.frame_source import FrameSource
+from fourd.geometry.fans import split_pinches
 from fourd.geometry.meshes import median_edge_length
 from fourd.geometry.neighbors import point_spacing
 from fourd.io.npz import npz_frames, streamed_output
@@ -119,10 +120,12 @@ def reconstruct_streamed(
                 if cache.enabled:
                     cache.save(STAGE, key, run.entry(written))
             if writer is None:
+                # one copy of a pinched vertex per fan, as in memory (pipeline.without_pinches)
+                faces, copies = split_pinches(run.faces, len(run.rest))
                 writer = stack.enter_context(
-                    npz_frames(output, faces=run.faces, times=source.times, rest=run.rest)
+                    npz_frames(output, faces=faces, times=source.times, rest=run.rest[copies])
                 )
-            writer.write(*written)
+            writer.write(*(array[:, copies] for array in written))
             if index + 1 < len(spans):
                 after = spans[index + 1]
                 # the sliding starts from the frame before, the anchors' tracking one earlier
