@@ -118,6 +118,21 @@ def test_square_patch_meshes_open_and_clipped_at_its_border():
     assert vertex_components(mesh.faces, len(v))[0] == 1
 
 
+def test_a_patch_with_holes_meshes_without_a_pinched_vertex():
+    """The clipping around holes can leave two fans of faces meeting at one vertex (one such
+    pinch on this patch before): each fan gets its own copy, at the same place, with the
+    same weight."""
+    from fourd.geometry.fans import pinched_vertices
+
+    positions, normals = _patch()
+    keep = np.random.default_rng(0).random(len(positions)) < 0.6
+    mesh = mesh_frame(positions[keep], normals[keep], EPS)
+    assert len(mesh.faces) > 1000
+    assert len(pinched_vertices(mesh.faces)) == 0
+    assert len(mesh.support) == len(mesh.vertices) and mesh.support.min() >= MeshingOptions().clip
+    assert np.abs(mesh.vertices[:, 2]).max() < 1e-6 * EPS
+
+
 def test_bad_input_raises():
     positions, normals = _patch(half=0.1)
     with pytest.raises(ValueError, match="sampling"):

@@ -15,7 +15,8 @@ on a grid and contoured by marching cubes. Border detection [JWB*06]: a triangle
 where the surfels support it, i.e. the weight sum ``W(x) = sum_i w_i(x)`` at each of its
 corners is at least ``clip`` times the typical ``W`` at the surfels themselves; an open
 surface stays open, and the spurious sheets where the field meets the end of its support are
-dropped.
+dropped. A vertex the clipping leaves pinched (two fans of faces meeting at it only) gets a
+copy per fan.
 
 **Every frame.** Each vertex ``v`` of the reference frame ``r`` is bound to the surfels
 within the support by the renormalised weights ``phi_i = w_i(v) / W(v)`` (a partition of
@@ -51,6 +52,7 @@ import scipy.sparse as sp
 from scipy.spatial import cKDTree
 
 from fourd.animation import AnimatedMesh
+from fourd.geometry.fans import split_pinches
 from fourd.geometry.grid import Grid, fit_grid
 from fourd.geometry.implicit import imls_grid
 from fourd.geometry.marching import compact, marching_cubes
@@ -275,7 +277,9 @@ def mesh_frame(
     used = np.zeros(len(vertices), dtype=bool)
     used[faces.ravel()] = True
     vertices, faces = compact(vertices, faces)
-    return FrameMesh(vertices, faces, weight[used], grid)
+    # the clipping leaves faces touching at a vertex only: one copy of it per fan of faces
+    faces, source = split_pinches(faces, len(vertices))
+    return FrameMesh(vertices[source], faces, weight[used][source], grid)
 
 
 def bind_vertices(
