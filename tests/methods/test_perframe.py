@@ -97,6 +97,21 @@ def test_open_sheet_without_sensors_stays_open():
     assert np.abs(vertices[:, 2] - _sheet_height(vertices)).max() < 0.03
 
 
+def test_a_sheet_with_gaps_has_no_pinched_vertex():
+    """Half the points dropped at random: cells kept around the rest touch at edges and
+    corners (two pinches on this sheet before), and each pinch gets a copy per fan."""
+    from fourd.geometry.fans import pinched_vertices
+    from fourd.metrics.topology import topology
+
+    points = _sheet(seed=2)
+    points = points[np.random.default_rng(2).random(len(points)) < 0.5]
+    vertices, faces = reconstruct_frame(Frame(points, sensors=np.array([[0.0, 0.0, 5.0]])))
+    assert len(faces) > 1000
+    assert len(pinched_vertices(faces)) == 0
+    assert topology(faces, len(vertices)).nonmanifold_edges == 0
+    assert np.abs(vertices[:, 2] - _sheet_height(vertices)).max() < 0.03
+
+
 def test_outliers_do_not_create_components():
     # Component filtering off: the outlier removal alone must keep stray surface pieces away.
     options = Options(min_component_fraction=0.0)

@@ -5,7 +5,9 @@ Remove outliers (statistical, then small isolated clusters), estimate oriented n
 consistent propagation, each connected part then turned to face the sensors when the frame has
 them, else outwards), sample an implicit moving-least-squares signed distance on a grid near
 the data, extract its zero set by marching cubes restricted to cells near the data (so open
-scans stay open), drop tiny disconnected pieces and optionally smooth lightly (Taubin).
+scans stay open), drop tiny disconnected pieces, give each pinched vertex (two fans of faces
+meeting at it only, where kept cells touch at an edge or a corner) a copy per fan, and
+optionally smooth lightly (Taubin).
 
 :func:`frame_surface` is a pure function of one frame's arrays and the settings, so frames can
 be mapped over by any executor. All scales are multiples of the frame's point spacing (or of
@@ -29,6 +31,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.spatial import cKDTree
 
+from fourd.geometry.fans import split_pinches
 from fourd.geometry.grid import fit_grid
 from fourd.geometry.implicit import imls_grid
 from fourd.geometry.marching import compact, marching_cubes
@@ -349,6 +352,9 @@ def frame_surface(
     vertices, faces = remove_small_components(
         vertices, faces, min_fraction=options.min_component_fraction
     )
+    # kept cells touching cells left out at an edge or a corner pinch the surface there
+    faces, source = split_pinches(faces, len(vertices))
+    vertices = vertices[source]
     vertices = taubin_smooth(vertices, faces, iterations=options.smoothing_iterations)
     log.debug(
         "frame at time %g: %d points, %d kept, spacing %.4g, grid %s cell %.4g, %d vertices %d faces",
