@@ -66,3 +66,22 @@ def test_pieces_touching_at_a_vertex_come_out_as_two_closed_manifolds():
     np.testing.assert_array_equal(closed.vertices[1, copies], frames[1, [0, 0]])
     assert not closed.observed[1, copies].any() and closed.observed[0, copies].all()
     assert not (closed.vertices[0] == 3.0).any()  # the flap's own vertices are gone
+
+
+def test_a_hole_that_cannot_be_filled_stays_open_and_the_rest_of_the_closing_is_done():
+    """A hole whose rim has collapsed to a point (no length: the membrane cannot be laid out)
+    is left open with a warning, but the flap hanging from the surface is still dropped and
+    the pinch it leaves split: the result has no pinched vertex."""
+    import trimesh
+
+    sphere = trimesh.creation.icosphere(2)
+    count = len(sphere.vertices)
+    vertices = np.vstack([sphere.vertices, [[3, 3, 3], [3, 3, 4]]])
+    vertices[sphere.faces[0]] = vertices[sphere.faces[0]].mean(axis=0)  # the hole's rim, one point
+    flap = [[5, count, count + 1]]  # a triangle hanging from the sphere by vertex 5
+    faces = np.vstack([sphere.faces[1:], flap])
+    block = Block(faces, vertices[None], np.ones((1, len(vertices)), dtype=bool))
+    closed = close_small_holes(block, 0.25, 1.0, Options().open_handles)
+    found = topology(closed.faces, closed.vertices.shape[1])
+    assert found.boundary_loops == 1 and found.pinched_vertices == 0 and found.components == 1
+    assert len(closed.faces) == len(sphere.faces) - 1

@@ -106,18 +106,21 @@ def holes_to_close(first: np.ndarray, faces: np.ndarray, max_fraction: float, sm
         faces = faces[~dropped]
     filled_holes: list = []
     holes = small_holes(vertices, faces, max_fraction=max_fraction) if max_fraction > 0 else []
-    try:
-        if holes:
+    # a degenerate rim (InputError) leaves that step undone, not the steps before or after it
+    if holes:
+        try:
             closed = fill_holes(vertices, faces, holes=holes, area_matched=True, smooth=smoothness)
             # the membrane may add no vertex: a small hole closed by its rim's triangles
             log.info("closing %d holes with %d membrane vertices", len(holes), len(closed.vertices) - count)
             vertices, faces, filled_holes = closed.vertices, closed.faces, list(closed.holes)
-        if handle_hops > 0:
+        except InputError as error:
+            log.warning("holes left open: %s", error)
+    if handle_hops > 0:
+        try:
             vertices, faces, opened = _open_handles(vertices, faces, smoothness, handle_hops)
             filled_holes += opened
-    except InputError as error:  # a degenerate rim: keep the assembled result rather than lose it
-        log.warning("holes left open: %s", error)
-        return None
+        except InputError as error:
+            log.warning("small handles left: %s", error)
     closing = _closing(count, assembled, vertices, faces, filled_holes, smoothness)
     if len(vertices) == count and not filled_holes and not dropped.any() and closing.copies is None:
         return None
