@@ -34,7 +34,7 @@ def _pinched(faces):
     faces = np.asarray(faces)
     pairs, sides = face_adjacency(faces)
     links = []
-    for (f, g), side in zip(pairs.tolist(), sides.tolist()):
+    for (f, g), side in zip(pairs.tolist(), sides.tolist(), strict=True):
         for v in side:
             a = 3 * f + faces[f].tolist().index(v)
             b = 3 * g + faces[g].tolist().index(v)
