@@ -172,7 +172,9 @@ def face_adjacency(faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     faces = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
     edges = np.sort(faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
     owner = np.repeat(np.arange(len(faces)), 3)
-    order = np.lexsort((owner, edges[:, 1], edges[:, 0]))
+    # one key per side, sorted stably: by edge, then by face (owner is already ascending)
+    span = np.int64(max(int(faces.max(initial=-1)) + 1, 1))
+    order = np.argsort(edges[:, 0] * span + edges[:, 1], kind="stable")
     edges, owner = edges[order], owner[order]
     same = np.all(edges[1:] == edges[:-1], axis=1)
     first, second = owner[:-1][same], owner[1:][same]

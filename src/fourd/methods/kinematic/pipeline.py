@@ -45,9 +45,9 @@ def reconstruct(
     one (:mod:`fourd.cache`).
 
     ``edge_stiffness`` (edges as pairs of vertex ids, and their weights) is passed to the
-    sliding (:attr:`~fourd.methods.kinematic.sliding.SlideOptions.edge_stiffness`); its ids are those of a result made with
-    ``split_pinched`` False, which leaves the urshape's pinched vertices as they are (else each
-    gets a copy per fan of faces, :func:`without_pinches`).
+    sliding (:attr:`~fourd.methods.kinematic.sliding.SlideOptions.edge_stiffness`); its ids
+    are those of a result made with ``split_pinched`` False, which leaves the urshape's pinched
+    vertices as they are (else each gets a copy per fan of faces, :func:`without_pinches`).
 
     References
     ----------
