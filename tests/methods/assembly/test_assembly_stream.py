@@ -84,8 +84,11 @@ def test_a_streamed_run_writes_the_windowed_run_in_memory(tmp_path):
     seq, truth, edge = _turning_capture(frames=7)
     options = Options(relax_sweeps=2, workers=1, window=3)
     in_memory = reconstruct(seq, options)
-    summary = reconstruct_streamed(FrameSource.of(seq), tmp_path / "take.npz", options)
+    source, reads = FrameSource.of(seq), []
+    counted = dataclasses.replace(source, read_frame=lambda i: reads.append(i) or source.read_frame(i))
+    summary = reconstruct_streamed(counted, tmp_path / "take.npz", options)
     assert (summary.frames, summary.windows, summary.resumed) == (7, 3, 0)
+    assert sorted(reads) == list(range(7)), reads  # each frame read once
     written = read_npz(summary.output)
     np.testing.assert_array_equal(written.faces, in_memory.faces)
     np.testing.assert_array_equal(written.observed, in_memory.observed)

@@ -187,10 +187,11 @@ def _assembled_windows(run: _Run):
             source.times,
             video,
         )
-    # the first frame's mesh decides the merge processes (its size, as in memory)
-    first = source.read(0, 1)
-    run.first_mesh = frame_meshes(first, options)[0]
-    size = len(run.first_mesh[0]) or len(first.frames[0].points)
+    # the first frame's mesh decides the merge processes (its size, as in memory); the first
+    # window is read once, here (it has no frames before it to lead with)
+    first_read = source.read(*spans[0])
+    run.first_mesh = frame_meshes(first_read[:1], options)[0]
+    size = len(run.first_mesh[0]) or len(first_read.frames[0].points)
     with ExitStack() as stack:
         pool = stack.enter_context(merge_pool(options.merge_workers(size)))
         bar = stack.enter_context(
@@ -198,7 +199,8 @@ def _assembled_windows(run: _Run):
         )
         for index, (start, stop) in enumerate(spans):
             lead = run.lead(start)
-            read = source.read(start - lead, stop)
+            read = first_read if index == 0 else source.read(start - lead, stop)
+            first_read = None
             seq = read[lead:]
             if cache.enabled:
                 key = stage_key(
