@@ -7,6 +7,7 @@ from fourd.geometry.marching import marching_cubes
 from fourd.geometry.meshes import (
     component_volumes,
     enclosed_volume,
+    face_pieces,
     face_volumes,
     remove_small_components,
     vertex_adjacency,
@@ -95,3 +96,19 @@ def test_closed_components_carry_their_signed_volumes():
     assert len(volumes) == 2
     assert sorted(volumes) == pytest.approx([-0.125, 8.0])
     assert len(set(labels[:12])) == 1 and len(set(labels[12:])) == 1
+
+
+def test_pieces_meeting_along_a_non_manifold_edge_are_one_or_three_by_the_rule():
+    """A book of three pages on one spine (edge 0-1), each page two triangles, and a fourth
+    triangle touching page one at a vertex only."""
+    faces = np.array(
+        [[0, 1, 2], [1, 3, 2], [1, 0, 4], [1, 4, 5], [0, 1, 6], [6, 1, 7], [3, 8, 9]]
+    )
+    count, labels = face_pieces(faces)
+    assert count == 2 and len(set(labels[:6])) == 1 and labels[6] != labels[0]
+    count, labels = face_pieces(faces, manifold_only=True)
+    assert count == 4
+    assert labels.tolist() == [0, 0, 1, 1, 2, 2, 3]  # numbered by each piece's first face
+    # component_volumes joins by the manifold rule: the pages are components of their own
+    vertices = np.random.default_rng(0).random((10, 3))
+    assert component_volumes(vertices, faces)[0].tolist() == labels.tolist()

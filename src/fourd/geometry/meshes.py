@@ -79,27 +79,13 @@ def vertex_components(faces: np.ndarray, vertex_count: int) -> tuple[int, np.nda
 def component_volumes(vertices, faces) -> tuple[np.ndarray, np.ndarray]:
     """The closed components of a mesh: the component of every face [F] and the signed volume
     each encloses [C] (positive for outward-oriented faces, negative for a cavity's inner
-    surface). Faces belong together when they share an edge that no other face has, so a
-    piece that touches the rest only at vertices or along edges of three or more faces is a
-    component of its own and can be dropped by its volume (marching cubes once left a flat
-    doubled quad, four faces enclosing nothing, on two edges of a resolution-64 surface)."""
-    n_faces = len(faces)
-    edges = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1)
-    _, edge, count = np.unique(
-        edges[:, 0] * np.int64(len(vertices)) + edges[:, 1],
-        return_inverse=True,
-        return_counts=True,
-    )
-    nodes = n_faces + len(count)
-    face = np.tile(np.arange(n_faces), 3)
-    joins = count[edge] == 2
-    graph = sp.coo_matrix(
-        (np.ones(int(joins.sum())), (face[joins], n_faces + edge[joins])), shape=(nodes, nodes)
-    )
-    _, labels = sp.csgraph.connected_components(graph, directed=False)
-    _, face_label = np.unique(labels[:n_faces], return_inverse=True)
-    signed = face_volumes(vertices, faces)
-    return face_label, np.bincount(face_label, weights=signed)
+    surface). Faces belong together when they share an edge that no other face has
+    (:func:`face_pieces` with ``manifold_only``), so a piece that touches the rest only at
+    vertices or along edges of three or more faces is a component of its own and can be
+    dropped by its volume (marching cubes once left a flat doubled quad, four faces enclosing
+    nothing, on two edges of a resolution-64 surface)."""
+    _, face_label = face_pieces(faces, manifold_only=True)
+    return face_label, np.bincount(face_label, weights=face_volumes(vertices, faces))
 
 
 def remove_small_components(
@@ -182,11 +168,18 @@ def face_adjacency(faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return pairs, edges[:-1][same]
 
 
-def face_pieces(faces: np.ndarray) -> tuple[int, np.ndarray]:
+def face_pieces(faces: np.ndarray, *, manifold_only: bool = False) -> tuple[int, np.ndarray]:
     """Pieces of surface: faces joined by shared sides (:func:`face_adjacency`), so two pieces
-    that only touch at a vertex are two. ``(count, labels [F])``."""
+    that only touch at a vertex are two; with ``manifold_only``, only by sides no third face
+    has, so pieces meeting along a non-manifold edge are two as well. ``(count, labels [F])``,
+    labels numbered in the order of each piece's first face."""
     faces = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
-    pairs, _ = face_adjacency(faces)
+    pairs, edges = face_adjacency(faces)
+    if manifold_only and len(pairs):
+        # an edge of k faces gives k - 1 consecutive pairs (face_adjacency sorts by edge)
+        new_edge = np.r_[True, np.any(edges[1:] != edges[:-1], axis=1)]
+        run = np.cumsum(new_edge) - 1
+        pairs = pairs[np.bincount(run)[run] == 1]
     graph = sp.coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(len(faces),) * 2)
     count, labels = connected_components(graph, directed=False)
     return int(count), labels
