@@ -12,7 +12,7 @@ vertices and over all. Also: the truth's motion between the two frames (mean and
 percentile of the truth vertices' displacement), the anchors and the mapped fraction.
 
 Run: ``.venv/bin/python experiments/assembly_pair_errors.py [SCENE] [PAIRS...]`` (nothing else
-running; SCENE ``crane`` by default, or ``dfaust-hopping``: its 17 bench frames).
+running; SCENE a bench scene as ``fourd bench`` scans it, ``crane`` by default).
 
 Answer (at 39efc63, nothing else running): single pair maps, over the kick. Pair 0 -> 1: a
 step of 0.0016, mapped vertices 0.0017 off; 8 -> 9, 9 -> 10, 10 -> 11: steps of 0.022-0.028,
@@ -54,11 +54,17 @@ def main() -> None:
 
     arguments = sys.argv[1:]
     name = arguments.pop(0) if arguments and not arguments[0].isdigit() else "crane"
-    frames = 20 if name == "crane" else 17
-    pairs = [int(a) for a in arguments] or list(range(frames - 1))
-    extra = {"start": 0, "step": 2} if name == "crane" else {}
-    truth = synth.scene(name, frames=frames, seed=0, **extra)
-    scans = synth.scan(truth, resolution=256, seed=0, **suite.PROTOCOL)
+    bench = suite.select_scenes([name], quick=False)[0]
+    truth = synth.scene(bench.name, frames=bench.frames, seed=0, **bench.options)
+    scans = synth.scan(
+        truth,
+        resolution=bench.resolution,
+        seed=0,
+        appearance=bench.appearance,
+        video=bench.video,
+        **{**suite.PROTOCOL, **bench.scan},
+    )
+    pairs = [int(a) for a in arguments] or list(range(len(scans) - 1))
     options = Options(workers=1, correct=os.environ.get("CORRECT") == "1", paste=os.environ.get("CORRECT") == "1")
     blocks = base_blocks(scans, frame_meshes(scans, options))
     diagonal = truth.diagonal()
