@@ -92,6 +92,32 @@ def test_a_twist_that_grows_along_the_chain_is_taken_back():
     np.testing.assert_array_equal(fit_rest(slid, faces, observed, meshes, iterations=0), slid)
 
 
+def test_a_part_that_slid_alone_is_taken_back_though_the_rest_has_settled():
+    """Only the top 30% of the sphere twisted along the surface (a torso sliding after a
+    kick): most vertices settle in the first rounds, and the rounds must go on for the part."""
+    truth, faces, edge = _turning(2)
+    first = truth[0]
+    height = first[:, 2]
+    top = height > np.percentile(height, 70)
+    angle = np.where(top, 0.5 * (height - np.percentile(height, 70)), 0.0)
+    cos, sin = np.cos(angle), np.sin(angle)
+    turned = np.stack(
+        [cos * first[:, 0] - sin * first[:, 1], sin * first[:, 0] + cos * first[:, 1], height],
+        axis=1,
+    )
+    centre0, centre = first.mean(axis=0), truth[1].mean(axis=0)
+    u, _, vt = np.linalg.svd((first - centre0).T @ (truth[1] - centre))
+    moved = (turned - centre0) @ (u @ vt) + centre
+    slid = np.stack([first, closest_points_on_mesh(truth[1], faces, moved).points])
+    observed = np.ones(slid.shape[:2], dtype=bool)
+    fitted = fit_rest(slid, faces, observed, [(v, faces) for v in truth])
+    before = np.median(np.linalg.norm(slid[1] - truth[1], axis=1)[top]) / edge
+    after = np.median(np.linalg.norm(fitted[1] - truth[1], axis=1)[top]) / edge
+    # measured: 0.53 edges before, 0.12 after; 0.23 when the rounds stopped at the median
+    # vertex's settling (rest_fit.SETTLED_PERCENTILE 50)
+    assert after < 0.3 * before, (before, after)
+
+
 def test_a_frame_without_a_surface_keeps_the_last_correction():
     truth, faces, _ = _turning(3)
     fit = RestFit(truth[0], faces)

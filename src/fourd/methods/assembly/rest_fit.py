@@ -11,7 +11,7 @@ template's deformation does in ``kinematic``.
 
 Per frame ``t = 1 .. T - 1``, from the assembled positions moved by frame ``t - 1``'s
 correction (the correction grows with the chain's drift, so the last frame's is most of this
-one's), up to ``iterations`` rounds of ARAP-ICP (fewer once a round moves the median vertex
+one's), up to ``iterations`` rounds of ARAP-ICP (fewer once a round moves 90% of the vertices
 less than :data:`SETTLED` edges) with the first frame as the rest shape (Sorkine and
 Alexa 2007):
 
@@ -69,9 +69,15 @@ CANDIDATES = 4
 #: first frame since they were found.
 REQUERY = 0.25
 
-#: A frame's rounds stop once a round moved the median vertex less than this many median edges
-#: of the first frame (the fit has settled; a hard frame takes the rounds up to ``iterations``).
+#: A frame's rounds stop once a round moved :data:`SETTLED_PERCENTILE` percent of the vertices
+#: less than this many median edges of the first frame (the fit has settled; a hard frame takes
+#: the rounds up to ``iterations``).
 SETTLED = 0.01
+#: The share of the vertices (percent) that :data:`SETTLED` is asked of. Not the median: a part
+#: that still slides (crane's torso after a kick, a third of the vertices) kept sliding while
+#: the rest had settled (``benchmarks/METHODS.md``, "The rest fit settles when 90% of the
+#: vertices do").
+SETTLED_PERCENTILE = 90.0
 
 
 class RestFit:
@@ -155,7 +161,7 @@ class RestFit:
                 target = x.copy()
                 target[seen] = surface.closest(on, near).points
                 moved, x = x, self._solve(right + self.pull * target)
-                if np.median(np.linalg.norm(x - moved, axis=1)) < self.settled * self.edge:
+                if np.percentile(np.linalg.norm(x - moved, axis=1), SETTLED_PERCENTILE) < self.settled * self.edge:
                     break
             x[seen] = surface.closest(x[seen]).points
         self.carried = x - assembled
@@ -186,8 +192,8 @@ def fit_rest(
         The surface's pull against the ARAP energy, relative to the first frame's cotangent
         Laplacian's median diagonal: smaller lets the vertices slide further per round.
     settled : float
-        A frame's rounds stop once one moved the median vertex less than this many median
-        edges of the first frame.
+        A frame's rounds stop once one moved :data:`SETTLED_PERCENTILE` percent of the
+        vertices less than this many median edges of the first frame.
     cache : StageCache
         Where each frame's result is kept (:data:`STAGE`, a :class:`~fourd.cache.Chain`: frame
         ``t``'s entry holds only after the same frames before it), so a stopped run resumes.
