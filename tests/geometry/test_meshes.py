@@ -98,7 +98,7 @@ def test_closed_components_carry_their_signed_volumes():
     assert len(set(labels[:12])) == 1 and len(set(labels[12:])) == 1
 
 
-def test_pieces_meeting_along_a_non_manifold_edge_are_one_or_three_by_the_rule():
+def test_a_book_of_three_pages_is_one_piece_or_three_by_the_joining_rule():
     """A book of three pages on one spine (edge 0-1), each page two triangles, and a fourth
     triangle touching page one at a vertex only."""
     faces = np.array(

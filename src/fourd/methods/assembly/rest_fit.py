@@ -123,7 +123,8 @@ class RestFit:
     def key(self) -> str:
         """What the fit of a frame depends on besides that frame (for the cache)."""
         return stage_key(
-            self.first, self.faces, self.iterations, self.weight, self.settled, CANDIDATES
+            self.first, self.faces, self.iterations, self.weight, self.settled, SETTLED_PERCENTILE,
+            CANDIDATES,
         )
 
     def resume(self, assembled: np.ndarray, fitted: np.ndarray) -> None:
