@@ -45,7 +45,6 @@ import numpy as np
 
 def main() -> None:
     import fourd.bench.suite as suite
-    from fourd import synth
     from fourd.geometry.normals import vertex_normals
     from fourd.methods.assembly import Options
     from fourd.methods.assembly.hierarchy import merge_blocks
@@ -55,15 +54,7 @@ def main() -> None:
     arguments = sys.argv[1:]
     name = arguments.pop(0) if arguments and not arguments[0].isdigit() else "crane"
     bench = suite.select_scenes([name], quick=False)[0]
-    truth = synth.scene(bench.name, frames=bench.frames, seed=0, **bench.options)
-    scans = synth.scan(
-        truth,
-        resolution=bench.resolution,
-        seed=0,
-        appearance=bench.appearance,
-        video=bench.video,
-        **{**suite.PROTOCOL, **bench.scan},
-    )
+    truth, scans = suite.scan_scene(bench)
     pairs = [int(a) for a in arguments] or list(range(len(scans) - 1))
     options = Options(workers=1, correct=os.environ.get("CORRECT") == "1", paste=os.environ.get("CORRECT") == "1")
     blocks = base_blocks(scans, frame_meshes(scans, options))

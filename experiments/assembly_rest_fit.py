@@ -35,7 +35,6 @@ import numpy as np
 
 def main() -> None:
     import fourd.bench.suite as suite
-    from fourd import synth
     from fourd.animation import AnimatedMesh
     from fourd.methods import reconstruct
     from fourd.methods.assembly import Options
@@ -45,15 +44,7 @@ def main() -> None:
 
     name = sys.argv[1] if len(sys.argv) > 1 else "crane-full-sparse"
     bench = suite.select_scenes([name], quick=False)[0]
-    truth = synth.scene(bench.name, frames=bench.frames, seed=0, **bench.options)
-    scans = synth.scan(
-        truth,
-        resolution=bench.resolution,
-        seed=0,
-        appearance=bench.appearance,
-        video=bench.video,
-        **{**suite.PROTOCOL, **bench.scan},
-    )
+    truth, scans = suite.scan_scene(bench)
     import fourd.methods.assembly.rest_fit as rest_fit
 
     if "PERCENTILE" in os.environ:  # the share of the vertices a settled round asks of

@@ -46,7 +46,6 @@ import numpy as np
 
 def main() -> None:
     import fourd.bench.suite as suite
-    from fourd import synth
     from fourd.geometry.normals import vertex_normals
     from fourd.geometry.rotations import procrustes
     from fourd.methods.assembly import Options
@@ -59,15 +58,7 @@ def main() -> None:
     name = arguments.pop(0) if arguments and not arguments[0].isdigit() else "crane-remeshed"
     damping = float(os.environ.get("DAMPING", "1"))
     bench = suite.select_scenes([name], quick=False)[0]
-    truth = synth.scene(bench.name, frames=bench.frames, seed=0, **bench.options)
-    scans = synth.scan(
-        truth,
-        resolution=bench.resolution,
-        seed=0,
-        appearance=bench.appearance,
-        video=bench.video,
-        **{**suite.PROTOCOL, **bench.scan},
-    )
+    truth, scans = suite.scan_scene(bench)
     pairs = [int(a) for a in arguments] or list(range(1, len(scans) - 1))
     options = Options(workers=1)
     meshes = frame_meshes(scans, options)

@@ -38,6 +38,7 @@ from fourd.bench.suite import (
     QUICK_SAMPLES,
     SAMPLES,
     BenchScene,
+    scan_scene,
     select_methods,
     select_scenes,
 )
@@ -183,15 +184,9 @@ def _run_scene(bench_scene: BenchScene, methods, peers, *, samples, seed, repeat
                sheets: Path | None = None, made: dict | None = None) -> dict:
     """Scan one scene and run every method and peer on it. ``made`` (commit, date, repeats) is
     kept with each row, so a row merged into another report still says where it came from."""
-    from fourd import synth
-
     entry = {"settings": asdict(bench_scene), "rows": {}}
     try:
-        truth = synth.scene(bench_scene.name, frames=bench_scene.frames, seed=seed, **bench_scene.options)
-        scans = synth.scan(
-            truth, resolution=bench_scene.resolution, seed=seed, appearance=bench_scene.appearance,
-            video=bench_scene.video, **{**PROTOCOL, **bench_scene.scan},
-        )
+        truth, scans = scan_scene(bench_scene, seed)
     except Exception as error:  # noqa: BLE001 - a missing data file costs one scene
         entry["error"] = f"{type(error).__name__}: {error}"
         log.warning("scene %s: %s", bench_scene.key, entry["error"])

@@ -158,6 +158,19 @@ QUICK_SCENES: tuple[BenchScene, ...] = (
 PROTOCOL = {"cameras": 3, "noise": 0.002, "outliers": 0.02}
 
 
+def scan_scene(bench_scene: BenchScene, seed: int = 0):
+    """The truth of ``bench_scene`` and its scans under :data:`PROTOCOL`, as ``fourd bench`` makes
+    them: ``(truth, scans)``, a ``SceneTruth`` (or ``MeshSequence``) and a ``PointCloudSequence``."""
+    from fourd import synth
+
+    truth = synth.scene(bench_scene.name, frames=bench_scene.frames, seed=seed, **bench_scene.options)
+    scans = synth.scan(
+        truth, resolution=bench_scene.resolution, seed=seed, appearance=bench_scene.appearance,
+        video=bench_scene.video, **{**PROTOCOL, **bench_scene.scan},
+    )
+    return truth, scans
+
+
 #: Surface samples per surface and frame: full and quick runs.
 SAMPLES, QUICK_SAMPLES = 60000, 10000
 
