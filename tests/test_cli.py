@@ -890,12 +890,13 @@ def test_missing_or_wrong_image_is_exit_2_naming_it(filmed, capsys):
 
 
 @pytest.mark.parametrize(("method", "settings"), [("kinematic", ["template_vertices=400"]),
+                                                 ("watertight", ["window_overlap=1", "resolution=12"]),
                                                  ("assembly", ["relax_sweeps=1"])])
 def test_stream_writes_a_npz_read_a_window_at_a_time(tmp_path, capsys, method, settings):
     folder = _folder(tmp_path, frames=5)
     out = tmp_path / "out.npz"
     argv = ["reconstruct", str(folder), "-o", str(out), "--stream", "-q", "--method", method,
-            "--set", "window=2", "--set", settings[0]]
+            "--set", "window=2", *(x for setting in settings for x in ("--set", setting))]
     assert main(argv) == 0
     from fourd.io.results import load_result
 
@@ -906,7 +907,7 @@ def test_stream_writes_a_npz_read_a_window_at_a_time(tmp_path, capsys, method, s
         radius = np.linalg.norm(result.vertices[t] - [0.05 * t] * 3, axis=1)
         assert np.abs(np.median(radius) - 1.0) < 0.05, t
     _run_bad(capsys, argv[:3] + [str(tmp_path / "out.glb"), "--stream"], "out.glb", ".npz")
-    _run_bad(capsys, argv[:-6] + ["--method", "perframe"], "--stream", "auto, kinematic, flow and assembly")
+    _run_bad(capsys, argv[:6] + ["--method", "perframe"], "--stream", "auto, kinematic, flow, watertight and assembly")
     _run_bad(capsys, argv + ["--times", "0.5"], "--stream", "--times")
     if method == "assembly":
         _run_bad(capsys, argv + ["--set", "paste=true"], "paste", "without --stream")

@@ -259,23 +259,25 @@ def cmd_reconstruct(args) -> int:
 
 
 def _reconstruct_streamed(args, method: str, values: dict) -> int:
-    """``reconstruct --stream``: auto, kinematic, flow or assembly over frames read a window at
-    a time, the result written frame by frame (:mod:`fourd.methods.auto.stream`,
+    """``reconstruct --stream``: auto, kinematic, flow, watertight or assembly over frames read
+    a window at a time, the result written frame by frame (:mod:`fourd.methods.auto.stream`,
     :mod:`fourd.methods.kinematic.stream`, :mod:`fourd.methods.flow.windows`,
-    :mod:`fourd.methods.assembly.stream`)."""
+    :mod:`fourd.methods.watertight.stream`, :mod:`fourd.methods.assembly.stream`)."""
     from fourd.io.frames import open_sequence
     from fourd.io.npz import streamed_output
-    from fourd.methods import assembly, auto, flow, kinematic, method_options
+    from fourd.methods import assembly, auto, flow, kinematic, method_options, watertight
 
     streamed = {
         "auto": auto.reconstruct_streamed,
         "kinematic": kinematic.reconstruct_streamed,
         "flow": flow.reconstruct_streamed,
+        "watertight": watertight.reconstruct_streamed,
         "assembly": assembly.reconstruct_streamed,
     }
     if method not in streamed:
         raise InputError(
-            f"--stream: only auto, kinematic, flow and assembly run streamed (asked for {method})"
+            f"--stream: only auto, kinematic, flow, watertight and assembly run streamed (asked "
+            f"for {method})"
         )
     for flag, given in (("--times", args.times), ("--uv", args.uv), ("--colors", args.colors),
                         ("--scheduler", args.scheduler)):
@@ -533,7 +535,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="whole captures: read the frames a window at a time (the option "
                         "window, default 20) and write the result (.npz) frame by frame, so "
                         "memory is bounded by the window, not the capture's length (auto, "
-                        "kinematic, flow and assembly; --cache resumes it window by window)")
+                        "kinematic, flow, watertight and assembly; --cache resumes it window by window)")
     p.add_argument("--force", action="store_true",
                    help="run even when the up-front estimate of the memory needed exceeds the "
                         "memory available")
@@ -736,8 +738,8 @@ def main(argv: list[str] | None = None) -> int:
     except MemoryError:
         hint = ""
         if getattr(args, "func", None) is cmd_reconstruct and not args.stream:
-            hint = ("; for a long capture, --stream (auto, kinematic, flow, assembly) bounds the memory by a "
-                    "window of frames, or --frames A:B reconstructs part of it")
+            hint = ("; for a long capture, --stream (auto, kinematic, flow, watertight, assembly) bounds "
+                    "the memory by a window of frames, or --frames A:B reconstructs part of it")
         print(f"fourd: error: out of memory{hint}", file=sys.stderr)
         return EXIT_OUT_OF_MEMORY
     except BrokenPipeError:

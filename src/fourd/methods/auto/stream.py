@@ -8,12 +8,12 @@
    that file is the result.
 3. The closed template: the flow's surface at the first frame, as a signed distance to its
    mesh (:func:`fourd.methods.flow.mesh_distance`: the flow's solve is no longer in memory),
-   bound to the kinematic first frame (:func:`fourd.methods.watertight.closed_template`);
-   when the flow lacks more than ``lost_limit`` of it, the kinematic result goes to step 5.
+   bound to the kinematic first frame (:func:`fourd.methods.watertight.stream.streamed_template`,
+   the streamed ``watertight``'s step); when the flow lacks more than ``lost_limit`` of it,
+   the kinematic result goes to step 5.
 4. Frame by frame, the template carried with the kinematic frame and its free vertices
-   projected onto that frame's flow surface (:func:`~fourd.methods.watertight.carry_frame`,
-   :func:`~fourd.methods.watertight.free_offsets`), the projections smoothed over time
-   [1, 2, 1] as in memory (one frame of lag).
+   projected onto that frame's flow surface, the projections smoothed over time [1, 2, 1] as
+   in memory, one frame of lag (:func:`fourd.methods.watertight.stream.closed_mesh_frames`).
 5. The fit to the frames along the normals (:func:`fourd.geometry.surface_fit.fit_along_normals`)
    over chunks of :data:`FIT_CHUNK` frames with :data:`FIT_MARGIN` frames on both sides: its
    two passes of a [1, 2, 1] filter over time reach two frames, so every written frame is
@@ -42,10 +42,9 @@ from fourd.animation import MeshSequence
 from fourd.cache import subfolder
 from fourd.errors import InputError
 from fourd.frame_source import FrameSource
-from fourd.geometry.neighbors import point_spacing
 from fourd.geometry.surface_fit import fit_along_normals
 from fourd.io.npz import npz_frame_reader, npz_frames, streamed_output
-from fourd.methods import flow, kinematic, watertight
+from fourd.methods import flow, kinematic
 from fourd.methods.auto.method import (
     MIN_FRAMES,
     AutoDiagnostics,
@@ -55,6 +54,15 @@ from fourd.methods.auto.method import (
     part_counts,
     splits,
     vector_area_fraction,
+)
+from fourd.methods.watertight.stream import (
+    closed_mesh_frames,
+    first_points,
+    flow_meshes,
+    input_frames,
+    streamed_flow_options,
+    streamed_template,
+    warn_off_surface,
 )
 
 log = logging.getLogger("fourd.methods.auto")
@@ -125,11 +133,9 @@ class _Run:
     def __init__(self, source: FrameSource, output: Path, options: Options, work: Path):
         self.source, self.output, self.options, self.work = source, output, options, work
         self.windows = self.resumed = 0
-        window = options.window or flow.STREAM_WINDOW
-        self.flow_options = flow.Options(
-            resolution=options.resolution, window=window,
-            window_overlap=min(flow.Options().window_overlap, window // 2),
-            cache_dir=subfolder(options.cache_dir, "flow"),
+        self.flow_options = streamed_flow_options(
+            flow.Options(resolution=options.resolution, cache_dir=subfolder(options.cache_dir, "flow")),
+            options.window,
         )
 
     def run(self) -> StreamSummary:
@@ -149,7 +155,7 @@ class _Run:
         with np.load(meshes, allow_pickle=False) as data:
             parts = np.concatenate([
                 part_counts(MeshSequence((mesh,)), options.split_part)
-                for mesh in _meshes(data, len(self.source))
+                for mesh in flow_meshes(data, len(self.source))
             ])
         if splits(parts):
             log.warning(
@@ -159,7 +165,10 @@ class _Run:
             )
             os.replace(meshes, self.output)
             return self._summary(0, AutoDiagnostics(0.0, openness, 1.0, flowed.mass_error))
-        template, lost = self._template(opened, meshes, flowed.spacing)
+        template, lost = streamed_template(
+            self._first_points, opened, meshes, float(self.source.times[0]), flowed.spacing,
+            flowed.spacing / self.flow_options.refine,
+        )
         if lost > options.lost_limit:
             log.warning(
                 "auto: the flow's surface lacks %.1f%% of the tracked first frame (over %.1f%%; "
@@ -176,18 +185,12 @@ class _Run:
         )
         off_surface = []
         with npz_frame_reader(opened) as reader, np.load(meshes, allow_pickle=False) as data:
-            closed = _closed_frames(
-                template, reader, _meshes(data, len(self.source)), self._frames(),
+            closed = closed_mesh_frames(
+                template, reader, flow_meshes(data, len(self.source)), input_frames(self.source),
                 self.source.times, flowed.spacing / self.flow_options.refine, off_surface,
             )
             self._write(closed, template.faces, template.rest)
-        if max(off_surface) > watertight.OFF_SURFACE_WARNING:
-            log.warning(
-                "auto: in some frames more than %.1f%% of the closed mesh lies far from both the "
-                "flow's surface and the frame's points (at most %.1f%%, frame %d): the tracking "
-                "lost part of it", 100 * watertight.OFF_SURFACE_WARNING, 100 * max(off_surface),
-                int(np.argmax(off_surface)),
-            )
+        warn_off_surface(off_surface, "auto")
         diagnostics = AutoDiagnostics(
             0.0, openness, 0.0, flowed.mass_error, float(max(off_surface)), lost
         )
@@ -213,34 +216,13 @@ class _Run:
         self.resumed += summary.resumed
         return path, summary
 
-    def _template(self, opened: Path, meshes: Path, spacing: float):
-        """The closed template (step 3) and the fraction of the kinematic first frame it
-        lacks (:class:`fourd.methods.watertight.Closing`'s ``lost``)."""
-        first = self._first_points
-        cell = kinematic.template_cell_size(
-            first, point_spacing(first), kinematic.Options().template_vertices
-        )
-        with np.load(meshes, allow_pickle=False) as data:
-            mesh = next(_meshes(data, 1))
-        field = flow.mesh_distance(
-            *mesh, float(self.source.times[0]), spacing / self.flow_options.refine
-        )
-        with npz_frame_reader(opened) as reader:
-            start = next(reader.frames())
-            faces = reader.faces
-        template = watertight.closed_template(
-            start, faces, field, float(self.source.times[0]), bounds=field.bounds(),
-            cell_size=cell, reach=0.5 * spacing,
-        )
-        return template, watertight.lost_fraction(template.rest, start, faces)
-
     def _open(self, opened: Path, diagnostics: AutoDiagnostics) -> StreamSummary:
         """Step 5 on the kinematic result."""
         with npz_frame_reader(opened) as reader:
             frames = (
                 (vertices, seen, frame.points)
                 for vertices, seen, frame in zip(
-                    reader.frames(), reader.observed, self._frames(), strict=True
+                    reader.frames(), reader.observed, input_frames(self.source), strict=True
                 )
             )
             self._write(frames, reader.faces, reader.rest)
@@ -260,70 +242,19 @@ class _Run:
                     out.written - 1, len(self.source), _time.perf_counter() - started,
                 )
 
+    @functools.cached_property
+    def _first_points(self) -> np.ndarray:
+        return first_points(self.source)
+
     def _scales(self) -> tuple[float, float] | None:
         if not self.options.fit_frames:
             return None
         return fit_scales(fit_points([self._first_points])[0], self.options)
 
-    @functools.cached_property
-    def _first_points(self) -> np.ndarray:
-        """The points [P, 3] of the first frame with at least four."""
-        for k in range(len(self.source)):
-            points = self.source.read(k, k + 1).frames[0].points
-            if len(points) >= 4:
-                return points
-        raise InputError("no frame has points")
-
-    def _frames(self) -> Iterator:
-        """The source's frames in order, read :data:`FIT_CHUNK` at a time."""
-        for start in range(0, len(self.source), FIT_CHUNK):
-            yield from self.source.read(start, start + FIT_CHUNK).frames
-
     def _summary(self, vertices: int, diagnostics: AutoDiagnostics) -> StreamSummary:
         return StreamSummary(
             self.output, len(self.source), vertices, self.windows, self.resumed, diagnostics, 0.0
         )
-
-
-def _meshes(data, count: int) -> Iterator[tuple[np.ndarray, np.ndarray]]:
-    """The first ``count`` (vertices, faces) of an open MeshSequence ``.npz``, one at a time."""
-    for t in range(count):
-        yield data[f"vertices_{t}"], data[f"faces_{t}"]
-
-
-def _closed_frames(
-    template: watertight.ClosedTemplate,
-    opened,
-    meshes: Iterator,
-    frames: Iterator,
-    times: np.ndarray,
-    spacing: float,
-    off_surface: list,
-) -> Iterator[tuple[np.ndarray, np.ndarray, np.ndarray]]:
-    """Step 4: the closed template at every frame, in order, as (vertices [N, 3], observed
-    [N], the frame's points [P, 3]) (:func:`fourd.methods.watertight.closed_frames`); the
-    off-surface fraction of every frame (:func:`fourd.methods.watertight.off_surface_fraction`)
-    appended to ``off_surface``.
-
-    ``opened`` is the kinematic result's reader, ``meshes`` the flow's (vertices, faces) per
-    frame, ``frames`` the input frames, ``spacing`` the signed distances' grid spacing."""
-    def inputs():
-        for k, (vertices, seen, mesh, frame) in enumerate(
-            zip(opened.frames(), opened.observed, meshes, frames, strict=True)
-        ):
-            at = float(times[k])
-            field = flow.mesh_distance(*mesh, at, spacing) if len(mesh[1]) else None
-            yield vertices, seen, field, at, (field, at, frame.points)
-
-    for vertices, observed, (field, at, points) in watertight.closed_frames(
-        template, inputs(), len(times)
-    ):
-        off_surface.append(
-            0.0 if field is None else watertight.off_surface_fraction(
-                vertices, field, at, watertight.OFF_SURFACE_CELLS * spacing, points
-            )
-        )
-        yield vertices, observed, points
 
 
 def _fitted(frames: Iterator, faces: np.ndarray, count: int, options: Options,

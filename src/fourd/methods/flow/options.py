@@ -198,8 +198,8 @@ class Options:
         to the next without a jump. Memory is then bounded by the window, and each window's
         grid fits its own frames (``fourd.methods.flow.windows``). A streamed run
         (``--stream``) also reads the frames and writes the meshes per window (0 there: 20
-        frames). Only the ``flow`` method's own meshes are solved in windows (``watertight``
-        needs 0).
+        frames). ``watertight`` runs its kinematic and flow stages window by window too, the
+        flow's windows as here (0 in memory: one solve; streamed: 20 frames).
     window_overlap : int
         Frames that consecutive windows share at least (with ``window``), blended from one
         window's surface into the next one's; from 1 to half the window, so that no frame is

@@ -397,7 +397,8 @@ def run(seq: PointCloudSequence, options: Options | None = None) -> FlowResult:
     if options.window and len(seq) > options.window:
         raise InputError(
             f"window {options.window}: this run needs one flow solve over all {len(seq)} frames "
-            "(only the flow method's own meshes are solved in windows; set window to 0)"
+            "(fourd.methods.flow.reconstruct and reconstruct_streamed solve in windows; set "
+            "window to 0)"
         )
     cache = StageCache(options.cache_dir)
     seconds = {}

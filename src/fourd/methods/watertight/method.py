@@ -1,23 +1,27 @@
 """Method ``watertight``: one closed animated mesh, by composition of two methods.
 
-The ``flow`` method's closed, manifold frames (Sharf et al. 2008, ``002_382acf333feb7a6e.txt``)
-give a signed distance in space-time (:func:`fourd.methods.flow.surface_distance`); a closed
-template of the first frame with data is slid along it with the ``kinematic`` method's
-:func:`~fourd.methods.kinematic.animate` (Süßmuth et al. 2008, ``000_00387fefe94cc850.txt``,
-section 5), whose data term follows each frame's own points where it has them. The flow
-fills what the frames do not see. Neither paper gives watertight frames with
-correspondences; this composition does.
+The ``kinematic`` method's result (Süßmuth et al. 2008, ``000_00387fefe94cc850.txt``) is open
+where no frame saw the surface; the ``flow`` method's closed, manifold frames (Sharf et al.
+2008, ``002_382acf333feb7a6e.txt``) give a signed distance in space-time
+(:func:`fourd.methods.flow.surface_distance`). A closed template of the flow's surface at the
+first frame is bound to the kinematic first frame: its bound vertices follow the kinematic
+result exactly, the others are carried rigidly with their nearest bound vertices and moved
+onto the flow's surface at every frame (:func:`close_animation`). The flow fills what the
+frames do not see. Neither paper gives watertight frames with correspondences; this
+composition does. With ``window`` set, the stages run window by window
+(:mod:`fourd.methods.watertight.stream`).
 
 Until this module existed the composition was the ``flow`` option ``coherent=true``; the
 registry still accepts that spelling (:data:`fourd.methods.ALIASES`).
 """
-
 from __future__ import annotations
 
 import dataclasses
 import logging
+import tempfile
 import time
 from collections.abc import Iterable, Iterator
+from pathlib import Path
 from typing import NamedTuple
 
 import numpy as np
@@ -26,8 +30,10 @@ from scipy.spatial import cKDTree
 
 from fourd.animation import AnimatedMesh
 from fourd.cache import subfolder
+from fourd.frame_source import FrameSource
 from fourd.geometry.meshes import median_edge_length
 from fourd.geometry.neighbors import point_spacing
+from fourd.io.npz import read_npz
 from fourd.methods import flow, kinematic
 from fourd.methods.base import Reconstruction
 from fourd.sequence import PointCloudSequence
@@ -471,6 +477,8 @@ def reconstruct_with_diagnostics(
 ) -> Reconstruction:
     """:func:`reconstruct` and :class:`WatertightDiagnostics`."""
     options = Options() if options is None else options
+    if options.window:
+        return _windowed(seq, options)
     opened = kinematic.reconstruct(
         seq, kinematic.Options(cache_dir=subfolder(options.cache_dir, "kinematic"))
     )
@@ -491,3 +499,14 @@ def reconstruct(seq: PointCloudSequence, options: Options | None = None) -> Anim
     """One closed, manifold animated mesh: the flow's surfaces, the kinematic sliding's
     correspondences (see the module docstring)."""
     return reconstruct_with_diagnostics(seq, options).result
+
+
+def _windowed(seq: PointCloudSequence, options: Options) -> Reconstruction:
+    """``options.window`` set: the streamed run (:mod:`fourd.methods.watertight.stream`) over
+    ``seq``, its result read back."""
+    from fourd.methods.watertight.stream import reconstruct_streamed
+
+    with tempfile.TemporaryDirectory(prefix="fourd-watertight-") as folder:
+        summary = reconstruct_streamed(FrameSource.of(seq), Path(folder) / "result.npz", options)
+        result = read_npz(summary.output)
+    return Reconstruction(result, summary.diagnostics)
