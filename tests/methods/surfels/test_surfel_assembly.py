@@ -149,3 +149,35 @@ def test_two_scans_of_a_still_surface_merge_into_one_surfel_set():
     p = merged.state.positions
     assert np.percentile(np.abs(p[..., 2] - height(p[..., 0], p[..., 1])), 95) <= noise
     assert merged.observed.mean() > 0.9
+
+
+def test_optimising_near_the_seam_moves_only_the_frames_within_reach_towards_their_data():
+    """Eight frames of a still plane, every frame's surfels lifted off it: with the seam at
+    frame 4 and a reach of 1, frames 3 and 4 come back onto the data, frames 1-2 and 5-6 are
+    held as boundary conditions and every other frame is left exactly as it was."""
+    from fourd.methods.surfels.assembly import optimize_near_seam
+    from fourd.methods.surfels.model import Model
+
+    rng = np.random.default_rng(5)
+    spacing, count = 0.02, 8
+
+    def scan():
+        points = np.c_[rng.uniform(-1, 1, (2, 3000)).T, rng.normal(scale=0.002, size=3000)]
+        return FramePoints(points, np.tile([0.0, 0.0, 1.0], (3000, 1)))
+
+    frames = [scan() for _ in range(count)]
+    sampling = 4 * spacing
+    weights = energy_weights(Options(), spacing, sampling)
+    quick = GaussNewtonOptions(iterations=3, cg_tolerance=1e-3, cg_iterations=50)
+    grid = np.stack(np.meshgrid(*[np.arange(-0.9, 0.91, sampling)] * 2), -1).reshape(-1, 2)
+    lifted = np.c_[grid, np.full(len(grid), 0.5 * sampling)]
+    state = surfel_state(
+        np.repeat(lifted[None], count, axis=0), np.tile([0.0, 0.0, 1.0], (count, len(grid), 1))
+    )
+    topology = build_topology(state.positions, 2 * sampling, reference=0)
+    model = Model(state, topology, 0, np.ones((count, len(grid)), dtype=bool))
+    out = optimize_near_seam(model, frames, 4, 1, weights, quick, MatchOptions(tangential=0.05))
+    height = np.abs(out.state.positions[..., 2])
+    assert np.all(np.median(height[3:5], axis=1) < 0.1 * sampling)  # back on the plane
+    np.testing.assert_array_equal(out.state.positions[[0, 1, 2, 5, 6, 7]], state.positions[[0, 1, 2, 5, 6, 7]])
+    assert out.observed.shape == (count, len(grid))

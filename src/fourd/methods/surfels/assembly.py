@@ -35,9 +35,9 @@ from fourd.methods.surfels.fill import fill_holes
 from fourd.methods.surfels.match import MatchOptions, frame_data
 from fourd.methods.surfels.model import Model, observed_surfels, pack_model, unpack_model
 from fourd.methods.surfels.motion import fit_rotations
-from fourd.methods.surfels.optimizer import GaussNewtonOptions, gauss_newton
+from fourd.methods.surfels.optimizer import GaussNewtonOptions, free_unknowns, gauss_newton
 from fourd.methods.surfels.resample import redundant_surfels
-from fourd.methods.surfels.state import SurfelState
+from fourd.methods.surfels.state import SurfelState, layout
 from fourd.methods.surfels.topology import build_topology
 from fourd.methods.surfels.urshape import fit_urshape
 
@@ -62,6 +62,9 @@ class Schedule(NamedTuple):
         The data term's association outside the alignment (the ``"global"`` regime).
     urshape : bool
         Each merge ends with the urshape's optimisation (the paper's schedule).
+    reach : int
+        Frames on each side of the seam that a merge's global optimisation moves
+        (:func:`optimize_near_seam`); 0, or with ``urshape``: every frame.
     """
 
     sampling: float
@@ -73,6 +76,7 @@ class Schedule(NamedTuple):
     fill: GaussNewtonOptions
     match: MatchOptions
     urshape: bool = False
+    reach: int = 0
 
 
 def range_data(frames: list, start: int, stop: int):
@@ -118,6 +122,50 @@ def optimize_model(
         log.debug("urshape: energy %.4g -> %.4g", energies[0], energies[-1])
     observed = observed_surfels(state, data, model.topology.radius)
     return Model(state, model.topology, model.start, observed, rest)
+
+
+def optimize_near_seam(
+    model: Model,
+    frames: list,
+    seam: int,
+    reach: int,
+    weights: Weights,
+    options: GaussNewtonOptions,
+    match: MatchOptions | None = None,
+) -> Model:
+    """The global optimisation of a merged ``model`` where the merge changed it most: frames
+    ``seam - reach .. seam + reach - 1`` (``seam`` the right range's first frame, relative to
+    ``model.start``) move, their neighbours in time are held as boundary conditions (the
+    rigidity and acceleration terms reach one and two frames), the frames beyond are left as
+    the hole filling made them. The issue's "solving only where things changed"; the paper
+    optimises every frame (:func:`optimize_model`)."""
+    state, count = model.state, model.state.count
+    first, stop = max(0, seam - reach), min(state.frames, seam + reach)
+    start, end = max(0, first - 2), min(state.frames, stop + 2)
+    local = SurfelState(
+        state.positions[start:end], state.normals[start:end], state.rotations[start : end - 1]
+    )
+    moving = np.zeros((end - start, count), dtype=bool)
+    moving[first - start : stop - start] = True
+    data = range_data(frames, model.start + start, model.start + end)
+    result = gauss_newton(
+        local, model.topology, data, weights, match, options,
+        free=free_unknowns(layout(local), moving),
+    )
+    log.debug(
+        "frames %d-%d of %d-%d, %d surfels: energy %.4g -> %.4g in %d steps",
+        model.start + first, model.start + stop - 1, model.start, model.stop - 1, count,
+        result.energies[0], result.energies[-1], len(result.cg_iterations),
+    )
+    positions, normals = state.positions.copy(), state.normals.copy()
+    rotations = state.rotations.copy()
+    positions[start:end], normals[start:end] = result.state.positions, result.state.normals
+    rotations[start : end - 1] = result.state.rotations
+    merged = SurfelState(positions, normals, rotations)
+    observed = observed_surfels(
+        merged, range_data(frames, model.start, model.stop), model.topology.radius
+    )
+    return Model(merged, model.topology, model.start, observed)
 
 
 def merge(left: Model, right: Model, frames: list, schedule: Schedule) -> Model:
@@ -219,6 +267,10 @@ def merge(left: Model, right: Model, frames: list, schedule: Schedule) -> Model:
         len(topology.edges),
     )
     model = Model(resampled, topology, left.start, observed[:, keep])
+    if schedule.reach and not schedule.urshape and frames_count > 2 * schedule.reach + 2:
+        return optimize_near_seam(
+            model, frames, nl, schedule.reach, schedule.weights, schedule.optimize, schedule.match
+        )
     return optimize_model(
         model, frames, schedule.weights, schedule.optimize, schedule.match,
         urshape="joint" if schedule.urshape else "off",

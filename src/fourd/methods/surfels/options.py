@@ -81,6 +81,11 @@ class Options:
         global optimisation of a merged range).
     fill_iterations : int
         Gauss-Newton steps of the local optimisation of each frame filled in.
+    merge_reach : int
+        Frames on each side of a merge's seam that its global optimisation moves, the frames
+        beyond held (the far frames' new surfels keep their hole filling's local
+        optimisation, and the final pass optimises every frame); 0: every frame of the
+        merged range, as the paper does.
     final_iterations : int
         Gauss-Newton steps of the final global optimisation of all frames (0: no final
         pass, and no urshape unless the merges computed one).
@@ -144,6 +149,7 @@ class Options:
     tensor_ratio: float = 0.8
     iterations: int = 4
     fill_iterations: int = 2
+    merge_reach: int = 0
     final_iterations: int = 4
     urshape: str = "rest"
     cg_tolerance: float = 1e-3
@@ -191,6 +197,7 @@ class Options:
             "iterations",
             "align_iterations",
             "fill_iterations",
+            "merge_reach",
             "final_iterations",
             "cg_iterations",
         ):

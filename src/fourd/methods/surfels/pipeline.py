@@ -125,6 +125,7 @@ def reconstruct(seq: PointCloudSequence, options: Options | None = None) -> Anim
         fill=fill,
         match=match,
         urshape=options.urshape == "merges",
+        reach=options.merge_reach,
     )
     without = (
         "mesh_sigma",
