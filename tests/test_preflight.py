@@ -209,8 +209,8 @@ def test_memory_refusal_suggests_windows_where_they_fit(monkeypatch):
     with pytest.raises(InputError) as info:
         check_memory(seq, "flow", method_module("flow"), options)
     assert str(info.value).endswith("reconstruct fewer frames")  # windows would not fit either
-    # watertight solves its flow in one piece: no windows to suggest
+    # watertight streams its flow in the same windows: the same suggestion
     monkeypatch.setattr(preflight, "available_memory", lambda: (whole + windowed) // 2)
     with pytest.raises(InputError) as info:
         check_memory(seq, "watertight", method_module("watertight"), method_options("watertight"))
-    assert "window" not in str(info.value)
+    assert str(info.value).endswith(f"--set window=20: about {preflight._size(windowed)})")
