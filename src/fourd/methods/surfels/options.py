@@ -85,7 +85,8 @@ class Options:
         Frames on each side of a merge's seam that its global optimisation moves, the frames
         beyond held (the far frames' new surfels keep their hole filling's local
         optimisation, and the final pass optimises every frame); 0: every frame of the
-        merged range, as the paper does.
+        merged range, as the paper does (2 left more surfels and scored worse on crane:
+        benchmarks/METHODS.md).
     final_iterations : int
         Gauss-Newton steps of the final global optimisation of all frames (0: no final
         pass, and no urshape unless the merges computed one).
