@@ -190,7 +190,7 @@ class _Run:
                 self.source.times, flowed.spacing / self.flow_options.refine, off_surface,
             )
             self._write(closed, template.faces, template.rest)
-        warn_off_surface(off_surface, "auto")
+        warn_off_surface(off_surface, log, "auto")
         diagnostics = AutoDiagnostics(
             0.0, openness, 0.0, flowed.mass_error, float(max(off_surface)), lost
         )

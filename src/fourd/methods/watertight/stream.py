@@ -158,7 +158,7 @@ def _run(source: FrameSource, output: Path, options: Options, work: Path) -> Str
             if out.written % READ_CHUNK == 0 or out.written == len(source):
                 log.info("watertight: %d of %d frames written (%.1f s)", out.written,
                          len(source), _time.perf_counter() - started)
-    warn_off_surface(off_surface, "watertight")
+    warn_off_surface(off_surface, log, "watertight")
     diagnostics = WatertightDiagnostics(flowed.mass_error, float(max(off_surface)), lost)
     return StreamSummary(
         output, len(source), len(template.rest), opened_summary.windows + flowed.windows,
@@ -246,11 +246,12 @@ def closed_mesh_frames(
         yield vertices, observed, points
 
 
-def warn_off_surface(off_surface: list, method: str) -> None:
-    """Warn when in some frame more than :data:`OFF_SURFACE_WARNING` of the closed mesh lies
-    far from both the flow's surface and the frame's points (``off_surface``, per frame)."""
+def warn_off_surface(off_surface: list, logger: logging.Logger, method: str) -> None:
+    """Warn on ``logger`` when in some frame more than :data:`OFF_SURFACE_WARNING` of the
+    closed mesh lies far from both the flow's surface and the frame's points (``off_surface``,
+    per frame); ``method`` names the method in the message."""
     if max(off_surface, default=0.0) > OFF_SURFACE_WARNING:
-        log.warning(
+        logger.warning(
             "%s: in some frames more than %.1f%% of the closed mesh lies far from both the "
             "flow's surface and the frame's points (at most %.1f%%, frame %d): the tracking "
             "lost part of it", method, 100 * OFF_SURFACE_WARNING, 100 * max(off_surface),
