@@ -150,3 +150,44 @@ def check_method_module(module: ModuleType) -> list[str]:
                 f"COMMON_OPTIONS must name options of the method, each once, got {common!r}"
             )
     return problems
+
+
+def run_streamed(name: str, source, output, min_frames: int, run):
+    """The frame of a composition's streamed run: ``output`` checked
+    (:func:`fourd.io.npz.streamed_output`), at least ``min_frames`` frames in ``source``
+    (:class:`~fourd.errors.InputError` otherwise), then ``run(output, work)`` with ``work`` a
+    temporary folder beside the output that goes when it returns; its summary (a NamedTuple
+    with ``seconds``) comes back with the wall seconds, logged on ``fourd.methods.<name>``."""
+    import logging
+    import tempfile
+    import time
+
+    from fourd.errors import InputError
+    from fourd.io.npz import streamed_output
+
+    output = streamed_output(output)
+    if len(source) < min_frames:
+        raise InputError(f"{name} needs at least {min_frames} frames, got {len(source)}")
+    started = time.perf_counter()
+    with tempfile.TemporaryDirectory(dir=output.parent, prefix=f".fourd-{name}-") as work:
+        summary = run(output, Path(work))
+    seconds = time.perf_counter() - started
+    logging.getLogger(f"fourd.methods.{name}").info(
+        "%s, streamed: %d frames in %.1f s", name, len(source), seconds
+    )
+    return summary._replace(seconds=seconds)
+
+
+def streamed_in_memory(reconstruct_streamed, seq: PointCloudSequence, options, name: str) -> Reconstruction:
+    """A method's ``reconstruct_streamed(source, output, options)`` over the sequence ``seq``
+    in memory (``window`` set without ``--stream``): written to a temporary ``.npz``, read
+    back, with the summary's ``diagnostics``."""
+    import tempfile
+
+    from fourd.frame_source import FrameSource
+    from fourd.io.npz import read_npz
+
+    with tempfile.TemporaryDirectory(prefix=f"fourd-{name}-") as folder:
+        summary = reconstruct_streamed(FrameSource.of(seq), Path(folder) / "result.npz", options)
+        result = read_npz(summary.output)
+    return Reconstruction(result, summary.diagnostics)

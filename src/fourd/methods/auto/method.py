@@ -36,22 +36,18 @@ from __future__ import annotations
 
 import dataclasses
 import logging
-import tempfile
-from pathlib import Path
 from typing import Literal
 
 import numpy as np
 
 from fourd.animation import AnimatedMesh, MeshSequence
 from fourd.cache import subfolder
-from fourd.frame_source import FrameSource
 from fourd.geometry.meshes import vertex_components
 from fourd.geometry.neighbors import point_spacing
 from fourd.geometry.outliers import distance_ratio_inliers
 from fourd.geometry.surface_fit import fit_along_normals
-from fourd.io.npz import read_npz
 from fourd.methods import flow, kinematic, watertight
-from fourd.methods.base import Reconstruction
+from fourd.methods.base import Reconstruction, streamed_in_memory
 from fourd.methods.kinematic.options import OUTLIER_NEIGHBOURS
 from fourd.sequence import PointCloudSequence
 
@@ -363,7 +359,4 @@ def _windowed(seq: PointCloudSequence, options: Options) -> Reconstruction:
     ``seq``, its result read back."""
     from fourd.methods.auto.stream import reconstruct_streamed
 
-    with tempfile.TemporaryDirectory(prefix="fourd-auto-") as folder:
-        summary = reconstruct_streamed(FrameSource.of(seq), Path(folder) / "result.npz", options)
-        result = read_npz(summary.output)
-    return Reconstruction(result, summary.diagnostics)
+    return streamed_in_memory(reconstruct_streamed, seq, options, "auto")

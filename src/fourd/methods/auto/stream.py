@@ -30,7 +30,6 @@ from __future__ import annotations
 import functools
 import logging
 import os
-import tempfile
 import time as _time
 from collections.abc import Iterator
 from pathlib import Path
@@ -40,10 +39,9 @@ import numpy as np
 
 from fourd.animation import MeshSequence
 from fourd.cache import subfolder
-from fourd.errors import InputError
 from fourd.frame_source import FrameSource
 from fourd.geometry.surface_fit import fit_along_normals
-from fourd.io.npz import npz_frame_reader, npz_frames, streamed_output
+from fourd.io.npz import npz_frame_reader, npz_frames
 from fourd.methods import flow, kinematic
 from fourd.methods.auto.method import (
     MIN_FRAMES,
@@ -55,6 +53,7 @@ from fourd.methods.auto.method import (
     splits,
     vector_area_fraction,
 )
+from fourd.methods.base import run_streamed
 from fourd.methods.watertight.stream import (
     closed_mesh_frames,
     first_points,
@@ -116,15 +115,9 @@ def reconstruct_streamed(
     the windows are this project's (issue 56).
     """
     options = options or Options()
-    output = streamed_output(output)
-    if len(source) < MIN_FRAMES:
-        raise InputError(f"auto needs at least {MIN_FRAMES} frames, got {len(source)}")
-    started = _time.perf_counter()
-    with tempfile.TemporaryDirectory(dir=output.parent, prefix=".fourd-auto-") as work:
-        summary = _Run(source, output, options, Path(work)).run()
-    seconds = _time.perf_counter() - started
-    log.info("auto, streamed: %d frames in %.1f s", len(source), seconds)
-    return summary._replace(seconds=seconds)
+    return run_streamed(
+        "auto", source, output, MIN_FRAMES, lambda output, work: _Run(source, output, options, work).run()
+    )
 
 
 class _Run:

@@ -18,10 +18,8 @@ from __future__ import annotations
 
 import dataclasses
 import logging
-import tempfile
 import time
 from collections.abc import Iterable, Iterator
-from pathlib import Path
 from typing import NamedTuple
 
 import numpy as np
@@ -30,12 +28,10 @@ from scipy.spatial import cKDTree
 
 from fourd.animation import AnimatedMesh
 from fourd.cache import subfolder
-from fourd.frame_source import FrameSource
 from fourd.geometry.meshes import median_edge_length
 from fourd.geometry.neighbors import point_spacing
-from fourd.io.npz import read_npz
 from fourd.methods import flow, kinematic
-from fourd.methods.base import Reconstruction
+from fourd.methods.base import Reconstruction, streamed_in_memory
 from fourd.sequence import PointCloudSequence
 
 log = logging.getLogger("fourd.methods.watertight")
@@ -506,7 +502,4 @@ def _windowed(seq: PointCloudSequence, options: Options) -> Reconstruction:
     ``seq``, its result read back."""
     from fourd.methods.watertight.stream import reconstruct_streamed
 
-    with tempfile.TemporaryDirectory(prefix="fourd-watertight-") as folder:
-        summary = reconstruct_streamed(FrameSource.of(seq), Path(folder) / "result.npz", options)
-        result = read_npz(summary.output)
-    return Reconstruction(result, summary.diagnostics)
+    return streamed_in_memory(reconstruct_streamed, seq, options, "watertight")

@@ -24,7 +24,6 @@ from __future__ import annotations
 
 import dataclasses
 import logging
-import tempfile
 import time as _time
 from collections.abc import Iterator
 from pathlib import Path
@@ -36,8 +35,9 @@ from fourd.cache import subfolder
 from fourd.errors import InputError
 from fourd.frame_source import FrameSource
 from fourd.geometry.neighbors import point_spacing
-from fourd.io.npz import npz_frame_reader, npz_frames, streamed_output
+from fourd.io.npz import npz_frame_reader, npz_frames
 from fourd.methods import flow, kinematic
+from fourd.methods.base import run_streamed
 from fourd.methods.watertight.method import (
     LOST_WARNING,
     MIN_FRAMES,
@@ -102,15 +102,9 @@ def reconstruct_streamed(
     the windows are this project's (issue 56).
     """
     options = options or Options()
-    output = streamed_output(output)
-    if len(source) < MIN_FRAMES:
-        raise InputError(f"watertight needs at least {MIN_FRAMES} frames, got {len(source)}")
-    started = _time.perf_counter()
-    with tempfile.TemporaryDirectory(dir=output.parent, prefix=".fourd-watertight-") as work:
-        summary = _run(source, output, options, Path(work))
-    seconds = _time.perf_counter() - started
-    log.info("watertight, streamed: %d frames in %.1f s", len(source), seconds)
-    return summary._replace(seconds=seconds)
+    return run_streamed(
+        "watertight", source, output, MIN_FRAMES, lambda output, work: _run(source, output, options, work)
+    )
 
 
 def streamed_flow_options(options: flow.Options, window: int) -> flow.Options:
