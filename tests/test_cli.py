@@ -891,7 +891,10 @@ def test_missing_or_wrong_image_is_exit_2_naming_it(filmed, capsys):
 
 @pytest.mark.parametrize(("method", "settings"), [("kinematic", ["template_vertices=400"]),
                                                  ("watertight", ["window_overlap=1", "resolution=12"]),
-                                                 ("assembly", ["relax_sweeps=1"])])
+                                                 ("assembly", ["relax_sweeps=1"]),
+                                                 ("surfels", ["window=3", "sampling=2", "iterations=2",
+                                                              "final_iterations=1",
+                                                              "align_iterations=4"])])
 def test_stream_writes_a_npz_read_a_window_at_a_time(tmp_path, capsys, method, settings):
     folder = _folder(tmp_path, frames=5)
     out = tmp_path / "out.npz"
@@ -907,7 +910,7 @@ def test_stream_writes_a_npz_read_a_window_at_a_time(tmp_path, capsys, method, s
         radius = np.linalg.norm(result.vertices[t] - [0.05 * t] * 3, axis=1)
         assert np.abs(np.median(radius) - 1.0) < 0.05, t
     _run_bad(capsys, argv[:3] + [str(tmp_path / "out.glb"), "--stream"], "out.glb", ".npz")
-    _run_bad(capsys, argv[:6] + ["--method", "perframe"], "--stream", "auto, kinematic, flow, watertight and assembly")
+    _run_bad(capsys, argv[:6] + ["--method", "perframe"], "--stream", "auto, kinematic, flow, watertight, assembly and surfels")
     _run_bad(capsys, argv + ["--times", "0.5"], "--stream", "--times")
     if method == "assembly":
         _run_bad(capsys, argv + ["--set", "paste=true"], "paste", "without --stream")

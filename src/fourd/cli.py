@@ -259,13 +259,22 @@ def cmd_reconstruct(args) -> int:
 
 
 def _reconstruct_streamed(args, method: str, values: dict) -> int:
-    """``reconstruct --stream``: auto, kinematic, flow, watertight or assembly over frames read
-    a window at a time, the result written frame by frame (:mod:`fourd.methods.auto.stream`,
-    :mod:`fourd.methods.kinematic.stream`, :mod:`fourd.methods.flow.windows`,
-    :mod:`fourd.methods.watertight.stream`, :mod:`fourd.methods.assembly.stream`)."""
+    """``reconstruct --stream``: auto, kinematic, flow, watertight, assembly or surfels over
+    frames read a window at a time, the result written frame by frame
+    (:mod:`fourd.methods.auto.stream`, :mod:`fourd.methods.kinematic.stream`,
+    :mod:`fourd.methods.flow.windows`, :mod:`fourd.methods.watertight.stream`,
+    :mod:`fourd.methods.assembly.stream`, :mod:`fourd.methods.surfels.stream`)."""
     from fourd.io.frames import open_sequence
     from fourd.io.npz import streamed_output
-    from fourd.methods import assembly, auto, flow, kinematic, method_options, watertight
+    from fourd.methods import (
+        assembly,
+        auto,
+        flow,
+        kinematic,
+        method_options,
+        surfels,
+        watertight,
+    )
 
     streamed = {
         "auto": auto.reconstruct_streamed,
@@ -273,10 +282,11 @@ def _reconstruct_streamed(args, method: str, values: dict) -> int:
         "flow": flow.reconstruct_streamed,
         "watertight": watertight.reconstruct_streamed,
         "assembly": assembly.reconstruct_streamed,
+        "surfels": surfels.reconstruct_streamed,
     }
     if method not in streamed:
         raise InputError(
-            f"--stream: only auto, kinematic, flow, watertight and assembly run streamed (asked "
+            f"--stream: only auto, kinematic, flow, watertight, assembly and surfels run streamed (asked "
             f"for {method})"
         )
     for flag, given in (("--times", args.times), ("--uv", args.uv), ("--colors", args.colors),
@@ -535,7 +545,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="whole captures: read the frames a window at a time (the option "
                         "window, default 20) and write the result (.npz) frame by frame, so "
                         "memory is bounded by the window, not the capture's length (auto, "
-                        "kinematic, flow, watertight and assembly; --cache resumes it window by window)")
+                        "kinematic, flow, watertight, assembly and surfels; --cache resumes it window by window)")
     p.add_argument("--force", action="store_true",
                    help="run even when the up-front estimate of the memory needed exceeds the "
                         "memory available")
@@ -738,7 +748,7 @@ def main(argv: list[str] | None = None) -> int:
     except MemoryError:
         hint = ""
         if getattr(args, "func", None) is cmd_reconstruct and not args.stream:
-            hint = ("; for a long capture, --stream (auto, kinematic, flow, watertight, assembly) bounds "
+            hint = ("; for a long capture, --stream (auto, kinematic, flow, watertight, assembly, surfels) bounds "
                     "the memory by a window of frames, or --frames A:B reconstructs part of it")
         print(f"fourd: error: out of memory{hint}", file=sys.stderr)
         return EXIT_OUT_OF_MEMORY

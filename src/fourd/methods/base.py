@@ -181,7 +181,7 @@ def run_streamed(name: str, source, output, min_frames: int, run):
 def streamed_in_memory(reconstruct_streamed, seq: PointCloudSequence, options, name: str) -> Reconstruction:
     """A method's ``reconstruct_streamed(source, output, options)`` over the sequence ``seq``
     in memory (``window`` set without ``--stream``): written to a temporary ``.npz``, read
-    back, with the summary's ``diagnostics``."""
+    back, with the summary's ``diagnostics`` (None for a summary without)."""
     import tempfile
 
     from fourd.frame_source import FrameSource
@@ -190,4 +190,4 @@ def streamed_in_memory(reconstruct_streamed, seq: PointCloudSequence, options, n
     with tempfile.TemporaryDirectory(prefix=f"fourd-{name}-") as folder:
         summary = reconstruct_streamed(FrameSource.of(seq), Path(folder) / "result.npz", options)
         result = read_npz(summary.output)
-    return Reconstruction(result, summary.diagnostics)
+    return Reconstruction(result, getattr(summary, "diagnostics", None))

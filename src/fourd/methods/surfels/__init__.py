@@ -28,7 +28,10 @@ by a statistical model and assembled frame range by frame range (Wand et al. 200
    after every merge's as well (``"merges"``, the paper's schedule; measured in
    benchmarks/METHODS.md);
 9. :mod:`.pipeline` -- all of it, and the mesh of :mod:`.meshing`: one frame's mesh carried
-   to every frame and to the urshape, which is the result's ``rest``.
+   to every frame and to the urshape, which is the result's ``rest``;
+10. :mod:`.stream` -- a whole capture window by window (``window``, ``--stream``): each
+    window assembled, then merged onto the past's last frames with those held, the first
+    frame's mesh carried on; memory bounded by the window.
 
 Beyond the paper (measured in benchmarks/METHODS.md): the alignment pulls towards the right
 frame's measured points (not its surfels) and starts from a rigid point-to-plane ICP
@@ -58,9 +61,12 @@ from fourd.methods.surfels.meshing import (
     Binding,
     FrameMesh,
     MeshingOptions,
+    align_to_normals,
     bind_vertices,
     carry,
+    carry_by,
     mesh_frame,
+    observed_vertices,
     surfel_frames,
     surfel_mesh,
 )
@@ -85,6 +91,7 @@ from fourd.methods.surfels.state import (
     surfel_state,
     tangent_basis,
 )
+from fourd.methods.surfels.stream import STREAM_WINDOW, reconstruct_streamed
 from fourd.methods.surfels.term import Term
 from fourd.methods.surfels.topology import (
     Topology,
@@ -100,6 +107,8 @@ __all__ = [
     "Options",
     "RESULT",
     "reconstruct",
+    "reconstruct_streamed",
+    "STREAM_WINDOW",
     "free_unknowns",
     "Binding",
     "Data",
@@ -122,6 +131,9 @@ __all__ = [
     "associate",
     "bind_vertices",
     "carry",
+    "carry_by",
+    "align_to_normals",
+    "observed_vertices",
     "fit_rotations",
     "fit_urshape",
     "frame_data",

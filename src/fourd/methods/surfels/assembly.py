@@ -95,13 +95,23 @@ def optimize_model(
     match: MatchOptions | None = None,
     *,
     urshape: str = "off",
+    held: int = 0,
 ) -> Model:
     """Global optimisation of all trajectories of ``model`` against its frames' data; then,
     with ``urshape`` ``"joint"``, of the trajectories together with the urshape, or with
     ``"rest"`` of the urshape alone (:func:`.fit_urshape`, the same weights and options; the
-    model's earlier urshape is not used); ``"off"``: none."""
+    model's earlier urshape is not used); ``"off"``: none. The first ``held`` frames stay as
+    they are, boundary conditions of the others (the streamed run's seam, :mod:`.stream`;
+    only with ``urshape`` ``"off"``)."""
+    if held and urshape != "off":
+        raise ValueError("held frames and an urshape do not go together")
     data = range_data(frames, model.start, model.stop)
-    result = gauss_newton(model.state, model.topology, data, weights, match, options)
+    free = None
+    if held:
+        moving = np.ones((model.state.frames, model.state.count), dtype=bool)
+        moving[:held] = False
+        free = free_unknowns(layout(model.state), moving)
+    result = gauss_newton(model.state, model.topology, data, weights, match, options, free=free)
     log.debug(
         "frames %d-%d, %d surfels: energy %.4g -> %.4g in %d steps (CG %s)",
         model.start,
@@ -168,9 +178,15 @@ def optimize_near_seam(
     return Model(merged, model.topology, model.start, observed)
 
 
-def merge(left: Model, right: Model, frames: list, schedule: Schedule) -> Model:
+def merge(
+    left: Model, right: Model, frames: list, schedule: Schedule, *, held: int = 0
+) -> Model:
     """Merge two adjacent ranges (``left.stop == right.start``) into one model over both
-    (sec. 3.2: align, stitch, fill holes, resample, optimise)."""
+    (sec. 3.2: align, stitch, fill holes, resample, optimise).
+
+    ``held`` > 0: the left range is the streamed run's past (:mod:`.stream`): its first
+    ``held`` frames are held in the global optimisation, and its surfels are all kept by the
+    resampling, first and in their order, so a surfel's index still names it."""
     if left.stop != right.start:
         raise ValueError(
             f"ranges must be adjacent, got {left.start}-{left.stop} and {right.start}-{right.stop}"
@@ -242,9 +258,12 @@ def merge(left: Model, right: Model, frames: list, schedule: Schedule) -> Model:
     observed = np.zeros((frames_count, count), dtype=bool)
     observed[:nl, :sl] = left.observed
     observed[nl:, sl:] = right.observed
-    drop = redundant_surfels(
-        state.positions, 0.5 * schedule.sampling, priority=observed.sum(axis=0)
-    )
+    priority = observed.sum(axis=0)
+    if held:
+        priority[:sl] += frames_count + 1
+    drop = redundant_surfels(state.positions, 0.5 * schedule.sampling, priority=priority)
+    if held:
+        drop[:sl] = False
     keep = np.flatnonzero(~drop)
     topology = build_topology(
         state.positions[:, keep],
@@ -267,6 +286,10 @@ def merge(left: Model, right: Model, frames: list, schedule: Schedule) -> Model:
         len(topology.edges),
     )
     model = Model(resampled, topology, left.start, observed[:, keep])
+    if held:
+        return optimize_model(
+            model, frames, schedule.weights, schedule.optimize, schedule.match, held=held
+        )
     if schedule.reach and not schedule.urshape and frames_count > 2 * schedule.reach + 2:
         return optimize_near_seam(
             model, frames, nl, schedule.reach, schedule.weights, schedule.optimize, schedule.match

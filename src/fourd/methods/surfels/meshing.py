@@ -339,8 +339,7 @@ def _least_rotations(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 def surfel_frames(state: SurfelState, reference: int, *, align_normals: bool = True) -> np.ndarray:
     """``F_i^t`` [T, S, 3, 3]: each surfel's rotation from frame ``reference`` to frame
     ``t``, composed from the local rotations ``A_i^(t)`` of eq. (9) (identity at the
-    reference), then, with ``align_normals``, turned by the least rotation taking
-    ``F n^r`` onto ``n^t``."""
+    reference), then, with ``align_normals``, turned by :func:`align_to_normals`."""
     if not 0 <= reference < state.frames:
         raise ValueError(f"reference {reference} is not a frame of 0..{state.frames - 1}")
     frames = np.empty((state.frames, state.count, 3, 3))
@@ -350,10 +349,22 @@ def surfel_frames(state: SurfelState, reference: int, *, align_normals: bool = T
     for t in range(reference, 0, -1):
         frames[t - 1] = np.swapaxes(state.rotations[t - 1], -1, -2) @ frames[t]
     if align_normals:
-        normals = state.normals / np.linalg.norm(state.normals, axis=-1, keepdims=True)
-        turned = np.einsum("tsab,sb->tsa", frames, normals[reference])
-        frames = _least_rotations(turned, normals) @ frames
+        frames = align_to_normals(frames, state.normals[reference], state.normals)
     return frames
+
+
+def align_to_normals(
+    frames: np.ndarray, reference_normals: np.ndarray, normals: np.ndarray
+) -> np.ndarray:
+    """``frames`` [T, S, 3, 3] each turned by the least rotation taking ``F n^r`` onto
+    ``n^t``: ``reference_normals`` [S, 3] the normals in the reference frame, ``normals``
+    [T, S, 3] those of each frame."""
+    reference_normals = reference_normals / np.linalg.norm(
+        reference_normals, axis=-1, keepdims=True
+    )
+    normals = normals / np.linalg.norm(normals, axis=-1, keepdims=True)
+    turned = np.einsum("tsab,sb->tsa", frames, reference_normals)
+    return _least_rotations(turned, normals) @ frames
 
 
 def carry(
@@ -362,11 +373,17 @@ def carry(
     """Vertex positions [T, N, 3] in every frame of ``state``: ``v^t = sum_i phi_i (p_i^t +
     F_i^t d_i)`` (sec. 3.3), for the vertices bound in frame ``reference``
     (:func:`surfel_frames` gives ``F``)."""
-    count = binding.count
     frames = surfel_frames(state, reference, align_normals=align_normals)
-    out = np.empty((state.frames, count, 3))
-    for t in range(state.frames):
-        moved = state.positions[t, binding.surfel] + np.einsum(
+    return carry_by(binding, state.positions, frames)
+
+
+def carry_by(binding: Binding, positions: np.ndarray, frames: np.ndarray) -> np.ndarray:
+    """Vertex positions [T, N, 3] of :func:`carry` from the surfels' ``positions`` [T, S, 3]
+    and rotations ``frames`` [T, S, 3, 3] from the binding's frame."""
+    count = binding.count
+    out = np.empty((len(positions), count, 3))
+    for t in range(len(positions)):
+        moved = positions[t, binding.surfel] + np.einsum(
             "kab,kb->ka", frames[t, binding.surfel], binding.offset
         )
         for axis in range(3):
@@ -374,6 +391,19 @@ def carry(
                 binding.vertex, binding.weight * moved[:, axis], minlength=count
             )
     return out
+
+
+def observed_vertices(
+    binding: Binding, observed: np.ndarray, clip: float
+) -> np.ndarray:
+    """Vertices observed [T, N] from surfels ``observed`` [T, S]: the weight of the frame's
+    observed surfels at a vertex reaches ``clip`` times the binding's reference weight."""
+    pairs = sp.csr_matrix(
+        (binding.raw, (binding.vertex, binding.surfel)),
+        shape=(binding.count, observed.shape[1]),
+    )
+    seen = (pairs @ np.asarray(observed, dtype=np.float64).T).T / binding.reference_weight
+    return seen >= clip * (1.0 - 1e-9)
 
 
 def surfel_mesh(
@@ -447,14 +477,10 @@ def surfel_mesh(
     binding = bind_vertices(mesh.vertices, positions, normals, sampling, options=options)
     vertices = carry(binding, state, reference, align_normals=options.align_normals)
     vertices[reference] = mesh.vertices  # the identity up to rounding
-    pairs = sp.csr_matrix(
-        (binding.raw, (binding.vertex, binding.surfel)), shape=(len(mesh.vertices), state.count)
-    )
-    seen = (pairs @ observed.astype(np.float64).T).T / binding.reference_weight
     return AnimatedMesh(
         faces=mesh.faces,
         vertices=vertices,
         times=times,
-        observed=seen >= options.clip * (1.0 - 1e-9),
+        observed=observed_vertices(binding, observed, options.clip),
         rest=mesh.vertices,
     )

@@ -129,6 +129,11 @@ class Options:
         Folder where each preprocessed frame and each merged model are kept, keyed by the
         input data and the options that act on them; a rerun resumes after the last finished
         merge (``fourd reconstruct --cache``). None: nothing is kept.
+    window : int
+        0: one model over the whole sequence (the paper). N: the capture assembled N frames
+        at a time, each window merged onto the last frames of the one before with those held
+        (:mod:`.stream`; ``fourd reconstruct --stream``): memory grows with the window, not
+        with the capture, and the mesh is that of frame 0's surfels (``reference`` 0).
     """
 
     sampling: float = 4.0
@@ -164,6 +169,7 @@ class Options:
     reference: int = 0
     normals_k: int = 16
     cache_dir: str | None = None
+    window: int = 0
 
     def __post_init__(self):
         for name in (
@@ -201,6 +207,7 @@ class Options:
             "merge_reach",
             "final_iterations",
             "cg_iterations",
+            "window",
         ):
             if getattr(self, name) < 0:
                 raise ValueError(f"{name} must not be negative")

@@ -21,6 +21,7 @@ from fourd.geometry.surface_fit import fit_along_normals
 from fourd.methods.surfels.assembly import Schedule, assemble, optimize_model
 from fourd.methods.surfels.match import MatchOptions
 from fourd.methods.surfels.meshing import MeshingOptions, surfel_mesh
+from fourd.methods.surfels.model import Model
 from fourd.methods.surfels.optimizer import GaussNewtonOptions
 from fourd.methods.surfels.options import MIN_FRAMES, Options, energy_weights
 from fourd.methods.surfels.seeds import FramePoints, prepare_frame, seed_model
@@ -52,116 +53,33 @@ def reconstruct(seq: PointCloudSequence, options: Options | None = None) -> Anim
         raise InputError(
             f"reference {options.reference} is not a frame of the {len(seq)} input frames"
         )
+    if options.window:
+        from fourd.methods.base import streamed_in_memory
+        from fourd.methods.surfels.stream import reconstruct_streamed
+
+        return streamed_in_memory(reconstruct_streamed, seq, options, "surfels").result
     started = _time.perf_counter()
     cache = StageCache(options.cache_dir)
     spacing = point_spacing(seq.frames[0].points)
     sampling = options.sampling * spacing
     noise = options.noise or spacing
-    frames, keys = [], []
-    for index, f in enumerate(progress(seq.frames, desc="surfels: preprocessing")):
-        key = (
-            stage_key(
-                f.points, f.normals, f.sensors, spacing, options.tensor_ratio, options.normals_k
-            )
-            if cache.enabled
-            else ""
-        )
-        arrays, resumed = cached(
-            cache,
-            "surfels-frame",
-            key,
-            lambda f=f: prepare_frame(
-                f.points,
-                f.normals,
-                f.sensors,
-                spacing=spacing,
-                max_ratio=options.tensor_ratio,
-                k=options.normals_k,
-            )._asdict(),
-        )
-        if resumed:
-            report_resumed(log, f"frame {index}'s preprocessing")
-        frames.append(FramePoints(arrays["points"], arrays["normals"]))
-        keys.append(key)
-    for index, frame in enumerate(frames):
-        if len(frame.points) < 10:
-            raise InputError(f"frame {index} has no smooth surface region to start from")
-    weights = energy_weights(options, noise, sampling)
-    optimize = GaussNewtonOptions(
-        iterations=options.iterations,
-        cg_tolerance=options.cg_tolerance,
-        cg_iterations=options.cg_iterations,
-    )
-    fill = GaussNewtonOptions(
-        iterations=options.fill_iterations,
-        cg_tolerance=options.cg_tolerance,
-        cg_iterations=options.cg_iterations,
-    )
-    seed_match = MatchOptions(tangential=options.tangential)
-    match = MatchOptions(tangential=options.linked_tangential)
-    seeds = [
-        seed_model(
-            frame,
-            index,
-            sampling=sampling,
-            weights=weights,
-            gauss_newton_options=optimize,
-            match=seed_match,
-        )
-        for index, frame in enumerate(progress(frames, desc="surfels: seed regions"))
-    ]
+    frames, keys = prepare_frames(seq.frames, spacing, options, cache)
+    schedule = assembly_schedule(options, noise, sampling)
+    seeds = seed_models(frames, range(len(frames)), sampling, schedule, options)
     prepared = _time.perf_counter()
-    schedule = Schedule(
-        sampling=sampling,
-        weights=weights,
-        align_data=options.align_data / noise**2,
-        align=GaussNewtonOptions(
-            iterations=options.align_iterations,
-            cg_tolerance=options.cg_tolerance,
-            cg_iterations=options.cg_iterations,
-        ),
-        max_stretch=options.max_stretch,
-        optimize=optimize,
-        fill=fill,
-        match=match,
-        urshape=options.urshape == "merges",
-        reach=options.merge_reach,
-    )
-    without = (
-        "mesh_sigma",
-        "mesh_cell",
-        "mesh_clip",
-        "fit_frames",
-        "fit_radius",
-        "fit_reach",
-        "reference",
-        "final_rigid",
-        "final_accel",
-        "final_iterations",
-    )
-    if options.urshape != "merges":  # the merges do not use it
-        without = (*without, "urshape")
-    seed_keys = [
-        stage_key(key, option_values(options, without=without)) if cache.enabled else ""
-        for key in keys
-    ]
+    seed_keys = merge_keys(keys, options, cache)
     with progress(total=len(seeds) - 1, desc="surfels: merging", unit="merge") as bar:
         model, _ = assemble(
             seeds, frames, schedule, progress=bar.update, cache=cache, keys=seed_keys
         )
     merged = _time.perf_counter()
-    final = GaussNewtonOptions(
-        iterations=options.final_iterations,
-        cg_tolerance=options.cg_tolerance,
-        cg_iterations=options.cg_iterations,
-    )
     if options.final_iterations:
         model = optimize_model(
             model,
             frames,
             energy_weights(options, noise, sampling, final=True),
-            final,
-            match,
+            solver_options(options, options.final_iterations),
+            schedule.match,
             urshape={"off": "off", "rest": "rest"}.get(options.urshape, "joint"),
         )
     optimized = _time.perf_counter()
@@ -172,9 +90,7 @@ def reconstruct(seq: PointCloudSequence, options: Options | None = None) -> Anim
         observed=model.observed,
         urshape=model.urshape,
         times=np.asarray(seq.times, dtype=np.float64),
-        options=MeshingOptions(
-            sigma=options.mesh_sigma, cell=options.mesh_cell, clip=options.mesh_clip
-        ),
+        options=meshing_options(options),
     )
     if options.fit_frames:
         fit = fit_along_normals(
@@ -198,3 +114,120 @@ def reconstruct(seq: PointCloudSequence, options: Options | None = None) -> Anim
         _time.perf_counter() - optimized,
     )
     return mesh
+
+
+def prepare_frames(
+    frames, spacing: float, options: Options, cache: StageCache, *, first: int = 0
+) -> tuple[list[FramePoints], list[str]]:
+    """Each of ``frames`` (:class:`~fourd.sequence.Frame`, the first one frame ``first`` of
+    the sequence) preprocessed (:func:`.seeds.prepare_frame`: outliers, tensor voting,
+    normals) at point spacing ``spacing``, each kept in ``cache``; with their cache keys.
+    Raises :class:`InputError` for a frame without a smooth surface region."""
+    prepared, keys = [], []
+    for index, f in enumerate(progress(frames, desc="surfels: preprocessing"), start=first):
+        key = (
+            stage_key(
+                f.points, f.normals, f.sensors, spacing, options.tensor_ratio, options.normals_k
+            )
+            if cache.enabled
+            else ""
+        )
+        arrays, resumed = cached(
+            cache,
+            "surfels-frame",
+            key,
+            lambda f=f: prepare_frame(
+                f.points,
+                f.normals,
+                f.sensors,
+                spacing=spacing,
+                max_ratio=options.tensor_ratio,
+                k=options.normals_k,
+            )._asdict(),
+        )
+        if resumed:
+            report_resumed(log, f"frame {index}'s preprocessing")
+        if len(arrays["points"]) < 10:
+            raise InputError(f"frame {index} has no smooth surface region to start from")
+        prepared.append(FramePoints(arrays["points"], arrays["normals"]))
+        keys.append(key)
+    return prepared, keys
+
+
+def solver_options(options: Options, iterations: int) -> GaussNewtonOptions:
+    """Gauss-Newton options with ``iterations`` steps and ``options``' CG settings."""
+    return GaussNewtonOptions(
+        iterations=iterations,
+        cg_tolerance=options.cg_tolerance,
+        cg_iterations=options.cg_iterations,
+    )
+
+
+def assembly_schedule(options: Options, noise: float, sampling: float) -> Schedule:
+    """The :class:`~.assembly.Schedule` of the merges for ``options`` at noise level
+    ``noise`` and ``eps_sampl`` ``sampling`` (input units)."""
+    return Schedule(
+        sampling=sampling,
+        weights=energy_weights(options, noise, sampling),
+        align_data=options.align_data / noise**2,
+        align=solver_options(options, options.align_iterations),
+        max_stretch=options.max_stretch,
+        optimize=solver_options(options, options.iterations),
+        fill=solver_options(options, options.fill_iterations),
+        match=MatchOptions(tangential=options.linked_tangential),
+        urshape=options.urshape == "merges",
+        reach=options.merge_reach,
+    )
+
+
+def seed_models(
+    frames: list[FramePoints], indices, sampling: float, schedule: Schedule, options: Options
+) -> list[Model]:
+    """One seed model per frame (:func:`.seeds.seed_model`), frame ``indices[k]`` of the
+    assembly's frame list for ``frames[k]``."""
+    return [
+        seed_model(
+            frame,
+            index,
+            sampling=sampling,
+            weights=schedule.weights,
+            gauss_newton_options=schedule.optimize,
+            match=MatchOptions(tangential=options.tangential),
+        )
+        for frame, index in zip(
+            progress(frames, desc="surfels: seed regions"), indices, strict=True
+        )
+    ]
+
+
+#: Options that do not act on the merges (the cache keys of the merged models leave them out).
+NOT_IN_MERGES = (
+    "mesh_sigma",
+    "mesh_cell",
+    "mesh_clip",
+    "fit_frames",
+    "fit_radius",
+    "fit_reach",
+    "reference",
+    "final_rigid",
+    "final_accel",
+    "final_iterations",
+    "window",
+)
+
+
+def merge_keys(keys: list[str], options: Options, cache: StageCache, *salt) -> list[str]:
+    """The cache keys of the seed models of frames with preprocessing ``keys``: those and the
+    options that act on the merges, and ``salt`` (empty: the in-memory run)."""
+    if not cache.enabled:
+        return [""] * len(keys)
+    without = NOT_IN_MERGES
+    if options.urshape != "merges":  # the merges do not use it
+        without = (*without, "urshape")
+    values = option_values(options, without=without)
+    return [stage_key(key, values, *salt) for key in keys]
+
+
+def meshing_options(options: Options) -> MeshingOptions:
+    """The :class:`~.meshing.MeshingOptions` of ``options``."""
+    return MeshingOptions(sigma=options.mesh_sigma, cell=options.mesh_cell, clip=options.mesh_clip)

@@ -1,0 +1,289 @@
+"""``surfels`` over a whole capture with memory bounded by a window of frames (issue 56; the
+paper assembles every frame into one model, sec. 3.2, and stopped at 26 frames).
+
+The capture is read ``window`` frames at a time. Each window is assembled as in memory
+(preprocessing, seed models, the binary merges) and then merged onto the last frames of the
+model before it (:func:`~.assembly.merge` with ``held``): the past's surfels are aligned into
+the window, grown through it by the hole filling and all kept by the resampling. Of those
+past frames, the first :data:`HELD` were written and are held in the global optimisations
+(the acceleration prior reaches two frames back); the last :data:`LAG` were left unwritten
+by the window before and are optimised again with the new frames, so a frame is written
+only once it has frames after it on both sides of a seam. The final optimisation (increased
+rigidity and acceleration) runs on each window with the same frames held.
+
+The mesh is that of the first frame's surfels (sec. 3.3), bound once; those surfels keep their
+index in every later window, and their rotations from the first frame are composed across
+the windows, so each window's frames are carried (:func:`~.meshing.carry_by`), fitted to
+their points (``fit_frames``) and written as they come. What the streamed run gives up
+against the paper's: a surface first seen after the first window is not in the mesh (the
+hole filling cannot reach back into written frames), and the urshape is the first window's.
+Memory holds one window and the past's :data:`HELD` frames, plus the output's observed flags.
+With ``cache_dir`` every finished window is kept and a rerun resumes after the last one.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import logging
+import time as _time
+from pathlib import Path
+
+import numpy as np
+
+from fourd.cache import StageCache, cached, option_values, report_resumed, stage_key
+from fourd.errors import InputError
+from fourd.frame_source import FrameSource
+from fourd.geometry.neighbors import point_spacing
+from fourd.geometry.surface_fit import fit_along_normals
+from fourd.io.npz import npz_frames
+from fourd.methods.base import StreamSummary, run_streamed
+from fourd.methods.surfels.assembly import assemble, merge, optimize_model
+from fourd.methods.surfels.meshing import (
+    Binding,
+    align_to_normals,
+    bind_vertices,
+    carry,
+    carry_by,
+    mesh_frame,
+    observed_vertices,
+    surfel_frames,
+)
+from fourd.methods.surfels.model import Model, pack_model, unpack_model
+from fourd.methods.surfels.options import MIN_FRAMES, Options, energy_weights
+from fourd.methods.surfels.pipeline import (
+    assembly_schedule,
+    merge_keys,
+    meshing_options,
+    prepare_frames,
+    seed_models,
+    solver_options,
+)
+from fourd.methods.surfels.state import SurfelState
+from fourd.methods.surfels.urshape import with_urshape
+
+log = logging.getLogger("fourd.methods.surfels")
+
+#: Frames per window when ``Options.window`` is 0.
+STREAM_WINDOW = 16
+#: Written frames of the past model a window is merged onto, held (the acceleration prior's
+#: reach).
+HELD = 2
+#: A window's last frames, left unwritten and optimised again with the next window's.
+LAG = 2
+
+
+def reconstruct_streamed(
+    source: FrameSource, output, options: Options | None = None
+) -> StreamSummary:
+    """The ``surfels`` reconstruction of ``source``, window by window, written to ``output``
+    (a fourd ``.npz`` animated mesh, atomically: it appears when every frame is written).
+
+    Parameters
+    ----------
+    source : FrameSource
+        The capture, read a window at a time (:func:`fourd.io.frames.open_sequence`).
+    output : path-like
+        The ``.npz`` to write.
+    options : Options
+        ``window`` frames per window (0: :data:`STREAM_WINDOW`; at least ``LAG + 1``);
+        ``reference`` must be 0;
+        ``urshape`` other than ``"off"`` gives the first window's urshape as the ``rest``.
+
+    Raises
+    ------
+    InputError
+        Too few frames, an output that is not ``.npz``, a frame without surface, a
+        ``reference`` other than 0, a window shorter than ``LAG + 1``.
+
+    References
+    ----------
+    Wand et al.: Reconstruction of deforming geometry from time-varying point clouds, SGP
+    2007, sec. 3.2-3.3 (``001_3fedd1c3a0ac4198.txt``); the windows are this project's.
+    """
+    options = options or Options()
+    if 0 < options.window <= LAG:
+        raise InputError(
+            f"surfels, streamed: a window needs at least {LAG + 1} frames, got {options.window}"
+        )
+    if options.reference != 0:
+        raise InputError(
+            f"surfels, streamed: the mesh is the first frame's (reference 0), got reference "
+            f"{options.reference}"
+        )
+    return run_streamed(
+        "surfels", source, output, MIN_FRAMES, lambda output, work: _run(source, output, options)
+    )
+
+
+@dataclasses.dataclass
+class _Carried:
+    """The mesh and what carries it from one window to the next: the binding of the first
+    frame's mesh to its ``identity`` surfels, their normals there and their rotations from
+    it to the last frame written (before the turn onto the normals; None before any)."""
+
+    faces: np.ndarray
+    rest: np.ndarray
+    binding: Binding
+    identity: int
+    reference_normals: np.ndarray
+    last_frames: np.ndarray | None = None
+
+
+def _run(source: FrameSource, output: Path, options: Options) -> StreamSummary:
+    count, window = len(source), options.window or STREAM_WINDOW
+    cache = StageCache(options.cache_dir)
+    first = source.read(0, min(window, count))
+    spacing = point_spacing(first.frames[0].points)
+    sampling = options.sampling * spacing
+    noise = options.noise or spacing
+    schedule = assembly_schedule(options, noise, sampling)
+    final = energy_weights(options, noise, sampling, final=True)
+    values = option_values(options, without=("window", "cache_dir"))
+    tail, tail_frames, key, held = None, [], "", 0
+    carried: _Carried | None = None
+    resumed = windows = 0
+    started = _time.perf_counter()
+    with contextlib.ExitStack() as stack:
+        out = None
+        for start in range(0, count, window):
+            stop = min(start + window, count)
+            seq = first if start == 0 else source.read(start, stop)
+            first = None
+            frames, keys = prepare_frames(seq.frames, spacing, options, cache, first=start)
+            local = tail_frames + frames
+            key = stage_key(key, keys, values, held, len(tail_frames)) if cache.enabled else ""
+            arrays, was_cached = cached(
+                cache,
+                "surfels-window",
+                key,
+                lambda tail=tail, local=local, held=held, keys=keys: pack_model(
+                    _window_model(tail, local, held, keys, sampling, schedule, final, options, cache)
+                ),
+            )
+            if was_cached:
+                report_resumed(log, f"the window of frames {start}-{stop - 1}")
+                resumed += 1
+            model = unpack_model(arrays)
+            windows += 1
+            if carried is None:
+                carried = _first_mesh(model, sampling, options)
+                out = stack.enter_context(
+                    npz_frames(output, faces=carried.faces, times=source.times, rest=carried.rest)
+                )
+            end = len(local) if stop == count else len(local) - LAG
+            vertices, observed = _carry_window(carried, model, held, end, options)
+            vertices, observed = vertices[: end - held], observed[: end - held]
+            if options.fit_frames:
+                vertices = fit_along_normals(
+                    vertices,
+                    carried.faces,
+                    [frame.points for frame in local[held:end]],
+                    radius=options.fit_radius * spacing,
+                    reach=options.fit_reach * spacing,
+                ).vertices
+            out.write(vertices, observed)
+            log.info(
+                "surfels: %d of %d frames written, %d surfels (%.1f s)",
+                out.written,
+                count,
+                model.state.count,
+                _time.perf_counter() - started,
+            )
+            begin = max(0, end - HELD)
+            tail, tail_frames, held = _frames_of(model, begin), local[begin:], end - begin
+    return StreamSummary(output, count, len(carried.rest), windows, resumed, 0.0)
+
+
+def _window_model(
+    tail: Model | None,
+    local: list,
+    held: int,
+    keys: list[str],
+    sampling: float,
+    schedule,
+    final,
+    options: Options,
+    cache: StageCache,
+) -> Model:
+    """The model of one window: its new frames (after the past's ``local[:len(local) -
+    len(keys)]``) assembled, merged onto ``tail`` (the past's last frames, the first ``held``
+    of them written), then the final optimisation; the first window's with its urshape when
+    ``options.urshape`` asks."""
+    past = len(local) - len(keys)
+    seeds = seed_models(local[past:], range(past, len(local)), sampling, schedule, options)
+    seed_keys = [
+        stage_key(k, "streamed", index) if k else ""
+        for index, k in enumerate(merge_keys(keys, options, cache), start=past)
+    ]
+    model, _ = assemble(seeds, local, schedule, cache=cache, keys=seed_keys)
+    if tail is not None:
+        model = merge(tail, model, local, schedule, held=held)
+    if options.final_iterations:
+        model = optimize_model(
+            model,
+            local,
+            final,
+            solver_options(options, options.final_iterations),
+            schedule.match,
+            urshape="off" if tail is not None or options.urshape == "off" else "rest",
+            held=held,
+        )
+    return model
+
+
+def _first_mesh(model: Model, sampling: float, options: Options) -> _Carried:
+    """The first window's frame 0 meshed (sec. 3.3) and bound to its surfels; the ``rest`` is
+    that mesh, or carried to the window's urshape."""
+    state, meshing = model.state, meshing_options(options)
+    positions, normals = state.positions[0], state.normals[0]
+    mesh = mesh_frame(positions, normals, sampling, options=meshing)
+    if len(mesh.faces) == 0:
+        raise InputError("surfels: the first frame's surfels give no surface to mesh")
+    binding = bind_vertices(mesh.vertices, positions, normals, sampling, options=meshing)
+    rest = mesh.vertices
+    if model.urshape is not None:
+        rest = carry(
+            binding, with_urshape(state, model.urshape), 1, align_normals=meshing.align_normals
+        )[0]
+    return _Carried(mesh.faces, rest, binding, state.count, normals.copy(), np.eye(3)[None])
+
+
+def _carry_window(
+    carried: _Carried, model: Model, held: int, end: int, options: Options
+) -> tuple[np.ndarray, np.ndarray]:
+    """The frames ``held ..`` of ``model`` (those not written yet): vertices [T, N, 3] and
+    observed [T, N] of the first frame's mesh; ``carried.last_frames`` moves on to frame
+    ``end - 1``, the last to be written now."""
+    state, identity = model.state, carried.identity
+    if carried.last_frames is None:  # frame 0 of the model is the mesh's
+        frames = surfel_frames(state, 0, align_normals=False)[:, :identity]
+    else:
+        frames = np.empty((state.frames, identity, 3, 3))
+        frames[held - 1] = carried.last_frames
+        for t in range(held - 1, state.frames - 1):
+            frames[t + 1] = state.rotations[t, :identity] @ frames[t]
+    carried.last_frames = frames[end - 1]
+    frames = frames[held:]
+    meshing = meshing_options(options)
+    if meshing.align_normals:
+        frames = align_to_normals(
+            frames, carried.reference_normals, state.normals[held:, :identity]
+        )
+    vertices = carry_by(carried.binding, state.positions[held:, :identity], frames)
+    observed = observed_vertices(carried.binding, model.observed[held:, :identity], meshing.clip)
+    return vertices, observed
+
+
+def _frames_of(model: Model, begin: int) -> Model:
+    """``model`` from its frame ``begin`` on, as frames ``0 ..``."""
+    state = model.state
+    return Model(
+        SurfelState(
+            state.positions[begin:], state.normals[begin:], state.rotations[begin:]
+        ),
+        model.topology,
+        0,
+        model.observed[begin:],
+    )
+
