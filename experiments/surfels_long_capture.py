@@ -6,7 +6,7 @@ frame as the capture grows, and how does it score against one model over every f
 
 The capture of ``experiments/long_capture.py`` (the crane at step 1 played ping-pong, three
 virtual depth cameras framing the whole capture volume; :func:`fourd.synth.long_capture`),
-scanned at 256 rays a side instead of 700 (about 6,000 points a frame: ``surfels`` takes
+scanned at 200 rays a side instead of 700 (about 4,500 points a frame: ``surfels`` takes
 tens of seconds a frame at the bench's 15,000), ``surfels`` with its defaults otherwise.
 Each length runs in a fresh process (peak resident memory from ``getrusage``; the time
 includes scanning). ``MODE=memory`` runs :func:`fourd.methods.surfels.reconstruct` on the
@@ -38,7 +38,7 @@ from pathlib import Path
 import long_capture as scoring
 
 FRAMES = (20, 40, 80)
-RESOLUTION = 256
+RESOLUTION = 200
 WINDOW = 10
 MODE = os.environ.get("MODE", "streamed")
 OUT = Path(tempfile.gettempdir()) / f"fourd-surfels-{MODE}-long-capture"

@@ -179,14 +179,21 @@ def optimize_near_seam(
 
 
 def merge(
-    left: Model, right: Model, frames: list, schedule: Schedule, *, held: int = 0
+    left: Model,
+    right: Model,
+    frames: list,
+    schedule: Schedule,
+    *,
+    held: int = 0,
+    kept: int = 0,
 ) -> Model:
     """Merge two adjacent ranges (``left.stop == right.start``) into one model over both
     (sec. 3.2: align, stitch, fill holes, resample, optimise).
 
-    ``held`` > 0: the left range is the streamed run's past (:mod:`.stream`): its first
-    ``held`` frames are held in the global optimisation, and its surfels are all kept by the
-    resampling, first and in their order, so a surfel's index still names it."""
+    For the streamed run (:mod:`.stream`), where the left range is the past: its first
+    ``held`` frames are held in the global optimisation, and its first ``kept`` surfels are
+    never dropped by the resampling, so they stay first and in their order (a surfel's index
+    still names it)."""
     if left.stop != right.start:
         raise ValueError(
             f"ranges must be adjacent, got {left.start}-{left.stop} and {right.start}-{right.stop}"
@@ -259,11 +266,9 @@ def merge(
     observed[:nl, :sl] = left.observed
     observed[nl:, sl:] = right.observed
     priority = observed.sum(axis=0)
-    if held:
-        priority[:sl] += frames_count + 1
+    priority[:kept] += frames_count + 1
     drop = redundant_surfels(state.positions, 0.5 * schedule.sampling, priority=priority)
-    if held:
-        drop[:sl] = False
+    drop[:kept] = False
     keep = np.flatnonzero(~drop)
     topology = build_topology(
         state.positions[:, keep],

@@ -99,3 +99,22 @@ def observed_surfels(state: SurfelState, data: Data, radius: float) -> np.ndarra
     observed = np.zeros((state.frames, state.count), dtype=bool)
     observed[data.frames[matches.active], matches.surfels[matches.active]] = True
     return observed
+
+
+def surfel_subset(model: Model, keep: np.ndarray) -> Model:
+    """``model`` with only the surfels ``keep`` (increasing indices [K]), in that order; the
+    topology keeps the edges between them (the urshape is dropped)."""
+    keep = np.asarray(keep, dtype=np.int64)
+    index = np.full(model.state.count, -1, dtype=np.int64)
+    index[keep] = np.arange(len(keep))
+    edges = index[model.topology.edges]
+    edges = edges[(edges >= 0).all(axis=1)]
+    state = model.state
+    return Model(
+        SurfelState(
+            state.positions[:, keep], state.normals[:, keep], state.rotations[:, keep]
+        ),
+        Topology(edges, len(keep), model.topology.radius),
+        model.start,
+        model.observed[:, keep],
+    )

@@ -3,8 +3,10 @@ paper assembles every frame into one model, sec. 3.2, and stopped at 26 frames).
 
 The capture is read ``window`` frames at a time. Each window is assembled as in memory
 (preprocessing, seed models, the binary merges) and then merged onto the last frames of the
-model before it (:func:`~.assembly.merge` with ``held``): the past's surfels are aligned into
-the window, grown through it by the hole filling and all kept by the resampling. Of those
+model before it (:func:`~.assembly.merge` with ``held`` and ``kept``): the past's surfels are
+aligned into the window and grown through it by the hole filling; the resampling keeps every
+surfel of the mesh and drops the others where they duplicate the window's (so the model
+does not grow from window to window). Of those
 past frames, the first :data:`HELD` were written and are held in the global optimisations
 (the acceleration prior reaches two frames back); the last :data:`LAG` were left unwritten
 by the window before and are optimised again with the new frames, so a frame is written
@@ -49,7 +51,7 @@ from fourd.methods.surfels.meshing import (
     observed_vertices,
     surfel_frames,
 )
-from fourd.methods.surfels.model import Model, pack_model, unpack_model
+from fourd.methods.surfels.model import Model, pack_model, surfel_subset, unpack_model
 from fourd.methods.surfels.options import MIN_FRAMES, Options, energy_weights
 from fourd.methods.surfels.pipeline import (
     assembly_schedule,
@@ -152,13 +154,16 @@ def _run(source: FrameSource, output: Path, options: Options) -> StreamSummary:
             first = None
             frames, keys = prepare_frames(seq.frames, spacing, options, cache, first=start)
             local = tail_frames + frames
+            kept = 0 if carried is None else carried.identity
             key = stage_key(key, keys, values, held, len(tail_frames)) if cache.enabled else ""
             arrays, was_cached = cached(
                 cache,
                 "surfels-window",
                 key,
-                lambda tail=tail, local=local, held=held, keys=keys: pack_model(
-                    _window_model(tail, local, held, keys, sampling, schedule, final, options, cache)
+                lambda tail=tail, local=local, held=held, kept=kept, keys=keys: pack_model(
+                    _window_model(
+                        tail, local, held, kept, keys, sampling, schedule, final, options, cache
+                    )
                 ),
             )
             if was_cached:
@@ -191,7 +196,10 @@ def _run(source: FrameSource, output: Path, options: Options) -> StreamSummary:
                 _time.perf_counter() - started,
             )
             begin = max(0, end - HELD)
-            tail, tail_frames, held = _frames_of(model, begin), local[begin:], end - begin
+            # the past goes on as the mesh's surfels only: the window's own cover its frames,
+            # and the others would pile up window by window
+            tail = surfel_subset(_frames_of(model, begin), np.arange(carried.identity))
+            tail_frames, held = local[begin:], end - begin
     return StreamSummary(output, count, len(carried.rest), windows, resumed, 0.0)
 
 
@@ -199,6 +207,7 @@ def _window_model(
     tail: Model | None,
     local: list,
     held: int,
+    kept: int,
     keys: list[str],
     sampling: float,
     schedule,
@@ -208,7 +217,8 @@ def _window_model(
 ) -> Model:
     """The model of one window: its new frames (after the past's ``local[:len(local) -
     len(keys)]``) assembled, merged onto ``tail`` (the past's last frames, the first ``held``
-    of them written), then the final optimisation; the first window's with its urshape when
+    of them written; its first ``kept`` surfels, the mesh's, all kept), then the final
+    optimisation; the first window's with its urshape when
     ``options.urshape`` asks."""
     past = len(local) - len(keys)
     seeds = seed_models(local[past:], range(past, len(local)), sampling, schedule, options)
@@ -218,7 +228,7 @@ def _window_model(
     ]
     model, _ = assemble(seeds, local, schedule, cache=cache, keys=seed_keys)
     if tail is not None:
-        model = merge(tail, model, local, schedule, held=held)
+        model = merge(tail, model, local, schedule, held=held, kept=kept)
     if options.final_iterations:
         model = optimize_model(
             model,
