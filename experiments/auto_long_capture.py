@@ -34,7 +34,17 @@ and the fit; 2-core Intel Xeon, at 29af5cd's code, nothing else running):
 | 40 | 5 | 4.67 | 1,181 | 0.0053 / 0.0070 / 0.0112 | -0.011 | 0.0028 / 0.0056 | 2.9% |
 | 200 | 23 | 4.41 | 1,446 | 0.0073 / 0.0064 / 0.0125 | -0.0004 | 0.0020 / 0.0046 | 2.7% |
 
-Peak memory 1.22 times at five times the length (the windows' heaviest flow solve, as for
+And 100 against 1,000 frames (at b0e8858's code, 2026-12-04; niced test runs on the other
+core during parts of both, not scored for time: about 75 minutes of scoring):
+
+| frames | windows | s/frame | peak MB |
+|---|---|---|---|
+| 100 | 11 | 4.05 | 1,390 |
+| 1,000 | 113 | 4.47 | 1,672 |
+
+Peak memory 1.20 times and time per frame 1.10 times at ten times the length: both on the
+edge of issue 56's limits (within 20% and 10%). Before that:
+peak memory 1.22 times at five times the length (the windows' heaviest flow solve, as for
 ``auto``; the target, within 20%, is for 1,000 frames against 100), time per frame 5% lower;
 the correspondence is the default's to the digit (the same kinematic stage; the fit to the
 frames moves the vertices along their normals only), and every frame is closed (off-surface 0).
