@@ -34,7 +34,7 @@ and the fit; 2-core Intel Xeon, at 29af5cd's code, nothing else running):
 | 40 | 5 | 4.67 | 1,181 | 0.0053 / 0.0070 / 0.0112 | -0.011 | 0.0028 / 0.0056 | 2.9% |
 | 200 | 23 | 4.41 | 1,446 | 0.0073 / 0.0064 / 0.0125 | -0.0004 | 0.0020 / 0.0046 | 2.7% |
 
-And 100 against 1,000 frames (at b0e8858's code, 2026-12-04; niced test runs on the other
+And 100 against 1,000 frames (at 8350188's code, 2026-12-04; niced test runs on the other
 core during parts of both, not scored for time: about 75 minutes of scoring):
 
 | frames | windows | s/frame | peak MB |
