@@ -3,15 +3,16 @@ paper assembles every frame into one model, sec. 3.2, and stopped at 26 frames).
 
 The capture is read ``window`` frames at a time. Each window is assembled as in memory
 (preprocessing, seed models, the binary merges) and then merged onto the last frames of the
-model before it (:func:`~.assembly.merge` with ``held`` and ``kept``): the past's surfels are
-aligned into the window and grown through it by the hole filling; the resampling keeps every
-surfel of the mesh and drops the others where they duplicate the window's (so the model
-does not grow from window to window). Of those
-past frames, the first :data:`HELD` were written and are held in the global optimisations
-(the acceleration prior reaches two frames back); the last :data:`LAG` were left unwritten
-by the window before and are optimised again with the new frames, so a frame is written
-only once it has frames after it on both sides of a seam. The final optimisation (increased
-rigidity and acceleration) runs on each window with the same frames held.
+model before it (:func:`~.assembly.merge` with ``held`` and ``kept``). The past goes on as
+the surfels of the mesh only (the window's own surfels cover its frames; carried along, the
+others piled up window by window): they are aligned into the window, grown through it by the
+hole filling and never dropped by the resampling. Of the past's frames, the first
+:data:`HELD` were written and are held in the global optimisations (the acceleration prior
+reaches two frames back); the last :data:`LAG` were left unwritten by the window before and
+are optimised again with the new frames. The final optimisation (increased rigidity and
+acceleration) runs on each window with the same frames held. The seams keep a kink of about
+three times the motion's own second difference (benchmarks/METHODS.md, "`surfels`
+streamed").
 
 The mesh is that of the first frame's surfels (sec. 3.3), bound once; those surfels keep their
 index in every later window, and their rotations from the first frame are composed across
@@ -19,7 +20,8 @@ the windows, so each window's frames are carried (:func:`~.meshing.carry_by`), f
 their points (``fit_frames``) and written as they come. What the streamed run gives up
 against the paper's: a surface first seen after the first window is not in the mesh (the
 hole filling cannot reach back into written frames), and the urshape is the first window's.
-Memory holds one window and the past's :data:`HELD` frames, plus the output's observed flags.
+Memory holds one window and the past's :data:`HELD` + :data:`LAG` frames, plus the output's
+observed flags.
 With ``cache_dir`` every finished window is kept and a rerun resumes after the last one.
 """
 
