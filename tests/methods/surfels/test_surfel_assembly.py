@@ -109,22 +109,9 @@ def test_free_unknowns_checks_its_shape():
 
 
 @pytest.mark.slow
-def test_two_scans_of_a_still_surface_merge_into_one_surfel_set():
-    rng = np.random.default_rng(3)
+def test_two_scans_of_a_still_surface_merge_into_one_surfel_set(still_bumpy_scans):
     noise = 0.004
-
-    def height(x, y):  # bumpy in both directions, so a rigid slide is not free
-        return 0.15 * np.sin(1.5 * x) * np.cos(1.2 * y)
-
-    def scan():
-        x, y = rng.uniform(-1, 1, (2, 3000))
-        points = np.c_[x, y, height(x, y) + rng.normal(scale=noise, size=3000)]
-        slope_x = 0.225 * np.cos(1.5 * x) * np.cos(1.2 * y)
-        slope_y = -0.18 * np.sin(1.5 * x) * np.sin(1.2 * y)
-        normals = np.c_[-slope_x, -slope_y, np.ones(3000)]
-        return FramePoints(points, normals / np.linalg.norm(normals, axis=1, keepdims=True))
-
-    frames = [scan(), scan()]
+    frames = still_bumpy_scans(2, np.random.default_rng(3), noise)
     spacing = 0.02
     sampling = 4 * spacing
     options = Options()
@@ -147,7 +134,7 @@ def test_two_scans_of_a_still_surface_merge_into_one_surfel_set():
     motion = np.linalg.norm(merged.state.positions[1] - merged.state.positions[0], axis=1)
     assert np.median(motion) <= 0.1 * sampling
     p = merged.state.positions
-    assert np.percentile(np.abs(p[..., 2] - height(p[..., 0], p[..., 1])), 95) <= noise
+    assert np.percentile(np.abs(p[..., 2] - still_bumpy_scans.height(p[..., 0], p[..., 1])), 95) <= noise
     assert merged.observed.mean() > 0.9
 
 

@@ -17,29 +17,16 @@ from fourd.methods.surfels import GaussNewtonOptions, Options, reconstruct_strea
 from fourd.methods.surfels.assembly import Schedule, merge, optimize_model
 from fourd.methods.surfels.match import MatchOptions
 from fourd.methods.surfels.options import energy_weights
-from fourd.methods.surfels.seeds import FramePoints, seed_model
+from fourd.methods.surfels.seeds import seed_model
 from fourd.sequence import Frame, PointCloudSequence
 
 QUICK = dict(cg_iterations=50, iterations=3, final_iterations=2)
 
 
-def _still_bumpy_scans(count, rng, noise=0.004):
-    def height(x, y):
-        return 0.15 * np.sin(1.5 * x) * np.cos(1.2 * y)
-
-    def scan():
-        x, y = rng.uniform(-1, 1, (2, 3000))
-        points = np.c_[x, y, height(x, y) + rng.normal(scale=noise, size=3000)]
-        slope_x = 0.225 * np.cos(1.5 * x) * np.cos(1.2 * y)
-        slope_y = -0.18 * np.sin(1.5 * x) * np.sin(1.2 * y)
-        normals = np.c_[-slope_x, -slope_y, np.ones(3000)]
-        return FramePoints(points, normals / np.linalg.norm(normals, axis=1, keepdims=True))
-
-    return [scan() for _ in range(count)]
-
-
-def test_a_merge_onto_a_held_past_keeps_its_frames_and_all_its_surfels_in_order():
-    frames = _still_bumpy_scans(3, np.random.default_rng(3))
+def test_a_merge_onto_a_held_past_keeps_its_frames_and_all_its_surfels_in_order(
+    still_bumpy_scans,
+):
+    frames = still_bumpy_scans(3, np.random.default_rng(3))
     spacing = 0.02
     sampling = 4 * spacing
     weights = energy_weights(Options(), spacing, sampling)

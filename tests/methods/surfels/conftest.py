@@ -1,0 +1,32 @@
+"""Shared scans for the surfel tests."""
+
+import numpy as np
+import pytest
+
+from fourd.methods.surfels.seeds import FramePoints
+
+
+def bumpy_height(x, y):
+    """A surface bumpy in both directions, so a rigid slide along it is not free."""
+    return 0.15 * np.sin(1.5 * x) * np.cos(1.2 * y)
+
+
+@pytest.fixture
+def still_bumpy_scans():
+    """``scans(count, rng, noise=0.004)``: ``count`` scans (3,000 points, true normals) of
+    the still surface ``scans.height`` (:func:`bumpy_height`) over [-1, 1]^2, noisy in
+    height."""
+
+    def scans(count, rng, noise=0.004):
+        def scan():
+            x, y = rng.uniform(-1, 1, (2, 3000))
+            points = np.c_[x, y, bumpy_height(x, y) + rng.normal(scale=noise, size=3000)]
+            slope_x = 0.225 * np.cos(1.5 * x) * np.cos(1.2 * y)
+            slope_y = -0.18 * np.sin(1.5 * x) * np.sin(1.2 * y)
+            normals = np.c_[-slope_x, -slope_y, np.ones(3000)]
+            return FramePoints(points, normals / np.linalg.norm(normals, axis=1, keepdims=True))
+
+        return [scan() for _ in range(count)]
+
+    scans.height = bumpy_height
+    return scans
