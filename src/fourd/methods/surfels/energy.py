@@ -115,17 +115,23 @@ def total_energy(
     total = float(sum(values.values()))
     if not derivatives:
         return Energy(total, values, None, None)
+    # one Jacobian of every term, so that J^T J is formed once (a sum of the terms' Hessians
+    # allocates each partial sum)
     size = layout(state).size
+    residuals = np.concatenate([np.zeros(0)] + [part.residuals for part in parts.values()])
+    jacobians = [sp.csr_matrix((0, size))] + [part.jacobian for part in parts.values()]
+    parts.clear()
     if columns is not None:
         columns = np.asarray(columns, dtype=np.int64)
         select = sp.csr_matrix(
-            (np.ones(len(columns)), (columns, np.arange(len(columns)))), shape=(size, len(columns))
+            (np.ones(len(columns)), (columns, np.arange(len(columns)))),
+            shape=(size, len(columns)),
         )
-        size = len(columns)
-    gradient = np.zeros(size)
-    hessian = sp.csr_matrix((size, size))
-    for part in parts.values():
-        jacobian = part.jacobian if columns is None else (part.jacobian @ select).tocsr()
-        gradient += 2.0 * (jacobian.T @ part.residuals)
-        hessian = hessian + 2.0 * (jacobian.T @ jacobian)
-    return Energy(total, values, gradient, hessian.tocsr())
+        jacobians = [jacobian @ select for jacobian in jacobians]
+    jacobian = sp.vstack(jacobians, format="csr")
+    del jacobians
+    transposed = jacobian.T.tocsr()
+    gradient = 2.0 * (transposed @ residuals)
+    hessian = transposed @ jacobian
+    hessian.data *= 2.0
+    return Energy(total, values, gradient, hessian)

@@ -172,7 +172,12 @@ def solve_step(
     step = np.zeros(lay.size)
     if not len(free):
         return step, 0
-    system = hessian[local][:, local] + sp.diags(options.damping * diagonal[local])
+    if len(local) == hessian.shape[0]:
+        system = hessian.copy()
+    else:
+        system = hessian[local][:, local]
+    # every moving unknown has its diagonal entry, so this changes values only
+    system.setdiag((1.0 + options.damping) * diagonal[local])
     if options.preconditioner == "block":
         preconditioner = _block_jacobi(system, free, lay)
     else:
@@ -249,14 +254,15 @@ def _block_jacobi(system: sp.csr_matrix, free: np.ndarray, lay: Layout) -> sp.cs
     member = np.arange(len(free)) - first
     _, group = np.unique(owner, return_inverse=True)
     sizes = np.bincount(group)
-    entries = system.tocoo()
-    same = owner[entries.row] == owner[entries.col]
     blocks = np.zeros((len(sizes), 3, 3))
-    np.add.at(
-        blocks,
-        (group[entries.row[same]], member[entries.row[same]], member[entries.col[same]]),
-        entries.data[same],
-    )
+    # a block's entries lie on the system's diagonals -2 .. 2 (a copy of the whole system in
+    # coordinates took more memory than the system)
+    for offset in range(-2, 3):
+        values = system.diagonal(offset)
+        row = np.arange(len(values)) + max(0, -offset)
+        column = row + offset
+        same = owner[row] == owner[column]
+        blocks[group[row[same]], member[row[same]], member[column[same]]] = values[same]
     unused = np.arange(3)[None, :] >= sizes[:, None]
     blocks[:, np.arange(3), np.arange(3)] += unused
     inverse = np.linalg.inv(blocks)

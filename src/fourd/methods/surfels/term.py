@@ -43,6 +43,8 @@ class Blocks:
 
     def __init__(self, rows: int, columns: int):
         self.shape = (rows, columns)
+        # 32-bit indices where they fit: the entries' indices are most of the memory
+        self._index = np.int32 if max(rows, columns) < np.iinfo(np.int32).max else np.int64
         self._rows: list[np.ndarray] = []
         self._cols: list[np.ndarray] = []
         self._values: list[np.ndarray] = []
@@ -54,8 +56,13 @@ class Blocks:
         m, b = values.shape[-2:]
         lead = np.broadcast_shapes(np.shape(row), np.shape(column), values.shape[:-2])
         values = np.broadcast_to(values, (*lead, m, b))
-        row = np.broadcast_to(row, lead)[..., None, None] + np.arange(m)[:, None]
-        column = np.broadcast_to(column, lead)[..., None, None] + np.arange(b)[None, :]
+        index = self._index
+        row = np.asarray(row, dtype=index)
+        column = np.asarray(column, dtype=index)
+        row = np.broadcast_to(row, lead)[..., None, None] + np.arange(m, dtype=index)[:, None]
+        column = (
+            np.broadcast_to(column, lead)[..., None, None] + np.arange(b, dtype=index)[None, :]
+        )
         self._rows.append(np.broadcast_to(row, values.shape).ravel())
         self._cols.append(np.broadcast_to(column, values.shape).ravel())
         self._values.append(values.ravel())
