@@ -14,11 +14,14 @@ whole sequence instead (one model, the paper's). Each result is then scored as
 ``long_capture.py`` scores it: correspondence per frame, Chamfer and completeness-95 on
 every 25th frame (fractions of the crane's diagonal).
 
-Answer (2-core Intel Xeon, nothing else running, at 1e46fb8's code; details in
-benchmarks/METHODS.md, "`surfels` streamed"): 20, 40, 80 frames take 820, 946, 1,075 MB and
-5.81, 6.65, 7.52 s/frame (13-15% more per doubling: bounded far below the length, not flat);
-correspondence mean / last 0.0097 / 0.0182, 0.0178 / 0.0254, 0.0317 / 0.0551 (it drifts),
-Chamfer 0.0098-0.0116.
+Answer (2-core Intel Xeon, nothing else running; details in benchmarks/METHODS.md, "`surfels`
+streamed"): at 41f7844, 20, 40, 80 frames take 694, 714, 821 MB and 5.40, 5.96, 6.44 s/frame
+(at 1e46fb8: 820, 946, 1,075 MB and 5.81, 6.65, 7.52 s/frame); correspondence mean / last
+0.0083 / 0.0172, 0.0173 / 0.0251, 0.0312 / 0.0569 (it drifts), Chamfer 0.0108-0.0117. The
+growth is not the length's: logged per window, the memory held between windows stays at
+300-330 MB, each window's peak follows its surfel count (311 in the first window, 460-510 in
+the later ones, which also hold the mesh's surfels and 4 past frames), and the time per frame
+is the first, cheaper window's share thinned out.
 
 Run from the repository root::
 
