@@ -104,8 +104,8 @@ def gauss_newton(
     cg_counts = []
     converged = False
     columns = None if free is None else np.flatnonzero(free)
+    matches = associate(state, data, topology.radius, match)
     for _ in range(options.iterations + 1):
-        matches = associate(state, data, topology.radius, match)
         current = total_energy(
             state, topology, data, matches, weights, match, columns=columns, urshape=urshape
         )
@@ -131,15 +131,10 @@ def gauss_newton(
         if accepted is None:
             converged = True
             break
-        state = accepted
+        # the accepted trial's association and energy are the next step's start
+        state, matches = accepted, again
         if current.value - value <= options.tolerance * max(abs(current.value), 1e-300):
-            matches = associate(state, data, topology.radius, match)
-            energies.append(
-                total_energy(
-                    state, topology, data, matches, weights, match, derivatives=False,
-                    urshape=urshape,
-                ).value
-            )
+            energies.append(value)
             converged = True
             break
     log.debug(
