@@ -29,11 +29,17 @@ Run from the repository root::
     .venv/bin/python experiments/surfels_long_capture.py run 40       # one length
     .venv/bin/python experiments/surfels_long_capture.py score 40     # score a finished run
     MODE=memory .venv/bin/python experiments/surfels_long_capture.py run 20
+    WINDOWS=1 .venv/bin/python experiments/surfels_long_capture.py run 80  # memory per window
+
+With ``WINDOWS=1`` each window's log line carries the process's peak resident memory since
+the window before (reset through ``/proc/self/clear_refs``, Linux) and its resident memory
+once the window is written, in kB.
 """
 
 from __future__ import annotations
 
 import json
+import logging
 import os
 import resource
 import subprocess
@@ -51,12 +57,29 @@ MODE = os.environ.get("MODE", "streamed")
 OUT = Path(tempfile.gettempdir()) / f"fourd-surfels-{MODE}-long-capture"
 
 
+class _WindowMemory(logging.Filter):
+    """Appends ``[peak resident]`` kB to each log line and, after a window's line, resets the
+    peak, so each window's line shows that window's peak."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        status = Path("/proc/self/status").read_text().splitlines()
+        kb = {line.split(":")[0]: line.split()[1] for line in status if line.startswith("Vm")}
+        record.msg = f"{record.msg} [peak {kb['VmHWM']} resident {kb['VmRSS']} kB]"
+        if "written" in str(record.msg):
+            Path("/proc/self/clear_refs").write_text("5")
+        return True
+
+
 def run(frames: int) -> dict:
     from fourd.io.npz import write_npz
     from fourd.methods import surfels
     from fourd.synth.whole_capture import long_capture
 
     OUT.mkdir(exist_ok=True)
+    if os.environ.get("WINDOWS"):
+        logging.basicConfig(level=logging.INFO, format="%(asctime)s %(message)s")
+        for handler in logging.getLogger().handlers:
+            handler.addFilter(_WindowMemory())
     capture = long_capture(frames, resolution=RESOLUTION)
     before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     started = time.perf_counter()
