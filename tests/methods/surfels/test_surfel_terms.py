@@ -160,3 +160,82 @@ def test_energy_sums_its_terms():
         "rigid",
         "accel",
     }
+
+
+def _prior_terms(graph):
+    """The priors, whose Jacobian patterns the optimiser keeps between steps."""
+    return {
+        "smooth_position": lambda s, p: smooth_position_term(s, graph, 0.7, pattern=p),
+        "smooth_normal": lambda s, p: smooth_normal_term(s, graph, 0.3, pattern=p),
+        "laplace": lambda s, p: laplace_term(s, graph, 0.2, pattern=p),
+        "rigid": lambda s, p: rigid_term(s, graph, 0.9, 0.4, pattern=p),
+        "accel": lambda s, p: accel_term(s, 0.6, 0.25, pattern=p),
+        "rigid_urshape": lambda s, p: rigid_term(s, graph, 0.9, 0.4, urshape=True, pattern=p),
+        "accel_after_urshape": lambda s, p: accel_term(s, 0.6, 0.25, first=1, pattern=p),
+    }
+
+
+@pytest.mark.parametrize(
+    "name",
+    [
+        "smooth_position",
+        "smooth_normal",
+        "laplace",
+        "rigid",
+        "accel",
+        "rigid_urshape",
+        "accel_after_urshape",
+    ],
+)
+def test_a_kept_pattern_assembles_the_jacobian_of_another_state(name):
+    state, graph, _ = _problem(frames=4)
+    evaluate = _prior_terms(graph)[name]
+    pattern = evaluate(state, None).pattern
+    moved = move(state, np.random.default_rng(4).normal(scale=0.1, size=layout(state).size))
+    fresh = evaluate(moved, None).jacobian
+    reused = evaluate(moved, pattern).jacobian
+    assert reused.shape == fresh.shape and (reused != fresh).nnz == 0
+    # the identity blocks' and cross products' zeros are left out: the only zeros stored are
+    # the tangent bases' (eq. 11), whose places move with the normals
+    lay = layout(state)
+    columns = np.r_[0 : lay.normals_start, lay.rotations_start : lay.size]
+    positions_and_rotations = fresh[:, columns]
+    assert positions_and_rotations.nnz > 0 or name == "smooth_normal"
+    assert np.count_nonzero(positions_and_rotations.data) == positions_and_rotations.nnz
+    # a pattern of some columns assembles exactly those columns
+    columns = np.flatnonzero(np.random.default_rng(5).random(layout(state).size) < 0.6)
+    narrow = evaluate(moved, pattern.keep_columns(columns)).jacobian
+    assert narrow.shape == (fresh.shape[0], len(columns))
+    assert abs(narrow - fresh[:, columns]).max() == 0.0
+
+
+def test_a_pattern_from_another_term_is_refused():
+    state, graph, _ = _problem(frames=4)
+    terms = _prior_terms(graph)
+    rigid = terms["rigid"](state, None).pattern
+    with pytest.raises(ValueError, match="rows"):
+        terms["accel"](state, rigid)
+    # the same number of rows (3 a surfel and frame against 2 x 3 a surfel and inner frame)
+    accel = terms["accel"](state, None).pattern
+    assert accel.shape[0] == terms["laplace"](state, None).pattern.shape[0]
+    with pytest.raises(ValueError, match="pattern fits only"):
+        terms["laplace"](state, accel)
+
+
+def test_energy_with_kept_patterns_equals_a_fresh_assembly():
+    state, graph, data = _problem(seed=3, frames=4)
+    weights = Weights(1.5, 0.7, 0.3, 0.2, 0.9, 0.4, 0.6, 0.25)
+    match = MatchOptions(tangential=0.2)
+    columns = np.flatnonzero(np.random.default_rng(6).random(layout(state).size) < 0.7)
+    patterns = {}
+    for step in range(3):
+        at = move(state, np.random.default_rng(step).normal(scale=0.05, size=layout(state).size))
+        matches = associate(at, data, 0.15, match)
+        kept = total_energy(
+            at, graph, data, matches, weights, match, columns=columns, patterns=patterns
+        )
+        fresh = total_energy(at, graph, data, matches, weights, match, columns=columns)
+        assert set(patterns) == {"smooth_position", "smooth_normal", "laplace", "rigid", "accel"}
+        assert kept.value == fresh.value
+        assert np.allclose(kept.gradient, fresh.gradient, rtol=1e-13, atol=1e-13)
+        assert abs(kept.hessian - fresh.hessian).max() <= 1e-13 * abs(fresh.hessian).max()

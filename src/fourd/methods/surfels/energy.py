@@ -79,6 +79,7 @@ def total_energy(
     derivatives: bool = True,
     columns: np.ndarray | None = None,
     urshape: bool = False,
+    patterns: dict | None = None,
 ) -> Energy:
     """Eq. (3) with the association ``matches`` held fixed (default weights and options:
     :class:`Weights`, :class:`~.match.MatchOptions`).
@@ -89,45 +90,71 @@ def total_energy(
 
     ``columns`` (int [k], sorted unknowns of the layout) restricts the gradient [k] and
     Hessian [k, k] to those unknowns (the others held fixed): the Jacobians lose the other
-    columns before ``J^T J`` is formed, which is what makes a local optimisation cheap."""
+    columns before ``J^T J`` is formed, which is what makes a local optimisation cheap.
+
+    ``patterns`` (a dict, empty at first) keeps the priors' Jacobian patterns
+    (:class:`~.term.Pattern`, of ``columns`` only) between calls on the same topology,
+    layout and ``columns``, so that later calls assemble values only; it must not outlive
+    them."""
     w = weights or Weights()
     match = match or MatchOptions()
     d = derivatives
+    kept = {} if patterns is None or not derivatives else patterns
     parts = {}
     if w.match > 0:
         parts["match"] = match_term(state, data, matches, w.match, match, derivatives=d)
     if w.smooth_position > 0:
         parts["smooth_position"] = smooth_position_term(
-            state, topology, w.smooth_position, derivatives=d
+            state, topology, w.smooth_position, derivatives=d, pattern=kept.get("smooth_position")
         )
     if w.smooth_normal > 0:
-        parts["smooth_normal"] = smooth_normal_term(state, topology, w.smooth_normal, derivatives=d)
+        parts["smooth_normal"] = smooth_normal_term(
+            state, topology, w.smooth_normal, derivatives=d, pattern=kept.get("smooth_normal")
+        )
     if w.laplace > 0:
-        parts["laplace"] = laplace_term(state, topology, w.laplace, derivatives=d)
+        parts["laplace"] = laplace_term(
+            state, topology, w.laplace, derivatives=d, pattern=kept.get("laplace")
+        )
     if (w.rigid > 0 or w.rigid_normal > 0) and state.frames > 1:
         parts["rigid"] = rigid_term(
-            state, topology, w.rigid, w.rigid_normal, derivatives=d, urshape=urshape
+            state,
+            topology,
+            w.rigid,
+            w.rigid_normal,
+            derivatives=d,
+            urshape=urshape,
+            pattern=kept.get("rigid"),
         )
     first = 1 if urshape else 0
     if (w.accel > 0 or w.accel_normal > 0) and state.frames - first > 2:
-        parts["accel"] = accel_term(state, w.accel, w.accel_normal, derivatives=d, first=first)
+        parts["accel"] = accel_term(
+            state, w.accel, w.accel_normal, derivatives=d, first=first, pattern=kept.get("accel")
+        )
     values = {name: part.value for name, part in parts.items()}
     total = float(sum(values.values()))
     if not derivatives:
         return Energy(total, values, None, None)
+    size = layout(state).size
+    restrict = columns is not None and not np.array_equal(columns, np.arange(size))
+    for name, part in parts.items():
+        if name != "match" and name not in kept:
+            kept[name] = part.pattern.keep_columns(columns) if restrict else part.pattern
     # one Jacobian of every term, so that J^T J is formed once (a sum of the terms' Hessians
     # allocates each partial sum)
-    size = layout(state).size
     residuals = np.concatenate([np.zeros(0)] + [part.residuals for part in parts.values()])
     jacobians = [sp.csr_matrix((0, size))] + [part.jacobian for part in parts.values()]
     parts.clear()
-    if columns is not None:
+    if restrict:
         columns = np.asarray(columns, dtype=np.int64)
         select = sp.csr_matrix(
             (np.ones(len(columns)), (columns, np.arange(len(columns)))),
             shape=(size, len(columns)),
         )
-        jacobians = [jacobian @ select for jacobian in jacobians]
+        # the priors assembled from kept patterns have their columns already
+        jacobians = [
+            jacobian if jacobian.shape[1] == len(columns) else jacobian @ select
+            for jacobian in jacobians
+        ]
     jacobian = sp.vstack(jacobians, format="csr")
     del jacobians
     transposed = jacobian.T.tocsr()

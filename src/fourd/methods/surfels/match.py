@@ -210,7 +210,9 @@ def match_term(
     position = np.concatenate(
         [-plane[:, None, None] * normals[:, None, :], -point[:, None, None] * np.eye(3)], axis=1
     )
-    blocks.add(rows, lay.position(frames, surfels), position)
+    # the point offsets' rows are an identity block, absent without a tangential share
+    nonzero = np.concatenate([np.ones((1, 3), dtype=bool), np.eye(3, dtype=bool) & (beta > 0)])
+    blocks.add(rows, lay.position(frames, surfels), position, nonzero)
     basis = tangent_basis(state.normals)[frames, surfels]
     tilt = plane[:, None] * np.einsum("da,dab->db", offset, basis)
     blocks.add(rows, lay.normal(frames, surfels), tilt[:, None, :])

@@ -3,7 +3,9 @@ and on the normals), or between the urshape and every frame (sec. 3.2 "Global Op
 the Urshape"), and little acceleration along the trajectories (eq. 10, positions and normals);
 and the initial local rotations (a least-squares fit per neighbourhood).
 
-Each term returns a :class:`~.term.Term` over the unknowns of :class:`~.state.Layout`.
+Each term returns a :class:`~.term.Term` over the unknowns of :class:`~.state.Layout`; given
+the ``pattern`` of an earlier call on the same topology and layout, only the Jacobian's values
+are assembled.
 
 References
 ----------
@@ -19,7 +21,7 @@ import numpy as np
 
 from fourd.geometry.rotations import best_rotations
 from fourd.methods.surfels.state import SurfelState, layout, skew, tangent_basis
-from fourd.methods.surfels.term import Blocks, Term, term
+from fourd.methods.surfels.term import Blocks, Pattern, Term, term
 from fourd.methods.surfels.topology import Topology
 
 
@@ -31,6 +33,7 @@ def rigid_term(
     *,
     derivatives: bool = True,
     urshape: bool = False,
+    pattern: Pattern | None = None,
 ) -> Term:
     """Eq. (9): ``w sum_{t < T-1} sum_i sum_{j in N(i)} |A_i^t (s_i^t - s_j^t) - (s_i^{t+1} -
     s_j^{t+1})|^2`` plus the same potential on the normals, ``w_n sum |A_i^t n_i^t -
@@ -55,21 +58,22 @@ def rigid_term(
     residuals = np.concatenate([edge_residuals.ravel(), normal_residuals.ravel()])
     if not derivatives:
         return term(residuals, None)
-    blocks = Blocks(residuals.size, lay.size)
+    blocks = Blocks(residuals.size, lay.size, pattern)
     t = np.arange(steps)[:, None]
     o = origin[:, None]
     rows = 3 * np.arange(steps * len(i)).reshape(steps, len(i))
     eye = np.eye(3)
-    blocks.add(rows, lay.rotation(t, i), -root * skew(predicted))
+    diagonal = eye.astype(bool)
+    blocks.add(rows, lay.rotation(t, i), -root * skew(predicted), ~diagonal)
     blocks.add(rows, lay.position(o, i), root * rotations)
     blocks.add(rows, lay.position(o, j), -root * rotations)
-    blocks.add(rows, lay.position(t + 1, i), -root * eye)
-    blocks.add(rows, lay.position(t + 1, j), root * eye)
+    blocks.add(rows, lay.position(t + 1, i), -root * eye, diagonal)
+    blocks.add(rows, lay.position(t + 1, j), root * eye, diagonal)
     if normal_weight > 0 and steps > 0:
         surfels = np.arange(state.count)
         rows = edge_residuals.size + 3 * (t * state.count + surfels)
         basis = tangent_basis(state.normals)
-        blocks.add(rows, lay.rotation(t, surfels), -root_n * skew(turned))
+        blocks.add(rows, lay.rotation(t, surfels), -root_n * skew(turned), ~diagonal)
         blocks.add(rows, lay.normal(o, surfels), root_n * state.rotations @ basis[origin])
         blocks.add(rows, lay.normal(t + 1, surfels), -root_n * basis[1:])
     return term(residuals, blocks)
@@ -82,6 +86,7 @@ def accel_term(
     *,
     derivatives: bool = True,
     first: int = 0,
+    pattern: Pattern | None = None,
 ) -> Term:
     """Eq. (10): ``w sum_{first < t < T-1} sum_i |s_i^{t-1} - 2 s_i^t + s_i^{t+1}|^2`` plus the
     same on the normals with ``normal_weight``; residuals ``[T-2-first, S, 3]`` twice.
@@ -95,14 +100,14 @@ def accel_term(
     residuals = np.concatenate([position_residuals.ravel(), normal_residuals.ravel()])
     if not derivatives:
         return term(residuals, None)
-    blocks = Blocks(residuals.size, lay.size)
+    blocks = Blocks(residuals.size, lay.size, pattern)
     t = np.arange(1, inner + 1)[:, None]
     surfels = np.arange(state.count)
     rows = 3 * ((t - 1) * state.count + surfels)
     t = t + first
     eye = np.eye(3)
     for shift, factor in ((-1, 1.0), (0, -2.0), (1, 1.0)):
-        blocks.add(rows, lay.position(t + shift, surfels), root * factor * eye)
+        blocks.add(rows, lay.position(t + shift, surfels), root * factor * eye, eye > 0)
     if normal_weight > 0 and inner > 0:
         basis = tangent_basis(state.normals)
         rows = rows + position_residuals.size

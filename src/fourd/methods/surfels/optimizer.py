@@ -105,9 +105,19 @@ def gauss_newton(
     converged = False
     columns = None if free is None else np.flatnonzero(free)
     matches = associate(state, data, topology.radius, match)
+    # the topology and layout are fixed here, and so are the priors' Jacobian patterns
+    patterns = {}
     for _ in range(options.iterations + 1):
         current = total_energy(
-            state, topology, data, matches, weights, match, columns=columns, urshape=urshape
+            state,
+            topology,
+            data,
+            matches,
+            weights,
+            match,
+            columns=columns,
+            urshape=urshape,
+            patterns=patterns,
         )
         energies.append(current.value)
         if len(energies) > options.iterations:

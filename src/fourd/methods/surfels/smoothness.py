@@ -2,7 +2,9 @@
 planes (eq. 6), neighbouring normals alike (eq. 7), surfels at their neighbours' centroid
 (eq. 8), summed over all frames.
 
-Each returns a :class:`~.term.Term` over the unknowns of :class:`~.state.Layout`.
+Each returns a :class:`~.term.Term` over the unknowns of :class:`~.state.Layout`; given the
+``pattern`` of an earlier call on the same topology and layout, only the Jacobian's values are
+assembled.
 
 References
 ----------
@@ -15,12 +17,17 @@ from __future__ import annotations
 import numpy as np
 
 from fourd.methods.surfels.state import SurfelState, layout, tangent_basis
-from fourd.methods.surfels.term import Blocks, Term, term
+from fourd.methods.surfels.term import Blocks, Pattern, Term, term
 from fourd.methods.surfels.topology import Topology
 
 
 def smooth_position_term(
-    state: SurfelState, topology: Topology, weight: float, *, derivatives: bool = True
+    state: SurfelState,
+    topology: Topology,
+    weight: float,
+    *,
+    derivatives: bool = True,
+    pattern: Pattern | None = None,
 ) -> Term:
     """Eq. (6): ``w sum_t sum_i sum_{j in N(i)} <s_i - s_j, n_i>^2``; one residual per frame
     and directed edge, ``[T, 2E]``. ``weight`` in 1 / length^2 for a dimensionless energy."""
@@ -34,7 +41,7 @@ def smooth_position_term(
     lay = layout(state)
     t = np.arange(state.frames)[:, None]
     rows = np.arange(residuals.size).reshape(residuals.shape)
-    blocks = Blocks(residuals.size, lay.size)
+    blocks = Blocks(residuals.size, lay.size, pattern)
     blocks.add(rows, lay.position(t, i), root * normals[..., None, :])
     blocks.add(rows, lay.position(t, j), -root * normals[..., None, :])
     basis = tangent_basis(state.normals)[:, i]
@@ -45,7 +52,12 @@ def smooth_position_term(
 
 
 def smooth_normal_term(
-    state: SurfelState, topology: Topology, weight: float, *, derivatives: bool = True
+    state: SurfelState,
+    topology: Topology,
+    weight: float,
+    *,
+    derivatives: bool = True,
+    pattern: Pattern | None = None,
 ) -> Term:
     """Eq. (7): ``w sum_t sum_i sum_{j in N(i)} |n_i - n_j|^2``; three residuals per frame and
     directed edge, ``[T, 2E, 3]`` (dimensionless normals: ``weight`` carries the units)."""
@@ -58,14 +70,19 @@ def smooth_normal_term(
     t = np.arange(state.frames)[:, None]
     rows = 3 * np.arange(residuals.shape[0] * residuals.shape[1]).reshape(residuals.shape[:2])
     basis = tangent_basis(state.normals)
-    blocks = Blocks(residuals.size, lay.size)
+    blocks = Blocks(residuals.size, lay.size, pattern)
     blocks.add(rows, lay.normal(t, i), root * basis[:, i])
     blocks.add(rows, lay.normal(t, j), -root * basis[:, j])
     return term(residuals, blocks)
 
 
 def laplace_term(
-    state: SurfelState, topology: Topology, weight: float, *, derivatives: bool = True
+    state: SurfelState,
+    topology: Topology,
+    weight: float,
+    *,
+    derivatives: bool = True,
+    pattern: Pattern | None = None,
 ) -> Term:
     """Eq. (8): ``w sum_t sum_i |s_i - mean_{j in N(i)} s_j|^2`` over surfels with neighbours;
     three residuals per frame and surfel, ``[T, S, 3]`` (zero for surfels without)."""
@@ -84,7 +101,13 @@ def laplace_term(
     t = np.arange(frames)[:, None]
     rows = 3 * (t * count + np.arange(count))
     eye = np.eye(3)
-    blocks = Blocks(residuals.size, lay.size)
-    blocks.add(rows, lay.position(t, np.arange(count)), root * linked[..., None] * eye)
-    blocks.add(rows[:, i], lay.position(t, j), -root * share[i][:, None, None] * eye)
+    diagonal = eye.astype(bool)
+    blocks = Blocks(residuals.size, lay.size, pattern)
+    blocks.add(
+        rows,
+        lay.position(t, np.arange(count)),
+        root * linked[..., None] * eye,
+        linked[..., None] & diagonal,
+    )
+    blocks.add(rows[:, i], lay.position(t, j), -root * share[i][:, None, None] * eye, diagonal)
     return term(residuals, blocks)
