@@ -107,8 +107,9 @@ def gauss_newton(
     matches = associate(state, data, topology.radius, match)
     # the topology and layout are fixed here, and so are the priors' Jacobian patterns
     patterns = {}
-    for _ in range(options.iterations + 1):
-        current = total_energy(
+
+    def derivatives_at(state, matches):
+        return total_energy(
             state,
             topology,
             data,
@@ -119,9 +120,10 @@ def gauss_newton(
             urshape=urshape,
             patterns=patterns,
         )
-        energies.append(current.value)
-        if len(energies) > options.iterations:
-            break
+
+    current = derivatives_at(state, matches)
+    energies.append(current.value)
+    for iteration in range(options.iterations):
         step, count = solve_step(
             current.hessian, current.gradient, layout(state), options, columns=columns
         )
@@ -143,10 +145,13 @@ def gauss_newton(
             break
         # the accepted trial's association and energy are the next step's start
         state, matches = accepted, again
+        energies.append(value)
         if current.value - value <= options.tolerance * max(abs(current.value), 1e-300):
-            energies.append(value)
             converged = True
             break
+        if iteration + 1 < options.iterations:
+            # derivatives only where another step follows
+            current = derivatives_at(state, matches)
     log.debug(
         "gauss-newton: %d steps, energy %.6g -> %.6g", len(cg_counts), energies[0], energies[-1]
     )
