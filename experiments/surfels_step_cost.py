@@ -10,6 +10,8 @@ peak resident memory (each timing in a fresh process).
 Answer (2-core Intel Xeon, nothing else running; benchmarks/METHODS.md, "The normal
 equations' copies"): at 6f8067a ``total_energy`` 1.61 s, peak 391 MB; ``solve_step`` 227 MB
 more; ``gauss_newton`` 7.58 s, 728 MB. At 41f7844: 0.57-0.75 s, 250 MB; 95 MB; 5.6 s, 565 MB.
+At 3356095 (the priors' patterns kept, their structural zeros left out; "The priors' Jacobian
+patterns kept"): ``gauss_newton`` 5.00-5.81 s against 6.25-6.97 at 8e04352, run alternately.
 
 Run from the repository root::
 
