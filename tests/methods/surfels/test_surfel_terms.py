@@ -22,6 +22,7 @@ from fourd.methods.surfels import (
     total_energy,
 )
 from fourd.methods.surfels.state import skew
+from fourd.methods.surfels.term import Blocks
 
 
 def _problem(seed=0, frames=3, count=40):
@@ -239,3 +240,17 @@ def test_energy_with_kept_patterns_equals_a_fresh_assembly():
         assert kept.value == fresh.value
         assert np.allclose(kept.gradient, fresh.gradient, rtol=1e-13, atol=1e-13)
         assert abs(kept.hessian - fresh.hessian).max() <= 1e-13 * abs(fresh.hessian).max()
+
+
+def test_overlapping_blocks_are_refused():
+    blocks = Blocks(4, 6)
+    blocks.add(np.array([0]), np.array([0]), np.ones((2, 3)))
+    blocks.add(np.array([1]), np.array([2]), np.ones((2, 2)))
+    with pytest.raises(ValueError, match="overlap"):
+        blocks.matrix()
+    # left-out entries do not overlap
+    blocks = Blocks(4, 6)
+    blocks.add(np.array([0]), np.array([0]), np.eye(3)[:2], np.eye(3, dtype=bool)[:2])
+    blocks.add(np.array([0]), np.array([1]), np.ones((1, 1)))
+    jacobian = blocks.matrix()
+    assert jacobian.nnz == 3 and jacobian[0, 1] == 1.0 and jacobian[1, 1] == 1.0

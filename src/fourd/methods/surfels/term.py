@@ -13,7 +13,6 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.sparse import _sparsetools
 
 
 @dataclass(frozen=True)
@@ -29,7 +28,8 @@ class Pattern:
     indices, indptr : int
         The CSR column indices (sorted in each row) and row pointers.
     entries : int
-        How many values the blocks hold (more than ``nnz`` when columns were left out).
+        How many values the blocks hold (more than ``nnz`` where structural zeros or columns
+        were left out).
     """
 
     shape: tuple[int, int]
@@ -100,7 +100,7 @@ class Term:
 
 class Blocks:
     """Dense Jacobian blocks ``values [R, m, b]`` placed at (first row, first column) pairs,
-    gathered into one sparse matrix. Given the ``pattern`` of an earlier assembly of the same
+    gathered into one sparse matrix; blocks must not overlap. Given the ``pattern`` of an earlier assembly of the same
     blocks, only their values are kept (and a pattern that keeps some columns only,
     :meth:`Pattern.keep_columns`, gives the Jacobian of those)."""
 
@@ -163,16 +163,10 @@ class Blocks:
         count = len(rows)
         number = np.int32 if self._entries < np.iinfo(np.int32).max else np.int64
         numbers = np.concatenate([np.zeros(0, number)] + self._numbers).astype(number)
-        indptr = np.empty(self.shape[0] + 1, dtype=self._index)
-        indices = np.empty(count, dtype=self._index)
-        order = np.empty(count, dtype=number)
-        # the counting sort of scipy's COO -> CSR conversion, carrying each entry's number
-        _sparsetools.coo_tocsr(
-            self.shape[0], self.shape[1], count, rows, cols, numbers, indptr, indices, order
-        )
-        structure = sp.csr_matrix((order, indices, indptr), shape=self.shape)
-        structure.has_sorted_indices = False
-        structure.sort_indices()
+        # each entry carries its number through the conversion (sorted in each row)
+        structure = sp.coo_matrix((numbers, (rows, cols)), shape=self.shape).tocsr()
+        if structure.nnz != count:
+            raise ValueError("Jacobian blocks overlap: each entry must be added once")
         self._pattern = Pattern(
             self.shape, structure.data, structure.indices, structure.indptr, self._entries
         )
