@@ -176,18 +176,7 @@ def _prior_terms(graph):
     }
 
 
-@pytest.mark.parametrize(
-    "name",
-    [
-        "smooth_position",
-        "smooth_normal",
-        "laplace",
-        "rigid",
-        "accel",
-        "rigid_urshape",
-        "accel_after_urshape",
-    ],
-)
+@pytest.mark.parametrize("name", list(_prior_terms(None)))
 def test_a_kept_pattern_assembles_the_jacobian_of_another_state(name):
     state, graph, _ = _problem(frames=4)
     evaluate = _prior_terms(graph)[name]
