@@ -92,6 +92,38 @@ def test_topology_links_within_eps_top_and_drops_stretched_edges():
     assert np.array_equal(graph.degrees, np.bincount(graph.directed[:, 0], minlength=300))
 
 
+def test_topology_with_normals_joins_surfels_along_the_surface_only():
+    """A tube of radius 0.2, eps_top 0.5: in space both sides of it are within eps_top, along
+    the surface (half the circumference, 0.63) they are not."""
+    angle = np.linspace(0, 2 * np.pi, 19, endpoint=False)
+    ring = np.c_[np.cos(angle), np.sin(angle)]
+    heights = np.arange(0.0, 1.0, 0.1)
+    normals = np.concatenate([np.c_[ring, np.zeros(len(ring))]] * len(heights))
+    positions = np.concatenate([np.c_[0.2 * ring, np.full(len(ring), h)] for h in heights])
+    spatial = build_topology(positions, 0.5, max_stretch=None)
+    along = build_topology(positions, 0.5, max_stretch=None, normals=normals)
+    i, j = along.edges.T
+    cosines = np.einsum("ij,ij->i", normals[i], normals[j])
+    assert np.any(np.einsum("ij,ij->i", normals[spatial.edges[:, 0]], normals[spatial.edges[:, 1]]) < -0.9)
+    # the arc between two surfels of one ring, theta apart, is 0.2 theta: at most 0.5
+    assert cosines.min() > np.cos(0.5 / 0.2) - 1e-9
+    # every pair whose arc is within eps_top stays: on a plane, normals change nothing
+    arcs = np.hypot(0.2 * np.arccos(np.clip(cosines, -1, 1)), positions[i, 2] - positions[j, 2])
+    assert arcs.max() <= 0.5 + 1e-9
+    kept = set(map(tuple, along.edges))
+    assert kept <= set(map(tuple, spatial.edges))
+    flat = np.c_[np.random.default_rng(0).uniform(0, 1, (200, 2)), np.zeros(200)]
+    up = np.tile([0.0, 0.0, 1.0], (200, 1))
+    assert np.array_equal(
+        build_topology(flat, 0.2, normals=up).edges, build_topology(flat, 0.2).edges
+    )
+    # an edge along the tube's length is never dropped
+    straight = (np.abs(cosines - 1) < 1e-12)
+    assert np.sum(straight) == sum(
+        1 for a, b in spatial.edges if np.allclose(normals[a], normals[b])
+    )
+
+
 def test_sample_surfels_keeps_one_point_per_cell():
     rng = np.random.default_rng(3)
     points = rng.uniform(0, 1, (5000, 3))

@@ -65,6 +65,9 @@ class Schedule(NamedTuple):
     reach : int
         Frames on each side of the seam that a merge's global optimisation moves
         (:func:`optimize_near_seam`); 0, or with ``urshape``: every frame.
+    geodesic : bool
+        The topology joins surfels within ``eps_top`` along the surface, judged by their
+        normals (:func:`.topology.build_topology`); false: within ``eps_top`` in space.
     """
 
     sampling: float
@@ -77,6 +80,7 @@ class Schedule(NamedTuple):
     match: MatchOptions
     urshape: bool = False
     reach: int = 0
+    geodesic: bool = True
 
 
 def range_data(frames: list, start: int, stop: int):
@@ -251,7 +255,13 @@ def merge(
     # stitching: from scratch within eps_top in the aligned frame
     radius = 2.0 * schedule.sampling
     aligned_frame = nl if ahead else nl - 1
-    stitched = build_topology(positions, radius, reference=aligned_frame, max_stretch=None)
+    stitched = build_topology(
+        positions,
+        radius,
+        reference=aligned_frame,
+        max_stretch=None,
+        normals=normals if schedule.geodesic else None,
+    )
     state = fill_holes(
         SurfelState(positions, normals, rotations),
         known,
@@ -275,6 +285,7 @@ def merge(
         radius,
         reference=aligned_frame,
         max_stretch=schedule.max_stretch,
+        normals=state.normals[:, keep] if schedule.geodesic else None,
     )
     resampled = SurfelState(
         state.positions[:, keep],

@@ -31,6 +31,12 @@ class Options:
     sampling : float
         ``eps_sampl`` in point spacings ``s`` (the surfels' distance, sec. 3.1); the
         topology radius is ``eps_top = 2 eps_sampl``.
+    geodesic : bool
+        Surfels are neighbours when they lie within ``eps_top`` of each other along the
+        surface, as the paper defines ``T_S`` (sec. 3.1): the length of the arc through both
+        that meets their normals (:func:`.topology.build_topology`), so the two sides of a limb
+        thinner than ``eps_top`` are not joined and the smoothness (eq. 6) does not pull them
+        together. False: within ``eps_top`` in space.
     noise : float
         Noise level ``sigma`` in normal direction (input units); 0: ``s`` (the data weight is
         ``omega = 1 / sigma^2``, eq. 5).
@@ -137,6 +143,7 @@ class Options:
     """
 
     sampling: float = 4.0
+    geodesic: bool = True
     noise: float = 0.0
     smooth: float = 0.5
     smooth_normal: float = 0.01

@@ -177,6 +177,7 @@ def assembly_schedule(options: Options, noise: float, sampling: float) -> Schedu
         match=MatchOptions(tangential=options.linked_tangential),
         urshape=options.urshape == "merges",
         reach=options.merge_reach,
+        geodesic=options.geodesic,
     )
 
 
@@ -193,6 +194,7 @@ def seed_models(
             weights=schedule.weights,
             gauss_newton_options=schedule.optimize,
             match=MatchOptions(tangential=options.tangential),
+            geodesic=options.geodesic,
         )
         for frame, index in zip(
             progress(frames, desc="surfels: seed regions"), indices, strict=True

@@ -76,13 +76,20 @@ def seed_model(
     weights: Weights,
     gauss_newton_options: GaussNewtonOptions,
     match: MatchOptions | None = None,
+    geodesic: bool = True,
 ) -> Model:
     """The seed model of frame ``index``: surfels ``sampling`` (``eps_sampl``) apart on its
-    points, edges within ``2 eps_sampl``, positions and normals optimised by the data and
+    points, edges within ``2 eps_sampl`` (along the surface with ``geodesic``,
+    :func:`.topology.build_topology`), positions and normals optimised by the data and
     smoothness terms only (the 3D part of eq. 3), data associated by ``match``."""
     chosen = sample_surfels(frame.points, sampling)
     state = surfel_state(frame.points[chosen], frame.normals[chosen])
-    topology = build_topology(state.positions, 2.0 * sampling, max_stretch=None)
+    topology = build_topology(
+        state.positions,
+        2.0 * sampling,
+        max_stretch=None,
+        normals=state.normals if geodesic else None,
+    )
     data = frame_data([frame.points], weight=1.0, normals=[frame.normals])
     spatial = replace(weights, rigid=0.0, rigid_normal=0.0, accel=0.0, accel_normal=0.0)
     result = gauss_newton(state, topology, data, spatial, match, gauss_newton_options)

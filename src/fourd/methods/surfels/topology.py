@@ -78,7 +78,12 @@ class Topology:
 
 
 def build_topology(
-    positions: np.ndarray, radius: float, *, reference: int = 0, max_stretch: float | None = 1.5
+    positions: np.ndarray,
+    radius: float,
+    *,
+    reference: int = 0,
+    max_stretch: float | None = 1.5,
+    normals: np.ndarray | None = None,
 ) -> Topology:
     """Edges between surfels within ``radius`` (``eps_top``) of each other in frame
     ``reference``, less those whose length changes over the trajectories by more than
@@ -91,6 +96,12 @@ def build_topology(
     reference : int
     max_stretch : float or None
         None keeps every edge of the reference frame.
+    normals : ndarray [T, S, 3] or [S, 3], optional
+        With normals, the paper's *geodesic* ``eps_top`` (sec. 3.1): a pair is joined only when
+        the arc through both surfels that meets their normals, ``c theta / (2 sin(theta / 2))``
+        for chord ``c`` and angle ``theta`` between the normals, is at most ``radius`` long.
+        The two sides of a limb thinner than ``radius`` (opposite normals: ``c pi / 2``) are
+        not neighbours; without normals every pair within ``radius`` is.
     """
     positions = np.asarray(positions, dtype=np.float64)
     if positions.ndim == 2:
@@ -100,9 +111,31 @@ def build_topology(
     count = positions.shape[1]
     pairs = cKDTree(positions[reference]).query_pairs(radius, output_type="ndarray")
     pairs = np.sort(pairs.astype(np.int64).reshape(-1, 2), axis=1)
+    if normals is not None and len(pairs):
+        pairs = pairs[_arc_lengths(positions[reference], _frame(normals, reference), pairs) <= radius]
     if max_stretch is not None and len(pairs) and len(positions) > 1:
         lengths = np.linalg.norm(positions[:, pairs[:, 0]] - positions[:, pairs[:, 1]], axis=-1)
         stretch = lengths.max(axis=0) / np.maximum(lengths.min(axis=0), 1e-300)
         pairs = pairs[stretch <= max_stretch]
     pairs = pairs[np.lexsort((pairs[:, 1], pairs[:, 0]))]
     return Topology(pairs, count, float(radius))
+
+
+def _frame(normals: np.ndarray, reference: int) -> np.ndarray:
+    normals = np.asarray(normals, dtype=np.float64)
+    return normals[reference] if normals.ndim == 3 else normals
+
+
+def _arc_lengths(positions: np.ndarray, normals: np.ndarray, pairs: np.ndarray) -> np.ndarray:
+    """Length [E] of the circular arc through each pair's surfels that meets their normals:
+    ``c theta / (2 sin(theta / 2))``, chord ``c``, ``theta`` the angle between the normals."""
+    a, b = normals[pairs[:, 0]], normals[pairs[:, 1]]
+    a = a / np.linalg.norm(a, axis=1, keepdims=True)
+    b = b / np.linalg.norm(b, axis=1, keepdims=True)
+    theta = 2.0 * np.arctan2(np.linalg.norm(a - b, axis=1), np.linalg.norm(a + b, axis=1))
+    half = 0.5 * theta
+    stretch = np.ones_like(half)
+    bent = half > 1e-6
+    stretch[bent] = half[bent] / np.sin(half[bent])
+    chords = np.linalg.norm(positions[pairs[:, 0]] - positions[pairs[:, 1]], axis=1)
+    return chords * stretch
