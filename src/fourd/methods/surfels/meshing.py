@@ -13,9 +13,10 @@ tangent planes of its surfels, then carried to every frame by the surfels it is 
 (:func:`fourd.geometry.implicit.imls_grid`, whose ``bandwidth`` is ``sqrt(2) sigma``), sampled
 on a grid and contoured by marching cubes. Border detection [JWB*06]: a triangle is kept only
 where the surfels support it, i.e. the weight sum ``W(x) = sum_i w_i(x)`` at each of its
-corners is at least ``clip`` times the typical ``W`` at the surfels themselves; an open
-surface stays open, and the spurious sheets where the field meets the end of its support are
-dropped. A vertex the clipping leaves pinched (two fans of faces meeting at it only) gets a
+corners is at least ``clip`` times the weight sum the surfels around it have at themselves
+(``sum_i w_i(x) W(p_i) / W(x)``, so a sparser stretch of surfels is measured against its own
+sampling, not the model's median); an open surface stays open, and the spurious sheets where
+the field meets the end of its support are dropped. A vertex the clipping leaves pinched (two fans of faces meeting at it only) gets a
 copy per fan.
 
 **Every frame.** Each vertex ``v`` of the reference frame ``r`` is bound to the surfels
@@ -83,10 +84,18 @@ class MeshingOptions:
         Grid cell edge for marching cubes.
     clip : float
         Border detection: a triangle is dropped when one of its corners has a weight sum below
-        ``clip`` times the median weight sum at the surfels (their own weight included).
-        Points on a surface between surfels get 0.5-1 of it, the straight border of a plane
-        about half that: 0.3 puts the border about ``0.8 eps_sampl`` beyond the last
-        surfels of a plane sampled ``eps_sampl`` apart.
+        ``clip`` times the reference weight sum (``clip_reference``). 0.4 with ``"local"``
+        puts the border of a plane sampled ``eps_sampl`` apart where 0.3 with ``"median"``
+        did, about ``0.8 eps_sampl`` beyond the last surfels.
+    clip_reference : str
+        ``"local"``: the weight sums the surfels around the point have at themselves (their
+        own weight included), averaged with the point's window weights. Points on a surface
+        between surfels get about 1, whatever the surfels' density; ``"median"``: the median
+        weight sum at all the surfels, so sparser parts of a model fall under ``clip``.
+    clip_floor : float
+        With ``"local"``: the reference is at least this times the median weight sum at the
+        surfels, so stray surfels (a chain or a few, far sparser than the surface) do not
+        support a surface of their own.
     agreement : float
         Cosine: only surfels whose normal agrees this well with the nearest surfel's normal
         contribute to a point (keeps two sheets closer than the support apart; ``-1`` off).
@@ -100,7 +109,9 @@ class MeshingOptions:
     sigma: float = 0.75
     support: float = 3.5
     cell: float = 0.5
-    clip: float = 0.3
+    clip: float = 0.4
+    clip_reference: str = "local"
+    clip_floor: float = 0.5
     agreement: float = 0.0
     max_grid: int = 256
     align_normals: bool = True
@@ -112,6 +123,12 @@ class MeshingOptions:
                 raise ValueError(f"{name} must be positive, got {value}")
         if not 0 < self.clip < 1:
             raise ValueError(f"clip must lie in (0, 1), got {self.clip}")
+        if self.clip_reference not in ("local", "median"):
+            raise ValueError(
+                f"clip_reference must be 'local' or 'median', got {self.clip_reference!r}"
+            )
+        if not 0 <= self.clip_floor <= 1:
+            raise ValueError(f"clip_floor must lie in [0, 1], got {self.clip_floor}")
         if not -1 <= self.agreement <= 1:
             raise ValueError(f"agreement must lie in [-1, 1], got {self.agreement}")
         if self.max_grid < 8:
@@ -125,7 +142,7 @@ class FrameMesh(NamedTuple):
     faces : int64 [F, 3]
         Outward winding (normals point along the surfels' normals).
     support : float64 [N]
-        Weight sum ``W`` at each vertex over the median ``W`` at the surfels (>= ``clip``).
+        Weight sum ``W`` at each vertex over its reference (``clip_reference``; >= ``clip``).
     grid : Grid
         The grid the field was contoured on.
     """
@@ -144,10 +161,10 @@ class Binding(NamedTuple):
         ``phi_i(v)``, summing to one over each vertex's rows.
     raw : float64 [K]
         ``w_i(v)`` before renormalisation (for the observed flags).
+    reference : float64 [N]
+        Each vertex's reference weight sum (the unit of ``clip``, ``clip_reference``).
     offset : float64 [K, 3]
         ``v - p_i^r``, the vertex relative to the surfel in the reference frame.
-    reference_weight : float
-        Median weight sum at the surfels (the unit of ``clip``).
     count : int
         Number of vertices ``N``.
     """
@@ -157,7 +174,7 @@ class Binding(NamedTuple):
     weight: np.ndarray
     raw: np.ndarray
     offset: np.ndarray
-    reference_weight: float
+    reference: np.ndarray
     count: int
 
 
@@ -199,9 +216,21 @@ def _window_pairs(query, positions, normals, sigma, support, agreement, tree):
     return rows, cols, w
 
 
-def _reference_weight(positions, normals, sigma, support, agreement, tree) -> float:
-    rows, _, w = _window_pairs(positions, positions, normals, sigma, support, agreement, tree)
-    return float(np.median(np.bincount(rows, w, minlength=len(positions))))
+def _reference_weights(
+    rows, cols, w, count, positions, normals, sigma, support, options, tree
+) -> np.ndarray:
+    """The reference weight sum [count] of each query point of the window pairs ``(rows,
+    cols, w)``, by ``options.clip_reference``."""
+    own_rows, _, own_w = _window_pairs(
+        positions, positions, normals, sigma, support, options.agreement, tree
+    )
+    at_surfels = np.bincount(own_rows, own_w, minlength=len(positions))
+    median = np.median(at_surfels)
+    if options.clip_reference == "median":
+        return np.full(count, median)
+    total = np.bincount(rows, w, minlength=count)
+    level = np.bincount(rows, w * at_surfels[cols], minlength=count)
+    return np.maximum(level / np.where(total > 0, total, 1.0), options.clip_floor * median)
 
 
 def mesh_frame(
@@ -266,11 +295,14 @@ def mesh_frame(
     if len(faces) == 0:
         return empty
     tree = cKDTree(positions)
-    reference = _reference_weight(positions, normals, sigma, support, options.agreement, tree)
-    rows, _, w = _window_pairs(
+    rows, cols, w = _window_pairs(
         vertices, positions, normals, sigma, support, options.agreement, tree
     )
-    weight = np.bincount(rows, w, minlength=len(vertices)) / reference
+    reference = _reference_weights(
+        rows, cols, w, len(vertices), positions, normals, sigma, support, options, tree
+    )
+    total = np.bincount(rows, w, minlength=len(vertices))
+    weight = np.divide(total, reference, out=np.zeros(len(vertices)), where=reference > 0)
     faces = faces[np.all(weight[faces] >= options.clip, axis=1)]
     if len(faces) == 0:
         return empty
@@ -312,8 +344,8 @@ def bind_vertices(
         weight=w / total[rows],
         raw=w,
         offset=vertices[rows] - positions[cols],
-        reference_weight=_reference_weight(
-            positions, normals, sigma, support, options.agreement, tree
+        reference=_reference_weights(
+            rows, cols, w, len(vertices), positions, normals, sigma, support, options, tree
         ),
         count=len(vertices),
     )
@@ -397,13 +429,13 @@ def observed_vertices(
     binding: Binding, observed: np.ndarray, clip: float
 ) -> np.ndarray:
     """Vertices observed [T, N] from surfels ``observed`` [T, S]: the weight of the frame's
-    observed surfels at a vertex reaches ``clip`` times the binding's reference weight."""
+    observed surfels at a vertex reaches ``clip`` times the vertex's reference weight."""
     pairs = sp.csr_matrix(
         (binding.raw, (binding.vertex, binding.surfel)),
         shape=(binding.count, observed.shape[1]),
     )
-    seen = (pairs @ np.asarray(observed, dtype=np.float64).T).T / binding.reference_weight
-    return seen >= clip * (1.0 - 1e-9)
+    seen = (pairs @ np.asarray(observed, dtype=np.float64).T).T
+    return seen >= clip * (1.0 - 1e-9) * binding.reference
 
 
 def surfel_mesh(
@@ -431,7 +463,7 @@ def surfel_mesh(
     observed : ndarray bool [T, S], optional
         Surfels with data in each frame (default all). A vertex is observed in frame ``t``
         when the weight of that frame's observed surfels at it reaches the border clipping
-        threshold (``clip`` times the median weight sum at the surfels).
+        threshold (``clip`` times its reference weight sum, ``clip_reference``).
     urshape : Urshape, optional
         The trajectories' urshape (:mod:`.urshape`): the mesh is carried to it too, and that
         is the result's ``rest``.

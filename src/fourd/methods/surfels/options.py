@@ -115,6 +115,11 @@ class Options:
         Meshing: marching-cubes cell in ``eps_sampl``.
     mesh_clip : float
         Meshing: border clipping threshold (:class:`~.meshing.MeshingOptions` ``clip``).
+    mesh_clip_reference : str
+        Meshing: what ``mesh_clip`` is relative to, ``"local"`` (the weight the surfels
+        around a point have at themselves) or ``"median"`` (the median over all surfels,
+        which clips the sparser parts of a model; :class:`~.meshing.MeshingOptions`
+        ``clip_reference``).
     fit_frames : bool
         Move every frame's mesh vertices along their normals onto that frame's preprocessed
         points (:func:`fourd.geometry.surface_fit.fit_along_normals`), so the surface is the
@@ -169,7 +174,8 @@ class Options:
     cg_iterations: int = 50
     mesh_sigma: float = 0.75
     mesh_cell: float = 0.5
-    mesh_clip: float = 0.3
+    mesh_clip: float = 0.4
+    mesh_clip_reference: str = "local"
     fit_frames: bool = True
     fit_radius: float = 2.0
     fit_reach: float = 4.0
@@ -207,6 +213,11 @@ class Options:
                 raise ValueError(f"{name} must not be negative, got {getattr(self, name)}")
         if not 0 < self.tensor_ratio <= 1 or not 0 < self.mesh_clip < 1:
             raise ValueError("need 0 < tensor_ratio <= 1 and 0 < mesh_clip < 1")
+        if self.mesh_clip_reference not in ("local", "median"):
+            raise ValueError(
+                "mesh_clip_reference must be 'local' or 'median', "
+                f"got {self.mesh_clip_reference!r}"
+            )
         for name in (
             "iterations",
             "align_iterations",

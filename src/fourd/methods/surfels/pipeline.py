@@ -207,6 +207,7 @@ NOT_IN_MERGES = (
     "mesh_sigma",
     "mesh_cell",
     "mesh_clip",
+    "mesh_clip_reference",
     "fit_frames",
     "fit_radius",
     "fit_reach",
@@ -232,4 +233,9 @@ def merge_keys(keys: list[str], options: Options, cache: StageCache, *salt) -> l
 
 def meshing_options(options: Options) -> MeshingOptions:
     """The :class:`~.meshing.MeshingOptions` of ``options``."""
-    return MeshingOptions(sigma=options.mesh_sigma, cell=options.mesh_cell, clip=options.mesh_clip)
+    return MeshingOptions(
+        sigma=options.mesh_sigma,
+        cell=options.mesh_cell,
+        clip=options.mesh_clip,
+        clip_reference=options.mesh_clip_reference,
+    )
