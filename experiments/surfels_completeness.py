@@ -1,0 +1,180 @@
+"""Question: `surfels`' completeness-95 on crane is 0.027 of the diagonal (target 0.009;
+`kinematic` 0.012, `assembly` 0.005). Which truth is missing, and why: no surfel there in that
+frame (never assembled, or resampled away), surfels there but the mesh clipped at the border
+(weight sum under `mesh_clip`), or the surface there but misplaced?
+
+    PYTHONPATH=src python experiments/surfels_completeness.py crane [REFERENCE:CLIP[:FLOOR] ...]
+
+(`CLASSES=1` classes the missing truth of the first variant's mesh; `SET=geodesic=False,...`
+sets options of `surfels`.)
+
+The model is cached under /tmp/surfels-compl/ (`cache_dir`), so a rerun only meshes. For each
+frame, truth samples farther than THRESHOLD of the diagonal from the result are "missing";
+each is classed by the distance to the nearest surfel of that frame (in `eps_sampl`), the
+nearest preprocessed point of that frame (in point spacings: was it seen?), and the surfels'
+weight sum there over the meshing's reference (the clipping's measure).
+
+Answer: at the end of this docstring once measured.
+"""
+
+from __future__ import annotations
+
+import ast
+import dataclasses
+import os
+import pickle
+import sys
+
+import numpy as np
+from normal_fit import figures, scans_of
+from scipy.spatial import cKDTree
+
+from fourd.cache import StageCache
+from fourd.geometry.neighbors import point_spacing
+from fourd.geometry.surface_fit import fit_along_normals
+from fourd.geometry.surface_samples import sample_surface
+from fourd.methods.surfels import pipeline as sp
+from fourd.methods.surfels.assembly import assemble, optimize_model
+from fourd.methods.surfels.meshing import MeshingOptions, _reference_weights, _window_pairs
+from fourd.methods.surfels.options import Options, energy_weights
+
+THRESHOLD = 0.01
+SAMPLES = 20000
+
+
+def model_of(scans, options):
+    cache = StageCache(options.cache_dir)
+    spacing = point_spacing(scans.frames[0].points)
+    sampling = options.sampling * spacing
+    noise = options.noise or spacing
+    frames, keys = sp.prepare_frames(scans.frames, spacing, options, cache)
+    schedule = sp.assembly_schedule(options, noise, sampling)
+    seeds = sp.seed_models(frames, range(len(frames)), sampling, schedule, options)
+    model, _ = assemble(seeds, frames, schedule, cache=cache, keys=sp.merge_keys(keys, options, cache))
+    model = optimize_model(
+        model,
+        frames,
+        energy_weights(options, noise, sampling, final=True),
+        sp.solver_options(options, options.final_iterations),
+        schedule.match,
+        urshape="rest",
+    )
+    return model, frames, spacing, sampling
+
+
+TRACED = (0, 8, 17)
+
+
+def trace(t, truth, model, lost, sampling, diagonal):
+    """Where frame ``t``'s lost truth (data, no surfel) was in frame 0, and whether the
+    surfels there in frame 0 followed it."""
+    if not len(lost):
+        return
+    tv, _ = truth.frame(t)
+    v0, _ = truth.frame(0)
+    vertex = cKDTree(tv).query(lost)[1]
+    d0, s = cKDTree(model.state.positions[0]).query(v0[vertex])
+    off = np.linalg.norm(model.state.positions[t][s] - tv[vertex], axis=1)
+    covered = d0 < sampling
+    print(f"  frame {t}: {len(lost)} lost; at frame 0 a surfel within eps_sampl for "
+          f"{covered.mean():.2f} of them; those surfels are {np.median(off[covered]) / sampling:.2f} "
+          f"eps_sampl (median, 90th {np.percentile(off[covered], 90) / sampling if covered.any() else 0:.2f}) "
+          f"from where the truth went")
+    groups = cKDTree(lost).query_pairs(2 * sampling, output_type="ndarray")
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+    n = len(lost)
+    graph = coo_matrix((np.ones(len(groups)), (groups[:, 0], groups[:, 1])), shape=(n, n))
+    count, labels = connected_components(graph, directed=False)
+    sizes = np.bincount(labels)
+    for g in np.argsort(-sizes)[:5]:
+        members = labels == g
+        print(f"    cluster of {sizes[g]} at {lost[members].mean(0).round(3).tolist()} "
+              f"extent {np.ptp(lost[members], axis=0).round(3).tolist()}; frame 0 covered "
+              f"{covered[members].mean():.2f}, offset median {np.median(off[members]) / sampling:.2f} eps_sampl")
+
+
+def main(label: str, clips) -> None:
+    truth, scans = scans_of(label)
+    settings = dict(
+        (key, ast.literal_eval(value))
+        for key, value in (item.split("=") for item in os.environ.get("SET", "").split(",") if item)
+    )
+    suffix = "".join(f"-{key}={value}" for key, value in sorted(settings.items()))
+    options = Options(cache_dir=f"/tmp/surfels-compl/{label}", **settings)
+    path = f"/tmp/surfels-compl/{label}{suffix}.pickle"
+    if os.path.exists(path):
+        with open(path, "rb") as f:
+            model, frames, spacing, sampling = pickle.load(f)
+    else:
+        model, frames, spacing, sampling = model_of(scans, options)
+        with open(path, "wb") as f:
+            pickle.dump((model, frames, spacing, sampling), f)
+    diagonal = truth.diagonal()
+    print(f"{label}: {model.state.count} surfels, eps_sampl {sampling:.4g}, spacing {spacing:.4g}, "
+          f"diagonal {diagonal:.4g}; observed per frame {model.observed.mean():.3f}")
+    meshes = {}
+    for variant in clips:
+        reference, clip, *floor = variant.split(":")
+        mo = MeshingOptions(sigma=options.mesh_sigma, cell=options.mesh_cell, clip=float(clip),
+                            clip_reference=reference, clip_floor=float(floor[0]) if floor else 0.5)
+        mesh = sp.surfel_mesh(model.state, sampling, observed=model.observed, urshape=model.urshape,
+                              times=np.asarray(scans.times, dtype=np.float64), options=mo)
+        meshes[variant] = mesh
+        print(f"{variant}: {mesh.vertices.shape[1]} vertices, observed {mesh.observed.mean():.3f}; "
+              "unfitted", figures(mesh, truth), flush=True)
+        fit = fit_along_normals(mesh.vertices, mesh.faces, [f.points for f in frames],
+                                radius=options.fit_radius * spacing, reach=options.fit_reach * spacing)
+        fitted = dataclasses.replace(mesh, vertices=fit.vertices)
+        print(f"{variant}: fitted", figures(fitted, truth), flush=True)
+    if os.environ.get("CLASSES") != "1":
+        return
+    mesh = meshes[clips[0]]
+    mo = MeshingOptions()
+    sigma = mo.sigma * sampling
+    support = mo.support * sigma
+    classes = np.zeros(5)
+    heights = []
+    for t in range(truth.frame_count):
+        tv, tf = truth.frame(t)
+        ts = sample_surface(tv, tf, SAMPLES, np.random.default_rng(t)).points
+        rv, rf = mesh.frame(t)
+        rs = sample_surface(rv, rf, SAMPLES * 3, np.random.default_rng(100 + t)).points
+        comp = cKDTree(rs).query(ts)[0] / diagonal
+        missing = ts[comp > THRESHOLD]
+        positions, normals = model.state.positions[t], model.state.normals[t]
+        tree = cKDTree(positions)
+        surfel_d = tree.query(missing)[0] / sampling
+        data_d = cKDTree(frames[t].points).query(missing)[0] / spacing
+        raw_d = cKDTree(scans.frames[t].points).query(missing)[0] / spacing
+        rows, cols, w = _window_pairs(missing, positions, normals, sigma, support, mo.agreement, tree)
+        reference = _reference_weights(rows, cols, w, len(missing), positions, normals, sigma,
+                                       support, mo, tree)
+        weight = np.bincount(rows, w, minlength=len(missing)) / reference
+        seen = data_d < 2
+        near = surfel_d < 1
+        c = [
+            np.sum(near & (weight < mo.clip)),  # surfels there, clipped
+            np.sum(near & (weight >= mo.clip)),  # surfels there, supported: misplaced surface
+            np.sum(~near & seen),  # seen in this frame, no surfel: lost
+            np.sum(~near & ~seen & (raw_d < 2)),  # raw points there, dropped by preprocessing
+            np.sum(~near & ~seen & (raw_d >= 2)),  # unseen in this frame, not filled
+        ]
+        classes += c
+        heights.append(missing)
+        if t in TRACED:
+            trace(t, truth, model, missing[~near & seen], sampling, diagonal)
+        print(f"frame {t}: missing {len(missing) / SAMPLES:.3f}; clipped {c[0]} misplaced {c[1]} "
+              f"lost {c[2]} dropped {c[3]} unseen {c[4]}; surfel distance median "
+              f"{np.median(surfel_d) if len(missing) else 0:.2f}", flush=True)
+    print("totals (clipped, misplaced, lost, preprocessing-dropped, unseen):",
+          (classes / classes.sum()).round(3))
+    allm = np.concatenate(heights)
+    lo, hi = truth.frame(0)[0].min(0), truth.frame(0)[0].max(0)
+    rel = (allm - lo) / (hi - lo)
+    print("missing, relative position quantiles (x, y, z) 10/50/90:",
+          np.percentile(rel, [10, 50, 90], axis=0).round(2).tolist())
+
+
+if __name__ == "__main__":
+    main(sys.argv[1], sys.argv[2:] or ["median:0.3"])
