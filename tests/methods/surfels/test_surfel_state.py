@@ -92,7 +92,7 @@ def test_topology_links_within_eps_top_and_drops_stretched_edges():
     assert np.array_equal(graph.degrees, np.bincount(graph.directed[:, 0], minlength=300))
 
 
-def test_topology_with_normals_joins_surfels_along_the_surface_only():
+def test_topology_with_normals_flags_the_edges_along_the_surface():
     """A tube of radius 0.2, eps_top 0.5: in space both sides of it are within eps_top, along
     the surface (half the circumference, 0.63) they are not."""
     angle = np.linspace(0, 2 * np.pi, 19, endpoint=False)
@@ -101,7 +101,10 @@ def test_topology_with_normals_joins_surfels_along_the_surface_only():
     normals = np.concatenate([np.c_[ring, np.zeros(len(ring))]] * len(heights))
     positions = np.concatenate([np.c_[0.2 * ring, np.full(len(ring), h)] for h in heights])
     spatial = build_topology(positions, 0.5, max_stretch=None)
-    along = build_topology(positions, 0.5, max_stretch=None, normals=normals)
+    flagged = build_topology(positions, 0.5, max_stretch=None, normals=normals)
+    assert np.array_equal(flagged.edges, spatial.edges)  # the deformation priors keep them all
+    along = flagged.along_surface
+    assert len(along.edges) == flagged.surface.sum() < len(spatial.edges)
     i, j = along.edges.T
     cosines = np.einsum("ij,ij->i", normals[i], normals[j])
     assert np.any(np.einsum("ij,ij->i", normals[spatial.edges[:, 0]], normals[spatial.edges[:, 1]]) < -0.9)
@@ -114,9 +117,7 @@ def test_topology_with_normals_joins_surfels_along_the_surface_only():
     assert kept <= set(map(tuple, spatial.edges))
     flat = np.c_[np.random.default_rng(0).uniform(0, 1, (200, 2)), np.zeros(200)]
     up = np.tile([0.0, 0.0, 1.0], (200, 1))
-    assert np.array_equal(
-        build_topology(flat, 0.2, normals=up).edges, build_topology(flat, 0.2).edges
-    )
+    assert build_topology(flat, 0.2, normals=up).surface.all()
     # an edge along the tube's length is never dropped
     straight = (np.abs(cosines - 1) < 1e-12)
     assert np.sum(straight) == sum(

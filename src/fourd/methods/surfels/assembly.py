@@ -66,8 +66,9 @@ class Schedule(NamedTuple):
         Frames on each side of the seam that a merge's global optimisation moves
         (:func:`optimize_near_seam`); 0, or with ``urshape``: every frame.
     geodesic : bool
-        The topology joins surfels within ``eps_top`` along the surface, judged by their
-        normals (:func:`.topology.build_topology`); false: within ``eps_top`` in space.
+        The topology flags the edges within ``eps_top`` along the surface, judged by their
+        normals, for the shape priors (:func:`.topology.build_topology`); false: every edge
+        serves every prior.
     """
 
     sampling: float

@@ -103,17 +103,18 @@ def total_energy(
     parts = {}
     if w.match > 0:
         parts["match"] = match_term(state, data, matches, w.match, match, derivatives=d)
+    surface = topology.along_surface  # the shape priors' neighbours
     if w.smooth_position > 0:
         parts["smooth_position"] = smooth_position_term(
-            state, topology, w.smooth_position, derivatives=d, pattern=kept.get("smooth_position")
+            state, surface, w.smooth_position, derivatives=d, pattern=kept.get("smooth_position")
         )
     if w.smooth_normal > 0:
         parts["smooth_normal"] = smooth_normal_term(
-            state, topology, w.smooth_normal, derivatives=d, pattern=kept.get("smooth_normal")
+            state, surface, w.smooth_normal, derivatives=d, pattern=kept.get("smooth_normal")
         )
     if w.laplace > 0:
         parts["laplace"] = laplace_term(
-            state, topology, w.laplace, derivatives=d, pattern=kept.get("laplace")
+            state, surface, w.laplace, derivatives=d, pattern=kept.get("laplace")
         )
     if (w.rigid > 0 or w.rigid_normal > 0) and state.frames > 1:
         parts["rigid"] = rigid_term(

@@ -67,7 +67,8 @@ def pack_model(model: Model) -> dict[str, np.ndarray]:
             "urshape_normals": model.urshape.normals,
             "urshape_rotations": model.urshape.rotations,
         }
-    return urshape | {
+    surface = {} if model.topology.surface is None else {"surface": model.topology.surface}
+    return urshape | surface | {
         "positions": model.state.positions,
         "normals": model.state.normals,
         "rotations": model.state.rotations,
@@ -81,7 +82,10 @@ def pack_model(model: Model) -> dict[str, np.ndarray]:
 def unpack_model(arrays: dict) -> Model:
     """The :class:`Model` of :func:`pack_model`'s arrays."""
     state = SurfelState(arrays["positions"], arrays["normals"], arrays["rotations"])
-    topology = Topology(arrays["edges"].astype(np.int64), state.count, float(arrays["radius"]))
+    surface = arrays["surface"].astype(bool) if "surface" in arrays else None
+    topology = Topology(
+        arrays["edges"].astype(np.int64), state.count, float(arrays["radius"]), surface
+    )
     urshape = None
     if "urshape_positions" in arrays:
         urshape = Urshape(
@@ -108,13 +112,16 @@ def surfel_subset(model: Model, keep: np.ndarray) -> Model:
     index = np.full(model.state.count, -1, dtype=np.int64)
     index[keep] = np.arange(len(keep))
     edges = index[model.topology.edges]
-    edges = edges[(edges >= 0).all(axis=1)]
+    both = (edges >= 0).all(axis=1)
+    surface = model.topology.surface
     state = model.state
     return Model(
         SurfelState(
             state.positions[:, keep], state.normals[:, keep], state.rotations[:, keep]
         ),
-        Topology(edges, len(keep), model.topology.radius),
+        Topology(
+            edges[both], len(keep), model.topology.radius, None if surface is None else surface[both]
+        ),
         model.start,
         model.observed[:, keep],
     )

@@ -32,11 +32,12 @@ class Options:
         ``eps_sampl`` in point spacings ``s`` (the surfels' distance, sec. 3.1); the
         topology radius is ``eps_top = 2 eps_sampl``.
     geodesic : bool
-        Surfels are neighbours when they lie within ``eps_top`` of each other along the
-        surface, as the paper defines ``T_S`` (sec. 3.1): the length of the arc through both
-        that meets their normals (:func:`.topology.build_topology`), so the two sides of a limb
-        thinner than ``eps_top`` are not joined and the smoothness (eq. 6) does not pull them
-        together. False: within ``eps_top`` in space.
+        The shape priors (eq. 6-8) join the surfels that lie within ``eps_top`` of each other
+        along the surface, as the paper defines ``T_S`` (sec. 3.1): the length of the arc
+        through both that meets their normals (:func:`.topology.build_topology`), so the
+        smoothness does not pull the two sides of a limb thinner than ``eps_top`` together.
+        The deformation priors (eq. 9, 10) keep every pair within ``eps_top`` in space (a
+        limb's cross-section moves rigidly). False: the shape priors too.
     noise : float
         Noise level ``sigma`` in normal direction (input units); 0: ``s`` (the data weight is
         ``omega = 1 / sigma^2``, eq. 5).

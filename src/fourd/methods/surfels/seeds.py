@@ -79,9 +79,9 @@ def seed_model(
     geodesic: bool = True,
 ) -> Model:
     """The seed model of frame ``index``: surfels ``sampling`` (``eps_sampl``) apart on its
-    points, edges within ``2 eps_sampl`` (along the surface with ``geodesic``,
-    :func:`.topology.build_topology`), positions and normals optimised by the data and
-    smoothness terms only (the 3D part of eq. 3), data associated by ``match``."""
+    points, edges within ``2 eps_sampl`` (the smoothness's along the surface with
+    ``geodesic``, :func:`.topology.build_topology`), positions and normals optimised by the
+    data and smoothness terms only (the 3D part of eq. 3), data associated by ``match``."""
     chosen = sample_surfels(frame.points, sampling)
     state = surfel_state(frame.points[chosen], frame.normals[chosen])
     topology = build_topology(

@@ -53,11 +53,16 @@ class Topology:
         Number of surfels ``S``.
     radius : float
         ``eps_top`` the edges were built with (input units); also the data term's truncation.
+    surface : bool [E] or None
+        The edges whose surfels lie within ``eps_top`` of each other along the surface
+        (:func:`build_topology` with normals); the shape priors (eq. 6-8) use those only,
+        the deformation priors (eq. 9, 10) every edge. None: all of them.
     """
 
     edges: np.ndarray
     count: int
     radius: float
+    surface: np.ndarray | None = None
 
     def __post_init__(self):
         e = self.edges
@@ -65,6 +70,15 @@ class Topology:
             raise ValueError(f"edges must have shape [E, 2], got {list(e.shape)}")
         if len(e) and (e.min() < 0 or e.max() >= self.count or np.any(e[:, 0] >= e[:, 1])):
             raise ValueError(f"edges must be pairs i < j of surfels 0..{self.count - 1}")
+        if self.surface is not None and self.surface.shape != (len(e),):
+            raise ValueError(f"surface must be a flag per edge [{len(e)}]")
+
+    @property
+    def along_surface(self) -> Topology:
+        """The graph of the edges along the surface only (``surface``)."""
+        if self.surface is None or self.surface.all():
+            return self
+        return Topology(self.edges[self.surface], self.count, self.radius)
 
     @property
     def directed(self) -> np.ndarray:
@@ -97,11 +111,12 @@ def build_topology(
     max_stretch : float or None
         None keeps every edge of the reference frame.
     normals : ndarray [T, S, 3] or [S, 3], optional
-        With normals, the paper's *geodesic* ``eps_top`` (sec. 3.1): a pair is joined only when
-        the arc through both surfels that meets their normals, ``c theta / (2 sin(theta / 2))``
-        for chord ``c`` and angle ``theta`` between the normals, is at most ``radius`` long.
-        The two sides of a limb thinner than ``radius`` (opposite normals: ``c pi / 2``) are
-        not neighbours; without normals every pair within ``radius`` is.
+        With normals, each edge is flagged ``surface`` when its surfels lie within ``radius``
+        along the surface too, the paper's *geodesic* ``eps_top`` (sec. 3.1): when the arc
+        through both that meets their normals, ``c theta / (2 sin(theta / 2))`` for chord
+        ``c`` and angle ``theta`` between the normals, is at most ``radius`` long. The two
+        sides of a limb thinner than ``radius`` (opposite normals: ``c pi / 2``) are joined,
+        but not along the surface.
     """
     positions = np.asarray(positions, dtype=np.float64)
     if positions.ndim == 2:
@@ -111,14 +126,16 @@ def build_topology(
     count = positions.shape[1]
     pairs = cKDTree(positions[reference]).query_pairs(radius, output_type="ndarray")
     pairs = np.sort(pairs.astype(np.int64).reshape(-1, 2), axis=1)
-    if normals is not None and len(pairs):
-        pairs = pairs[_arc_lengths(positions[reference], _frame(normals, reference), pairs) <= radius]
     if max_stretch is not None and len(pairs) and len(positions) > 1:
         lengths = np.linalg.norm(positions[:, pairs[:, 0]] - positions[:, pairs[:, 1]], axis=-1)
         stretch = lengths.max(axis=0) / np.maximum(lengths.min(axis=0), 1e-300)
         pairs = pairs[stretch <= max_stretch]
     pairs = pairs[np.lexsort((pairs[:, 1], pairs[:, 0]))]
-    return Topology(pairs, count, float(radius))
+    surface = None
+    if normals is not None:
+        arcs = _arc_lengths(positions[reference], _frame(normals, reference), pairs)
+        surface = arcs <= radius
+    return Topology(pairs, count, float(radius), surface)
 
 
 def _frame(normals: np.ndarray, reference: int) -> np.ndarray:
