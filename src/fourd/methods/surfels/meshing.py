@@ -15,8 +15,9 @@ on a grid and contoured by marching cubes. Border detection [JWB*06]: a triangle
 where the surfels support it, i.e. the weight sum ``W(x) = sum_i w_i(x)`` at each of its
 corners is at least ``clip`` times the weight sum the surfels around it have at themselves
 (``sum_i w_i(x) W(p_i) / W(x)``, so a sparser stretch of surfels is measured against its own
-sampling, not the model's median); an open surface stays open, and the spurious sheets where
-the field meets the end of its support are dropped. A vertex the clipping leaves pinched (two fans of faces meeting at it only) gets a
+sampling, not the model's median; never under ``clip_floor`` times that median); an open
+surface stays open, and the spurious sheets where the field meets the end of its support are
+dropped. A vertex the clipping leaves pinched (two fans of faces meeting at it only) gets a
 copy per fan.
 
 **Every frame.** Each vertex ``v`` of the reference frame ``r`` is bound to the surfels
@@ -161,10 +162,10 @@ class Binding(NamedTuple):
         ``phi_i(v)``, summing to one over each vertex's rows.
     raw : float64 [K]
         ``w_i(v)`` before renormalisation (for the observed flags).
-    reference : float64 [N]
-        Each vertex's reference weight sum (the unit of ``clip``, ``clip_reference``).
     offset : float64 [K, 3]
         ``v - p_i^r``, the vertex relative to the surfel in the reference frame.
+    reference : float64 [N]
+        Each vertex's reference weight sum (the unit of ``clip``, ``clip_reference``).
     count : int
         Number of vertices ``N``.
     """
