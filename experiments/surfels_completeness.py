@@ -196,9 +196,9 @@ def main(label: str, clips) -> None:
         data_d = cKDTree(frames[t].points).query(missing)[0] / spacing
         raw_d = cKDTree(scans.frames[t].points).query(missing)[0] / spacing
         rows, cols, w = _window_pairs(missing, positions, normals, sigma, support, mo.agreement, tree)
-        reference = _reference_weights(rows, cols, w, len(missing), positions, normals, sigma,
-                                       support, mo, tree)
-        weight = np.bincount(rows, w, minlength=len(missing)) / reference
+        total = np.bincount(rows, w, minlength=len(missing))
+        weight = total / _reference_weights(rows, cols, w, total, positions, normals, sigma,
+                                            support, mo, tree)
         seen = data_d < 2
         near = surfel_d < 1
         c = [

@@ -218,19 +218,18 @@ def _window_pairs(query, positions, normals, sigma, support, agreement, tree):
 
 
 def _reference_weights(
-    rows, cols, w, count, positions, normals, sigma, support, options, tree
+    rows, cols, w, total, positions, normals, sigma, support, options, tree
 ) -> np.ndarray:
-    """The reference weight sum [count] of each query point of the window pairs ``(rows,
-    cols, w)``, by ``options.clip_reference``."""
+    """The reference weight sum of each query point of the window pairs ``(rows, cols, w)``
+    whose weight sums are ``total`` [N], by ``options.clip_reference``."""
     own_rows, _, own_w = _window_pairs(
         positions, positions, normals, sigma, support, options.agreement, tree
     )
     at_surfels = np.bincount(own_rows, own_w, minlength=len(positions))
     median = np.median(at_surfels)
     if options.clip_reference == "median":
-        return np.full(count, median)
-    total = np.bincount(rows, w, minlength=count)
-    level = np.bincount(rows, w * at_surfels[cols], minlength=count)
+        return np.full(len(total), median)
+    level = np.bincount(rows, w * at_surfels[cols], minlength=len(total))
     return np.maximum(level / np.where(total > 0, total, 1.0), options.clip_floor * median)
 
 
@@ -299,10 +298,10 @@ def mesh_frame(
     rows, cols, w = _window_pairs(
         vertices, positions, normals, sigma, support, options.agreement, tree
     )
-    reference = _reference_weights(
-        rows, cols, w, len(vertices), positions, normals, sigma, support, options, tree
-    )
     total = np.bincount(rows, w, minlength=len(vertices))
+    reference = _reference_weights(
+        rows, cols, w, total, positions, normals, sigma, support, options, tree
+    )
     weight = np.divide(total, reference, out=np.zeros(len(vertices)), where=reference > 0)
     faces = faces[np.all(weight[faces] >= options.clip, axis=1)]
     if len(faces) == 0:
@@ -346,7 +345,7 @@ def bind_vertices(
         raw=w,
         offset=vertices[rows] - positions[cols],
         reference=_reference_weights(
-            rows, cols, w, len(vertices), positions, normals, sigma, support, options, tree
+            rows, cols, w, total, positions, normals, sigma, support, options, tree
         ),
         count=len(vertices),
     )

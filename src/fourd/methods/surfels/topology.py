@@ -10,6 +10,7 @@ section 3.1 "Discretization" and 3.2 "Topological stitching" (``001_3fedd1c3a0ac
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -73,9 +74,10 @@ class Topology:
         if self.surface is not None and self.surface.shape != (len(e),):
             raise ValueError(f"surface must be a flag per edge [{len(e)}]")
 
-    @property
+    @cached_property
     def along_surface(self) -> Topology:
-        """The graph of the edges along the surface only (``surface``)."""
+        """The graph of the edges along the surface only (``surface``); built once, every
+        energy evaluation asks for it."""
         if self.surface is None or self.surface.all():
             return self
         return Topology(self.edges[self.surface], self.count, self.radius)
