@@ -66,6 +66,7 @@ def align_ranges(
     *,
     data_weight: float,
     rigid_start: bool = True,
+    percentile: float = 100.0,
 ) -> Alignment:
     """Align ``left``'s last frame to the data ``points`` [P, 3] (oriented ``normals``) of
     the frame after it, the right range's first (sec. 3.2): only the data term (weight
@@ -79,7 +80,13 @@ def align_ranges(
     rotation is kept only when it explains more of the data than a translation alone does
     (:data:`ROTATION_EVIDENCE`) and turns by less than :data:`MAX_START_TURN`: the alignment
     has no tangential pull, so a turn the surface does not determine would stay in the
-    correspondences."""
+    correspondences.
+
+    ``percentile`` is the alignment regime's cutoff (:class:`~.match.MatchOptions`; the paper
+    85). Between two frames of a fast motion the largest distances are those of the limbs that
+    moved most, so a percentile cutoff drops exactly them and they stay behind; at 100 only
+    the angle and doublet tests reject points (the outliers are gone with the tensor voting,
+    the surface one frame sees and the other does not fails the doublet test)."""
     last = left.state.frames - 1
     p, n = left.state.positions[last], left.state.normals[last]
     if rigid_start:
@@ -110,7 +117,7 @@ def align_ranges(
         left.topology,
         data,
         align_weights,
-        MatchOptions(regime="alignment"),
+        MatchOptions(regime="alignment", percentile=percentile),
         options,
         free=free_unknowns(layout(state), free),
     )

@@ -69,6 +69,8 @@ class Schedule(NamedTuple):
         The topology flags the edges within ``eps_top`` along the surface, judged by their
         normals, for the shape priors (:func:`.topology.build_topology`); false: every edge
         serves every prior.
+    align_percentile : float
+        The alignment's cutoff percentile (:func:`.align.align_ranges`).
     """
 
     sampling: float
@@ -82,6 +84,7 @@ class Schedule(NamedTuple):
     urshape: bool = False
     reach: int = 0
     geodesic: bool = True
+    align_percentile: float = 100.0
 
 
 def range_data(frames: list, start: int, stop: int):
@@ -212,6 +215,7 @@ def merge(
         schedule.weights,
         schedule.align,
         data_weight=schedule.align_data,
+        percentile=schedule.align_percentile,
     )
     backward = align_ranges(
         _first_frame(right),
@@ -220,6 +224,7 @@ def merge(
         schedule.weights,
         schedule.align,
         data_weight=schedule.align_data,
+        percentile=schedule.align_percentile,
     )
     ahead = forward.stretch <= backward.stretch
     nl, nr = left.state.frames, right.state.frames

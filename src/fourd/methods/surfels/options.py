@@ -77,6 +77,11 @@ class Options:
         sec. 3.2), relative.
     align_iterations : int
         Gauss-Newton steps of that alignment (each re-associates the data, as ICP does).
+    align_percentile : float
+        That alignment counts the data points up to this percentile of their distances to
+        their surfels (sec. 3.2; paper: 85). 100: every point that passes the 45 degree and
+        doublet tests. In a fast motion the farthest points are the limbs that moved most,
+        and a lower cutoff leaves them behind.
     max_stretch : float
         Stitching filter: an edge whose length changes over its trajectory by more than this
         factor is rejected (paper: 1.5).
@@ -164,6 +169,7 @@ class Options:
     final_accel: float = 4.0
     align_data: float = 1.0
     align_iterations: int = 12
+    align_percentile: float = 100.0
     max_stretch: float = 1.5
     tensor_ratio: float = 0.8
     iterations: int = 4
@@ -212,6 +218,10 @@ class Options:
         ):
             if not getattr(self, name) >= 0:
                 raise ValueError(f"{name} must not be negative, got {getattr(self, name)}")
+        if not 0 < self.align_percentile <= 100:
+            raise ValueError(
+                f"align_percentile must be in (0, 100], got {self.align_percentile}"
+            )
         if not 0 < self.tensor_ratio <= 1 or not 0 < self.mesh_clip < 1:
             raise ValueError("need 0 < tensor_ratio <= 1 and 0 < mesh_clip < 1")
         if self.mesh_clip_reference not in ("local", "median"):

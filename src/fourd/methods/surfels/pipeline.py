@@ -178,6 +178,7 @@ def assembly_schedule(options: Options, noise: float, sampling: float) -> Schedu
         urshape=options.urshape == "merges",
         reach=options.merge_reach,
         geodesic=options.geodesic,
+        align_percentile=options.align_percentile,
     )
 
 
