@@ -30,9 +30,10 @@ def main() -> None:
     import fourd.bench.suite as suite
     from fourd import synth
     from fourd.animation import AnimatedMesh
+    from fourd.geometry.hole_closing import close_small_holes
     from fourd.methods.assembly import Options
     from fourd.methods.assembly.hierarchy import Block, assemble
-    from fourd.methods.assembly.method import base_blocks, close_small_holes, frame_meshes
+    from fourd.methods.assembly.method import base_blocks, frame_meshes
     from fourd.metrics import evaluate
 
     name = sys.argv[1] if len(sys.argv) > 1 else "crane"
@@ -49,7 +50,7 @@ def main() -> None:
         block, _ = assemble(base_blocks(scans, frame_meshes(scans, options)), options)
         np.savez(kept, **block._asdict())
     variants = [("as assembled", block)] + [(f"closed at {fraction}, smoothness {smoothness}",
-                                             close_small_holes(block, fraction, smoothness))
+                                             Block(*close_small_holes(*block, fraction, smoothness)))
                                             for smoothness in (1.0, 0.3, 0.0)]
     for label, result in variants:
         mesh = AnimatedMesh(result.faces, result.vertices, scans.times, result.observed, rest=result.vertices[0])

@@ -31,7 +31,7 @@ Answer (2026-12-04, 7247184, standard scans):
   web of small tunnels.
 So the whole animation takes the first frame's handles, since its connectivity is that frame's
 mesh. The figures above are with ``open_handles=0``. The default now cuts the small handles out
-and closes them with the holes (``methods/assembly/closing.py``, ``geometry/handles.py``):
+and closes them with the holes (``geometry/hole_closing.py``, ``geometry/handles.py``):
 crane's 4 frames go from genus 22 to 3, dfaust-hopping's 17 from 2 to 0. The fix at the source
 would be the per-frame surface across a gap of a few spacings.
 """

@@ -24,11 +24,11 @@ import sys
 
 from fourd import synth
 from fourd.bench.runner import PROTOCOL
+from fourd.geometry import hole_closing as closing
 from fourd.geometry.boundary_loops import boundary_loops
 from fourd.geometry.fans import pinched_vertices
 from fourd.geometry.handles import capped_genus
 from fourd.methods import reconstruct
-from fourd.methods.assembly import closing
 from fourd.metrics.topology import topology
 
 

@@ -22,8 +22,8 @@ def main() -> None:
     import fourd.bench.suite as suite
     from fourd import synth
     from fourd.cache import StageCache
+    from fourd.geometry.hole_closing import close_small_holes
     from fourd.methods.assembly import Options
-    from fourd.methods.assembly.closing import close_small_holes
     from fourd.methods.assembly.hierarchy import Block, assemble, merge_pool
     from fourd.methods.assembly.method import (
         _fit_colors,
@@ -62,7 +62,8 @@ def main() -> None:
     times["colour fit"] = time.perf_counter() - t
     t = time.perf_counter()
     if options.close_holes > 0:
-        block = close_small_holes(block, options.close_holes, options.close_smoothness, options.open_handles)
+        block = Block(*close_small_holes(*block, options.close_holes, options.close_smoothness,
+                                         options.open_handles))
     times["closing"] = time.perf_counter() - t
     total = time.perf_counter() - started
     frames = len(seq)

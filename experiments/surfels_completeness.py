@@ -78,6 +78,7 @@ from normal_fit import figures, scans_of
 from scipy.spatial import cKDTree
 
 from fourd.cache import StageCache
+from fourd.geometry.hole_closing import close_small_holes
 from fourd.geometry.neighbors import point_spacing
 from fourd.geometry.surface_fit import fit_along_normals
 from fourd.geometry.surface_samples import sample_surface
@@ -175,6 +176,13 @@ def main(label: str, clips) -> None:
                                 radius=options.fit_radius * spacing, reach=options.fit_reach * spacing)
         fitted = dataclasses.replace(mesh, vertices=fit.vertices)
         print(f"{variant}: fitted", figures(fitted, truth), flush=True)
+        for closing in filter(None, os.environ.get("CLOSE", "").split(",")):
+            fraction, smoothness = (float(x) for x in closing.split(":"))
+            faces, vertices, observed = close_small_holes(fitted.faces, fitted.vertices, fitted.observed,
+                                                          fraction, smoothness)
+            closed_mesh = dataclasses.replace(fitted, faces=faces, vertices=vertices, observed=observed,
+                                              rest=None)
+            print(f"{variant}: fitted, closed {closing}", figures(closed_mesh, truth), flush=True)
     if os.environ.get("CLASSES") != "1":
         return
     mesh = meshes[clips[0]]

@@ -166,7 +166,7 @@ def test_a_hole_no_frame_fills_is_closed_in_every_frame_unobserved():
     vertices, faces = _bumpy()
     keep = ~(vertices[faces].mean(axis=1)[:, 0] > 0.85)
     from fourd.geometry.marching import compact
-    from fourd.methods.assembly import close_small_holes
+    from tests.geometry.test_hole_closing import close_small_holes
 
     holed, holed_faces = compact(vertices, faces[keep])
     seq = PointCloudSequence([Frame(holed @ _motion(t)[0].T + _motion(t)[1], faces=holed_faces, time=float(t))
@@ -196,7 +196,7 @@ def test_a_hole_no_frame_fills_is_closed_in_every_frame_unobserved():
 def test_a_hole_of_one_triangle_closes_without_new_vertices():
     """The membrane of a three-vertex rim has no interior vertex: the block keeps its vertex
     count and gains the triangle (the positions once came back doubled, crane-remeshed)."""
-    from fourd.methods.assembly import close_small_holes
+    from tests.geometry.test_hole_closing import close_small_holes
 
     vertices, faces = _bumpy()
     frames = np.stack([vertices @ _motion(t)[0].T + _motion(t)[1] for t in range(2)])
@@ -211,7 +211,7 @@ def test_a_hole_of_one_triangle_closes_without_new_vertices():
 
 def test_a_hole_that_cannot_be_filled_leaves_the_assembled_result_as_it_is(monkeypatch):
     """A rim the membrane cannot span (a degenerate loop) costs the closing, not the run."""
-    import fourd.methods.assembly.closing as closing
+    import fourd.geometry.hole_closing as closing
 
     vertices, faces = _bumpy()
     keep = ~(vertices[faces].mean(axis=1)[:, 0] > 0.85)
@@ -221,7 +221,8 @@ def test_a_hole_that_cannot_be_filled_leaves_the_assembled_result_as_it_is(monke
         raise InputError("a hole's boundary has no length")
 
     monkeypatch.setattr(closing, "fill_holes", degenerate)
-    assert closing.close_small_holes(block, 0.25) is block
+    closed = closing.close_small_holes(block.faces, block.vertices, block.observed, 0.25)
+    assert all(a is b for a, b in zip(closed, block, strict=True))
 
 
 def test_a_region_missing_from_the_first_frame_is_pasted_in_from_the_next():

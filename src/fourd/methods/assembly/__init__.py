@@ -25,8 +25,9 @@ Frames that are meshes are used as they are; point clouds are meshed per frame f
 - :mod:`.completion`: geometry only the later frame has glued into the union mesh along a
   zipped seam, placed in the earlier frames by Laplacian coordinates (5.6, second half);
 - :mod:`.method`: the pipeline (``reconstruct``); :mod:`.options` its ``Options``;
-- :mod:`.closing`: the holes no frame fills closed at the end by the membrane of 3.6.2, and
-  the first frame's small handles cut out and closed the same way (``close_small_holes``);
+- the holes no frame fills are closed at the end by the membrane of 3.6.2, and the first
+  frame's small handles cut out and closed the same way
+  (:func:`fourd.geometry.hole_closing.close_small_holes`);
 - :mod:`.stream`: the same over a whole capture a window of frames at a time, written frame by
   frame (``reconstruct_streamed``, ``fourd reconstruct --stream``; issue 56).
 
@@ -49,7 +50,6 @@ from fourd.methods.assembly.anchors import (
     returned_points,
     spread_anchors,
 )
-from fourd.methods.assembly.closing import HoleClosing, close_small_holes, holes_to_close
 from fourd.methods.assembly.completion import Paste, paste_target_only, place_pasted, zip_strip
 from fourd.methods.assembly.crossparam import (
     CrossParameterization,
@@ -95,9 +95,7 @@ __all__ = [
     "MIN_FRAMES",
     "RESULT",
     "STREAM_WINDOW",
-    "HoleClosing",
     "StreamSummary",
-    "holes_to_close",
     "merge_tree",
     "reconstruct_streamed",
     "Alignment",
@@ -116,7 +114,6 @@ __all__ = [
     "MergeReport",
     "Options",
     "assemble",
-    "close_small_holes",
     "geometric_anchors",
     "join_blocks",
     "map_pair",

@@ -22,7 +22,7 @@ assembly of :mod:`~fourd.methods.assembly.hierarchy`.
 4. The holes no frame filled are closed by the membrane of 3.6.2 (``close_holes``), and the
    small handles the first frame's mesh grew are cut out and closed the same way
    (``open_handles``), placed in every frame from that frame's rim, unobserved
-   (:func:`~fourd.methods.assembly.closing.close_small_holes`).
+   (:func:`~fourd.geometry.hole_closing.close_small_holes`).
 """
 
 from __future__ import annotations
@@ -36,7 +36,7 @@ from fourd.animation import AnimatedMesh
 from fourd.cache import StageCache, report_resumed
 from fourd.errors import InputError
 from fourd.geometry.frame_surface import SurfaceSettings, frame_surfaces
-from fourd.methods.assembly.closing import close_small_holes
+from fourd.geometry.hole_closing import close_small_holes
 from fourd.methods.assembly.color_fit import fit_colors, frame_colors
 from fourd.methods.assembly.guides import Guide, read_guides, video_guides
 from fourd.methods.assembly.hierarchy import Block, MergePool, assemble, merge_pool
@@ -181,7 +181,8 @@ def reconstruct_with_diagnostics(seq: PointCloudSequence, options: Options | Non
     if options.color_fit:
         block = _fit_colors(seq, meshes, block, options)
     if options.close_holes > 0:
-        block = close_small_holes(block, options.close_holes, options.close_smoothness, options.open_handles)
+        block = Block(*close_small_holes(block.faces, block.vertices, block.observed, options.close_holes,
+                                         options.close_smoothness, options.open_handles))
     return _reconstruction(seq, block, reports)
 
 

@@ -14,7 +14,7 @@ side by side in the merge processes. Then the window's frames are fitted, each f
 before: the rest fit (:class:`~fourd.methods.assembly.rest_fit.RestFit`, against the first
 frame's shape) and the colour fit (:class:`~fourd.methods.assembly.color_fit.ColorFit`,
 against its colours); the holes found in the first frame are closed in every frame
-(:class:`~fourd.methods.assembly.closing.HoleClosing`).
+(:class:`~fourd.geometry.hole_closing.HoleClosing`).
 
 The seam's map starts from the previous window's last frame **as fitted**, not as assembled,
 and the fits' corrections start again from nothing: a chain of pair maps slides and wears
@@ -48,8 +48,8 @@ import numpy as np
 from fourd.cache import StageCache, option_values, report_resumed, stage_key
 from fourd.errors import InputError
 from fourd.frame_source import FrameSource
+from fourd.geometry.hole_closing import HoleClosing, holes_to_close
 from fourd.io.npz import npz_frames, streamed_output
-from fourd.methods.assembly.closing import HoleClosing, holes_to_close
 from fourd.methods.assembly.color_fit import ColorFit, frame_colors
 from fourd.methods.assembly.hierarchy import Block, MergeReport, assemble, merge_pool
 from fourd.methods.assembly.method import (
@@ -306,7 +306,7 @@ class _Run:
         if self.color_fit is not None:
             self.color_fit.carried = np.zeros_like(self.color_fit.carried)
         written = Block(block.faces, vertices, block.observed)
-        return written if self.closing is None else self.closing.apply(written)
+        return written if self.closing is None else Block(*self.closing.apply(written.vertices, written.observed))
 
     def _start(self, meshes, colors) -> None:
         """The rest fit, the colour fit and the holes' membranes, from the first frame

@@ -1,12 +1,19 @@
-"""The assembled mesh closed at the end: holes filled and small handles opened, in every frame."""
+"""An animated mesh closed at the end (as ``assembly`` and ``surfels`` do): holes filled and small
+handles opened, in every frame."""
 
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from fourd.methods.assembly import Options, close_small_holes, holes_to_close
+from fourd.geometry import hole_closing
+from fourd.geometry.hole_closing import holes_to_close
+from fourd.methods.assembly import Options
 from fourd.methods.assembly.hierarchy import Block
 from fourd.metrics.topology import topology
 from tests.geometry.test_handles import _body_with_an_arch, _pinched
+
+
+def close_small_holes(block: Block, *args) -> Block:
+    return Block(*hole_closing.close_small_holes(block.faces, block.vertices, block.observed, *args))
 
 
 def test_a_handle_of_the_first_frame_is_cut_out_of_every_frame():

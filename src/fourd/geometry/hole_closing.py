@@ -1,5 +1,6 @@
-"""The assembled mesh closed at the end: its small holes filled by the membrane of thesis 3.6.2,
-and its small handles opened and closed the same way (topological noise).
+"""An animated mesh closed at the end: its small holes filled by the membrane of thesis 3.6.2
+(004, :mod:`.hole_filling`), and its small handles opened and closed the same way (topological
+noise). Used by ``assembly`` and ``surfels`` on their results.
 
 Each step is found in the first frame and then applied to every frame, so one connectivity serves
 the whole sequence:
@@ -35,11 +36,10 @@ from fourd.geometry.boundary_loops import boundary_edges, boundary_loops
 from fourd.geometry.fans import fragments, split_pinches
 from fourd.geometry.handles import capped_genus, open_small_handles
 from fourd.geometry.hole_filling import fill_holes, membrane_positions, small_holes
-from fourd.methods.assembly.hierarchy import Block
 
 __all__ = ["HANDLE_ROUNDS", "HoleClosing", "close_small_holes", "holes_to_close"]
 
-log = logging.getLogger("fourd.methods.assembly")
+log = logging.getLogger("fourd.geometry.hole_closing")
 
 #: Rounds of handle opening, each with balls one edge wider than the last: cutting a handle out
 #: can leave a neighbour that no ball could hold beside the cut until the opening was filled
@@ -75,10 +75,11 @@ class HoleClosing(NamedTuple):
         """The result's vertex count."""
         return len(self.vertices) if self.copies is None else len(self.copies)
 
-    def apply(self, block: Block) -> Block:
-        """``block`` (any of the frames of the block the holes were found in) with the holes
-        closed: the membranes placed in each of its frames from that frame's rim, unobserved."""
-        assembled, observed = block.vertices, block.observed
+    def apply(self, vertices: np.ndarray, observed: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(faces, vertices [T, N', 3], observed [T, N'])``: the mesh at ``vertices [T, N, 3]``
+        (any frames of the mesh the holes were found in; ``observed [T, N]``) with the holes
+        closed, the membranes placed in each frame from that frame's rim, unobserved."""
+        assembled = vertices
         if self.kept is not None:
             assembled, observed = assembled[:, self.kept], observed[:, self.kept]
         frames, count = assembled.shape[:2]
@@ -87,8 +88,8 @@ class HoleClosing(NamedTuple):
         vertices = membrane_positions(vertices, self.faces, self.filled, self.holes, smooth=self.smoothness)
         observed = np.concatenate([observed, np.zeros((frames, added), dtype=bool)], axis=1)
         if self.copies is not None:
-            return Block(self.split_faces, vertices[:, self.copies], observed[:, self.copies])
-        return Block(self.faces, vertices, observed)
+            return self.split_faces, vertices[:, self.copies], observed[:, self.copies]
+        return self.faces, vertices, observed
 
 
 def holes_to_close(first: np.ndarray, faces: np.ndarray, max_fraction: float, smoothness: float = 1.0,
@@ -179,12 +180,15 @@ def _closing(count: int, assembled: np.ndarray, vertices: np.ndarray, faces: np.
                        None if len(kept) == count else kept, split, copies)
 
 
-def close_small_holes(block: Block, max_fraction: float, smoothness: float = 1.0, handle_hops: int = 0) -> Block:
-    """``block`` with its holes of flat area at most ``max_fraction`` of their piece's area
-    (:func:`~fourd.geometry.hole_filling.small_holes`, in the first frame) filled by the
+def close_small_holes(faces: np.ndarray, vertices: np.ndarray, observed: np.ndarray, max_fraction: float,
+                      smoothness: float = 1.0, handle_hops: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(faces, vertices, observed)``: the mesh ``faces`` at ``vertices [T, N, 3]``
+    (``observed [T, N]``) with its holes of flat area at most ``max_fraction`` of their piece's
+    area (:func:`~fourd.geometry.hole_filling.small_holes`, in the first frame) filled by the
     membrane of 3.6.2 (``smoothness``: weight of its C1 terms, 1 the thesis' membrane, 0 the
     flat one), and its small handles opened and filled the same way when ``handle_hops`` > 0:
     the disks triangulated in the first frame, their vertices placed in every frame by the
-    membrane over that frame's rim, ``observed`` False."""
-    closing = holes_to_close(block.vertices[0], block.faces, max_fraction, smoothness, handle_hops)
-    return block if closing is None else closing.apply(block)
+    membrane over that frame's rim, ``observed`` False. Unchanged (the same arrays) when there
+    is nothing to close."""
+    closing = holes_to_close(vertices[0], faces, max_fraction, smoothness, handle_hops)
+    return (faces, vertices, observed) if closing is None else closing.apply(vertices, observed)
