@@ -137,6 +137,15 @@ class Options:
     fit_reach : float
         The fit ignores points farther than this from a vertex's tangent plane and moves no
         vertex farther, in point spacings ``s``.
+    close_holes : float
+        Close the result's holes whose flat area is at most this fraction of their piece's
+        (found in the reference frame; :func:`fourd.geometry.hole_closing.close_small_holes`)
+        by the membrane of 004 sec. 3.6.2, placed in every frame from that frame's rim and
+        not ``observed``: the surface no frame saw, and the stretches the border clipping
+        opened. 0: the paper's open mesh.
+    close_smoothness : float
+        Weight of that membrane's C1 terms (1: the thesis' membrane, continuing the rim's
+        slopes; 0: the flat one).
     reference : int
         The frame whose surfels are meshed and carried to every other frame and to the
         urshape (the result's ``rest``; without an urshape, this frame's mesh).
@@ -186,6 +195,8 @@ class Options:
     fit_frames: bool = True
     fit_radius: float = 2.0
     fit_reach: float = 4.0
+    close_holes: float = 0.25
+    close_smoothness: float = 1.0
     reference: int = 0
     normals_k: int = 16
     cache_dir: str | None = None
@@ -215,6 +226,8 @@ class Options:
             "final_rigid",
             "final_accel",
             "align_data",
+            "close_holes",
+            "close_smoothness",
         ):
             if not getattr(self, name) >= 0:
                 raise ValueError(f"{name} must not be negative, got {getattr(self, name)}")

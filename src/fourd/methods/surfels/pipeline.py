@@ -16,6 +16,7 @@ import numpy as np
 from fourd.animation import AnimatedMesh
 from fourd.cache import StageCache, cached, option_values, report_resumed, stage_key
 from fourd.errors import InputError
+from fourd.geometry.hole_closing import close_small_holes
 from fourd.geometry.neighbors import point_spacing
 from fourd.geometry.surface_fit import fit_along_normals
 from fourd.methods.surfels.assembly import Schedule, assemble, optimize_model
@@ -101,6 +102,8 @@ def reconstruct(seq: PointCloudSequence, options: Options | None = None) -> Anim
             reach=options.fit_reach * spacing,
         )
         mesh = dataclasses.replace(mesh, vertices=fit.vertices)
+    if options.close_holes > 0:
+        mesh = closed_mesh(mesh, options)
     log.info(
         "surfels: %d frames, %d surfels, %d vertices in %.2f s (preprocessing and seeds %.2f, "
         "merging %.2f, final optimisation %.2f, meshing and fit %.2f)",
@@ -203,6 +206,27 @@ def seed_models(
     ]
 
 
+def closed_mesh(mesh: AnimatedMesh, options: Options) -> AnimatedMesh:
+    """``mesh`` with its small holes closed (``options.close_holes``,
+    :func:`fourd.geometry.hole_closing.close_small_holes`, found in its first frame), the
+    membranes placed in every frame and in the ``rest`` from their rims, not observed."""
+    vertices, observed = mesh.vertices, mesh.observed
+    if mesh.rest is not None:
+        vertices = np.concatenate([vertices, mesh.rest[None]])
+        observed = np.concatenate([observed, observed[:1]])
+    faces, vertices, observed = close_small_holes(
+        mesh.faces, vertices, observed, options.close_holes, options.close_smoothness
+    )
+    frames = mesh.vertices.shape[0]
+    return dataclasses.replace(
+        mesh,
+        faces=faces,
+        vertices=vertices[:frames],
+        observed=observed[:frames],
+        rest=None if mesh.rest is None else vertices[frames],
+    )
+
+
 #: Options that do not act on the merges (the cache keys of the merged models leave them out).
 NOT_IN_MERGES = (
     "mesh_sigma",
@@ -212,6 +236,8 @@ NOT_IN_MERGES = (
     "fit_frames",
     "fit_radius",
     "fit_reach",
+    "close_holes",
+    "close_smoothness",
     "reference",
     "final_rigid",
     "final_accel",

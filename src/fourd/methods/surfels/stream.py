@@ -17,7 +17,9 @@ streamed").
 The mesh is that of the first frame's surfels (sec. 3.3), bound once; those surfels keep their
 index in every later window, and their rotations from the first frame are composed across
 the windows, so each window's frames are carried (:func:`~.meshing.carry_by`), fitted to
-their points (``fit_frames``) and written as they come. What the streamed run gives up
+their points (``fit_frames``), their small holes closed as in memory (``close_holes``: the
+membranes found in the first frame, placed in each frame from its rim) and written as they
+come. What the streamed run gives up
 against the paper's: a surface first seen after the first window is not in the mesh (the
 hole filling cannot reach back into written frames), and the urshape is the first window's.
 Memory holds one window and the past's :data:`HELD` + :data:`LAG` frames, plus the output's
@@ -38,6 +40,7 @@ import numpy as np
 from fourd.cache import StageCache, cached, option_values, report_resumed, stage_key
 from fourd.errors import InputError
 from fourd.frame_source import FrameSource
+from fourd.geometry.hole_closing import HoleClosing, holes_to_close
 from fourd.geometry.neighbors import point_spacing
 from fourd.geometry.surface_fit import fit_along_normals
 from fourd.io.npz import npz_frames
@@ -146,6 +149,7 @@ def _run(source: FrameSource, output: Path, options: Options) -> StreamSummary:
     values = option_values(options, without=("window", "cache_dir"))
     tail, tail_frames, key, held = None, [], "", 0
     carried: _Carried | None = None
+    closing: HoleClosing | None = None
     resumed = windows = 0
     started = _time.perf_counter()
     with contextlib.ExitStack() as stack:
@@ -173,11 +177,9 @@ def _run(source: FrameSource, output: Path, options: Options) -> StreamSummary:
                 resumed += 1
             model = unpack_model(arrays)
             windows += 1
-            if carried is None:
+            opening = carried is None
+            if opening:
                 carried = _first_mesh(model, sampling, options)
-                out = stack.enter_context(
-                    npz_frames(output, faces=carried.faces, times=source.times, rest=carried.rest)
-                )
             end = len(local) if stop == count else len(local) - LAG
             vertices, observed = _carry_window(carried, model, held, end, options)
             vertices, observed = vertices[: end - held], observed[: end - held]
@@ -189,6 +191,20 @@ def _run(source: FrameSource, output: Path, options: Options) -> StreamSummary:
                     radius=options.fit_radius * spacing,
                     reach=options.fit_reach * spacing,
                 ).vertices
+            if opening:
+                faces, rest = carried.faces, carried.rest
+                if options.close_holes > 0:
+                    closing = holes_to_close(
+                        vertices[0], faces, options.close_holes, options.close_smoothness
+                    )
+                if closing is not None:
+                    faces = closing.output_faces
+                    rest = closing.apply(rest[None], np.ones((1, len(rest)), dtype=bool))[1][0]
+                out = stack.enter_context(
+                    npz_frames(output, faces=faces, times=source.times, rest=rest)
+                )
+            if closing is not None:
+                _, vertices, observed = closing.apply(vertices, observed)
             out.write(vertices, observed)
             log.info(
                 "surfels: %d of %d frames written, %d surfels (%.1f s)",
@@ -202,7 +218,8 @@ def _run(source: FrameSource, output: Path, options: Options) -> StreamSummary:
             # and the others would pile up window by window
             tail = surfel_subset(_frames_of(model, begin), np.arange(carried.identity))
             tail_frames, held = local[begin:], end - begin
-    return StreamSummary(output, count, len(carried.rest), windows, resumed, 0.0)
+    vertex_count = len(carried.rest) if closing is None else closing.output_count
+    return StreamSummary(output, count, vertex_count, windows, resumed, 0.0)
 
 
 def _window_model(
