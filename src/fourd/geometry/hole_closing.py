@@ -50,9 +50,9 @@ HANDLE_ROUNDS = 3
 
 class HoleClosing(NamedTuple):
     """The membranes of :func:`close_small_holes`, made in the first frame, to place in every
-    frame: the closed mesh's ``faces``, its ``vertices`` in the first frame (the assembled ones
+    frame: the closed mesh's ``faces``, its ``vertices`` in the first frame (the original ones
     kept first, then the membranes'), the ``filled [N']`` membrane vertices, the ``holes``'
-    rims, the C1 weight ``smoothness`` and the assembled vertices ``kept [K]`` (None: all; the
+    rims, the C1 weight ``smoothness`` and the original vertices ``kept [K]`` (None: all; the
     others were inside a handle cut out). With pinches, ``split_faces`` are the faces given to
     the result and ``copies [N' + P]`` the vertex of ``vertices`` each of its vertices copies."""
 
@@ -79,12 +79,11 @@ class HoleClosing(NamedTuple):
         """``(faces, vertices [T, N', 3], observed [T, N'])``: the mesh at ``vertices [T, N, 3]``
         (any frames of the mesh the holes were found in; ``observed [T, N]``) with the holes
         closed, the membranes placed in each frame from that frame's rim, unobserved."""
-        assembled = vertices
         if self.kept is not None:
-            assembled, observed = assembled[:, self.kept], observed[:, self.kept]
-        frames, count = assembled.shape[:2]
+            vertices, observed = vertices[:, self.kept], observed[:, self.kept]
+        frames, count = vertices.shape[:2]
         added = len(self.vertices) - count
-        vertices = np.concatenate([assembled, np.repeat(self.vertices[None, count:], frames, axis=0)], axis=1)
+        vertices = np.concatenate([vertices, np.repeat(self.vertices[None, count:], frames, axis=0)], axis=1)
         vertices = membrane_positions(vertices, self.faces, self.filled, self.holes, smooth=self.smoothness)
         observed = np.concatenate([observed, np.zeros((frames, added), dtype=bool)], axis=1)
         if self.copies is not None:
@@ -100,7 +99,7 @@ def holes_to_close(first: np.ndarray, faces: np.ndarray, max_fraction: float, sm
     nothing to do."""
     count = len(first)
     vertices, faces = np.asarray(first, dtype=np.float64), np.asarray(faces, dtype=np.int64)
-    assembled = faces
+    original = faces
     dropped = fragments(faces, count)
     if dropped.any():
         log.info("dropped %d faces of fragments (flaps hanging by a vertex, crumbs)", int(dropped.sum()))
@@ -122,7 +121,7 @@ def holes_to_close(first: np.ndarray, faces: np.ndarray, max_fraction: float, sm
             filled_holes += opened
         except InputError as error:
             log.warning("small handles left: %s", error)
-    closing = _closing(count, assembled, vertices, faces, filled_holes, smoothness)
+    closing = _closing(count, original, vertices, faces, filled_holes, smoothness)
     if len(vertices) == count and not filled_holes and not dropped.any() and closing.copies is None:
         return None
     return closing
@@ -153,16 +152,16 @@ def _open_handles(vertices: np.ndarray, faces: np.ndarray, smoothness: float, ho
     return vertices, faces, filled_holes
 
 
-def _closing(count: int, assembled: np.ndarray, vertices: np.ndarray, faces: np.ndarray, holes: list,
+def _closing(count: int, original: np.ndarray, vertices: np.ndarray, faces: np.ndarray, holes: list,
              smoothness: float) -> HoleClosing:
     """The :class:`HoleClosing` of the closed mesh ``(vertices, faces)`` whose first ``count``
-    vertices are the assembled ones (their faces ``assembled``): those a cut-out handle took
+    vertices are the original ones (their faces ``original``): those a cut-out handle took
     every face of are dropped, as are membrane vertices of a cut-out handle; ``holes``
     renumbered to match; the pinches of the result split."""
     used = np.zeros(len(vertices), dtype=bool)
     used[faces.ravel()] = True
     used_before = np.zeros(count, dtype=bool)
-    used_before[assembled.ravel()] = True
+    used_before[original.ravel()] = True
     kept = np.flatnonzero(used[:count] | ~used_before)
     order = np.concatenate([kept, count + np.flatnonzero(used[count:])])
     number = np.full(len(vertices), -1, dtype=np.int64)
