@@ -112,3 +112,9 @@ def test_a_turning_blob_in_windows_turns_with_its_scans_without_a_jump_and_resum
     assert len(resumed) == 3
     np.testing.assert_array_equal(again.faces, anim.faces)
     np.testing.assert_allclose(again.vertices, anim.vertices, atol=1e-6)
+    # options that act only on the mesh (its holes, its fit to the points) keep the windows
+    caplog.clear()
+    with caplog.at_level("INFO", logger="fourd.methods.surfels"):
+        reconstruct(scans, method="surfels", **{**options, "close_holes": 0.0, "fit_frames": True})
+    resumed = [r.getMessage() for r in caplog.records if "the window of frames" in r.getMessage()]
+    assert len(resumed) == 3

@@ -227,8 +227,9 @@ def closed_mesh(mesh: AnimatedMesh, options: Options) -> AnimatedMesh:
     )
 
 
-#: Options that do not act on the merges (the cache keys of the merged models leave them out).
-NOT_IN_MERGES = (
+#: Options that act only on the mesh of a model, not on the model (the cache keys of the
+#: merged models and of the streamed windows leave them out).
+MESH_ONLY = (
     "mesh_sigma",
     "mesh_cell",
     "mesh_clip",
@@ -239,6 +240,11 @@ NOT_IN_MERGES = (
     "close_holes",
     "close_smoothness",
     "reference",
+)
+
+#: Options that do not act on the merges (the cache keys of the merged models leave them out).
+NOT_IN_MERGES = (
+    *MESH_ONLY,
     "final_rigid",
     "final_accel",
     "final_iterations",

@@ -59,6 +59,7 @@ from fourd.methods.surfels.meshing import (
 from fourd.methods.surfels.model import Model, pack_model, surfel_subset, unpack_model
 from fourd.methods.surfels.options import MIN_FRAMES, Options, energy_weights
 from fourd.methods.surfels.pipeline import (
+    MESH_ONLY,
     assembly_schedule,
     merge_keys,
     meshing_options,
@@ -146,7 +147,7 @@ def _run(source: FrameSource, output: Path, options: Options) -> StreamSummary:
     noise = options.noise or spacing
     schedule = assembly_schedule(options, noise, sampling)
     final = energy_weights(options, noise, sampling, final=True)
-    values = option_values(options, without=("window", "cache_dir"))
+    values = option_values(options, without=("window", *MESH_ONLY))
     tail, tail_frames, key, held = None, [], "", 0
     carried: _Carried | None = None
     closing: HoleClosing | None = None
