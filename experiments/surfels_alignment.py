@@ -40,6 +40,19 @@ Whole runs (`experiments/surfels_completeness.py`, fitted, 20k samples; Chamfer 
 completeness-95 / correspondence mean / last): crane 0.0047 / 0.0033 / 0.0218 / 0.0108 / 0.0180
 -> 0.0046 / 0.0030 / 0.0228 / 0.0092 / 0.0128; crane-130 0.0061 / 0.0053 / 0.0253 / 0.0239 /
 0.0266 -> 0.0047 / 0.0035 / 0.0212 / 0.0131 / 0.0162. So `align_percentile` is 100.
+
+Crane-50 (held out, the fastest stretch; 2026-12-05, eleventh session, at 100): over the pairs
+0.0076 / 0.0191. Pairs 7-9 move 0.030-0.036 of the diagonal on average and 0.081-0.097 at the
+90th percentile (5-6 eps_sampl), and the alignment leaves 60-80% of the fast part undone
+(0.0139-0.0185 / 0.051-0.075). These are the frames where three pieces of `surfels`' crane-50
+mesh lose their data for good (`experiments/surfels_pieces.py`). Nothing of the alignment's
+settings reaches them (pairs 7 / 8 / 9, 90th percentile; the seeds kept, the settings
+acting on the alignment only): 48 steps instead of 12 0.0595 / 0.0748 / 0.0511 (the same: the
+correspondences settle), `rigid` 0.25 0.0492 / 0.0738 / 0.0519 (over the pairs 0.0062 /
+0.0163), `align_data` 4 0.0547 / 0.0750 / 0.0536, the doublet tolerance at 2 or 4 eps_top
+0.0567 / 0.0729 / 0.0529. A limb that moves several times its own sampling between two scans
+is beyond the nearest-point correspondences of any ICP; what would reach it is a
+correspondence that does not come from proximity (appearance, or a rigid search per part).
 """
 
 from __future__ import annotations
