@@ -13,15 +13,17 @@ each frame. Last, the bench's figures with the components under 1%, 3% and 5% of
 (by faces) dropped.
 
 Answer (2026-12-05, eleventh session, at d3a69bc; 1,288 surfels, 8,388 + 8 + 8 + 78 +
-89 + 17 + 19 + 49 + 37 + 201 faces): not crumbs. Every small component lies on the truth in
-frame 0 (median 0.001-0.003 of the diagonal; one of 78 faces, 40% observed, 0.028), and all but
-one is joined to the body in T_S (the largest graph component, 1,248 of 1,288 surfels): the
-meshing's clipping cuts them off where the surfels are sparse (a wrist, an ankle). Three of them
-(49, 37, 201 faces: a hand and its fingers) follow the truth to frame 7 and then lose their data
-for good: observed 1.0 -> 0.33 / 0.6 / 0.71 at frame 8, about 0 from frame 11 on, and their
-surfels end 0.05-0.12 of the diagonal from the truth at frame 19. Frames 7-9 are the fastest
-pair of the stretch, where the alignment leaves most of the fast part undone
-(`experiments/surfels_alignment.py`): the hand moves 5-6 eps_sampl between two scans, beyond
+89 + 17 + 19 + 49 + 37 + 201 faces): not crumbs. Five of the nine small components lie on the
+truth in frame 0 (median 0.0010-0.0014 of the diagonal), two of 8 faces 0.005-0.009 off, one of
+78 faces 0.028 (40% observed there, 0.002 from frame 5 on) and one of 89 faces 0.002. All but
+two (17 and 19 faces, their own pieces of the graph) are joined to the body in T_S (the largest
+graph component, 1,248 of 1,288 surfels): the meshing's clipping cuts them off where the
+surfels are sparse (a wrist, an ankle). Three of them (49, 37, 201 faces: one limb's end)
+follow the truth to frame 7 and then lose their data for good: observed 1.0 -> 0.33 / 0.6 / 0.71 at frame
+8, about 0 from frame 11 on, and their surfels end 0.05-0.12 of the diagonal from the truth at
+frame 19; the one of 89 faces loses its data over frames 15-18 (0.047 off). Frames 7-9 are the
+fastest pairs of the stretch, where the alignment leaves most of the fast part undone
+(`experiments/surfels_alignment.py`): it moves 5-6 eps_sampl between two scans, beyond
 nearest-point correspondences. Dropping the small components costs what they cover (Chamfer /
 accuracy / completeness-95 / correspondence mean / last, 20k samples):
 
@@ -29,7 +31,8 @@ accuracy / completeness-95 / correspondence mean / last, 20k samples):
     under 1% of the largest   0.0067 / 0.0061 / 0.0286 / 0.0269 / 0.0393
     under 3% or 5%            0.0085 / 0.0058 / 0.0577 / 0.0248 / 0.0360
 
-So they stay: the correspondence they cost is that of a lost hand, which dropping it only hides.
+So they stay: the correspondence they cost is that of a lost limb's end, which dropping it only
+hides.
 """
 
 from __future__ import annotations
