@@ -12,15 +12,15 @@ component of the graph T_S, the fraction observed and their median distance to t
 each frame. Last, the bench's figures with the components under 1%, 3% and 5% of the largest
 (by faces) dropped.
 
-Answer (2026-12-05, eleventh session, at d3a69bc; 1,288 surfels, 8,388 + 8 + 8 + 78 +
-89 + 17 + 19 + 49 + 37 + 201 faces): not crumbs. Five of the nine small components lie on the
-truth in frame 0 (median 0.0010-0.0014 of the diagonal), two of 8 faces 0.005-0.009 off, one of
-78 faces 0.028 (40% observed there, 0.002 from frame 5 on) and one of 89 faces 0.002. All but
-two (17 and 19 faces, their own pieces of the graph) are joined to the body in T_S (the largest
-graph component, 1,248 of 1,288 surfels): the meshing's clipping cuts them off where the
-surfels are sparse (a wrist, an ankle). Three of them (49, 37, 201 faces: one limb's end)
-follow the truth to frame 7 and then lose their data for good: observed 1.0 -> 0.33 / 0.6 /
-0.71 at frame 8, about 0 from frame 11 on, and their surfels end 0.05-0.12 of the diagonal from the truth at
+Answer (2026-12-05, eleventh session, at d3a69bc; 1,288 surfels, 8,388 + 8 + 8 + 78 + 89 + 17 +
+19 + 49 + 37 + 201 faces): not crumbs. Five of the nine small components lie on the truth in
+frame 0 (median 0.0010-0.0014 of the diagonal), two of 8 faces 0.005-0.009 off, one of 78 faces
+0.028 (40% observed there, 0.002 from frame 5 on) and one of 89 faces 0.002. All but two (17
+and 19 faces, their own pieces of the graph) are joined to the body in T_S (the largest graph
+component, 1,248 of 1,288 surfels): the meshing's clipping cuts them off where the surfels are
+sparse (a wrist, an ankle). Three of them (49, 37, 201 faces: one limb's end) follow the truth
+to frame 7 and then lose their data for good: observed 1.0 -> 0.33 / 0.6 / 0.71 at frame 8,
+about 0 from frame 11 on, and their surfels end 0.05-0.12 of the diagonal from the truth at
 frame 19; the one of 89 faces loses its data over frames 15-18 (0.047 off). Frames 7-9 are the
 fastest pairs of the stretch, where the alignment leaves most of the fast part undone
 (`experiments/surfels_alignment.py`): it moves 5-6 eps_sampl between two scans, beyond
