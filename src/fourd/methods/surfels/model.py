@@ -9,9 +9,11 @@ section 3.2 "Iterative model assembly" (``001_3fedd1c3a0ac4198.txt``).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
 
 from fourd.methods.surfels.match import Data, associate
 from fourd.methods.surfels.state import SurfelState
@@ -124,4 +126,48 @@ def surfel_subset(model: Model, keep: np.ndarray) -> Model:
         ),
         model.start,
         model.observed[:, keep],
+    )
+
+
+def unsupported_pieces(model: Model, min_piece: int) -> np.ndarray:
+    """Surfels of the pieces of ``T_S`` (connected components of its edges) with fewer than
+    ``min_piece`` surfels that have no data in some frame (none of their surfels
+    ``observed`` there): bool [S].
+
+    With no neighbours to carry it, such a piece has only the acceleration prior (eq. 10)
+    in a frame without data: its trajectory there is the extrapolation of its last observed
+    velocity, and a piece lost early in a long take flies off along it (horse-gallop: 78
+    surfels alone in the graph and 10 in pieces of 3-4, last observed 4-40 frames before the
+    end, up to five diagonals away in the last frame)."""
+    count = model.state.count
+    if min_piece <= 1 or count == 0:
+        return np.zeros(count, dtype=bool)
+    edges = model.topology.edges
+    graph = coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(count, count))
+    pieces, label = connected_components(graph, directed=False)
+    seen = np.zeros((model.observed.shape[0], pieces), dtype=bool)
+    frame, surfel = np.nonzero(model.observed)
+    seen[frame, label[surfel]] = True
+    small = np.bincount(label, minlength=pieces) < min_piece
+    return (small & ~seen.all(axis=0))[label]
+
+
+def without_surfels(model: Model, drop: np.ndarray) -> Model:
+    """``model`` without the surfels ``drop`` (bool [S]), its urshape (when it has one)
+    with them."""
+    if not drop.any():
+        return model
+    keep = np.flatnonzero(~drop)
+    urshape = model.urshape
+    subset = surfel_subset(model, keep)
+    if urshape is None:
+        return subset
+    return replace(
+        subset,
+        urshape=replace(
+            urshape,
+            positions=urshape.positions[keep],
+            normals=urshape.normals[keep],
+            rotations=urshape.rotations[:, keep],
+        ),
     )

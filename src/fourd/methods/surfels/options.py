@@ -146,6 +146,12 @@ class Options:
     close_smoothness : float
         Weight of that membrane's C1 terms (1: the thesis' membrane, continuing the rim's
         slopes; 0: the flat one).
+    min_piece : int
+        Pieces of the surfel graph (connected components of ``T_S``) with fewer surfels than
+        this that have no data in some frame are left out of the mesh: with no neighbours,
+        their trajectory there is the acceleration prior's extrapolation, and one lost early
+        in a long take flies off (:func:`~.model.unsupported_pieces`). 0: every surfel is
+        meshed (the paper). In memory only (``window`` 0).
     reference : int
         The frame whose surfels are meshed and carried to every other frame and to the
         urshape (the result's ``rest``; without an urshape, this frame's mesh).
@@ -197,6 +203,7 @@ class Options:
     fit_reach: float = 4.0
     close_holes: float = 0.25
     close_smoothness: float = 1.0
+    min_piece: int = 8
     reference: int = 0
     normals_k: int = 16
     cache_dir: str | None = None
@@ -249,6 +256,7 @@ class Options:
             "merge_reach",
             "final_iterations",
             "cg_iterations",
+            "min_piece",
             "window",
         ):
             if getattr(self, name) < 0:

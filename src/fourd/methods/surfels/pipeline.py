@@ -22,7 +22,7 @@ from fourd.geometry.surface_fit import fit_along_normals
 from fourd.methods.surfels.assembly import Schedule, assemble, optimize_model
 from fourd.methods.surfels.match import MatchOptions
 from fourd.methods.surfels.meshing import MeshingOptions, surfel_mesh
-from fourd.methods.surfels.model import Model
+from fourd.methods.surfels.model import Model, unsupported_pieces, without_surfels
 from fourd.methods.surfels.optimizer import GaussNewtonOptions
 from fourd.methods.surfels.options import MIN_FRAMES, Options, energy_weights
 from fourd.methods.surfels.seeds import FramePoints, prepare_frame, seed_model
@@ -84,6 +84,15 @@ def reconstruct(seq: PointCloudSequence, options: Options | None = None) -> Anim
             urshape={"off": "off", "rest": "rest"}.get(options.urshape, "joint"),
         )
     optimized = _time.perf_counter()
+    lost = unsupported_pieces(model, options.min_piece)
+    if lost.any() and not lost.all():
+        log.info(
+            "surfels: %d surfels in pieces of fewer than %d without data in some frame are "
+            "left out of the mesh",
+            int(lost.sum()),
+            options.min_piece,
+        )
+        model = without_surfels(model, lost)
     mesh = surfel_mesh(
         model.state,
         sampling,
@@ -239,6 +248,7 @@ MESH_ONLY = (
     "fit_reach",
     "close_holes",
     "close_smoothness",
+    "min_piece",
     "reference",
 )
 
