@@ -136,6 +136,17 @@ def model_of(scans, options):
 TRACED = (0, 8, 17)
 
 
+def cached_model(path, scans, options):
+    """``model_of(scans, options)``, pickled at ``path`` and read from there when it exists."""
+    if os.path.exists(path):
+        with open(path, "rb") as f:
+            return pickle.load(f)
+    result = model_of(scans, options)
+    with open(path, "wb") as f:
+        pickle.dump(result, f)
+    return result
+
+
 def trace(t, truth, model, lost, sampling, diagonal):
     """Where frame ``t``'s lost truth (data, no surfel) was in frame 0, and whether the
     surfels there in frame 0 followed it."""
@@ -174,13 +185,7 @@ def main(label: str, clips) -> None:
     suffix = "".join(f"-{key}={value}" for key, value in sorted(settings.items()))
     options = Options(cache_dir=f"/tmp/surfels-compl/{label}", **settings)
     path = f"/tmp/surfels-compl/{label}{suffix}.pickle"
-    if os.path.exists(path):
-        with open(path, "rb") as f:
-            model, frames, spacing, sampling = pickle.load(f)
-    else:
-        model, frames, spacing, sampling = model_of(scans, options)
-        with open(path, "wb") as f:
-            pickle.dump((model, frames, spacing, sampling), f)
+    model, frames, spacing, sampling = cached_model(path, scans, options)
     diagonal = truth.diagonal()
     print(f"{label}: {model.state.count} surfels, eps_sampl {sampling:.4g}, spacing {spacing:.4g}, "
           f"diagonal {diagonal:.4g}; observed per frame {model.observed.mean():.3f}")

@@ -39,14 +39,13 @@ from __future__ import annotations
 
 import dataclasses
 import os
-import pickle
 import sys
 
 import numpy as np
 from normal_fit import figures, scans_of
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
-from surfels_completeness import model_of
+from surfels_completeness import cached_model
 
 from fourd.geometry.surface_fit import fit_along_normals
 from fourd.methods.surfels import pipeline as sp
@@ -62,13 +61,7 @@ def main(label: str, min_pieces: list[int]) -> None:
     truth, scans = scans_of(label)
     options = Options(cache_dir=f"{FOLDER}/cache-{label}")
     path = f"{FOLDER}/{label}-model.pickle"
-    if os.path.exists(path):
-        with open(path, "rb") as f:
-            model, frames, spacing, sampling = pickle.load(f)
-    else:
-        model, frames, spacing, sampling = model_of(scans, options)
-        with open(path, "wb") as f:
-            pickle.dump((model, frames, spacing, sampling), f)
+    model, frames, spacing, sampling = cached_model(path, scans, options)
     diagonal, count = truth.diagonal(), model.state.count
     edges = model.topology.edges
     graph = coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(count, count))
