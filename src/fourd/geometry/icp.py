@@ -19,6 +19,9 @@ from typing import NamedTuple
 import numpy as np
 from scipy.spatial import cKDTree
 
+#: Sources of at least this many points query the target's k-d tree in parallel.
+PARALLEL_QUERIES = 5000
+
 
 class RigidFit(NamedTuple):
     """The outcome of :func:`rigid_icp`.
@@ -59,6 +62,7 @@ def rigid_icp(
     rotate: bool = True,
     rotation_evidence: float = 0.0,
     max_turn: float = 180.0,
+    tree: cKDTree | None = None,
 ) -> RigidFit:
     """Rigid motion moving ``source`` [P, 3] onto the surface of ``target`` [Q, 3] with unit
     ``target_normals`` [Q, 3] by point-to-plane ICP.
@@ -86,6 +90,8 @@ def rigid_icp(
         Below 180, the translation alone is returned too when the rigid motion turns by more
         than this many degrees (between two adjacent frames of a capture such a turn is an
         ICP minimum a deformation chose: a ball squashing matches itself turned on its side).
+    tree : cKDTree, optional
+        The target's k-d tree, when the caller fits many sources to one target.
 
     Examples
     --------
@@ -114,7 +120,7 @@ def rigid_icp(
         raise ValueError(f"rotation_evidence must lie in [0, 1), got {rotation_evidence}")
     if not 0 <= max_turn <= 180:
         raise ValueError(f"max_turn must lie in [0, 180] degrees, got {max_turn}")
-    tree = cKDTree(target)
+    tree = cKDTree(target) if tree is None else tree
     pairs = (source, source_normals, tree, target, target_normals)
     settings = (iterations, trim, max_angle, tolerance)
     fit = _fit(*pairs, *settings, rotate=rotate)
@@ -137,10 +143,12 @@ def _fit(source, source_normals, tree, target, target_normals, iterations, trim,
     rotation, translation = np.eye(3), np.zeros(3)
     rms, done = 0.0, 0
     cosine = np.cos(np.radians(max_angle))
+    # threads cost more than they save on a small source (a part of a few dozen points)
+    workers = -1 if len(source) >= PARALLEL_QUERIES else 1
     for step in range(1, iterations + 1):
         done = step
         moved = source @ rotation.T + translation
-        distance, nearest = tree.query(moved, workers=-1)
+        distance, nearest = tree.query(moved, workers=workers)
         keep = distance <= np.percentile(distance, trim)
         if source_normals is not None:
             turned = source_normals @ rotation.T

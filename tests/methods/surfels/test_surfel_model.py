@@ -55,3 +55,38 @@ def test_a_lone_surfel_with_data_in_every_frame_stays():
     model = _model(np.ones(4, dtype=bool))
     np.testing.assert_array_equal(np.flatnonzero(unsupported_pieces(model, 8)), [11, 12])
     assert without_surfels(model, np.zeros(13, dtype=bool)) is model
+
+
+def _plane_and_lost_pair() -> Model:
+    """Frames ``T = 3``: a flat 12 x 12 grid of surfels one unit apart with data in every
+    frame, and a pair of surfels far off with data in frame 0 only."""
+    frames = 3
+    x, y = np.meshgrid(np.arange(12.0), np.arange(12.0))
+    grid = np.stack([x.ravel(), y.ravel(), 0 * x.ravel()], 1)
+    base = np.concatenate([grid, [[30.0, 5, 0], [31, 5, 0]]])
+    positions = np.repeat(base[None], frames, axis=0)
+    normals = np.broadcast_to([0.0, 0.0, 1.0], positions.shape).copy()
+    index = np.arange(144).reshape(12, 12)
+    edges = np.concatenate(
+        [
+            np.stack([index[:, :-1].ravel(), index[:, 1:].ravel()], 1),
+            np.stack([index[:-1].ravel(), index[1:].ravel()], 1),
+            [[144, 145]],
+        ]
+    )
+    observed = np.zeros((frames, len(base)), dtype=bool)
+    observed[:, :144] = True
+    observed[0, 144:] = True
+    return Model(surfel_state(positions, normals), Topology(edges, len(base), 2.0), 0, observed)
+
+
+def test_the_streamed_mesh_leaves_out_the_small_pieces_without_data_too():
+    from fourd.methods.surfels.options import Options
+    from fourd.methods.surfels.stream import _first_mesh
+
+    model = _plane_and_lost_pair()
+    for min_piece, pair_meshed in ((8, False), (0, True)):
+        carried = _first_mesh(model, 1.0, Options(min_piece=min_piece))
+        assert (carried.binding.surfel >= 144).any() == pair_meshed
+        assert (carried.rest[:, 0] > 20).any() == pair_meshed
+        assert (carried.rest[:, 0] < 12).any()  # the plane is meshed either way

@@ -29,6 +29,7 @@ from fourd.methods.surfels.energy import Weights
 from fourd.methods.surfels.match import MatchOptions, frame_data
 from fourd.methods.surfels.model import Model
 from fourd.methods.surfels.optimizer import GaussNewtonOptions, free_unknowns, gauss_newton
+from fourd.methods.surfels.part_search import PartSearch, part_search
 from fourd.methods.surfels.state import layout, surfel_state
 
 #: The rigid start keeps its rotation only when that lowers the point-to-plane rms of a
@@ -67,6 +68,7 @@ def align_ranges(
     data_weight: float,
     rigid_start: bool = True,
     percentile: float = 100.0,
+    parts: PartSearch | None = None,
 ) -> Alignment:
     """Align ``left``'s last frame to the data ``points`` [P, 3] (oriented ``normals``) of
     the frame after it, the right range's first (sec. 3.2): only the data term (weight
@@ -86,7 +88,11 @@ def align_ranges(
     85). Between two frames of a fast motion the largest distances are those of the limbs that
     moved most, so a percentile cutoff drops exactly them and they stay behind; at 100 only
     the angle and doublet tests reject points (the outliers are gone with the tensor voting,
-    the surface one frame sees and the other does not fails the doublet test)."""
+    the surface one frame sees and the other does not fails the doublet test).
+
+    With ``parts``, each part of the surfels is then searched for on its own
+    (:func:`.part_search.part_search`) before the non-rigid alignment: a limb that moved
+    several ``eps_sampl`` is beyond the nearest-point correspondences."""
     last = left.state.frames - 1
     p, n = left.state.positions[last], left.state.normals[last]
     if rigid_start:
@@ -99,13 +105,14 @@ def align_ranges(
             max_turn=MAX_START_TURN,
         )
         moved, turned = p @ fit.rotation.T + fit.translation, n @ fit.rotation.T
-        state = surfel_state(
-            np.stack([p, moved]),
-            np.stack([n, turned]),
-            np.broadcast_to(fit.rotation, (1, len(p), 3, 3)),
-        )
+        rotations = np.broadcast_to(fit.rotation, (len(p), 3, 3))
     else:
-        state = surfel_state(np.stack([p, p]), np.stack([n, n]))
+        moved, turned, rotations = p, n, np.broadcast_to(np.eye(3), (len(p), 3, 3))
+    if parts is not None:
+        found = part_search(moved, turned, left.topology, points, normals, parts)
+        moved, turned = found.positions, found.normals
+        rotations = found.rotations @ rotations
+    state = surfel_state(np.stack([p, moved]), np.stack([n, turned]), rotations[None])
     data = frame_data([np.zeros((0, 3)), points], normals=[np.zeros((0, 3)), normals])
     align_weights = Weights(
         match=data_weight, rigid=weights.rigid, rigid_normal=weights.rigid_normal

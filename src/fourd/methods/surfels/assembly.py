@@ -36,6 +36,7 @@ from fourd.methods.surfels.match import MatchOptions, frame_data
 from fourd.methods.surfels.model import Model, observed_surfels, pack_model, unpack_model
 from fourd.methods.surfels.motion import fit_rotations
 from fourd.methods.surfels.optimizer import GaussNewtonOptions, free_unknowns, gauss_newton
+from fourd.methods.surfels.part_search import PartSearch
 from fourd.methods.surfels.resample import redundant_surfels
 from fourd.methods.surfels.state import SurfelState, layout
 from fourd.methods.surfels.topology import build_topology
@@ -71,6 +72,8 @@ class Schedule(NamedTuple):
         serves every prior.
     align_percentile : float
         The alignment's cutoff percentile (:func:`.align.align_ranges`).
+    parts : PartSearch or None
+        The alignment's rigid search per part (:mod:`.part_search`); None: none.
     """
 
     sampling: float
@@ -85,6 +88,7 @@ class Schedule(NamedTuple):
     reach: int = 0
     geodesic: bool = True
     align_percentile: float = 100.0
+    parts: PartSearch | None = None
 
 
 def range_data(frames: list, start: int, stop: int):
@@ -216,6 +220,7 @@ def merge(
         schedule.align,
         data_weight=schedule.align_data,
         percentile=schedule.align_percentile,
+        parts=schedule.parts,
     )
     backward = align_ranges(
         _first_frame(right),
@@ -225,6 +230,7 @@ def merge(
         schedule.align,
         data_weight=schedule.align_data,
         percentile=schedule.align_percentile,
+        parts=schedule.parts,
     )
     ahead = forward.stretch <= backward.stretch
     nl, nr = left.state.frames, right.state.frames

@@ -82,6 +82,17 @@ class Options:
         their surfels (sec. 3.2; paper: 85). 100: every point that passes the 45 degree and
         doublet tests. In a fast motion the farthest points are the limbs that moved most,
         and a lower cutoff leaves them behind.
+    part_size : float
+        Before that alignment's non-rigid ICP, the surfels are split into parts of about this
+        many ``eps_sampl`` and each part is searched for rigidly among the data
+        (:mod:`.part_search`, beyond the paper): a limb that moved several ``eps_sampl``
+        between two scans is beyond nearest-point correspondences. 0: no search (the paper).
+    part_reach : float
+        The longest translation searched per part, in ``eps_sampl`` (the grid's step is one
+        ``eps_sampl``; the cost grows with its cube).
+    part_gain : float
+        A part moves only when the search puts this fraction of its surfels more within
+        ``eps_sampl`` of data of agreeing normal than its start did.
     max_stretch : float
         Stitching filter: an edge whose length changes over its trajectory by more than this
         factor is rejected (paper: 1.5).
@@ -185,6 +196,9 @@ class Options:
     align_data: float = 1.0
     align_iterations: int = 12
     align_percentile: float = 100.0
+    part_size: float = 4.0
+    part_reach: float = 6.0
+    part_gain: float = 0.2
     max_stretch: float = 1.5
     tensor_ratio: float = 0.8
     iterations: int = 4
@@ -233,6 +247,9 @@ class Options:
             "final_rigid",
             "final_accel",
             "align_data",
+            "part_size",
+            "part_reach",
+            "part_gain",
             "close_holes",
             "close_smoothness",
         ):

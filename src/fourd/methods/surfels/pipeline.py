@@ -25,6 +25,7 @@ from fourd.methods.surfels.meshing import MeshingOptions, surfel_mesh
 from fourd.methods.surfels.model import Model, unsupported_pieces, without_surfels
 from fourd.methods.surfels.optimizer import GaussNewtonOptions
 from fourd.methods.surfels.options import MIN_FRAMES, Options, energy_weights
+from fourd.methods.surfels.part_search import PartSearch
 from fourd.methods.surfels.seeds import FramePoints, prepare_frame, seed_model
 from fourd.progress import progress
 from fourd.sequence import PointCloudSequence
@@ -191,6 +192,16 @@ def assembly_schedule(options: Options, noise: float, sampling: float) -> Schedu
         reach=options.merge_reach,
         geodesic=options.geodesic,
         align_percentile=options.align_percentile,
+        parts=(
+            PartSearch(
+                options.part_size * sampling,
+                sampling,
+                options.part_reach * sampling,
+                options.part_gain,
+            )
+            if options.part_size > 0 and options.part_reach > 0
+            else None
+        ),
     )
 
 

@@ -56,7 +56,13 @@ from fourd.methods.surfels.meshing import (
     observed_vertices,
     surfel_frames,
 )
-from fourd.methods.surfels.model import Model, pack_model, surfel_subset, unpack_model
+from fourd.methods.surfels.model import (
+    Model,
+    pack_model,
+    surfel_subset,
+    unpack_model,
+    unsupported_pieces,
+)
 from fourd.methods.surfels.options import MIN_FRAMES, Options, energy_weights
 from fourd.methods.surfels.pipeline import (
     MESH_ONLY,
@@ -264,13 +270,21 @@ def _window_model(
 
 def _first_mesh(model: Model, sampling: float, options: Options) -> _Carried:
     """The first window's frame 0 meshed (sec. 3.3) and bound to its surfels; the ``rest`` is
-    that mesh, or carried to the window's urshape."""
+    that mesh, or carried to the window's urshape. The small pieces of the graph that lack
+    data in some frame of the window are left out (``min_piece``,
+    :func:`.model.unsupported_pieces`); a piece that loses its data in a later window stays."""
     state, meshing = model.state, meshing_options(options)
-    positions, normals = state.positions[0], state.normals[0]
+    keep = np.arange(state.count)
+    lost = unsupported_pieces(model, options.min_piece)
+    if lost.any() and not lost.all():
+        keep = np.flatnonzero(~lost)
+    positions, normals = state.positions[0, keep], state.normals[0, keep]
     mesh = mesh_frame(positions, normals, sampling, options=meshing)
     if len(mesh.faces) == 0:
         raise InputError("surfels: the first frame's surfels give no surface to mesh")
     binding = bind_vertices(mesh.vertices, positions, normals, sampling, options=meshing)
+    binding = binding._replace(surfel=keep[binding.surfel])
+    normals = state.normals[0]
     rest = mesh.vertices
     if model.urshape is not None:
         rest = carry(

@@ -1,0 +1,76 @@
+"""Question: a limb that moves several `eps_sampl` between two scans is beyond the nearest-point
+correspondences of `surfels`' alignment (`experiments/surfels_alignment.py`, crane-50 pairs
+7-9). Does a rigid search per part, after the whole-body rigid start and before the non-rigid
+ICP, reach it?
+
+    PYTHONPATH=src:experiments python experiments/surfels_part_search.py crane-50 [PART ...]
+
+PART is `part_size` in eps_sampl (0: no part search, the paper's alignment). For each pair of
+adjacent frames (``PAIRS=7,8,9`` picks some), frame t's seed model (cached as by
+`surfels_alignment.py`) is aligned to frame t + 1's points by `align_ranges` with the schedule's
+part search (`fourd.methods.surfels.part_search`; ``SET=part_reach=4,...`` sets options). Error
+as in `surfels_alignment.py`: mean / 90th percentile distance of each surfel to where the truth
+went, fractions of the diagonal; and the seconds of the alignment.
+"""
+
+from __future__ import annotations
+
+import ast
+import os
+import pickle
+import sys
+import time
+
+import numpy as np
+from surfels_alignment import scans_of, where_truth_went
+
+from fourd.cache import StageCache
+from fourd.geometry.neighbors import point_spacing
+from fourd.methods.surfels import pipeline as sp
+from fourd.methods.surfels.align import align_ranges
+from fourd.methods.surfels.options import Options
+
+
+def main(label, sizes):
+    settings = dict(
+        (key, ast.literal_eval(value))
+        for key, value in (item.split("=") for item in os.environ.get("SET", "").split(",") if item)
+    )
+    truth, scans = scans_of(label)
+    diagonal = truth.diagonal()
+    spacing = point_spacing(scans.frames[0].points)
+    options = Options(cache_dir=f"/tmp/surfels-align/{label}", part_size=0.0)
+    sampling, noise = options.sampling * spacing, options.noise or spacing
+    frames, _ = sp.prepare_frames(scans.frames, spacing, options, StageCache(options.cache_dir))
+    path = f"/tmp/surfels-align/{label}-seeds.pickle"
+    if not os.path.exists(path):
+        schedule = sp.assembly_schedule(options, noise, sampling)
+        with open(path, "wb") as f:
+            pickle.dump(sp.seed_models(frames, range(len(frames)), sampling, schedule, options), f)
+    with open(path, "rb") as f:
+        seeds = pickle.load(f)
+    pairs = [int(x) for x in os.environ.get("PAIRS", "").split(",") if x] or range(len(frames) - 1)
+    for size in sizes:
+        schedule = sp.assembly_schedule(Options(part_size=size, **settings), noise, sampling)
+        errors, seconds = [], 0.0
+        for t in pairs:
+            start = seeds[t].state.positions[-1]
+            target, near = where_truth_went(truth, t, start, sampling)
+            began = time.perf_counter()
+            aligned = align_ranges(seeds[t], frames[t + 1].points, frames[t + 1].normals,
+                                   schedule.weights, schedule.align, data_weight=schedule.align_data,
+                                   percentile=schedule.align_percentile, parts=schedule.parts)
+            seconds += time.perf_counter() - began
+            motion = np.linalg.norm(target - start, axis=1)[near] / diagonal
+            error = np.linalg.norm(aligned.positions - target, axis=1)[near] / diagonal
+            errors.append((error.mean(), np.percentile(error, 90)))
+            print(f"{label} part {size:g}: pair {t}: motion {motion.mean():.4f} / "
+                  f"{np.percentile(motion, 90):.4f}, aligned {error.mean():.4f} / "
+                  f"{np.percentile(error, 90):.4f}", flush=True)
+        mean = np.mean(errors, axis=0)
+        print(f"{label} part {size:g}: over the pairs {mean[0]:.4f} / {mean[1]:.4f}, "
+              f"{seconds / len(errors):.2f} s a pair", flush=True)
+
+
+if __name__ == "__main__":
+    main(sys.argv[1] if len(sys.argv) > 1 else "crane-50", [float(s) for s in sys.argv[2:]] or [0.0, 6.0])
