@@ -14,7 +14,8 @@ along the graph ``T_S``), and each part is searched for on its own:
    unexplained, and the data of the parts that did not move is theirs;
 2. a point-to-plane rigid ICP refines the best one (:func:`fourd.geometry.icp.rigid_icp`);
 3. the part moves only when that puts more of its surfels within ``step`` of such a data point
-   than were near the data at its start, by at least ``gain`` of its surfels.
+   than were near the data at its start, by at least ``gain`` of its surfels (so a part with
+   more than ``1 - gain`` of its surfels near the data at the start is not searched at all).
 
 The non-rigid alignment then starts from the parts' motions and its rigidity prior (eq. 9)
 joins the seams. The search is a correspondence that does not come from proximity alone, and
