@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import contextlib
+import glob
 import os
+import secrets
 import shutil
 import tempfile
 from pathlib import Path
@@ -26,6 +28,23 @@ def _check_parent(path: Path) -> None:
         raise InputError("the output folder is not writable", parent)
 
 
+def _unique_prefix(name: str) -> str:
+    """A temporary name's prefix no other write shares, chosen before anything is created."""
+    return f".{name}.{secrets.token_hex(4)}."
+
+
+def _remove_started(folder: Path, prefix: str) -> None:
+    """Remove what a write with ``prefix`` left in ``folder``: found by its prefix, not by the
+    name ``mkstemp`` returned, since a signal (Ctrl-C, SIGTERM) can interrupt ``mkstemp``
+    after it created the file and before it returned its name."""
+    for leftover in Path(folder or ".").glob(glob.escape(prefix) + "*"):
+        with contextlib.suppress(OSError):
+            if leftover.is_dir() and not leftover.is_symlink():
+                shutil.rmtree(leftover, ignore_errors=True)
+            else:
+                leftover.unlink()
+
+
 @contextlib.contextmanager
 def atomic_path(path: str | os.PathLike, *, suffix: str | None = None):
     """Yield a temporary file path in the target's folder; rename it onto ``path`` on success.
@@ -36,15 +55,15 @@ def atomic_path(path: str | os.PathLike, *, suffix: str | None = None):
     path = Path(path)
     _check_parent(path)
     suffix = path.suffix if suffix is None else suffix
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=f".part{suffix}", dir=path.parent or ".")
-    os.close(fd)
+    prefix = _unique_prefix(path.stem)
     try:
+        fd, tmp = tempfile.mkstemp(prefix=prefix, suffix=f".part{suffix}", dir=path.parent or ".")
+        os.close(fd)
         yield Path(tmp)
         _permissions(Path(tmp), 0o666)
         os.replace(tmp, path)
     except BaseException:
-        with contextlib.suppress(OSError):
-            os.remove(tmp)
+        _remove_started(path.parent, prefix)
         raise
 
 
@@ -56,8 +75,9 @@ def atomic_dir(path: str | os.PathLike):
     _check_parent(path)
     if path.exists() and not path.is_dir():
         raise InputError("exists and is not a folder", path)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".part", dir=path.parent or "."))
+    prefix = _unique_prefix(path.name)
     try:
+        tmp = Path(tempfile.mkdtemp(prefix=prefix, suffix=".part", dir=path.parent or "."))
         yield tmp
         _permissions(tmp, 0o777)
         if path.exists():
@@ -69,5 +89,5 @@ def atomic_dir(path: str | os.PathLike):
         else:
             os.replace(tmp, path)
     except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
+        _remove_started(path.parent, prefix)
         raise
