@@ -96,27 +96,39 @@ def where_truth_went(truth, t: int, positions: np.ndarray, sampling: float):
     return there[nearest], distance < sampling
 
 
-def main(label: str, percentiles: list[float]) -> None:
-    os.makedirs("/tmp/surfels-align", exist_ok=True)
-    settings = dict(
+def env_settings() -> dict:
+    """The options of `surfels` that ``SET=name=value,...`` sets."""
+    return dict(
         (key, ast.literal_eval(value))
         for key, value in (item.split("=") for item in os.environ.get("SET", "").split(",") if item)
     )
+
+
+def seeded(label: str, options: Options):
+    """``(truth, frames, sampling, noise, seeds)`` of a bench scene: its preprocessed frames and
+    one seed model per frame as the pipeline makes them (the seeds kept under
+    /tmp/surfels-align/)."""
+    os.makedirs("/tmp/surfels-align", exist_ok=True)
     truth, scans = scans_of(label)
-    diagonal = truth.diagonal()
     spacing = point_spacing(scans.frames[0].points)
-    options = Options(cache_dir=f"/tmp/surfels-align/{label}", **settings)
     sampling, noise = options.sampling * spacing, options.noise or spacing
     frames, _ = sp.prepare_frames(scans.frames, spacing, options, StageCache(options.cache_dir))
-    schedule = sp.assembly_schedule(options, noise, sampling)
     path = f"/tmp/surfels-align/{label}-seeds.pickle"
     if os.path.exists(path):
         with open(path, "rb") as f:
-            seeds = pickle.load(f)
-    else:
-        seeds = sp.seed_models(frames, range(len(frames)), sampling, schedule, options)
-        with open(path, "wb") as f:
-            pickle.dump(seeds, f)
+            return truth, frames, sampling, noise, pickle.load(f)
+    schedule = sp.assembly_schedule(options, noise, sampling)
+    seeds = sp.seed_models(frames, range(len(frames)), sampling, schedule, options)
+    with open(path, "wb") as f:
+        pickle.dump(seeds, f)
+    return truth, frames, sampling, noise, seeds
+
+
+def main(label: str, percentiles: list[float]) -> None:
+    options = Options(cache_dir=f"/tmp/surfels-align/{label}", **env_settings())
+    truth, frames, sampling, noise, seeds = seeded(label, options)
+    diagonal = truth.diagonal()
+    schedule = sp.assembly_schedule(options, noise, sampling)
     for percentile in percentiles:
         errors = []
         for t in range(len(frames) - 1):

@@ -35,40 +35,23 @@ ball matches the ball turned anywhere.
 
 from __future__ import annotations
 
-import ast
 import os
-import pickle
 import sys
 import time
 
 import numpy as np
-from surfels_alignment import scans_of, where_truth_went
+from surfels_alignment import env_settings, seeded, where_truth_went
 
-from fourd.cache import StageCache
-from fourd.geometry.neighbors import point_spacing
 from fourd.methods.surfels import pipeline as sp
 from fourd.methods.surfels.align import align_ranges
 from fourd.methods.surfels.options import Options
 
 
 def main(label, sizes):
-    settings = dict(
-        (key, ast.literal_eval(value))
-        for key, value in (item.split("=") for item in os.environ.get("SET", "").split(",") if item)
-    )
-    truth, scans = scans_of(label)
-    diagonal = truth.diagonal()
-    spacing = point_spacing(scans.frames[0].points)
+    settings = env_settings()
     options = Options(cache_dir=f"/tmp/surfels-align/{label}", part_size=0.0)
-    sampling, noise = options.sampling * spacing, options.noise or spacing
-    frames, _ = sp.prepare_frames(scans.frames, spacing, options, StageCache(options.cache_dir))
-    path = f"/tmp/surfels-align/{label}-seeds.pickle"
-    if not os.path.exists(path):
-        schedule = sp.assembly_schedule(options, noise, sampling)
-        with open(path, "wb") as f:
-            pickle.dump(sp.seed_models(frames, range(len(frames)), sampling, schedule, options), f)
-    with open(path, "rb") as f:
-        seeds = pickle.load(f)
+    truth, frames, sampling, noise, seeds = seeded(label, options)
+    diagonal = truth.diagonal()
     pairs = [int(x) for x in os.environ.get("PAIRS", "").split(",") if x] or range(len(frames) - 1)
     for size in sizes:
         schedule = sp.assembly_schedule(Options(part_size=size, **settings), noise, sampling)
