@@ -8,7 +8,9 @@ the whole sequence:
 1. fragments are dropped (:func:`~fourd.geometry.fans.fragments`): a flap of a few faces
    hanging from the surface by a vertex (at most a hundredth of the piece it touches), whose
    loop of 3 sides would be capped into a pillow, and a crumb of a few faces on its own (at
-   most a thousandth of the largest piece);
+   most a thousandth of the largest piece); and so are doubled layers
+   (:func:`~fourd.geometry.doubled_layers.doubled_layers`): a small open piece lying within
+   two edges of a larger surface, which no membrane could close but a pillow;
 2. the small holes (:func:`~fourd.geometry.hole_filling.small_holes`) are filled by the
    membrane (:func:`~fourd.geometry.hole_filling.fill_holes`);
 3. with ``handle_hops``, the small handles of the closed mesh are cut out
@@ -33,6 +35,7 @@ import numpy as np
 
 from fourd.errors import InputError
 from fourd.geometry.boundary_loops import boundary_edges, boundary_loops
+from fourd.geometry.doubled_layers import doubled_layers
 from fourd.geometry.fans import fragments, split_pinches
 from fourd.geometry.handles import capped_genus, open_small_handles
 from fourd.geometry.hole_filling import fill_holes, membrane_positions, small_holes
@@ -100,9 +103,10 @@ def holes_to_close(first: np.ndarray, faces: np.ndarray, max_fraction: float, sm
     count = len(first)
     vertices, faces = np.asarray(first, dtype=np.float64), np.asarray(faces, dtype=np.int64)
     original = faces
-    dropped = fragments(faces, count)
+    dropped = fragments(faces, count) | doubled_layers(vertices, faces)
     if dropped.any():
-        log.info("dropped %d faces of fragments (flaps hanging by a vertex, crumbs)", int(dropped.sum()))
+        log.info("dropped %d faces of fragments (flaps hanging by a vertex, crumbs, doubled layers)",
+                 int(dropped.sum()))
         faces = faces[~dropped]
     filled_holes: list = []
     holes = small_holes(vertices, faces, max_fraction=max_fraction) if max_fraction > 0 else []
