@@ -1,4 +1,4 @@
-"""Doubled layers: small open pieces along a larger surface are found, other pieces are not."""
+"""Doubled layers: small pieces along a larger surface are found, other pieces are not."""
 
 import numpy as np
 import trimesh
@@ -39,17 +39,26 @@ def test_a_sliver_one_edge_off_a_ball_is_a_doubled_layer_and_the_ball_is_not():
     assert doubled[len(faces):].all()
 
 
-def test_a_piece_far_from_every_surface_a_closed_piece_and_a_lone_sheet_are_kept():
+def test_a_piece_far_from_every_surface_a_ball_against_it_and_a_lone_sheet_are_kept():
     vertices, faces = _ball()
     far, patch = _patch_of(vertices, faces, lift=0.5)  # 16 edges out: surface nothing covers
     all_vertices, all_faces = _with(vertices, faces, far, patch)
     assert not doubled_layers(all_vertices, all_faces).any()
-    small = trimesh.creation.icosphere(0)  # closed, 20 faces, beside the ball
-    beside = np.asarray(small.vertices) * 0.03 + [0.0, 0.0, 1.04]
-    all_vertices, all_faces = _with(vertices, faces, beside, np.asarray(small.faces))
+    small = trimesh.creation.icosphere(0)  # closed, 20 faces, 5 edges across, touching the ball
+    against = np.asarray(small.vertices) * 0.15 + [0.0, 0.0, 1.16]
+    all_vertices, all_faces = _with(vertices, faces, against, np.asarray(small.faces))
     assert not doubled_layers(all_vertices, all_faces).any()
     sheet, sheet_faces = _patch_of(vertices, faces, lift=0.0, ring=3)
     assert not doubled_layers(sheet, sheet_faces).any()
+
+
+def test_a_bubble_within_an_edge_of_the_ball_is_a_doubled_layer():
+    vertices, faces = _ball()
+    bubble = trimesh.creation.icosphere(0)  # closed, 20 faces, one edge across
+    beside = np.asarray(bubble.vertices) * 0.015 + [0.0, 0.0, 1.03]
+    all_vertices, all_faces = _with(vertices, faces, beside, np.asarray(bubble.faces))
+    doubled = doubled_layers(all_vertices, all_faces)
+    assert doubled[len(faces):].all() and not doubled[: len(faces)].any()
 
 
 def test_closing_drops_the_doubled_layer_so_the_ball_with_a_hole_comes_out_watertight():

@@ -1,12 +1,13 @@
-"""Doubled layers: small open pieces of a mesh that lie along a larger surface of it.
+"""Doubled layers: small pieces of a mesh that lie along a larger surface of it.
 
 A surface meshed from samples with a border clipping (``surfels``' sec. 3.3) can cut a sliver
-off where the samples thin out, or mesh a second layer of a surface the scan saw twice, a cell
-or two beside it. The body around it is then closed (the hole the sliver left gets a membrane),
-and the sliver stays as a small open piece that keeps the whole mesh from being watertight while
-adding nothing the body lacks: it lies within the meshing's resolution of the body's surface.
-A small open piece far from every other surface (a limb's end cut off) is kept: it is surface
-nothing else covers.
+off where the samples thin out, mesh a second layer of a surface the scan saw twice a cell or
+two beside it, or leave a bubble of a few faces around one grid point beside the surface. The
+body around it is then closed (the hole a sliver left gets a membrane), and the small piece
+stays: an open one keeps the whole mesh from being watertight, and neither adds anything the
+body lacks, since it lies within the meshing's resolution of the body's surface. A small piece
+whose surface mostly lies farther out (a limb's end cut off, a ball held against the body) is
+kept: it is surface nothing else covers.
 
 Examples
 --------
@@ -29,9 +30,10 @@ from fourd.geometry.meshes import face_pieces, median_edge_length
 
 __all__ = ["DOUBLED_REACH", "DOUBLED_SMALL", "doubled_layers"]
 
-#: Median distance, in median edge lengths, within which a small open piece lies along another
+#: Median distance, in median edge lengths, within which a small piece lies along another
 #: surface to count as a doubled layer. The marching cubes resolve two layers a cell apart at
-#: best; crane's and crane-90's slivers lie 0.7 edges from the body (median; at most 1.8-2.6).
+#: best; crane's and crane-90's slivers lie 0.7 edges from the body (median; at most 1.8-2.6), and
+#: crane-90's bubble of 8 faces 0.8.
 DOUBLED_REACH = 2.0
 
 #: A piece is small when the largest piece has at least this many times its faces.
@@ -46,10 +48,9 @@ def doubled_layers(
     small: float = DOUBLED_SMALL,
 ) -> np.ndarray:
     """bool ``[F]``: the faces of ``faces [F, 3]`` (over ``vertices [N, 3]``) in a doubled
-    layer: a piece (faces joined by sides) with a boundary, at most ``1 / small`` of the largest
-    piece's faces, whose vertices lie at a median distance of at most ``reach`` median edge
-    lengths from the surface of the other pieces (those neither small nor open). Closed small
-    pieces (a small object of its own) and small open pieces far from the rest are kept."""
+    layer: a piece (faces joined by sides) with at most ``1 / small`` of the largest piece's
+    faces whose vertices lie at a median distance of at most ``reach`` median edge lengths
+    from the surface of the pieces that are not small."""
     vertices = np.asarray(vertices, dtype=np.float64)
     faces = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
     doubled = np.zeros(len(faces), dtype=bool)
@@ -59,12 +60,7 @@ def doubled_layers(
     if pieces < 2:
         return doubled
     size = np.bincount(piece, minlength=pieces)
-    a, b = faces.ravel(), np.roll(faces, -1, axis=1).ravel()
-    keys = np.minimum(a, b) * np.int64(len(vertices)) + np.maximum(a, b)
-    _, side, uses = np.unique(keys, return_inverse=True, return_counts=True)
-    open_piece = np.zeros(pieces, dtype=bool)
-    open_piece[piece[np.repeat(np.arange(len(faces)), 3)[uses[side] == 1]]] = True
-    candidate = open_piece & (small * size <= size.max())
+    candidate = small * size <= size.max()
     if not candidate.any():
         return doubled
     vertex_piece = np.full(len(vertices), -1, dtype=np.int64)

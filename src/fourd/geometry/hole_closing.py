@@ -9,10 +9,12 @@ the whole sequence:
    hanging from the surface by a vertex (at most a hundredth of the piece it touches), whose
    loop of 3 sides would be capped into a pillow, and a crumb of a few faces on its own (at
    most a thousandth of the largest piece); and so are doubled layers
-   (:func:`~fourd.geometry.doubled_layers.doubled_layers`): a small open piece lying within
-   two edges of a larger surface, which no membrane could close but a pillow;
+   (:func:`~fourd.geometry.doubled_layers.doubled_layers`): a small open piece lying within two
+   edges of a larger surface, which no membrane could close but into a pillow;
 2. the small holes (:func:`~fourd.geometry.hole_filling.small_holes`) are filled by the
-   membrane (:func:`~fourd.geometry.hole_filling.fill_holes`);
+   membrane (:func:`~fourd.geometry.hole_filling.fill_holes`), and the doubled layers are
+   sought again along the closed surface: a sliver the meshing's clipping cut off lies over
+   the hole it left;
 3. with ``handle_hops``, the small handles of the closed mesh are cut out
    (:func:`~fourd.geometry.handles.open_small_handles`: balls of that many edges that are not
    disks) and their openings filled the same way, for a few rounds. The first frame's mesh
@@ -119,6 +121,11 @@ def holes_to_close(first: np.ndarray, faces: np.ndarray, max_fraction: float, sm
             vertices, faces, filled_holes = closed.vertices, closed.faces, list(closed.holes)
         except InputError as error:
             log.warning("holes left open: %s", error)
+    # again against the closed surface: a sliver the clipping cut off lies over its hole
+    doubled = doubled_layers(vertices, faces)
+    if doubled.any():
+        log.info("dropped %d faces of doubled layers (small open pieces along the surface)", int(doubled.sum()))
+        faces = faces[~doubled]
     if handle_hops > 0:
         try:
             vertices, faces, opened = _open_handles(vertices, faces, smoothness, handle_hops)
@@ -126,7 +133,7 @@ def holes_to_close(first: np.ndarray, faces: np.ndarray, max_fraction: float, sm
         except InputError as error:
             log.warning("small handles left: %s", error)
     closing = _closing(count, original, vertices, faces, filled_holes, smoothness)
-    if len(vertices) == count and not filled_holes and not dropped.any() and closing.copies is None:
+    if len(vertices) == count and not filled_holes and not dropped.any() and not doubled.any() and closing.copies is None:
         return None
     return closing
 
