@@ -125,7 +125,12 @@ def gauss_newton(
     energies.append(current.value)
     for iteration in range(options.iterations):
         step, count = solve_step(
-            current.hessian, current.gradient, layout(state), options, columns=columns
+            current.hessian,
+            current.gradient,
+            layout(state),
+            options,
+            columns=columns,
+            overwrite=True,
         )
         cg_counts.append(count)
         accepted = None
@@ -150,7 +155,9 @@ def gauss_newton(
             converged = True
             break
         if iteration + 1 < options.iterations:
-            # derivatives only where another step follows
+            # derivatives only where another step follows; the last Hessian is let go first, or
+            # it would live beside the next one's Jacobians (a quarter of the peak memory)
+            current = None
             current = derivatives_at(state, matches)
     log.debug(
         "gauss-newton: %d steps, energy %.6g -> %.6g", len(cg_counts), energies[0], energies[-1]
@@ -166,13 +173,15 @@ def solve_step(
     *,
     free: np.ndarray | None = None,
     columns: np.ndarray | None = None,
+    overwrite: bool = False,
 ) -> tuple[np.ndarray, int]:
     """The damped Gauss-Newton step ``-(H + damping diag H)^-1 g`` [n] by preconditioned CG,
     over the unknowns the energy depends on (and, given ``free`` bool [n], only those; the
     others stay 0), and the CG iteration count.
 
     With ``columns`` (int [k], sorted), ``hessian`` [k, k] and ``gradient`` [k] are already
-    restricted to those unknowns of the layout (:func:`~.energy.total_energy` ``columns``)."""
+    restricted to those unknowns of the layout (:func:`~.energy.total_energy` ``columns``).
+    ``overwrite``: the damping may be written into ``hessian`` itself (no copy of it)."""
     diagonal = hessian.diagonal()
     moving = diagonal > 1e-300 * max(float(diagonal.max(initial=0.0)), 1e-300)
     if free is not None:
@@ -183,7 +192,7 @@ def solve_step(
     if not len(free):
         return step, 0
     if len(local) == hessian.shape[0]:
-        system = hessian.copy()
+        system = hessian if overwrite else hessian.copy()
     else:
         system = hessian[local][:, local]
     # every moving unknown has its diagonal entry, so this changes values only
