@@ -12,7 +12,7 @@ kept: it is surface nothing else covers.
 Examples
 --------
 >>> import numpy as np, trimesh
->>> ball = trimesh.creation.icosphere(3)  # 1,280 faces, edges about 0.05
+>>> ball = trimesh.creation.icosphere(3)  # 1,280 faces, edges about 0.15
 >>> sliver = [[0.0, 0, 1.02], [0.05, 0, 1.02], [0, 0.05, 1.02]]  # a triangle just outside it
 >>> far = [[0.0, 0, 1.5], [0.05, 0, 1.5], [0, 0.05, 1.5]]
 >>> vertices = np.concatenate([ball.vertices, sliver, far])

@@ -9,8 +9,9 @@ the whole sequence:
    hanging from the surface by a vertex (at most a hundredth of the piece it touches), whose
    loop of 3 sides would be capped into a pillow, and a crumb of a few faces on its own (at
    most a thousandth of the largest piece); and so are doubled layers
-   (:func:`~fourd.geometry.doubled_layers.doubled_layers`): a small open piece lying within two
-   edges of a larger surface, which no membrane could close but into a pillow;
+   (:func:`~fourd.geometry.doubled_layers.doubled_layers`): a small piece (a sliver, a bubble)
+   lying within two edges of a larger surface, which adds nothing the larger one lacks and, when
+   open, no membrane could close but into a pillow;
 2. the small holes (:func:`~fourd.geometry.hole_filling.small_holes`) are filled by the
    membrane (:func:`~fourd.geometry.hole_filling.fill_holes`), and the doubled layers are
    sought again along the closed surface: a sliver the meshing's clipping cut off lies over
@@ -124,7 +125,7 @@ def holes_to_close(first: np.ndarray, faces: np.ndarray, max_fraction: float, sm
     # again against the closed surface: a sliver the clipping cut off lies over its hole
     doubled = doubled_layers(vertices, faces)
     if doubled.any():
-        log.info("dropped %d faces of doubled layers (small open pieces along the surface)", int(doubled.sum()))
+        log.info("dropped %d faces of doubled layers (small pieces along the closed surface)", int(doubled.sum()))
         faces = faces[~doubled]
     if handle_hops > 0:
         try:
