@@ -53,22 +53,27 @@ def doubled_layers(
     from the surface of the pieces that are not small."""
     vertices = np.asarray(vertices, dtype=np.float64)
     faces = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
-    doubled = np.zeros(len(faces), dtype=bool)
+    none = np.zeros(len(faces), dtype=bool)
     if len(faces) == 0:
-        return doubled
+        return none
     pieces, piece = face_pieces(faces)
     if pieces < 2:
-        return doubled
+        return none
     size = np.bincount(piece, minlength=pieces)
     candidate = small * size <= size.max()
     if not candidate.any():
-        return doubled
+        return none
     vertex_piece = np.full(len(vertices), -1, dtype=np.int64)
     vertex_piece[faces.ravel()] = np.repeat(piece, 3)
     near = np.flatnonzero(candidate[np.maximum(vertex_piece, 0)] & (vertex_piece >= 0))
     distance = closest_points_on_mesh(vertices, faces[~candidate[piece]], vertices[near]).distances
-    unit = median_edge_length(vertices, faces)
-    for label in np.flatnonzero(candidate):
-        if np.median(distance[vertex_piece[near] == label]) <= reach * unit:
-            doubled[piece == label] = True
-    return doubled
+    # each candidate piece's median distance, all pieces at once (a noisy mesh has thousands)
+    label = vertex_piece[near]
+    order = np.lexsort((distance, label))
+    label, distance = label[order], distance[order]
+    starts = np.flatnonzero(np.r_[True, label[1:] != label[:-1]])
+    counts = np.diff(np.r_[starts, len(label)])
+    median = 0.5 * (distance[starts + (counts - 1) // 2] + distance[starts + counts // 2])
+    is_doubled = np.zeros(pieces, dtype=bool)
+    is_doubled[label[starts]] = median <= reach * median_edge_length(vertices, faces)
+    return is_doubled[piece]
