@@ -8,14 +8,13 @@ the whole sequence:
 1. fragments are dropped (:func:`~fourd.geometry.fans.fragments`): a flap of a few faces
    hanging from the surface by a vertex (at most a hundredth of the piece it touches), whose
    loop of 3 sides would be capped into a pillow, and a crumb of a few faces on its own (at
-   most a thousandth of the largest piece); and so are doubled layers
-   (:func:`~fourd.geometry.doubled_layers.doubled_layers`): a small piece (a sliver, a bubble)
-   lying within two edges of a larger surface, which adds nothing the larger one lacks and, when
-   open, no membrane could close but into a pillow;
+   most a thousandth of the largest piece);
 2. the small holes (:func:`~fourd.geometry.hole_filling.small_holes`) are filled by the
-   membrane (:func:`~fourd.geometry.hole_filling.fill_holes`), and the doubled layers are
-   sought again along the closed surface: a sliver the meshing's clipping cut off lies over
-   the hole it left;
+   membrane (:func:`~fourd.geometry.hole_filling.fill_holes`), and then doubled layers are
+   dropped (:func:`~fourd.geometry.doubled_layers.doubled_layers`): a small piece (a sliver,
+   a bubble) lying within two edges of the closed surface, which adds nothing the surface
+   lacks. It is sought after the membranes because a sliver the meshing's clipping cut off
+   lies over the hole it left; a small piece the membranes closed into a pillow counts too;
 3. with ``handle_hops``, the small handles of the closed mesh are cut out
    (:func:`~fourd.geometry.handles.open_small_handles`: balls of that many edges that are not
    disks) and their openings filled the same way, for a few rounds. The first frame's mesh
@@ -106,10 +105,9 @@ def holes_to_close(first: np.ndarray, faces: np.ndarray, max_fraction: float, sm
     count = len(first)
     vertices, faces = np.asarray(first, dtype=np.float64), np.asarray(faces, dtype=np.int64)
     original = faces
-    dropped = fragments(faces, count) | doubled_layers(vertices, faces)
+    dropped = fragments(faces, count)
     if dropped.any():
-        log.info("dropped %d faces of fragments (flaps hanging by a vertex, crumbs, doubled layers)",
-                 int(dropped.sum()))
+        log.info("dropped %d faces of fragments (flaps hanging by a vertex, crumbs)", int(dropped.sum()))
         faces = faces[~dropped]
     filled_holes: list = []
     holes = small_holes(vertices, faces, max_fraction=max_fraction) if max_fraction > 0 else []
@@ -122,7 +120,7 @@ def holes_to_close(first: np.ndarray, faces: np.ndarray, max_fraction: float, sm
             vertices, faces, filled_holes = closed.vertices, closed.faces, list(closed.holes)
         except InputError as error:
             log.warning("holes left open: %s", error)
-    # again against the closed surface: a sliver the clipping cut off lies over its hole
+    # against the closed surface: a sliver the clipping cut off lies over the hole it left
     doubled = doubled_layers(vertices, faces)
     if doubled.any():
         log.info("dropped %d faces of doubled layers (small pieces along the closed surface)", int(doubled.sum()))
