@@ -5,9 +5,11 @@ import numpy as np
 import pytest
 
 from fourd.methods.surfels import (
+    AnchorData,
     MatchOptions,
     Weights,
     accel_term,
+    anchor_term,
     associate,
     build_topology,
     frame_data,
@@ -59,6 +61,14 @@ def _terms(state, graph, data):
     global_matches = associate(state, data, 0.15, near)
     aligned = MatchOptions(regime="alignment", tangential=0.2)
     alignment_matches = associate(state, data, 0.4, aligned)
+    rng = np.random.default_rng(5)
+    pairs = rng.integers(state.frames - 1, size=30)
+    sources = state.positions[pairs, rng.integers(state.count, size=30)] + rng.normal(
+        scale=0.02, size=(30, 3)
+    )
+    anchors = AnchorData(
+        pairs, sources, sources + rng.normal(scale=0.1, size=(30, 3)), rng.uniform(0.2, 1, 30)
+    )
     return {
         "match": lambda s, d: match_term(s, data, global_matches, 1.5, near, derivatives=d),
         "match_alignment": lambda s, d: match_term(
@@ -71,6 +81,7 @@ def _terms(state, graph, data):
         "accel": lambda s, d: accel_term(s, 0.6, 0.25, derivatives=d),
         "rigid_urshape": lambda s, d: rigid_term(s, graph, 0.9, 0.4, derivatives=d, urshape=True),
         "accel_after_urshape": lambda s, d: accel_term(s, 0.6, 0.25, derivatives=d, first=1),
+        "anchor": lambda s, d: anchor_term(s, anchors, 0.8, 0.5, derivatives=d),
     }
 
 
@@ -86,6 +97,7 @@ def _terms(state, graph, data):
         "accel",
         "rigid_urshape",
         "accel_after_urshape",
+        "anchor",
     ],
 )
 def test_jacobian_and_gradient_match_central_differences(name):

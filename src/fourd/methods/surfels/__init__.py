@@ -39,7 +39,8 @@ frame's measured points (not its surfels) and starts from a rigid point-to-plane
 and below 30 degrees; a small tangential share of the point distance in the data term
 outside the alignment (``tangential``, ``linked_tangential``), which keeps open patches from
 shrinking; every frame's mesh fitted along its normals to that frame's points
-(``fit_frames``). Slow: tens of seconds per frame at a standard scan, against the
+(``fit_frames``); with the capture's video, anchors tracked by optical flow pull each
+surfel along the surface as well (:mod:`.anchors`, ``video_anchors``). Slow: tens of seconds per frame at a standard scan, against the
 issue's 2 s target.
 
 References
@@ -48,6 +49,7 @@ Wand, Jenke, Huang, Bokeloh, Guibas, Schilling: Reconstruction of deforming geom
 time-varying point clouds, SGP 2007 (``001_3fedd1c3a0ac4198.txt``).
 """
 
+from fourd.methods.surfels.anchors import AnchorData, Forward, anchor_term, pair_anchors
 from fourd.methods.surfels.energy import Energy, Weights, total_energy
 from fourd.methods.surfels.match import (
     Data,
@@ -110,10 +112,12 @@ __all__ = [
     "reconstruct_streamed",
     "STREAM_WINDOW",
     "free_unknowns",
+    "AnchorData",
     "Binding",
     "Data",
     "Energy",
     "FrameMesh",
+    "Forward",
     "GaussNewtonOptions",
     "Layout",
     "MatchOptions",
@@ -127,6 +131,7 @@ __all__ = [
     "UrshapeFit",
     "Weights",
     "accel_term",
+    "anchor_term",
     "build_topology",
     "associate",
     "bind_vertices",
@@ -143,6 +148,7 @@ __all__ = [
     "match_term",
     "mesh_frame",
     "move",
+    "pair_anchors",
     "retract",
     "rigid_term",
     "sample_surfels",

@@ -25,6 +25,7 @@ from typing import NamedTuple
 import numpy as np
 
 from fourd.geometry.icp import rigid_icp
+from fourd.methods.surfels.anchors import Forward, pair_anchors
 from fourd.methods.surfels.energy import Weights
 from fourd.methods.surfels.match import MatchOptions, frame_data
 from fourd.methods.surfels.model import Model
@@ -69,6 +70,7 @@ def align_ranges(
     rigid_start: bool = True,
     percentile: float = 100.0,
     parts: PartSearch | None = None,
+    anchors: Forward | None = None,
 ) -> Alignment:
     """Align ``left``'s last frame to the data ``points`` [P, 3] (oriented ``normals``) of
     the frame after it, the right range's first (sec. 3.2): only the data term (weight
@@ -92,7 +94,10 @@ def align_ranges(
 
     With ``parts``, each part of the surfels is then searched for on its own
     (:func:`.part_search.part_search`) before the non-rigid alignment: a limb that moved
-    several ``eps_sampl`` is beyond the nearest-point correspondences."""
+    several ``eps_sampl`` is beyond the nearest-point correspondences.
+
+    ``anchors`` (the video's, from ``left``'s last frame into the points' frame) pull the
+    surfels with ``weights.anchor`` (:mod:`.anchors`), along the surface too."""
     last = left.state.frames - 1
     p, n = left.state.positions[last], left.state.normals[last]
     if rigid_start:
@@ -113,9 +118,16 @@ def align_ranges(
         moved, turned = found.positions, found.normals
         rotations = found.rotations @ rotations
     state = surfel_state(np.stack([p, moved]), np.stack([n, turned]), rotations[None])
-    data = frame_data([np.zeros((0, 3)), points], normals=[np.zeros((0, 3)), normals])
+    data = frame_data(
+        [np.zeros((0, 3)), points],
+        normals=[np.zeros((0, 3)), normals],
+        anchors=pair_anchors([anchors]),
+    )
     align_weights = Weights(
-        match=data_weight, rigid=weights.rigid, rigid_normal=weights.rigid_normal
+        match=data_weight,
+        rigid=weights.rigid,
+        rigid_normal=weights.rigid_normal,
+        anchor=weights.anchor,
     )
     free = np.zeros((2, state.count), dtype=bool)
     free[1] = True

@@ -30,6 +30,7 @@ import numpy as np
 
 from fourd.cache import NO_CACHE, StageCache, cached, report_resumed, stage_key
 from fourd.methods.surfels.align import align_ranges
+from fourd.methods.surfels.anchors import pair_anchors
 from fourd.methods.surfels.energy import Weights
 from fourd.methods.surfels.fill import fill_holes
 from fourd.methods.surfels.match import MatchOptions, frame_data
@@ -92,10 +93,12 @@ class Schedule(NamedTuple):
 
 
 def range_data(frames: list, start: int, stop: int):
-    """:class:`~.match.Data` of frames ``start .. stop - 1`` (indices relative to ``start``)."""
+    """:class:`~.match.Data` of frames ``start .. stop - 1`` (indices relative to ``start``),
+    with the anchors between them."""
     return frame_data(
         [frames[t].points for t in range(start, stop)],
         normals=[frames[t].normals for t in range(start, stop)],
+        anchors=pair_anchors([frames[t].forward for t in range(start, stop - 1)]),
     )
 
 
@@ -221,6 +224,7 @@ def merge(
         data_weight=schedule.align_data,
         percentile=schedule.align_percentile,
         parts=schedule.parts,
+        anchors=last.forward,
     )
     backward = align_ranges(
         _first_frame(right),
@@ -231,6 +235,7 @@ def merge(
         data_weight=schedule.align_data,
         percentile=schedule.align_percentile,
         parts=schedule.parts,
+        anchors=None if last.forward is None else last.forward.reversed(),
     )
     ahead = forward.stretch <= backward.stretch
     nl, nr = left.state.frames, right.state.frames

@@ -9,11 +9,15 @@ from dataclasses import dataclass, fields
 import numpy as np
 import scipy.sparse as sp
 
+from fourd.methods.surfels.anchors import anchor_term
 from fourd.methods.surfels.match import Data, Matches, MatchOptions, match_term
 from fourd.methods.surfels.motion import accel_term, rigid_term
 from fourd.methods.surfels.smoothness import laplace_term, smooth_normal_term, smooth_position_term
 from fourd.methods.surfels.state import SurfelState, layout
 from fourd.methods.surfels.topology import Topology
+
+#: Terms whose Jacobian pattern follows the state (their association), never kept.
+ASSOCIATED = ("match", "anchor")
 
 
 @dataclass(frozen=True)
@@ -33,6 +37,8 @@ class Weights:
         ``w_rigid`` on neighbour offsets and on normals (eq. 9).
     accel, accel_normal : float
         ``w_accel`` on positions and on normals (eq. 10).
+    anchor : float
+        Multiplies the video anchors' weights (:mod:`.anchors`, beyond the paper).
     """
 
     match: float = 1.0
@@ -43,6 +49,7 @@ class Weights:
     rigid_normal: float = 0.0
     accel: float = 0.0
     accel_normal: float = 0.0
+    anchor: float = 0.0
 
     def __post_init__(self):
         for field in fields(self):
@@ -126,6 +133,10 @@ def total_energy(
             urshape=urshape,
             pattern=kept.get("rigid"),
         )
+    if w.anchor > 0 and data.anchors is not None and state.frames > 1:
+        parts["anchor"] = anchor_term(
+            state, data.anchors, w.anchor, topology.radius, derivatives=d
+        )
     first = 1 if urshape else 0
     if (w.accel > 0 or w.accel_normal > 0) and state.frames - first > 2:
         parts["accel"] = accel_term(
@@ -138,7 +149,7 @@ def total_energy(
     size = layout(state).size
     restrict = columns is not None and not np.array_equal(columns, np.arange(size))
     for name, part in parts.items():
-        if name != "match" and name not in kept:
+        if name not in ASSOCIATED and name not in kept:
             kept[name] = part.pattern.keep_columns(columns) if restrict else part.pattern
     # one Jacobian of every term, so that J^T J is formed once (a sum of the terms' Hessians
     # allocates each partial sum)

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from fourd.methods.surfels.anchors import pair_anchors
 from fourd.methods.surfels.energy import Weights
 from fourd.methods.surfels.match import MatchOptions, frame_data
 from fourd.methods.surfels.optimizer import GaussNewtonOptions, free_unknowns, gauss_newton
@@ -113,6 +114,7 @@ def fill_holes(
             data = frame_data(
                 [frames[w].points if w == t else np.zeros((0, 3)) for w in window],
                 normals=[frames[w].normals if w == t else np.zeros((0, 3)) for w in window],
+                anchors=pair_anchors([frames[w].forward for w in window[:-1]]),
             )
             result = gauss_newton(
                 local,

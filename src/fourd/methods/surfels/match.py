@@ -33,6 +33,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
+from fourd.methods.surfels.anchors import AnchorData
 from fourd.methods.surfels.state import SurfelState, layout, tangent_basis
 from fourd.methods.surfels.term import Blocks, Term, term
 
@@ -48,12 +49,15 @@ class Data:
         ``omega``: inverse noise variance in normal direction (1 / length^2).
     normals : float64 [D, 3] or None
         Oriented data normals (only the ``"alignment"`` regime's angle test uses them).
+    anchors : AnchorData or None
+        The video's anchors between consecutive frames (:mod:`.anchors`).
     """
 
     points: np.ndarray
     frames: np.ndarray
     weights: np.ndarray
     normals: np.ndarray | None = None
+    anchors: AnchorData | None = None
 
     def __post_init__(self):
         count = len(self.points)
@@ -66,13 +70,20 @@ class Data:
 
 
 def frame_data(
-    frames: list[np.ndarray], *, weight: float = 1.0, normals: list[np.ndarray] | None = None
+    frames: list[np.ndarray],
+    *,
+    weight: float = 1.0,
+    normals: list[np.ndarray] | None = None,
+    anchors: AnchorData | None = None,
 ) -> Data:
-    """:class:`Data` from one array of points [P_t, 3] per frame, all with ``weight``."""
+    """:class:`Data` from one array of points [P_t, 3] per frame, all with ``weight``, and
+    the ``anchors`` between the frames."""
     points = np.concatenate([np.asarray(f, dtype=np.float64).reshape(-1, 3) for f in frames])
     index = np.repeat(np.arange(len(frames)), [len(f) for f in frames])
     stacked = None if normals is None else np.concatenate(normals).astype(np.float64)
-    return Data(points, index.astype(np.int64), np.full(len(points), float(weight)), stacked)
+    return Data(
+        points, index.astype(np.int64), np.full(len(points), float(weight)), stacked, anchors
+    )
 
 
 @dataclass(frozen=True)

@@ -163,6 +163,15 @@ class Options:
         their trajectory there is the acceleration prior's extrapolation, and one lost early
         in a long take flies off (:func:`~.model.unsupported_pieces`). 0: every surfel is
         meshed (the paper). In memory only (``window`` 0).
+    video_anchors : bool
+        When the input has calibrated video (``cameras.json`` and ``video/``), track anchors
+        by optical flow between consecutive frames (:func:`fourd.appearance.anchors`, on hue
+        texture only) and pull each surfel to move as the anchors near it did, in the
+        alignments, the hole filling and the global optimisations (:mod:`.anchors`; beyond the
+        paper, whose data term says nothing along the surface). Silent without video; in
+        memory only (``window`` 0).
+    anchor_weight : float
+        Weight of an anchor of confidence 1, relative (as the data points' weights).
     reference : int
         The frame whose surfels are meshed and carried to every other frame and to the
         urshape (the result's ``rest``; without an urshape, this frame's mesh).
@@ -218,6 +227,8 @@ class Options:
     close_holes: float = 0.25
     close_smoothness: float = 1.0
     min_piece: int = 8
+    video_anchors: bool = True
+    anchor_weight: float = 1.0
     reference: int = 0
     normals_k: int = 16
     cache_dir: str | None = None
@@ -252,6 +263,7 @@ class Options:
             "part_gain",
             "close_holes",
             "close_smoothness",
+            "anchor_weight",
         ):
             if not getattr(self, name) >= 0:
                 raise ValueError(f"{name} must not be negative, got {getattr(self, name)}")
@@ -305,4 +317,5 @@ def energy_weights(
         rigid_normal=rigid * options.rigid_normal * normal,
         accel=accel * options.accel * position,
         accel_normal=accel * options.accel_normal * normal,
+        anchor=options.anchor_weight * position if options.video_anchors else 0.0,
     )

@@ -19,6 +19,7 @@ from fourd.errors import InputError
 from fourd.geometry.hole_closing import close_small_holes
 from fourd.geometry.neighbors import point_spacing
 from fourd.geometry.surface_fit import fit_along_normals
+from fourd.methods.surfels.anchors import video_anchors
 from fourd.methods.surfels.assembly import Schedule, assemble, optimize_model
 from fourd.methods.surfels.match import MatchOptions
 from fourd.methods.surfels.meshing import MeshingOptions, surfel_mesh
@@ -66,10 +67,15 @@ def reconstruct(seq: PointCloudSequence, options: Options | None = None) -> Anim
     sampling = options.sampling * spacing
     noise = options.noise or spacing
     frames, keys = prepare_frames(seq.frames, spacing, options, cache)
+    salt = ()
+    if options.video_anchors and getattr(seq, "video", None) is not None:
+        tracked = video_anchors(seq, [frame.points for frame in frames])
+        frames = [frame._replace(forward=f) for frame, f in zip(frames, tracked, strict=True)]
+        salt = (seq.video.fingerprint(),)
     schedule = assembly_schedule(options, noise, sampling)
     seeds = seed_models(frames, range(len(frames)), sampling, schedule, options)
     prepared = _time.perf_counter()
-    seed_keys = merge_keys(keys, options, cache)
+    seed_keys = merge_keys(keys, options, cache, *salt)
     with progress(total=len(seeds) - 1, desc="surfels: merging", unit="merge") as bar:
         model, _ = assemble(
             seeds, frames, schedule, progress=bar.update, cache=cache, keys=seed_keys
@@ -115,7 +121,7 @@ def reconstruct(seq: PointCloudSequence, options: Options | None = None) -> Anim
     if options.close_holes > 0:
         mesh = closed_mesh(mesh, options)
     log.info(
-        "surfels: %d frames, %d surfels, %d vertices in %.2f s (preprocessing and seeds %.2f, "
+        "surfels: %d frames, %d surfels, %d vertices in %.2f s (preprocessing, anchors and seeds %.2f, "
         "merging %.2f, final optimisation %.2f, meshing and fit %.2f)",
         len(seq),
         model.state.count,

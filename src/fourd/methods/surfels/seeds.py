@@ -20,6 +20,7 @@ import numpy as np
 from fourd.geometry.normals import estimate_normals
 from fourd.geometry.outliers import remove_outliers
 from fourd.geometry.tensor_voting import tensor_voting
+from fourd.methods.surfels.anchors import Forward
 from fourd.methods.surfels.energy import Weights
 from fourd.methods.surfels.match import MatchOptions, frame_data
 from fourd.methods.surfels.model import Model, observed_surfels
@@ -36,10 +37,13 @@ class FramePoints(NamedTuple):
     normals : float64 [P, 3]
         Oriented unit normals (the input's, else PCA oriented by the sensors or by
         propagation).
+    forward : Forward or None
+        The video's anchors from this frame into the next (:mod:`.anchors`); None: none.
     """
 
     points: np.ndarray
     normals: np.ndarray
+    forward: Forward | None = None
 
 
 def prepare_frame(

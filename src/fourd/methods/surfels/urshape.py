@@ -92,7 +92,13 @@ def fit_urshape(
     positions = np.concatenate([state.positions[:1], state.positions])
     normals = np.concatenate([state.normals[:1], state.normals])
     joined = SurfelState(positions, normals, fit_rotations(positions, topology, urshape=True))
-    shifted = Data(data.points, data.frames + 1, data.weights, data.normals)
+    shifted = Data(
+        data.points,
+        data.frames + 1,
+        data.weights,
+        data.normals,
+        None if data.anchors is None else data.anchors.shifted(1),
+    )
     free = None
     if not joint:
         surfels = np.zeros((joined.frames, joined.count), dtype=bool)
