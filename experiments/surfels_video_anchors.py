@@ -38,6 +38,9 @@ def main(scene: str, frames: int, resolution: int, weights: list[float]) -> None
             f"{seconds:.2f} s/frame",
             flush=True,
         )
+        frame = report["per_frame"]
+        for name in ("accuracy_95", "completeness_95", "correspondence"):
+            print(f"  {name}: " + " ".join(f"{v:.4f}" for v in frame[name]), flush=True)
 
 
 if __name__ == "__main__":

@@ -134,17 +134,16 @@ def anchor_term(
     return term(residuals, blocks)
 
 
-def video_anchors(seq, points: list[np.ndarray]) -> list[Forward | None]:
-    """Per frame of ``seq`` (a :class:`~fourd.sequence.PointCloudSequence` with video), its
-    anchors into the next (None for the last), tracked on the frames' preprocessed ``points``
-    (list of [P_t, 3]; their own outlier removal would repeat the cleaning)."""
+def video_anchors(points: list[np.ndarray], times, video, names=()) -> list[Forward | None]:
+    """Per frame, its anchors into the next (None for the last), tracked on the frames'
+    preprocessed ``points`` (list of [P_t, 3]; their own outlier removal would repeat the
+    cleaning) at ``times``, filmed by ``video`` (:class:`~fourd.io.video.Video`, one image per
+    camera and frame)."""
     from fourd.appearance import anchors as track_anchors
     from fourd.sequence import Frame, PointCloudSequence
 
     cleaned = PointCloudSequence(
-        tuple(Frame(p, time=f.time) for p, f in zip(points, seq.frames, strict=True)),
-        tuple(seq.names),
-        seq.video,
+        tuple(Frame(p, time=t) for p, t in zip(points, times, strict=True)), tuple(names), video
     )
     tracked = track_anchors(
         cleaned, texture=ANCHOR_TEXTURE, sources=ANCHOR_SOURCES, remove_outliers=False

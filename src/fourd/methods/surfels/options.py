@@ -168,8 +168,7 @@ class Options:
         by optical flow between consecutive frames (:func:`fourd.appearance.anchors`, on hue
         texture only) and pull each surfel to move as the anchors near it did, in the
         alignments, the hole filling and the global optimisations (:mod:`.anchors`; beyond the
-        paper, whose data term says nothing along the surface). Silent without video; in
-        memory only (``window`` 0).
+        paper, whose data term says nothing along the surface). Silent without video.
     anchor_weight : float
         Weight of an anchor of confidence 1, relative (as the data points' weights).
     reference : int

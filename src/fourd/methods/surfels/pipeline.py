@@ -69,7 +69,9 @@ def reconstruct(seq: PointCloudSequence, options: Options | None = None) -> Anim
     frames, keys = prepare_frames(seq.frames, spacing, options, cache)
     salt = ()
     if options.video_anchors and getattr(seq, "video", None) is not None:
-        tracked = video_anchors(seq, [frame.points for frame in frames])
+        tracked = video_anchors(
+            [frame.points for frame in frames], seq.times, seq.video, seq.names
+        )
         frames = [frame._replace(forward=f) for frame, f in zip(frames, tracked, strict=True)]
         salt = (seq.video.fingerprint(),)
     schedule = assembly_schedule(options, noise, sampling)

@@ -23,7 +23,8 @@ come. What the streamed run gives up
 against the paper's: a surface first seen after the first window is not in the mesh (the
 hole filling cannot reach back into written frames), and the urshape is the first window's.
 Memory holds one window and the past's :data:`HELD` + :data:`LAG` frames, plus the output's
-observed flags.
+observed flags. With video (``video_anchors``) each window tracks the anchors of its own frame
+pairs and of the seam's, from the past's last frame.
 With ``cache_dir`` every finished window is kept and a rerun resumes after the last one.
 """
 
@@ -45,6 +46,7 @@ from fourd.geometry.neighbors import point_spacing
 from fourd.geometry.surface_fit import fit_along_normals
 from fourd.io.npz import npz_frames
 from fourd.methods.base import StreamSummary, run_streamed
+from fourd.methods.surfels.anchors import video_anchors
 from fourd.methods.surfels.assembly import assemble, merge, optimize_model
 from fourd.methods.surfels.meshing import (
     Binding,
@@ -73,6 +75,7 @@ from fourd.methods.surfels.pipeline import (
     seed_models,
     solver_options,
 )
+from fourd.methods.surfels.seeds import FramePoints
 from fourd.methods.surfels.state import SurfelState
 from fourd.methods.surfels.urshape import with_urshape
 
@@ -154,6 +157,8 @@ def _run(source: FrameSource, output: Path, options: Options) -> StreamSummary:
     schedule = assembly_schedule(options, noise, sampling)
     final = energy_weights(options, noise, sampling, final=True)
     values = option_values(options, without=("window", *MESH_ONLY))
+    anchored = options.video_anchors and source.video is not None
+    salt = (source.video.fingerprint(),) if anchored else ()
     tail, tail_frames, key, held = None, [], "", 0
     carried: _Carried | None = None
     closing: HoleClosing | None = None
@@ -166,6 +171,10 @@ def _run(source: FrameSource, output: Path, options: Options) -> StreamSummary:
             seq = first if start == 0 else source.read(start, stop)
             first = None
             frames, keys = prepare_frames(seq.frames, spacing, options, cache, first=start)
+            if anchored:
+                tail_frames, frames = _with_anchors(tail_frames, frames, source, start)
+                # the merges' keys and the window's carry the video
+                keys = [stage_key(k, *salt) if k else "" for k in keys]
             local = tail_frames + frames
             kept = 0 if carried is None else carried.identity
             key = stage_key(key, keys, values, held, len(tail_frames)) if cache.enabled else ""
@@ -227,6 +236,29 @@ def _run(source: FrameSource, output: Path, options: Options) -> StreamSummary:
             tail_frames, held = local[begin:], end - begin
     vertex_count = len(carried.rest) if closing is None else closing.output_count
     return StreamSummary(output, count, vertex_count, windows, resumed, 0.0)
+
+
+def _with_anchors(
+    tail_frames: list[FramePoints], frames: list[FramePoints], source: FrameSource, start: int
+) -> tuple[list[FramePoints], list[FramePoints]]:
+    """The window's ``frames`` (the first one frame ``start``) with the video's anchors into
+    the frame after each, and the past's last frame (``tail_frames[-1]``, when there is a past)
+    with its anchors into ``start``: the seam's pair is tracked with the window."""
+    first = start - 1 if tail_frames else start
+    points = [frame.points for frame in tail_frames[-1:] + frames]
+    tracked = video_anchors(
+        points,
+        source.times[first : start + len(frames)],
+        source.video.select(slice(first, start + len(frames))),
+        source.names[first : start + len(frames)],
+    )
+    anchored = [
+        frame._replace(forward=f)
+        for frame, f in zip(tail_frames[-1:] + frames, tracked, strict=True)
+    ]
+    if not tail_frames:
+        return [], anchored
+    return tail_frames[:-1] + anchored[:1], anchored[1:]
 
 
 def _window_model(
