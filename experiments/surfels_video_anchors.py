@@ -4,7 +4,8 @@ correspondence 0.03 / 0.04; geometry alone gives 0.136 / 0.265 (the sheet slides
 
     PYTHONPATH=src python experiments/surfels_video_anchors.py SCENE FRAMES RESOLUTION [WEIGHT ...]
 
-Runs `surfels` on the scene's first FRAMES frames scanned as the bench does (3 cameras,
+Runs `surfels` on the scene's FRAMES frames (the first `USE` of them, all by default)
+scanned as the bench does (3 cameras,
 noise, outliers) at RESOLUTION rays per side, in cloth with the rig's video, once without
 anchors and once per anchor weight; prints Chamfer / completeness-95 / correspondence mean /
 last and seconds per frame (`fourd.metrics.evaluate`, 20k samples).
@@ -12,6 +13,7 @@ last and seconds per frame (`fourd.metrics.evaluate`, 20k samples).
 Answer: see benchmarks/METHODS.md, "The video's anchors in `surfels`".
 """
 
+import os
 import sys
 import time
 
@@ -26,6 +28,13 @@ def main(scene: str, frames: int, resolution: int, weights: list[float]) -> None
     scans = fourd.synth.scan(
         truth, **{**PROTOCOL, "resolution": resolution, "appearance": "cloth", "video": True}
     )
+    use = int(os.environ.get("USE", frames))
+    if use < frames:
+        truth = fourd.AnimatedMesh(truth.faces, truth.vertices[:use], truth.times[:use])
+        scans = fourd.PointCloudSequence(
+            scans.frames[:use], scans.names[:use], scans.video.select(slice(0, use))
+        )
+        frames = use
     for weight in [None, *weights]:
         options = Options(video_anchors=weight is not None, anchor_weight=weight or 0.0)
         started = time.perf_counter()

@@ -1,5 +1,5 @@
 """The video's anchors in eq. (3): a slide along a featureless surface, which the data term
-cannot see, is recovered from them."""
+cannot see, is recovered from them; an anchor far off is cut off."""
 
 import numpy as np
 import pytest
@@ -9,6 +9,7 @@ from fourd.methods.surfels import (
     Forward,
     GaussNewtonOptions,
     Weights,
+    anchor_term,
     build_topology,
     frame_data,
     free_unknowns,
@@ -82,3 +83,20 @@ def test_anchor_data_checks_its_shapes():
         AnchorData(np.zeros(2, dtype=np.int64), np.zeros((2, 3)), np.zeros((3, 3)), np.ones(2))
     with pytest.raises(ValueError, match="weights"):
         AnchorData(np.zeros(1, dtype=np.int64), np.zeros((1, 3)), np.zeros((1, 3)), -np.ones(1))
+
+
+def test_an_anchor_far_from_its_surfels_move_adds_a_constant_and_no_pull():
+    positions = np.array([[[0.0, 0, 0], [1, 0, 0]], [[0.0, 0, 0], [1, 0, 0]]])
+    state = surfel_state(positions, np.tile([0.0, 0, 1], (2, 2, 1)))
+    # the first anchor moved 0.1 (inside the reach 0.5), the second 2.0 (outside); the third
+    # starts 2.5 from every surfel
+    anchors = AnchorData(
+        np.zeros(3, dtype=np.int64),
+        np.array([[0.0, 0, 0], [1, 0, 0], [3.5, 0, 0]]),
+        np.array([[0.1, 0, 0], [1, 2, 0], [3.5, 1, 0]]),
+        np.array([1.0, 0.5, 1.0]),
+    )
+    at = anchor_term(state, anchors, 2.0, 0.5)
+    assert at.value == pytest.approx(2.0 * 0.1**2 + 2.0 * 0.5 * 0.5**2)
+    assert np.count_nonzero(at.jacobian[3:].toarray()) == 0
+    assert at.gradient[layout(state).position(1, 0)] == pytest.approx(2 * 2.0 * -0.1)

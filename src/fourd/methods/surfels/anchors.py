@@ -4,7 +4,8 @@ section 5.4.1) asks the surfel nearest its start in frame ``t`` to move as it di
 
     E_anchor = w sum_a omega_a |(s_i(a)^{t+1} - s_i(a)^t) - (target_a - source_a)|^2,
 
-with ``i(a)`` the surfel nearest ``source_a`` in frame ``t`` (found again at every state, as
+truncated at ``eps_top`` as the data term is (eq. 5), with ``i(a)`` the surfel nearest
+``source_a`` in frame ``t`` (found again at every state, as
 the data term's association is) and ``omega_a`` the anchor's confidence; ``w`` is in 1 /
 length^2 (:func:`~.options.energy_weights`: ``anchor_weight / sigma^2``, an anchor as
 trusted as a data point at one noise level).
@@ -110,8 +111,11 @@ def anchor_term(
     *,
     derivatives: bool = True,
 ) -> Term:
-    """``E_anchor`` (module docstring) at ``state``: residuals ``[M, 3]``, an anchor with no
-    surfel within ``reach`` (input units) of its source contributing nothing."""
+    """``E_anchor`` (module docstring) at ``state``: residuals ``[M, 3]``. An anchor with no
+    surfel within ``reach`` (input units) of its source contributes nothing; one whose surfel
+    moved farther than ``reach`` from the anchor's move contributes the constant ``w omega_a
+    reach^2`` and no gradient (truncated, as the data term is: the flow lifted onto the wrong
+    layer of a fold passes the tracking's checks)."""
     lay = layout(state)
     surfels = np.zeros(len(anchors.frames), dtype=np.int64)
     near = np.zeros(len(anchors.frames), dtype=bool)
@@ -121,17 +125,19 @@ def anchor_term(
         surfels[mine] = nearest
         near[mine] = distance <= reach
     t, i = anchors.frames, surfels
-    moved = state.positions[t + 1, i] - state.positions[t, i]
-    root = np.sqrt(weight * anchors.weights * near)[:, None]
-    residuals = root * (moved - (anchors.target - anchors.source))
+    gaps = state.positions[t + 1, i] - state.positions[t, i] - (anchors.target - anchors.source)
+    inside = np.linalg.norm(gaps, axis=1) <= reach
+    outside = weight * reach**2 * float(np.sum(anchors.weights[near & ~inside]))
+    root = np.sqrt(weight * anchors.weights * (near & inside))[:, None]
+    residuals = root * gaps
     if not derivatives:
-        return term(residuals, None)
+        return term(residuals, None, outside)
     blocks = Blocks(residuals.size, lay.size)
     rows = 3 * np.arange(len(t))
     eye = np.eye(3)
     blocks.add(rows, lay.position(t + 1, i), root[:, :, None] * eye, eye > 0)
     blocks.add(rows, lay.position(t, i), -root[:, :, None] * eye, eye > 0)
-    return term(residuals, blocks)
+    return term(residuals, blocks, outside)
 
 
 def video_anchors(points: list[np.ndarray], times, video, names=()) -> list[Forward | None]:
