@@ -39,9 +39,9 @@ frame's measured points (not its surfels) and starts from a rigid point-to-plane
 and below 30 degrees; a small tangential share of the point distance in the data term
 outside the alignment (``tangential``, ``linked_tangential``), which keeps open patches from
 shrinking; every frame's mesh fitted along its normals to that frame's points
-(``fit_frames``); with the capture's video, anchors tracked by optical flow pull each
-surfel along the surface as well (:mod:`.anchors`, ``video_anchors``). Slow: tens of seconds per frame at a standard scan, against the
-issue's 2 s target.
+(``fit_frames``); with the capture's video, anchors tracked by optical flow pull each surfel
+along the surface as well (:mod:`.anchors`, ``video_anchors``). Slow: tens of seconds per
+frame at a standard scan, against the issue's 2 s target.
 
 References
 ----------
