@@ -154,17 +154,7 @@ def prepare_frames(
             else ""
         )
         arrays, resumed = cached(
-            cache,
-            "surfels-frame",
-            key,
-            lambda f=f: prepare_frame(
-                f.points,
-                f.normals,
-                f.sensors,
-                spacing=spacing,
-                max_ratio=options.tensor_ratio,
-                k=options.normals_k,
-            )._asdict(),
+            cache, "surfels-frame", key, lambda f=f: _prepared(f, spacing, options)
         )
         if resumed:
             report_resumed(log, f"frame {index}'s preprocessing")
@@ -173,6 +163,20 @@ def prepare_frames(
         prepared.append(FramePoints(arrays["points"], arrays["normals"]))
         keys.append(key)
     return prepared, keys
+
+
+def _prepared(frame, spacing: float, options: Options) -> dict:
+    """The arrays of :func:`.seeds.prepare_frame` for ``frame`` (a cache entry: the anchors
+    are tracked after)."""
+    prepared = prepare_frame(
+        frame.points,
+        frame.normals,
+        frame.sensors,
+        spacing=spacing,
+        max_ratio=options.tensor_ratio,
+        k=options.normals_k,
+    )
+    return {"points": prepared.points, "normals": prepared.normals}
 
 
 def solver_options(options: Options, iterations: int) -> GaussNewtonOptions:
