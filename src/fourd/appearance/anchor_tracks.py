@@ -539,3 +539,16 @@ def anchors(seq, options: AnchorOptions | None = None, **overrides) -> Anchors:
         for t in progress(range(len(seq) - 1), desc="anchors", total=len(seq) - 1, unit="pair")
     ]
     return Anchors(tuple(pairs))
+
+
+def cleaned_anchors(points, times, video, names=(), **overrides) -> Anchors:
+    """:func:`anchors` of frames a method has already cleaned: ``points`` (list of [P_t, 3]) at
+    ``times`` [T], filmed by ``video`` (:class:`~fourd.io.video.Video`, one image per camera
+    and frame; ``names`` name the frames for messages). Their outliers are not set aside again
+    (``remove_outliers`` false); keyword arguments override :class:`AnchorOptions`' fields."""
+    from fourd.sequence import Frame, PointCloudSequence
+
+    cleaned = PointCloudSequence(
+        tuple(Frame(p, time=t) for p, t in zip(points, times, strict=True)), tuple(names), video
+    )
+    return anchors(cleaned, **{"remove_outliers": False, **overrides})

@@ -21,7 +21,7 @@ from fourd.methods.kinematic.field import fit_key, fit_windows, space_time_point
 from fourd.methods.kinematic.frames import densify_frames, prepare_frames
 from fourd.methods.kinematic.mpu4d import MPUOptions
 from fourd.methods.kinematic.options import MIN_FRAMES, Options
-from fourd.sequence import Frame, PointCloudSequence
+from fourd.sequence import PointCloudSequence
 
 log = logging.getLogger("fourd.methods.kinematic")
 
@@ -131,13 +131,10 @@ def video_anchors(points, times, video, options: Options, names=()):
     the frames ``points`` (list of [P_k, 3], as prepared: the anchors' own outlier removal
     would repeat the cleaning) at ``times``, filmed by ``video`` (one image per camera and
     frame)."""
-    from fourd.appearance import anchors as track_anchors
+    from fourd.appearance.anchor_tracks import cleaned_anchors
 
-    cleaned = PointCloudSequence(
-        tuple(Frame(p, time=t) for p, t in zip(points, times, strict=True)), tuple(names), video
-    )
-    anchors = track_anchors(
-        cleaned, texture=options.anchor_texture, sources=ANCHOR_SOURCES, remove_outliers=False
+    anchors = cleaned_anchors(
+        points, times, video, names, texture=options.anchor_texture, sources=ANCHOR_SOURCES
     )
     log.info("anchors from the video: %d over %d frame pairs", anchors.total, len(anchors))
     return anchors

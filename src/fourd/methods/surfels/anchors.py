@@ -145,14 +145,10 @@ def video_anchors(points: list[np.ndarray], times, video, names=()) -> list[Forw
     preprocessed ``points`` (list of [P_t, 3]; their own outlier removal would repeat the
     cleaning) at ``times``, filmed by ``video`` (:class:`~fourd.io.video.Video`, one image per
     camera and frame)."""
-    from fourd.appearance import anchors as track_anchors
-    from fourd.sequence import Frame, PointCloudSequence
+    from fourd.appearance.anchor_tracks import cleaned_anchors
 
-    cleaned = PointCloudSequence(
-        tuple(Frame(p, time=t) for p, t in zip(points, times, strict=True)), tuple(names), video
-    )
-    tracked = track_anchors(
-        cleaned, texture=ANCHOR_TEXTURE, sources=ANCHOR_SOURCES, remove_outliers=False
+    tracked = cleaned_anchors(
+        points, times, video, names, texture=ANCHOR_TEXTURE, sources=ANCHOR_SOURCES
     )
     log.info("surfels: anchors from the video: %d over %d frame pairs", tracked.total, len(tracked))
     return [Forward(p.source, p.target, p.confidence) for p in tracked] + [None]
