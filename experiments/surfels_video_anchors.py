@@ -8,7 +8,10 @@ Runs `surfels` on the scene's FRAMES frames (the first `USE` of them, all by def
 scanned as the bench does (3 cameras,
 noise, outliers) at RESOLUTION rays per side, in cloth with the rig's video, once without
 anchors and once per anchor weight; prints Chamfer / completeness-95 / correspondence mean /
-last and seconds per frame (`fourd.metrics.evaluate`, 20k samples).
+last and seconds per frame (`fourd.metrics.evaluate`, 20k samples). With `CHECK=1` it first
+prints, per frame pair, how far the anchors' targets lie from where the truth's vertex nearest
+each source went (median / 90th / 99th percentile, in point spacings; the truth's own vertex
+spacing bounds what this can resolve); `CHECK=only` stops there.
 
 Answer: see benchmarks/METHODS.md, "The video's anchors in `surfels`".
 """
@@ -17,10 +20,29 @@ import os
 import sys
 import time
 
+import numpy as np
+from scipy.spatial import cKDTree
+
 import fourd
 from fourd.bench.suite import PROTOCOL
+from fourd.cache import NO_CACHE
+from fourd.geometry.neighbors import point_spacing
 from fourd.methods.surfels import Options, reconstruct
+from fourd.methods.surfels.anchors import video_anchors
+from fourd.methods.surfels.pipeline import prepare_frames
 from fourd.metrics.scores import evaluate
+
+
+def check_anchors(truth, scans) -> None:
+    """Each pair's anchors against the truth's motion (module docstring)."""
+    spacing = point_spacing(scans.frames[0].points)
+    frames, _ = prepare_frames(scans.frames, spacing, Options(), NO_CACHE)
+    tracked = video_anchors([f.points for f in frames], scans.times, scans.video, scans.names)
+    for t, pair in enumerate(tracked[:-1]):
+        _, nearest = cKDTree(truth.vertices[t]).query(pair.source)
+        error = np.linalg.norm(pair.target - truth.vertices[t + 1][nearest], axis=1) / spacing
+        print(f"pair {t}: {len(error)} anchors, off by " + " / ".join(
+            f"{v:.2f}" for v in np.percentile(error, [50, 90, 99])) + " spacings", flush=True)
 
 
 def main(scene: str, frames: int, resolution: int, weights: list[float]) -> None:
@@ -35,6 +57,10 @@ def main(scene: str, frames: int, resolution: int, weights: list[float]) -> None
             scans.frames[:use], scans.names[:use], scans.video.select(slice(0, use))
         )
         frames = use
+    if os.environ.get("CHECK"):
+        check_anchors(truth, scans)
+        if os.environ["CHECK"] == "only":
+            return
     for weight in [None, *weights]:
         options = Options(video_anchors=weight is not None, anchor_weight=weight or 0.0)
         started = time.perf_counter()
