@@ -11,11 +11,13 @@ anchors and once per anchor weight; prints Chamfer / completeness-95 / correspon
 last and seconds per frame (`fourd.metrics.evaluate`, 20k samples). With `CHECK=1` it first
 prints, per frame pair, how far the anchors' targets lie from where the truth's vertex nearest
 each source went (median / 90th / 99th percentile, in point spacings; the truth's own vertex
-spacing bounds what this can resolve); `CHECK=only` stops there.
+spacing bounds what this can resolve); `CHECK=only` stops there. `SET=linked_tangential=0,...`
+sets other options of every run; `BASELINE=0` leaves out the run without anchors.
 
 Answer: see benchmarks/METHODS.md, "The video's anchors in `surfels`".
 """
 
+import ast
 import os
 import sys
 import time
@@ -61,8 +63,15 @@ def main(scene: str, frames: int, resolution: int, weights: list[float]) -> None
         check_anchors(truth, scans)
         if os.environ["CHECK"] == "only":
             return
-    for weight in [None, *weights]:
-        options = Options(video_anchors=weight is not None, anchor_weight=weight or 0.0)
+    settings = dict(
+        (key, ast.literal_eval(value))
+        for key, value in (item.split("=") for item in os.environ.get("SET", "").split(",") if item)
+    )
+    baseline = [] if os.environ.get("BASELINE") == "0" else [None]
+    for weight in [*baseline, *weights]:
+        options = Options(
+            **{"video_anchors": weight is not None, "anchor_weight": weight or 0.0, **settings}
+        )
         started = time.perf_counter()
         result = reconstruct(scans, options)
         seconds = (time.perf_counter() - started) / frames
