@@ -30,7 +30,7 @@ from fourd.bench.suite import PROTOCOL
 from fourd.cache import NO_CACHE
 from fourd.geometry.neighbors import point_spacing
 from fourd.methods.surfels import Options, reconstruct
-from fourd.methods.surfels.anchors import video_anchors
+from fourd.methods.surfels.anchors import with_video_anchors
 from fourd.methods.surfels.pipeline import prepare_frames
 from fourd.metrics.scores import evaluate
 
@@ -39,8 +39,8 @@ def check_anchors(truth, scans) -> None:
     """Each pair's anchors against the truth's motion (module docstring)."""
     spacing = point_spacing(scans.frames[0].points)
     frames, _ = prepare_frames(scans.frames, spacing, Options(), NO_CACHE)
-    tracked = video_anchors([f.points for f in frames], scans.times, scans.video, scans.names)
-    for t, pair in enumerate(tracked[:-1]):
+    frames = with_video_anchors(frames, scans.times, scans.video, scans.names)
+    for t, pair in enumerate(frame.forward for frame in frames[:-1]):
         _, nearest = cKDTree(truth.vertices[t]).query(pair.source)
         error = np.linalg.norm(pair.target - truth.vertices[t + 1][nearest], axis=1) / spacing
         print(f"pair {t}: {len(error)} anchors, off by " + " / ".join(

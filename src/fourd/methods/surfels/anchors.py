@@ -140,15 +140,21 @@ def anchor_term(
     return term(residuals, blocks, outside)
 
 
-def video_anchors(points: list[np.ndarray], times, video, names=()) -> list[Forward | None]:
-    """Per frame, its anchors into the next (None for the last), tracked on the frames'
-    preprocessed ``points`` (list of [P_t, 3]; their own outlier removal would repeat the
-    cleaning) at ``times``, filmed by ``video`` (:class:`~fourd.io.video.Video`, one image per
-    camera and frame)."""
+def with_video_anchors(frames: list, times, video, names=()) -> list:
+    """``frames`` (:class:`~.seeds.FramePoints`, preprocessed) each with the video's anchors
+    into the next as ``forward`` (None for the last), tracked on their points (their own outlier
+    removal would repeat the cleaning) at ``times``, filmed by ``video``
+    (:class:`~fourd.io.video.Video`, one image per camera and frame)."""
     from fourd.appearance.anchor_tracks import cleaned_anchors
 
     tracked = cleaned_anchors(
-        points, times, video, names, texture=ANCHOR_TEXTURE, sources=ANCHOR_SOURCES
+        [frame.points for frame in frames],
+        times,
+        video,
+        names,
+        texture=ANCHOR_TEXTURE,
+        sources=ANCHOR_SOURCES,
     )
     log.info("surfels: anchors from the video: %d over %d frame pairs", tracked.total, len(tracked))
-    return [Forward(p.source, p.target, p.confidence) for p in tracked] + [None]
+    forward = [Forward(p.source, p.target, p.confidence) for p in tracked] + [None]
+    return [frame._replace(forward=f) for frame, f in zip(frames, forward, strict=True)]

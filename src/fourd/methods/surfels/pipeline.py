@@ -19,7 +19,7 @@ from fourd.errors import InputError
 from fourd.geometry.hole_closing import close_small_holes
 from fourd.geometry.neighbors import point_spacing
 from fourd.geometry.surface_fit import fit_along_normals
-from fourd.methods.surfels.anchors import video_anchors
+from fourd.methods.surfels.anchors import with_video_anchors
 from fourd.methods.surfels.assembly import Schedule, assemble, optimize_model
 from fourd.methods.surfels.match import MatchOptions
 from fourd.methods.surfels.meshing import MeshingOptions, surfel_mesh
@@ -69,10 +69,7 @@ def reconstruct(seq: PointCloudSequence, options: Options | None = None) -> Anim
     frames, keys = prepare_frames(seq.frames, spacing, options, cache)
     salt = ()
     if options.video_anchors and getattr(seq, "video", None) is not None:
-        tracked = video_anchors(
-            [frame.points for frame in frames], seq.times, seq.video, seq.names
-        )
-        frames = [frame._replace(forward=f) for frame, f in zip(frames, tracked, strict=True)]
+        frames = with_video_anchors(frames, seq.times, seq.video, seq.names)
         salt = (seq.video.fingerprint(),)
     schedule = assembly_schedule(options, noise, sampling)
     seeds = seed_models(frames, range(len(frames)), sampling, schedule, options)

@@ -46,7 +46,7 @@ from fourd.geometry.neighbors import point_spacing
 from fourd.geometry.surface_fit import fit_along_normals
 from fourd.io.npz import npz_frames
 from fourd.methods.base import StreamSummary, run_streamed
-from fourd.methods.surfels.anchors import video_anchors
+from fourd.methods.surfels.anchors import with_video_anchors
 from fourd.methods.surfels.assembly import assemble, merge, optimize_model
 from fourd.methods.surfels.meshing import (
     Binding,
@@ -245,17 +245,12 @@ def _with_anchors(
     the frame after each, and the past's last frame (``tail_frames[-1]``, when there is a past)
     with its anchors into ``start``: the seam's pair is tracked with the window."""
     first = start - 1 if tail_frames else start
-    points = [frame.points for frame in tail_frames[-1:] + frames]
-    tracked = video_anchors(
-        points,
+    anchored = with_video_anchors(
+        tail_frames[-1:] + frames,
         source.times[first : start + len(frames)],
         source.video.select(slice(first, start + len(frames))),
         source.names[first : start + len(frames)],
     )
-    anchored = [
-        frame._replace(forward=f)
-        for frame, f in zip(tail_frames[-1:] + frames, tracked, strict=True)
-    ]
     if not tail_frames:
         return [], anchored
     return tail_frames[:-1] + anchored[:1], anchored[1:]

@@ -17,7 +17,7 @@ section 3.2 (``001_3fedd1c3a0ac4198.txt``).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import NamedTuple
 
 import numpy as np
@@ -92,12 +92,10 @@ def fit_urshape(
     positions = np.concatenate([state.positions[:1], state.positions])
     normals = np.concatenate([state.normals[:1], state.normals])
     joined = SurfelState(positions, normals, fit_rotations(positions, topology, urshape=True))
-    shifted = Data(
-        data.points,
-        data.frames + 1,
-        data.weights,
-        data.normals,
-        None if data.anchors is None else data.anchors.shifted(1),
+    shifted = replace(
+        data,
+        frames=data.frames + 1,
+        anchors=None if data.anchors is None else data.anchors.shifted(1),
     )
     free = None
     if not joint:
