@@ -87,27 +87,27 @@ def test_points_without_colours_take_them_from_the_video(filmed_without_colours,
 def test_colours_come_from_one_source_for_every_frame(filmed_without_colours):
     import dataclasses
 
+    from fourd.appearance.color_guide import guide_colors
     from fourd.appearance.point_colors import colors_from_video
-    from fourd.methods.kinematic.pipeline import _guide_colors
     from fourd.sequence import PointCloudSequence
 
     _, scans, bare = filmed_without_colours
     points = [f.points for f in scans.frames]
     normals = [None] * len(points)
     # every frame coloured: the points' own colours, the video unused
-    own = _guide_colors(scans, points, normals)
+    own = guide_colors(scans, points, normals)
     assert all(np.array_equal(c, f.colors) for c, f in zip(own, scans.frames, strict=True))
     # one frame without: all from the video, so that the frames' colours compare
     mixed = PointCloudSequence((dataclasses.replace(scans[0], colors=None),) + scans.frames[1:], video=scans.video)
-    from_video = _guide_colors(mixed, points, normals)
+    from_video = guide_colors(mixed, points, normals)
     assert np.array_equal(from_video[1], colors_from_video(bare, 1))
     # no colours, no video: no guide
-    assert _guide_colors(PointCloudSequence(bare.frames), points, normals) is None
+    assert guide_colors(PointCloudSequence(bare.frames), points, normals) is None
 
 
 def test_a_video_that_sees_none_of_the_points_is_refused_naming_the_way_out(filmed_without_colours):
+    from fourd.appearance.color_guide import guide_colors
     from fourd.errors import InputError
-    from fourd.methods.kinematic.pipeline import _guide_colors
     from fourd.sequence import PointCloudSequence
 
     _, _, bare = filmed_without_colours
@@ -115,5 +115,5 @@ def test_a_video_that_sees_none_of_the_points_is_refused_naming_the_way_out(film
     seq = PointCloudSequence.from_arrays(away)
     seq = PointCloudSequence(seq.frames, video=bare.video)
     with pytest.raises(InputError, match="no camera of the video sees any point.*color_guide=false") as error:
-        _guide_colors(seq, away, [None] * len(away))
+        guide_colors(seq, away, [None] * len(away))
     assert "\n" not in str(error.value)

@@ -14,6 +14,7 @@ what the colours correct does not accumulate.
 from __future__ import annotations
 
 import logging
+import time as _time
 from collections.abc import Sequence
 
 import numpy as np
@@ -22,9 +23,10 @@ from scipy.spatial import cKDTree
 from fourd.appearance.guide import Guide
 from fourd.appearance.photometric import photometric_shift
 from fourd.appearance.surface_color import ColorField, field_for_reads
+from fourd.errors import InputError
 from fourd.geometry.normals import vertex_normals
 
-__all__ = ["PhotometricGuides", "colors_of_cleaned"]
+__all__ = ["PhotometricGuides", "colors_of_cleaned", "frame_colors_from_video", "guide_colors"]
 
 log = logging.getLogger("fourd.appearance.color_guide")
 
@@ -99,3 +101,35 @@ class PhotometricGuides(Sequence):
             return Guide(finite, start[finite] + result.shift[finite], weight)
 
         return guide
+
+
+def guide_colors(seq, points, normals) -> list | None:
+    """Per frame, the colours ``[P, 3]`` of its cleaned ``points`` for the colour guide (None
+    where a frame has none): the points' own when every frame has them, else the video's
+    (:func:`fourd.appearance.point_colors.colors_from_video`) for every frame, so that all
+    frames' colours come from one source and compare; without video, the points' own where
+    given. None when there are no colours at all."""
+    if all(f.colors is not None for f in seq.frames) or getattr(seq, "video", None) is None:
+        if not any(f.colors is not None for f in seq.frames):
+            return None
+        return [colors_of_cleaned(f.points, f.colors, p) for f, p in zip(seq.frames, points, strict=True)]
+    started = _time.perf_counter()
+    colors = [
+        frame_colors_from_video(seq, t, p, n)
+        for t, (p, n) in enumerate(zip(points, normals, strict=True))
+    ]
+    log.info("point colours from the video: %.2f s", _time.perf_counter() - started)
+    return colors
+
+
+def frame_colors_from_video(seq, index: int, points, normals) -> np.ndarray:
+    """The colours ``[P, 3]`` of frame ``index``'s cleaned ``points`` (with their ``normals``)
+    from ``seq.video``, for the colour guide; InputError saying how to go without."""
+    from fourd.appearance.point_colors import colors_from_video
+
+    try:
+        return colors_from_video(seq, index, points=points, normals=normals)
+    except InputError as error:
+        raise InputError(
+            f"colour guide from the video: {error.problem} (color_guide=false goes without)", error.path
+        ) from None

@@ -6,6 +6,7 @@ import pytest
 
 from fourd.methods.surfels import (
     AnchorData,
+    GuideData,
     MatchOptions,
     Weights,
     accel_term,
@@ -13,6 +14,7 @@ from fourd.methods.surfels import (
     associate,
     build_topology,
     frame_data,
+    guide_term,
     laplace_term,
     layout,
     match_term,
@@ -69,6 +71,14 @@ def _terms(state, graph, data):
     anchors = AnchorData(
         pairs, sources, sources + rng.normal(scale=0.1, size=(30, 3)), rng.uniform(0.2, 1, 30)
     )
+    guided = rng.integers(state.count, size=25)
+    frames = rng.integers(state.frames, size=25)
+    guides = GuideData(
+        frames,
+        guided,
+        state.positions[frames, guided] + rng.normal(scale=0.1, size=(25, 3)),
+        rng.uniform(0.2, 1, 25),
+    )
     return {
         "match": lambda s, d: match_term(s, data, global_matches, 1.5, near, derivatives=d),
         "match_alignment": lambda s, d: match_term(
@@ -82,6 +92,7 @@ def _terms(state, graph, data):
         "rigid_urshape": lambda s, d: rigid_term(s, graph, 0.9, 0.4, derivatives=d, urshape=True),
         "accel_after_urshape": lambda s, d: accel_term(s, 0.6, 0.25, derivatives=d, first=1),
         "anchor": lambda s, d: anchor_term(s, anchors, 0.8, 0.5, derivatives=d),
+        "guide": lambda s, d: guide_term(s, guides, 0.7, derivatives=d),
     }
 
 
@@ -98,6 +109,7 @@ def _terms(state, graph, data):
         "rigid_urshape",
         "accel_after_urshape",
         "anchor",
+        "guide",
     ],
 )
 def test_jacobian_and_gradient_match_central_differences(name):

@@ -11,7 +11,7 @@ import time as _time
 import numpy as np
 
 from fourd.animation import AnimatedMesh
-from fourd.appearance.color_guide import colors_of_cleaned
+from fourd.appearance.color_guide import guide_colors
 from fourd.cache import StageCache
 from fourd.errors import InputError
 from fourd.geometry.fans import split_pinches
@@ -92,7 +92,7 @@ def reconstruct(
         anchors = video_anchors(points, times, seq.video, options, seq.names)
     colors = None
     if options.color_guide:
-        colors = _guide_colors(seq, points, normals)
+        colors = guide_colors(seq, points, normals)
     result = animate(
         field, points, normals, times, spacing=spacing, options=options, cache=cache,
         field_key=key, edge_stiffness=edge_stiffness, anchors=anchors, colors=colors,
@@ -147,35 +147,3 @@ def fit_options(options: Options, spacing: float) -> MPUOptions:
         min_points=options.min_points,
         error_quantile=options.error_quantile,
     )
-
-
-def _guide_colors(seq: PointCloudSequence, points, normals) -> list | None:
-    """Per frame, the colours ``[P, 3]`` of its cleaned ``points`` for the colour guide (None
-    where a frame has none): the points' own when every frame has them, else the video's
-    (:func:`fourd.appearance.point_colors.colors_from_video`) for every frame, so that all
-    frames' colours come from one source and compare; without video, the points' own where
-    given. None when there are no colours at all."""
-    if all(f.colors is not None for f in seq.frames) or getattr(seq, "video", None) is None:
-        if not any(f.colors is not None for f in seq.frames):
-            return None
-        return [colors_of_cleaned(f.points, f.colors, p) for f, p in zip(seq.frames, points, strict=True)]
-    started = _time.perf_counter()
-    colors = [
-        frame_colors_from_video(seq, t, p, n)
-        for t, (p, n) in enumerate(zip(points, normals, strict=True))
-    ]
-    log.info("point colours from the video: %.2f s", _time.perf_counter() - started)
-    return colors
-
-
-def frame_colors_from_video(seq: PointCloudSequence, index: int, points, normals) -> np.ndarray:
-    """The colours ``[P, 3]`` of frame ``index``'s cleaned ``points`` (with their ``normals``)
-    from ``seq.video``, for the colour guide; InputError saying how to go without."""
-    from fourd.appearance.point_colors import colors_from_video
-
-    try:
-        return colors_from_video(seq, index, points=points, normals=normals)
-    except InputError as error:
-        raise InputError(
-            f"colour guide from the video: {error.problem} (color_guide=false goes without)", error.path
-        ) from None

@@ -33,7 +33,11 @@ from contextlib import ExitStack
 
 import numpy as np
 
-from fourd.appearance.color_guide import PhotometricGuides, colors_of_cleaned
+from fourd.appearance.color_guide import (
+    PhotometricGuides,
+    colors_of_cleaned,
+    frame_colors_from_video,
+)
 from fourd.cache import StageCache, report_resumed, stage_key
 from fourd.errors import InputError
 from fourd.frame_source import FrameSource
@@ -52,7 +56,7 @@ from fourd.methods.kinematic.field import SpaceTimeField, space_time_points, win
 from fourd.methods.kinematic.frames import densify_density, densify_frames, prepare_frames
 from fourd.methods.kinematic.mpu4d import fit_mpu4d, mpu_arrays, mpu_from_arrays
 from fourd.methods.kinematic.options import MIN_FRAMES, Options
-from fourd.methods.kinematic.pipeline import fit_options, frame_colors_from_video, video_anchors
+from fourd.methods.kinematic.pipeline import fit_options, video_anchors
 from fourd.methods.kinematic.sliding import slide
 from fourd.methods.kinematic.trajectories import smooth_trajectories
 from fourd.sequence import PointCloudSequence
@@ -370,7 +374,7 @@ class _Frames:
 
     def _colors(self, index: int, points, normals) -> np.ndarray | None:
         """The colours [P, 3] of frame ``index``'s prepared ``points`` (as the run in memory
-        takes them, :func:`fourd.methods.kinematic.pipeline.frame_colors_from_video`)."""
+        takes them, :func:`fourd.appearance.color_guide.frame_colors_from_video`)."""
         if self.colour_source == "own":
             frame = self.raw[index]
             return colors_of_cleaned(frame.points, frame.colors, points)

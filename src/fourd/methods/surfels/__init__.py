@@ -40,7 +40,9 @@ and below 30 degrees; a small tangential share of the point distance in the data
 outside the alignment (``tangential``, ``linked_tangential``), which keeps open patches from
 shrinking; every frame's mesh fitted along its normals to that frame's points
 (``fit_frames``); with the capture's video, anchors tracked by optical flow pull each surfel
-along the surface as well (:mod:`.anchors`, ``video_anchors``). Slow: tens of seconds per
+along the surface as well (:mod:`.anchors`, ``video_anchors``), and the colours of the points
+(or of the video) pull each surfel in the final optimisation to where its first frame's
+colours say it is (:mod:`.color_guide`, ``color_guide``). Slow: tens of seconds per
 frame at a standard scan, against the issue's 2 s target.
 
 References
@@ -50,6 +52,7 @@ time-varying point clouds, SGP 2007 (``001_3fedd1c3a0ac4198.txt``).
 """
 
 from fourd.methods.surfels.anchors import AnchorData, Forward, anchor_term, pair_anchors
+from fourd.methods.surfels.color_guide import GuideData, color_guides, guide_term
 from fourd.methods.surfels.energy import Energy, Weights, total_energy
 from fourd.methods.surfels.match import (
     Data,
@@ -119,6 +122,7 @@ __all__ = [
     "FrameMesh",
     "Forward",
     "GaussNewtonOptions",
+    "GuideData",
     "Layout",
     "MatchOptions",
     "Matches",
@@ -132,6 +136,8 @@ __all__ = [
     "Weights",
     "accel_term",
     "anchor_term",
+    "color_guides",
+    "guide_term",
     "build_topology",
     "associate",
     "bind_vertices",

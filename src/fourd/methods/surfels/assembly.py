@@ -23,6 +23,7 @@ section 3.2 (``001_3fedd1c3a0ac4198.txt``).
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 from typing import NamedTuple
 
@@ -31,6 +32,7 @@ import numpy as np
 from fourd.cache import NO_CACHE, StageCache, cached, report_resumed, stage_key
 from fourd.methods.surfels.align import align_ranges
 from fourd.methods.surfels.anchors import pair_anchors
+from fourd.methods.surfels.color_guide import GuideData
 from fourd.methods.surfels.energy import Weights
 from fourd.methods.surfels.fill import fill_holes
 from fourd.methods.surfels.match import MatchOptions, frame_data
@@ -111,16 +113,18 @@ def optimize_model(
     *,
     urshape: str = "off",
     held: int = 0,
+    guides: GuideData | None = None,
 ) -> Model:
     """Global optimisation of all trajectories of ``model`` against its frames' data; then,
     with ``urshape`` ``"joint"``, of the trajectories together with the urshape, or with
     ``"rest"`` of the urshape alone (:func:`.fit_urshape`, the same weights and options; the
     model's earlier urshape is not used); ``"off"``: none. The first ``held`` frames stay as
     they are, boundary conditions of the others (the streamed run's seam, :mod:`.stream`;
-    only with ``urshape`` ``"off"``)."""
+    only with ``urshape`` ``"off"``). ``guides`` (frames of the model) join the data
+    (:mod:`.color_guide`)."""
     if held and urshape != "off":
         raise ValueError("held frames and an urshape do not go together")
-    data = range_data(frames, model.start, model.stop)
+    data = dataclasses.replace(range_data(frames, model.start, model.stop), guides=guides)
     free = None
     if held:
         moving = np.ones((model.state.frames, model.state.count), dtype=bool)

@@ -10,6 +10,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from fourd.methods.surfels.anchors import anchor_term
+from fourd.methods.surfels.color_guide import guide_term
 from fourd.methods.surfels.match import Data, Matches, MatchOptions, match_term
 from fourd.methods.surfels.motion import accel_term, rigid_term
 from fourd.methods.surfels.smoothness import laplace_term, smooth_normal_term, smooth_position_term
@@ -17,7 +18,7 @@ from fourd.methods.surfels.state import SurfelState, layout
 from fourd.methods.surfels.topology import Topology
 
 #: Terms whose Jacobian pattern follows the state (their association), never kept.
-ASSOCIATED = ("match", "anchor")
+ASSOCIATED = ("match", "anchor", "guide")
 
 
 @dataclass(frozen=True)
@@ -39,6 +40,8 @@ class Weights:
         ``w_accel`` on positions and on normals (eq. 10).
     anchor : float
         Multiplies the video anchors' weights (:mod:`.anchors`, beyond the paper).
+    guide : float
+        Multiplies the colour guides' weights (:mod:`.color_guide`, beyond the paper).
     """
 
     match: float = 1.0
@@ -50,6 +53,7 @@ class Weights:
     accel: float = 0.0
     accel_normal: float = 0.0
     anchor: float = 0.0
+    guide: float = 0.0
 
     def __post_init__(self):
         for field in fields(self):
@@ -137,6 +141,8 @@ def total_energy(
         parts["anchor"] = anchor_term(
             state, data.anchors, w.anchor, topology.radius, derivatives=d
         )
+    if w.guide > 0 and data.guides is not None:
+        parts["guide"] = guide_term(state, data.guides, w.guide, derivatives=d)
     first = 1 if urshape else 0
     if (w.accel > 0 or w.accel_normal > 0) and state.frames - first > 2:
         parts["accel"] = accel_term(

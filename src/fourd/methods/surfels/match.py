@@ -34,6 +34,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from fourd.methods.surfels.anchors import AnchorData
+from fourd.methods.surfels.color_guide import GuideData
 from fourd.methods.surfels.state import SurfelState, layout, tangent_basis
 from fourd.methods.surfels.term import Blocks, Term, term
 
@@ -51,6 +52,8 @@ class Data:
         Oriented data normals (only the ``"alignment"`` regime's angle test uses them).
     anchors : AnchorData or None
         The video's anchors between consecutive frames (:mod:`.anchors`).
+    guides : GuideData or None
+        Where the colours say surfels are (:mod:`.color_guide`).
     """
 
     points: np.ndarray
@@ -58,6 +61,7 @@ class Data:
     weights: np.ndarray
     normals: np.ndarray | None = None
     anchors: AnchorData | None = None
+    guides: GuideData | None = None
 
     def __post_init__(self):
         count = len(self.points)

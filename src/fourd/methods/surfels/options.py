@@ -171,6 +171,25 @@ class Options:
         paper, whose data term says nothing along the surface). Silent without video.
     anchor_weight : float
         Weight of an anchor of confidence 1, relative (as the data points' weights).
+    color_guide : bool
+        When the input points have colours, or have none but the input has calibrated video
+        (then each frame's points are coloured from the cameras that see them,
+        :func:`fourd.appearance.point_colors.guide_colors`): in the final optimisation, pull
+        each surfel in every frame where the colours its patch had in the first frame that
+        observed it say it is (per-surfel Lucas-Kanade on the frame's coloured points, hue
+        only; :mod:`.color_guide`, beyond the paper). One reference, so the anchors' small
+        errors do not add up from frame to frame. Silent without colours or video.
+    color_weight : float
+        Weight of a guide of certainty 1, relative to one data point's: a surfel holds about
+        ``sampling^2`` points of data (16 at the default ``sampling``), so 16 makes a sure
+        guide as strong as a surfel's data.
+    color_radius : float
+        Patch radius of that Lucas-Kanade, in ``eps_sampl``.
+    color_scale : float
+        A guide whose shift's uncertainty is this many ``eps_sampl`` gets weight ``exp(-1)``.
+    color_rounds : int
+        With the colours' guide, the final optimisation runs this many times, the guides found
+        again from where the one before left the surfels (the Lucas-Kanade starts nearer).
     reference : int
         The frame whose surfels are meshed and carried to every other frame and to the
         urshape (the result's ``rest``; without an urshape, this frame's mesh).
@@ -228,6 +247,11 @@ class Options:
     min_piece: int = 8
     video_anchors: bool = True
     anchor_weight: float = 1.0
+    color_guide: bool = True
+    color_weight: float = 16.0
+    color_radius: float = 3.0
+    color_scale: float = 0.5
+    color_rounds: int = 2
     reference: int = 0
     normals_k: int = 16
     cache_dir: str | None = None
@@ -242,6 +266,8 @@ class Options:
             "cg_tolerance",
             "fit_radius",
             "fit_reach",
+            "color_radius",
+            "color_scale",
         ):
             if not getattr(self, name) > 0:
                 raise ValueError(f"{name} must be positive, got {getattr(self, name)}")
@@ -263,6 +289,7 @@ class Options:
             "close_holes",
             "close_smoothness",
             "anchor_weight",
+            "color_weight",
         ):
             if not getattr(self, name) >= 0:
                 raise ValueError(f"{name} must not be negative, got {getattr(self, name)}")
@@ -289,6 +316,8 @@ class Options:
         ):
             if getattr(self, name) < 0:
                 raise ValueError(f"{name} must not be negative")
+        if self.color_rounds < 1:
+            raise ValueError(f"color_rounds must be at least 1, got {self.color_rounds}")
         if self.urshape not in URSHAPE_STAGES:
             raise ValueError(
                 f"urshape must be one of {', '.join(URSHAPE_STAGES)}, got {self.urshape!r}"
@@ -317,4 +346,5 @@ def energy_weights(
         accel=accel * options.accel * position,
         accel_normal=accel * options.accel_normal * normal,
         anchor=options.anchor_weight * position if options.video_anchors else 0.0,
+        guide=options.color_weight * position if options.color_guide else 0.0,
     )

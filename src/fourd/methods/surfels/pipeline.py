@@ -14,6 +14,7 @@ import time as _time
 import numpy as np
 
 from fourd.animation import AnimatedMesh
+from fourd.appearance.color_guide import guide_colors
 from fourd.cache import StageCache, cached, option_values, report_resumed, stage_key
 from fourd.errors import InputError
 from fourd.geometry.hole_closing import close_small_holes
@@ -21,6 +22,7 @@ from fourd.geometry.neighbors import point_spacing
 from fourd.geometry.surface_fit import fit_along_normals
 from fourd.methods.surfels.anchors import with_video_anchors
 from fourd.methods.surfels.assembly import Schedule, assemble, optimize_model
+from fourd.methods.surfels.color_guide import color_guides
 from fourd.methods.surfels.match import MatchOptions
 from fourd.methods.surfels.meshing import MeshingOptions, surfel_mesh
 from fourd.methods.surfels.model import Model, unsupported_pieces, without_surfels
@@ -81,14 +83,27 @@ def reconstruct(seq: PointCloudSequence, options: Options | None = None) -> Anim
         )
     merged = _time.perf_counter()
     if options.final_iterations:
-        model = optimize_model(
-            model,
-            frames,
-            energy_weights(options, noise, sampling, final=True),
-            solver_options(options, options.final_iterations),
-            schedule.match,
-            urshape={"off": "off", "rest": "rest"}.get(options.urshape, "joint"),
-        )
+        colors = _guide_colors(seq, frames, options)
+        rounds = options.color_rounds if colors is not None else 1
+        for round in range(rounds):
+            model = optimize_model(
+                model,
+                frames,
+                energy_weights(options, noise, sampling, final=True),
+                solver_options(options, options.final_iterations),
+                schedule.match,
+                urshape="off" if round < rounds - 1 else
+                {"off": "off", "rest": "rest"}.get(options.urshape, "joint"),
+                guides=None if colors is None else color_guides(
+                    model.state,
+                    model.observed,
+                    [frame.points for frame in frames],
+                    [frame.normals for frame in frames],
+                    colors,
+                    radius=options.color_radius * sampling,
+                    scale=options.color_scale * sampling,
+                ),
+            )
     optimized = _time.perf_counter()
     lost = unsupported_pieces(model, options.min_piece)
     if lost.any() and not lost.all():
@@ -132,6 +147,17 @@ def reconstruct(seq: PointCloudSequence, options: Options | None = None) -> Anim
         _time.perf_counter() - optimized,
     )
     return mesh
+
+
+def _guide_colors(seq, frames, options: Options) -> list | None:
+    """The colours of the prepared ``frames``' points for the colours' guide
+    (:mod:`.color_guide`), from the points' own or the video; None without them or with
+    ``color_guide`` off."""
+    if not options.color_guide or options.color_weight == 0:
+        return None
+    return guide_colors(
+        seq, [frame.points for frame in frames], [frame.normals for frame in frames]
+    )
 
 
 def prepare_frames(

@@ -96,6 +96,7 @@ def fit_urshape(
         data,
         frames=data.frames + 1,
         anchors=None if data.anchors is None else data.anchors.shifted(1),
+        guides=None if data.guides is None else data.guides.shifted(1),
     )
     free = None
     if not joint:
