@@ -13,7 +13,11 @@ the surfels' own positions; the mesh as output (after the fit to the frames); th
 mesh; that mesh carried with `align_normals` off; and carried with the offsets not turned at
 all (every `F` the identity).
 
-Answer: see benchmarks/METHODS.md, "The video's anchors in `surfels`".
+Answer (the bench's scene, with anchors, before the colours' guide): the surfels drift, not
+the carry. Surfels 0.0100 / 0.0188; output mesh 0.0098 / 0.0178; carried 0.0098 / 0.0180, the
+same without `align_normals`; offsets not turned 0.0103 / 0.0190. With the colours' guide
+(`color_guide`, weight 1, one round) everything moves together: surfels 0.0057 / 0.0122, mesh
+0.0059 / 0.0119. benchmarks/METHODS.md, "The video's anchors" and "The colours' guide".
 """
 
 import sys

@@ -178,7 +178,8 @@ class Options:
         each surfel in every frame where the colours its patch had in the first frame that
         observed it say it is (per-surfel Lucas-Kanade on the frame's coloured points, hue
         only; :mod:`.color_guide`, beyond the paper). One reference, so the anchors' small
-        errors do not add up from frame to frame. Silent without colours or video.
+        errors do not add up from frame to frame. Silent without colours or video. In memory
+        only (``window`` 0).
     color_weight : float
         Weight of a guide of certainty 1, relative to one data point's: a surfel holds about
         ``sampling^2`` points of data (16 at the default ``sampling``), so 16 makes a sure

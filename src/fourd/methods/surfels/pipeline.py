@@ -84,26 +84,7 @@ def reconstruct(seq: PointCloudSequence, options: Options | None = None) -> Anim
     merged = _time.perf_counter()
     if options.final_iterations:
         colors = _guide_colors(seq, frames, options)
-        rounds = options.color_rounds if colors is not None else 1
-        for round in range(rounds):
-            model = optimize_model(
-                model,
-                frames,
-                energy_weights(options, noise, sampling, final=True),
-                solver_options(options, options.final_iterations),
-                schedule.match,
-                urshape="off" if round < rounds - 1 else
-                {"off": "off", "rest": "rest"}.get(options.urshape, "joint"),
-                guides=None if colors is None else color_guides(
-                    model.state,
-                    model.observed,
-                    [frame.points for frame in frames],
-                    [frame.normals for frame in frames],
-                    colors,
-                    radius=options.color_radius * sampling,
-                    scale=options.color_scale * sampling,
-                ),
-            )
+        model = _final_optimisation(model, frames, colors, schedule, noise, sampling, options)
     optimized = _time.perf_counter()
     lost = unsupported_pieces(model, options.min_piece)
     if lost.any() and not lost.all():
@@ -147,6 +128,40 @@ def reconstruct(seq: PointCloudSequence, options: Options | None = None) -> Anim
         _time.perf_counter() - optimized,
     )
     return mesh
+
+
+def _final_optimisation(
+    model: Model, frames, colors, schedule: Schedule, noise: float, sampling: float,
+    options: Options,
+) -> Model:
+    """The final global optimisation of ``model`` (sec. 3.2), then its urshape; with the
+    frames' ``colors`` (:func:`_guide_colors`, None: none) ``color_rounds`` times, each with
+    the colours' guides found from where the one before left the surfels (:mod:`.color_guide`)
+    and the urshape after the last."""
+    rounds = options.color_rounds if colors is not None else 1
+    urshape = {"off": "off", "rest": "rest"}.get(options.urshape, "joint")
+    for k in range(rounds):
+        guides = None
+        if colors is not None:
+            guides = color_guides(
+                model.state,
+                model.observed,
+                [frame.points for frame in frames],
+                [frame.normals for frame in frames],
+                colors,
+                radius=options.color_radius * sampling,
+                scale=options.color_scale * sampling,
+            )
+        model = optimize_model(
+            model,
+            frames,
+            energy_weights(options, noise, sampling, final=True),
+            solver_options(options, options.final_iterations),
+            schedule.match,
+            urshape=urshape if k == rounds - 1 else "off",
+            guides=guides,
+        )
+    return model
 
 
 def _guide_colors(seq, frames, options: Options) -> list | None:
