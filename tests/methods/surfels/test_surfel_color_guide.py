@@ -10,6 +10,7 @@ import pytest
 from fourd.methods.surfels import (
     GaussNewtonOptions,
     GuideData,
+    GuideSettings,
     Weights,
     build_topology,
     color_guides,
@@ -45,7 +46,7 @@ def _slid_plane(printed=True):
     colors = [np.clip(c + rng.normal(scale=0.01, size=c.shape), 0, 1) for c in colors]
     guides = color_guides(
         state, np.ones((2, len(surfels)), dtype=bool), [points, points], [point_normals] * 2,
-        colors, radius=3 * SPACING, scale=0.5 * SPACING,
+        colors, GuideSettings(radius=3 * SPACING, scale=0.5 * SPACING),
     )
     return state, points, guides
 

@@ -52,7 +52,12 @@ time-varying point clouds, SGP 2007 (``001_3fedd1c3a0ac4198.txt``).
 """
 
 from fourd.methods.surfels.anchors import AnchorData, Forward, anchor_term, pair_anchors
-from fourd.methods.surfels.color_guide import GuideData, color_guides, guide_term
+from fourd.methods.surfels.color_guide import (
+    GuideData,
+    GuideSettings,
+    color_guides,
+    guide_term,
+)
 from fourd.methods.surfels.energy import Energy, Weights, total_energy
 from fourd.methods.surfels.match import (
     Data,
@@ -123,6 +128,7 @@ __all__ = [
     "Forward",
     "GaussNewtonOptions",
     "GuideData",
+    "GuideSettings",
     "Layout",
     "MatchOptions",
     "Matches",

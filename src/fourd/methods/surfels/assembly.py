@@ -32,7 +32,7 @@ import numpy as np
 from fourd.cache import NO_CACHE, StageCache, cached, report_resumed, stage_key
 from fourd.methods.surfels.align import align_ranges
 from fourd.methods.surfels.anchors import pair_anchors
-from fourd.methods.surfels.color_guide import GuideData
+from fourd.methods.surfels.color_guide import GuideData, GuideSettings, color_guides
 from fourd.methods.surfels.energy import Weights
 from fourd.methods.surfels.fill import fill_holes
 from fourd.methods.surfels.match import MatchOptions, frame_data
@@ -77,6 +77,9 @@ class Schedule(NamedTuple):
         The alignment's cutoff percentile (:func:`.align.align_ranges`).
     parts : PartSearch or None
         The alignment's rigid search per part (:mod:`.part_search`); None: none.
+    guide : GuideSettings or None
+        The colours' guides in each merge's global optimisation, where the frames have
+        colours (:mod:`.color_guide`); None: none.
     """
 
     sampling: float
@@ -92,6 +95,7 @@ class Schedule(NamedTuple):
     geodesic: bool = True
     align_percentile: float = 100.0
     parts: PartSearch | None = None
+    guide: GuideSettings | None = None
 
 
 def range_data(frames: list, start: int, stop: int):
@@ -113,18 +117,20 @@ def optimize_model(
     *,
     urshape: str = "off",
     held: int = 0,
-    guides: GuideData | None = None,
+    guide: GuideSettings | None = None,
 ) -> Model:
     """Global optimisation of all trajectories of ``model`` against its frames' data; then,
     with ``urshape`` ``"joint"``, of the trajectories together with the urshape, or with
     ``"rest"`` of the urshape alone (:func:`.fit_urshape`, the same weights and options; the
     model's earlier urshape is not used); ``"off"``: none. The first ``held`` frames stay as
     they are, boundary conditions of the others (the streamed run's seam, :mod:`.stream`;
-    only with ``urshape`` ``"off"``). ``guides`` (frames of the model) join the data
-    (:mod:`.color_guide`)."""
+    only with ``urshape`` ``"off"``). With ``guide``, the colours' guides of the model's
+    surfels at its state join the data where the frames have colours (:mod:`.color_guide`)."""
     if held and urshape != "off":
         raise ValueError("held frames and an urshape do not go together")
-    data = dataclasses.replace(range_data(frames, model.start, model.stop), guides=guides)
+    data = dataclasses.replace(
+        range_data(frames, model.start, model.stop), guides=model_guides(model, frames, guide)
+    )
     free = None
     if held:
         moving = np.ones((model.state.frames, model.state.count), dtype=bool)
@@ -151,6 +157,23 @@ def optimize_model(
         log.debug("urshape: energy %.4g -> %.4g", energies[0], energies[-1])
     observed = observed_surfels(state, data, model.topology.radius)
     return Model(state, model.topology, model.start, observed, rest)
+
+
+def model_guides(model: Model, frames: list, guide: GuideSettings | None) -> GuideData | None:
+    """The colours' guides (:func:`.color_guide.color_guides`) of ``model``'s surfels in its
+    frames of ``frames`` (:class:`~.seeds.FramePoints` with ``colors``); None without
+    ``guide`` or colours."""
+    own = frames[model.start : model.stop]
+    if guide is None or all(frame.colors is None for frame in own):
+        return None
+    return color_guides(
+        model.state,
+        model.observed,
+        [frame.points for frame in own],
+        [frame.normals for frame in own],
+        [frame.colors for frame in own],
+        guide,
+    )
 
 
 def optimize_near_seam(
@@ -333,7 +356,7 @@ def merge(
         )
     return optimize_model(
         model, frames, schedule.weights, schedule.optimize, schedule.match,
-        urshape="joint" if schedule.urshape else "off",
+        urshape="joint" if schedule.urshape else "off", guide=schedule.guide,
     )
 
 

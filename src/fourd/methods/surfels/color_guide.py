@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -30,6 +31,14 @@ from fourd.methods.surfels.state import SurfelState, layout
 from fourd.methods.surfels.term import Blocks, Term, term
 
 log = logging.getLogger("fourd.methods.surfels.color_guide")
+
+
+class GuideSettings(NamedTuple):
+    """How the guides are found (input units): the Lucas-Kanade's patch ``radius`` and the
+    uncertainty ``scale`` that gets weight ``exp(-1)`` (:func:`color_guides`)."""
+
+    radius: float
+    scale: float
 
 
 @dataclass(frozen=True)
@@ -85,9 +94,7 @@ def color_guides(
     points: list,
     normals: list,
     colors: list,
-    *,
-    radius: float,
-    scale: float,
+    settings: GuideSettings,
 ) -> GuideData | None:
     """The guides of every surfel of ``state`` in every frame with colours.
 
@@ -101,12 +108,10 @@ def color_guides(
     points, normals, colors : lists of ``T`` arrays [P_t, 3]
         Each frame's points, their unit normals and colours in [0, 1] (``colors[t]`` None:
         frame ``t`` has none).
-    radius : float
-        Patch radius of the Lucas-Kanade (input units).
-    scale : float
-        A shift whose uncertainty is ``scale`` (input units) gets weight ``exp(-1)``.
+    settings : GuideSettings
 
     Returns None when no frame has colours."""
+    radius, scale = settings
     frames = [t for t in range(state.frames) if colors[t] is not None and len(points[t]) >= 8]
     if not frames:
         return None

@@ -188,6 +188,9 @@ class Options:
         Patch radius of that Lucas-Kanade, in ``eps_sampl``.
     color_scale : float
         A guide whose shift's uncertainty is this many ``eps_sampl`` gets weight ``exp(-1)``.
+    color_merges : bool
+        The guide acts in every merge's global optimisation too, so the drift is held before
+        the next level builds on it; false: in the final optimisation only.
     color_rounds : int
         With the colours' guide, the final optimisation runs this many times, the guides found
         again from where the one before left the surfels (the Lucas-Kanade starts nearer).
@@ -252,6 +255,7 @@ class Options:
     color_weight: float = 16.0
     color_radius: float = 3.0
     color_scale: float = 0.5
+    color_merges: bool = True
     color_rounds: int = 2
     reference: int = 0
     normals_k: int = 16

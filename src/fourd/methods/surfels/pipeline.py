@@ -22,7 +22,7 @@ from fourd.geometry.neighbors import point_spacing
 from fourd.geometry.surface_fit import fit_along_normals
 from fourd.methods.surfels.anchors import with_video_anchors
 from fourd.methods.surfels.assembly import Schedule, assemble, optimize_model
-from fourd.methods.surfels.color_guide import color_guides
+from fourd.methods.surfels.color_guide import GuideSettings
 from fourd.methods.surfels.match import MatchOptions
 from fourd.methods.surfels.meshing import MeshingOptions, surfel_mesh
 from fourd.methods.surfels.model import Model, unsupported_pieces, without_surfels
@@ -73,6 +73,11 @@ def reconstruct(seq: PointCloudSequence, options: Options | None = None) -> Anim
     if options.video_anchors and getattr(seq, "video", None) is not None:
         frames = with_video_anchors(frames, seq.times, seq.video, seq.names)
         salt = (seq.video.fingerprint(),)
+    colors = _guide_colors(seq, frames, options)
+    if colors is not None:
+        frames = [frame._replace(colors=c) for frame, c in zip(frames, colors, strict=True)]
+        if options.color_merges:
+            salt = (*salt, stage_key(colors))
     schedule = assembly_schedule(options, noise, sampling)
     seeds = seed_models(frames, range(len(frames)), sampling, schedule, options)
     prepared = _time.perf_counter()
@@ -83,8 +88,7 @@ def reconstruct(seq: PointCloudSequence, options: Options | None = None) -> Anim
         )
     merged = _time.perf_counter()
     if options.final_iterations:
-        colors = _guide_colors(seq, frames, options)
-        model = _final_optimisation(model, frames, colors, schedule, noise, sampling, options)
+        model = _final_optimisation(model, frames, schedule, noise, sampling, options)
     optimized = _time.perf_counter()
     lost = unsupported_pieces(model, options.min_piece)
     if lost.any() and not lost.all():
@@ -131,27 +135,16 @@ def reconstruct(seq: PointCloudSequence, options: Options | None = None) -> Anim
 
 
 def _final_optimisation(
-    model: Model, frames, colors, schedule: Schedule, noise: float, sampling: float,
-    options: Options,
+    model: Model, frames, schedule: Schedule, noise: float, sampling: float, options: Options
 ) -> Model:
-    """The final global optimisation of ``model`` (sec. 3.2), then its urshape; with the
-    frames' ``colors`` (:func:`_guide_colors`, None: none) ``color_rounds`` times, each with
-    the colours' guides found from where the one before left the surfels (:mod:`.color_guide`)
-    and the urshape after the last."""
-    rounds = options.color_rounds if colors is not None else 1
+    """The final global optimisation of ``model`` (sec. 3.2), then its urshape; where the
+    ``frames`` have colours, ``color_rounds`` times, each with the colours' guides found from
+    where the one before left the surfels (:mod:`.color_guide`), the urshape after the last."""
+    guide = guide_settings(options, sampling)
+    guided = guide is not None and any(frame.colors is not None for frame in frames)
+    rounds = options.color_rounds if guided else 1
     urshape = {"off": "off", "rest": "rest"}.get(options.urshape, "joint")
     for k in range(rounds):
-        guides = None
-        if colors is not None:
-            guides = color_guides(
-                model.state,
-                model.observed,
-                [frame.points for frame in frames],
-                [frame.normals for frame in frames],
-                colors,
-                radius=options.color_radius * sampling,
-                scale=options.color_scale * sampling,
-            )
         model = optimize_model(
             model,
             frames,
@@ -159,9 +152,17 @@ def _final_optimisation(
             solver_options(options, options.final_iterations),
             schedule.match,
             urshape=urshape if k == rounds - 1 else "off",
-            guides=guides,
+            guide=guide,
         )
     return model
+
+
+def guide_settings(options: Options, sampling: float) -> GuideSettings | None:
+    """The colours' guide's :class:`~.color_guide.GuideSettings` of ``options`` at
+    ``eps_sampl`` ``sampling``; None with the guide off."""
+    if not options.color_guide or options.color_weight == 0:
+        return None
+    return GuideSettings(options.color_radius * sampling, options.color_scale * sampling)
 
 
 def _guide_colors(seq, frames, options: Options) -> list | None:
@@ -242,6 +243,7 @@ def assembly_schedule(options: Options, noise: float, sampling: float) -> Schedu
         reach=options.merge_reach,
         geodesic=options.geodesic,
         align_percentile=options.align_percentile,
+        guide=guide_settings(options, sampling) if options.color_merges else None,
         parts=(
             PartSearch(
                 options.part_size * sampling,
@@ -319,6 +321,7 @@ NOT_IN_MERGES = (
     "final_rigid",
     "final_accel",
     "final_iterations",
+    "color_rounds",
     "window",
 )
 

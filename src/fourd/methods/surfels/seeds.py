@@ -39,11 +39,14 @@ class FramePoints(NamedTuple):
         propagation).
     forward : Forward or None
         The video's anchors from this frame into the next (:mod:`.anchors`); None: none.
+    colors : float64 [P, 3] or None
+        The points' colours in [0, 1] for the colours' guide (:mod:`.color_guide`); None: none.
     """
 
     points: np.ndarray
     normals: np.ndarray
     forward: Forward | None = None
+    colors: np.ndarray | None = None
 
 
 def prepare_frame(
