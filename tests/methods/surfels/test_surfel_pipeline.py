@@ -2,6 +2,8 @@
 frame on its own input, a rigid motion recovered, the fit to the frames closer to the truth;
 and its checks on the input."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 from scipy.spatial import cKDTree
@@ -129,6 +131,29 @@ def test_a_rerun_with_a_cache_resumes_every_stage_and_gives_the_same_result(tmp_
     assert sum("merge" in line for line in resumed) == 2
     assert np.array_equal(first.faces, again.faces)
     assert np.allclose(first.vertices, again.vertices)
+
+
+def test_the_merges_are_kept_for_the_points_colours_they_were_guided_by(tmp_path, caplog):
+    """The colours' guide acts in the merges, so a rerun resumes them for the same colours and
+    merges again for others."""
+    truth = synth.scene("rigid-turn", frames=3, angle=12.0)
+    scans = synth.scan(truth, resolution=48, appearance="cloth")
+    options = dict(QUICK, cache_dir=str(tmp_path / "cache"))
+
+    def resumed_merges(seq):
+        caplog.clear()
+        with caplog.at_level("INFO", logger="fourd.methods.surfels"):
+            reconstruct(seq, method="surfels", **options)
+        return sum(r.getMessage().startswith("resumed") and "merge" in r.getMessage()
+                   for r in caplog.records)
+
+    recoloured = PointCloudSequence(
+        [dataclasses.replace(f, colors=1.0 - f.colors) for f in scans.frames], scans.names
+    )
+    assert resumed_merges(scans) == 0
+    assert resumed_merges(scans) == 2
+    assert resumed_merges(recoloured) == 0
+    assert resumed_merges(scans) == 2
 
 
 @pytest.mark.slow
