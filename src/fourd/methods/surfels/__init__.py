@@ -41,7 +41,7 @@ outside the alignment (``tangential``, ``linked_tangential``), which keeps open 
 shrinking; every frame's mesh fitted along its normals to that frame's points
 (``fit_frames``); with the capture's video, anchors tracked by optical flow pull each surfel
 along the surface as well (:mod:`.anchors`, ``video_anchors``), and the colours of the points
-(or of the video) pull each surfel in the final optimisation to where its first frame's
+(or of the video) pull each surfel in the global optimisations to where its first frame's
 colours say it is (:mod:`.color_guide`, ``color_guide``). Slow: tens of seconds per
 frame at a standard scan, against the issue's 2 s target.
 

@@ -174,7 +174,7 @@ class Options:
     color_guide : bool
         When the input points have colours, or have none but the input has calibrated video
         (then each frame's points are coloured from the cameras that see them,
-        :func:`fourd.appearance.point_colors.guide_colors`): in the final optimisation, pull
+        :func:`fourd.appearance.color_guide.guide_colors`): in the global optimisations, pull
         each surfel in every frame where the colours its patch had in the first frame that
         observed it say it is (per-surfel Lucas-Kanade on the frame's coloured points, hue
         only; :mod:`.color_guide`, beyond the paper). One reference, so the anchors' small
