@@ -16,7 +16,7 @@ demo: $(STAMP)
 	$(VENV)/bin/fourd demo
 
 test: $(STAMP)
-	$(PY) -m pytest -q
+	$(PY) -m pytest -q --durations=25
 
 # Both write into benchmarks/out/ (git-ignored); the tracked record is rewritten only on
 # purpose: fourd bench -o benchmarks/BENCHMARKS.md
