@@ -57,6 +57,7 @@ from fourd.methods.surfels.color_guide import (
     GuideSettings,
     color_guides,
     guide_term,
+    reference_colors,
 )
 from fourd.methods.surfels.energy import Energy, Weights, total_energy
 from fourd.methods.surfels.match import (
@@ -144,6 +145,7 @@ __all__ = [
     "anchor_term",
     "color_guides",
     "guide_term",
+    "reference_colors",
     "build_topology",
     "associate",
     "bind_vertices",

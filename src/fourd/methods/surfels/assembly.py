@@ -348,7 +348,8 @@ def merge(
     model = Model(resampled, topology, left.start, observed[:, keep])
     if held:
         return optimize_model(
-            model, frames, schedule.weights, schedule.optimize, schedule.match, held=held
+            model, frames, schedule.weights, schedule.optimize, schedule.match, held=held,
+            guide=schedule.guide,
         )
     if schedule.reach and not schedule.urshape and frames_count > 2 * schedule.reach + 2:
         return optimize_near_seam(

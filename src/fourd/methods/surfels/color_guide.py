@@ -35,10 +35,14 @@ log = logging.getLogger("fourd.methods.surfels.color_guide")
 
 class GuideSettings(NamedTuple):
     """How the guides are found (input units): the Lucas-Kanade's patch ``radius`` and the
-    uncertainty ``scale`` that gets weight ``exp(-1)`` (:func:`color_guides`)."""
+    uncertainty ``scale`` that gets weight ``exp(-1)`` (:func:`color_guides`). ``reference``
+    (log colours [K, 3], or None) are the first ``K`` surfels' reference colours, carried from
+    where they were first found (the streamed run's mesh surfels, from its first window,
+    :mod:`.stream`) instead of taken from the first frame at hand that observes them."""
 
     radius: float
     scale: float
+    reference: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -110,27 +114,23 @@ def color_guides(
         frame ``t`` has none).
     settings : GuideSettings
 
-    Returns None when no frame has colours."""
-    radius, scale = settings
-    frames = [t for t in range(state.frames) if colors[t] is not None and len(points[t]) >= 8]
-    if not frames:
+    Returns None when no frame has colours. The carried ``settings.reference`` surfels are
+    guided in every frame."""
+    fields = _color_fields(points, normals, colors, state.count)
+    if not fields:
         return None
-    fields = {t: field_for_reads(points[t], normals[t], colors[t], state.count) for t in frames}
-    first = np.argmax(observed, axis=0)
-    first[~observed.any(axis=0)] = 0
-    reference = np.full((state.count, 3), np.nan)
-    for t in np.unique(first):
-        mine = np.flatnonzero(first == t)
-        source = t if t in fields else min(fields, key=lambda k: abs(k - t))
-        reference[mine] = fields[source].sample(state.positions[source, mine])
+    reference, first = _reference_colors(state, observed, fields)
+    if settings.reference is not None:
+        carried = len(settings.reference)
+        reference[:carried], first[:carried] = settings.reference, -1
     parts = []
-    for t in frames:
+    for t in fields:
         shift = photometric_shift(
-            state.positions[t], state.normals[t], reference, fields[t], radius=radius
+            state.positions[t], state.normals[t], reference, fields[t], radius=settings.radius
         )
         # in its reference frame a surfel's patch matches itself: no guide there
         finite = np.flatnonzero(np.isfinite(shift.uncertainty) & (first != t))
-        weight = np.exp(-((shift.uncertainty[finite] / scale) ** 2))
+        weight = np.exp(-((shift.uncertainty[finite] / settings.scale) ** 2))
         keep = finite[weight > 1e-3]
         parts.append((t, keep, state.positions[t, keep] + shift.shift[keep], weight[weight > 1e-3]))
     guides = GuideData(
@@ -142,7 +142,39 @@ def color_guides(
     log.info(
         "surfels: colour guides: %d over %d frames, mean certainty %.2f",
         len(guides.frames),
-        len(frames),
-        float(guides.weights.sum()) / max(1, state.count * len(frames)),
+        len(fields),
+        float(guides.weights.sum()) / max(1, state.count * len(fields)),
     )
     return guides
+
+
+def reference_colors(
+    state: SurfelState, observed: np.ndarray, points: list, normals: list, colors: list
+) -> np.ndarray | None:
+    """The log colours [S, 3] each surfel of ``state`` takes as its reference in
+    :func:`color_guides` (the arguments as there); None when no frame has colours."""
+    fields = _color_fields(points, normals, colors, state.count)
+    return _reference_colors(state, observed, fields)[0] if fields else None
+
+
+def _color_fields(points: list, normals: list, colors: list, reads: int) -> dict:
+    """Frame -> colour field of every frame with colours (and at least 8 points)."""
+    return {
+        t: field_for_reads(points[t], normals[t], colors[t], reads)
+        for t in range(len(points))
+        if colors[t] is not None and len(points[t]) >= 8
+    }
+
+
+def _reference_colors(state: SurfelState, observed: np.ndarray, fields: dict):
+    """Each surfel's reference colours [S, 3] from the colour ``fields`` (frame -> field) and
+    the frame they come from [S]: the first that observes it (0 for one that none does), or
+    the frame with colours nearest to it."""
+    first = np.argmax(observed, axis=0)
+    first[~observed.any(axis=0)] = 0
+    reference = np.full((state.count, 3), np.nan)
+    for t in np.unique(first):
+        mine = np.flatnonzero(first == t)
+        source = t if t in fields else min(fields, key=lambda k: abs(k - t))
+        reference[mine] = fields[source].sample(state.positions[source, mine])
+    return reference, first

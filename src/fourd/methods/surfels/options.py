@@ -162,7 +162,7 @@ class Options:
         this that have no data in some frame are left out of the mesh: with no neighbours,
         their trajectory there is the acceleration prior's extrapolation, and one lost early
         in a long take flies off (:func:`~.model.unsupported_pieces`). 0: every surfel is
-        meshed (the paper). In memory only (``window`` 0).
+        meshed (the paper). Streamed (``window``), judged on the first window's frames.
     video_anchors : bool
         When the input has calibrated video (``cameras.json`` and ``video/``), track anchors
         by optical flow between consecutive frames (:func:`fourd.appearance.anchors`, on hue
@@ -178,8 +178,9 @@ class Options:
         each surfel in every frame where the colours its patch had in the first frame that
         observed it say it is (per-surfel Lucas-Kanade on the frame's coloured points, hue
         only; :mod:`.color_guide`, beyond the paper). One reference, so the anchors' small
-        errors do not add up from frame to frame. Silent without colours or video. In memory
-        only (``window`` 0).
+        errors do not add up from frame to frame. Silent without colours or video. Streamed
+        (``window``), the mesh's surfels keep the reference colours of the first window
+        (:mod:`.stream`).
     color_weight : float
         Weight of a guide of certainty 1, relative to one data point's: a surfel holds about
         ``sampling^2`` points of data (16 at the default ``sampling``), so 16 makes a sure

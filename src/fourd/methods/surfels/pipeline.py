@@ -73,7 +73,7 @@ def reconstruct(seq: PointCloudSequence, options: Options | None = None) -> Anim
     if options.video_anchors and getattr(seq, "video", None) is not None:
         frames = with_video_anchors(frames, seq.times, seq.video, seq.names)
         salt = (seq.video.fingerprint(),)
-    colors = _guide_colors(seq, frames, options)
+    colors = guide_point_colors(seq, frames, options)
     if colors is not None:
         frames = [frame._replace(colors=c) for frame, c in zip(frames, colors, strict=True)]
         if options.color_merges:
@@ -88,7 +88,15 @@ def reconstruct(seq: PointCloudSequence, options: Options | None = None) -> Anim
         )
     merged = _time.perf_counter()
     if options.final_iterations:
-        model = _final_optimisation(model, frames, schedule, noise, sampling, options)
+        model = final_optimisation(
+            model,
+            frames,
+            energy_weights(options, noise, sampling, final=True),
+            schedule.match,
+            options,
+            guide=guide_settings(options, sampling),
+            urshape={"off": "off", "rest": "rest"}.get(options.urshape, "joint"),
+        )
     optimized = _time.perf_counter()
     lost = unsupported_pieces(model, options.min_piece)
     if lost.any() and not lost.all():
@@ -134,24 +142,33 @@ def reconstruct(seq: PointCloudSequence, options: Options | None = None) -> Anim
     return mesh
 
 
-def _final_optimisation(
-    model: Model, frames, schedule: Schedule, noise: float, sampling: float, options: Options
+def final_optimisation(
+    model: Model,
+    frames: list,
+    weights,
+    match,
+    options: Options,
+    *,
+    guide: GuideSettings | None,
+    urshape: str,
+    held: int = 0,
 ) -> Model:
-    """The final global optimisation of ``model`` (sec. 3.2), then its urshape; where the
-    ``frames`` have colours, ``color_rounds`` times, each with the colours' guides found from
-    where the one before left the surfels (:mod:`.color_guide`), the urshape after the last."""
-    guide = guide_settings(options, sampling)
+    """The final global optimisation of ``model`` (sec. 3.2, ``weights`` with the increased
+    rigidity and acceleration), then its ``urshape`` (:func:`.assembly.optimize_model`; the
+    first ``held`` frames held); where the ``frames`` have colours and with ``guide``,
+    ``color_rounds`` times, each with the colours' guides found from where the one before
+    left the surfels (:mod:`.color_guide`), the urshape after the last."""
     guided = guide is not None and any(frame.colors is not None for frame in frames)
     rounds = options.color_rounds if guided else 1
-    urshape = {"off": "off", "rest": "rest"}.get(options.urshape, "joint")
     for k in range(rounds):
         model = optimize_model(
             model,
             frames,
-            energy_weights(options, noise, sampling, final=True),
+            weights,
             solver_options(options, options.final_iterations),
-            schedule.match,
+            match,
             urshape=urshape if k == rounds - 1 else "off",
+            held=held,
             guide=guide,
         )
     return model
@@ -165,7 +182,7 @@ def guide_settings(options: Options, sampling: float) -> GuideSettings | None:
     return GuideSettings(options.color_radius * sampling, options.color_scale * sampling)
 
 
-def _guide_colors(seq, frames, options: Options) -> list | None:
+def guide_point_colors(seq, frames, options: Options) -> list | None:
     """The colours of the prepared ``frames``' points for the colours' guide
     (:mod:`.color_guide`), from the points' own or the video; None without them or with
     ``color_guide`` off."""

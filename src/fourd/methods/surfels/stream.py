@@ -24,7 +24,10 @@ against the paper's: a surface first seen after the first window is not in the m
 hole filling cannot reach back into written frames), and the urshape is the first window's.
 Memory holds one window and the past's :data:`HELD` + :data:`LAG` frames, plus the output's
 observed flags. With video (``video_anchors``) each window tracks the anchors of its own frame
-pairs and of the seam's, from the past's last frame.
+pairs and of the seam's, from the past's last frame. With colours (``color_guide``) the
+guides act in each window's merges, its merge onto the past and its final optimisation; the
+mesh's surfels keep the reference colours found in the first window
+(:func:`.color_guide.reference_colors`), so the guides do not chain from window to window.
 With ``cache_dir`` every finished window is kept and a rerun resumes after the last one.
 """
 
@@ -47,7 +50,8 @@ from fourd.geometry.surface_fit import fit_along_normals
 from fourd.io.npz import npz_frames
 from fourd.methods.base import StreamSummary, run_streamed
 from fourd.methods.surfels.anchors import with_video_anchors
-from fourd.methods.surfels.assembly import assemble, merge, optimize_model
+from fourd.methods.surfels.assembly import assemble, merge
+from fourd.methods.surfels.color_guide import GuideSettings, reference_colors
 from fourd.methods.surfels.meshing import (
     Binding,
     align_to_normals,
@@ -69,11 +73,13 @@ from fourd.methods.surfels.options import MIN_FRAMES, Options, energy_weights
 from fourd.methods.surfels.pipeline import (
     MESH_ONLY,
     assembly_schedule,
+    final_optimisation,
+    guide_point_colors,
+    guide_settings,
     merge_keys,
     meshing_options,
     prepare_frames,
     seed_models,
-    solver_options,
 )
 from fourd.methods.surfels.seeds import FramePoints
 from fourd.methods.surfels.state import SurfelState
@@ -159,6 +165,7 @@ def _run(source: FrameSource, output: Path, options: Options) -> StreamSummary:
     values = option_values(options, without=("window", *MESH_ONLY))
     anchored = options.video_anchors and source.video is not None
     salt = (source.video.fingerprint(),) if anchored else ()
+    guide = guide_settings(options, sampling)
     tail, tail_frames, key, held = None, [], "", 0
     carried: _Carried | None = None
     closing: HoleClosing | None = None
@@ -175,6 +182,11 @@ def _run(source: FrameSource, output: Path, options: Options) -> StreamSummary:
                 tail_frames, frames = _with_anchors(tail_frames, frames, source, start)
                 # the merges' keys and the window's carry the video
                 keys = [stage_key(k, *salt) if k else "" for k in keys]
+            colors = guide_point_colors(seq, frames, options) if guide is not None else None
+            if colors is not None:
+                frames = [frame._replace(colors=c) for frame, c in zip(frames, colors, strict=True)]
+                # the merges' keys and the window's carry the colours the guides come from
+                keys = [stage_key(k, stage_key(colors)) if k else "" for k in keys]
             local = tail_frames + frames
             kept = 0 if carried is None else carried.identity
             key = stage_key(key, keys, values, held, len(tail_frames)) if cache.enabled else ""
@@ -182,9 +194,12 @@ def _run(source: FrameSource, output: Path, options: Options) -> StreamSummary:
                 cache,
                 "surfels-window",
                 key,
-                lambda tail=tail, local=local, held=held, kept=kept, keys=keys: pack_model(
-                    _window_model(
-                        tail, local, held, kept, keys, sampling, schedule, final, options, cache
+                lambda tail=tail, local=local, held=held, kept=kept, keys=keys, guide=guide: (
+                    pack_model(
+                        _window_model(
+                            tail, local, held, kept, keys, sampling, schedule, final, guide,
+                            options, cache,
+                        )
                     )
                 ),
             )
@@ -196,6 +211,8 @@ def _run(source: FrameSource, output: Path, options: Options) -> StreamSummary:
             opening = carried is None
             if opening:
                 carried = _first_mesh(model, sampling, options)
+                if guide is not None and colors is not None:
+                    guide = guide._replace(reference=_mesh_reference(model, local, carried))
             end = len(local) if stop == count else len(local) - LAG
             vertices, observed = _carry_window(carried, model, held, end, options)
             vertices, observed = vertices[: end - held], observed[: end - held]
@@ -265,6 +282,7 @@ def _window_model(
     sampling: float,
     schedule,
     final,
+    guide: GuideSettings | None,
     options: Options,
     cache: StageCache,
 ) -> Model:
@@ -272,7 +290,9 @@ def _window_model(
     len(keys)]``) assembled, merged onto ``tail`` (the past's last frames, the first ``held``
     of them written; its first ``kept`` surfels, the mesh's, all kept), then the final
     optimisation; the first window's with its urshape when
-    ``options.urshape`` asks."""
+    ``options.urshape`` asks. With ``guide`` and colours, the colours' guides act in the
+    merge onto the past and the final optimisation, the mesh's surfels guided by the
+    reference colours carried in ``guide`` (:mod:`.color_guide`)."""
     past = len(local) - len(keys)
     seeds = seed_models(local[past:], range(past, len(local)), sampling, schedule, options)
     seed_keys = [
@@ -281,18 +301,33 @@ def _window_model(
     ]
     model, _ = assemble(seeds, local, schedule, cache=cache, keys=seed_keys)
     if tail is not None:
-        model = merge(tail, model, local, schedule, held=held, kept=kept)
+        onto = schedule._replace(guide=guide) if schedule.guide is not None else schedule
+        model = merge(tail, model, local, onto, held=held, kept=kept)
     if options.final_iterations:
-        model = optimize_model(
+        model = final_optimisation(
             model,
             local,
             final,
-            solver_options(options, options.final_iterations),
             schedule.match,
+            options,
+            guide=guide,
             urshape="off" if tail is not None or options.urshape == "off" else "rest",
             held=held,
         )
     return model
+
+
+def _mesh_reference(model: Model, local: list, carried: _Carried) -> np.ndarray | None:
+    """The reference colours [K, 3] of the mesh's ``K`` surfels in the first window's
+    ``model`` (:func:`.color_guide.reference_colors`), carried to every later window."""
+    reference = reference_colors(
+        model.state,
+        model.observed,
+        [frame.points for frame in local],
+        [frame.normals for frame in local],
+        [frame.colors for frame in local],
+    )
+    return None if reference is None else reference[: carried.identity]
 
 
 def _first_mesh(model: Model, sampling: float, options: Options) -> _Carried:
