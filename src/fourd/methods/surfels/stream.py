@@ -186,7 +186,8 @@ def _run(source: FrameSource, output: Path, options: Options) -> StreamSummary:
             if colors is not None:
                 frames = [frame._replace(colors=c) for frame, c in zip(frames, colors, strict=True)]
                 # the merges' keys and the window's carry the colours the guides come from
-                keys = [stage_key(k, stage_key(colors)) if k else "" for k in keys]
+                shade = stage_key(colors)
+                keys = [stage_key(k, shade) if k else "" for k in keys]
             local = tail_frames + frames
             kept = 0 if carried is None else carried.identity
             key = stage_key(key, keys, values, held, len(tail_frames)) if cache.enabled else ""
