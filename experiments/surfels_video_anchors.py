@@ -12,12 +12,15 @@ last and seconds per frame (`fourd.metrics.evaluate`, 20k samples). With `CHECK=
 prints, per frame pair, how far the anchors' targets lie from where the truth's vertex nearest
 each source went (median / 90th / 99th percentile, in point spacings; the truth's own vertex
 spacing bounds what this can resolve); `CHECK=only` stops there. `SET=linked_tangential=0,...`
-sets other options of every run; `BASELINE=0` leaves out the run without anchors.
+sets other options of every run; `BASELINE=0` leaves out the run without anchors;
+`NEIGHBOURS=48` gives the colours' guide's Lucas-Kanade patches that many surfels (24 by
+default; the patch radius is `color_radius`).
 
 Answer: see benchmarks/METHODS.md, "The video's anchors in `surfels`".
 """
 
 import ast
+import functools
 import os
 import sys
 import time
@@ -26,10 +29,11 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 import fourd
+from fourd.appearance.photometric import photometric_shift
 from fourd.bench.suite import PROTOCOL
 from fourd.cache import NO_CACHE
 from fourd.geometry.neighbors import point_spacing
-from fourd.methods.surfels import Options, reconstruct
+from fourd.methods.surfels import Options, color_guide, reconstruct
 from fourd.methods.surfels.anchors import with_video_anchors
 from fourd.methods.surfels.pipeline import prepare_frames
 from fourd.metrics.scores import evaluate
@@ -52,6 +56,10 @@ def main(scene: str, frames: int, resolution: int, weights: list[float]) -> None
     scans = fourd.synth.scan(
         truth, **{**PROTOCOL, "resolution": resolution, "appearance": "cloth", "video": True}
     )
+    if os.environ.get("NEIGHBOURS"):
+        color_guide.photometric_shift = functools.partial(
+            photometric_shift, neighbours=int(os.environ["NEIGHBOURS"])
+        )
     use = int(os.environ.get("USE", frames))
     if use < frames:
         truth = fourd.AnimatedMesh(truth.faces, truth.vertices[:use], truth.times[:use])
