@@ -39,7 +39,7 @@ from fourd.appearance.surface_color import ColorField
 from fourd.bench.suite import PROTOCOL
 from fourd.methods.surfels import Options, assembly, pipeline, reconstruct
 from fourd.metrics.sampling import bind_to_surface, bound_positions, sample_surface
-from fourd.metrics.scores import _TRUTH, _rng
+from fourd.metrics.scores import _TRUTH, _rng, evaluate
 
 
 def cloth_video_scene(scene: str, frames: int, resolution: int, use: int):
@@ -54,6 +54,19 @@ def cloth_video_scene(scene: str, frames: int, resolution: int, use: int):
         scans.frames[:use], scans.names[:use], scans.video.select(slice(0, use))
     )
     return truth, scans
+
+
+def print_scores(name: str, result, truth, seconds: float) -> None:
+    """Chamfer / completeness-95 / correspondence mean / last of ``result`` against ``truth``
+    (`fourd.metrics.evaluate`, 20k samples), s/frame, and the per-frame correspondence."""
+    report = evaluate(result, truth, samples=20000)
+    print(
+        f"{name}: {report['chamfer']:.4f} / {report['completeness_95']:.4f} / "
+        f"{report['correspondence_mean']:.4f} / {report['correspondence_last']:.4f}, "
+        f"{seconds:.2f} s/frame",
+        flush=True,
+    )
+    print("  " + " ".join(f"{v:.4f}" for v in report["per_frame"]["correspondence"]), flush=True)
 
 
 def main(scene: str, frames: int, resolution: int, use: int) -> None:

@@ -25,11 +25,10 @@ import os
 import sys
 import time
 
-from surfels_guide_accuracy import cloth_video_scene  # this folder, the script's own
+from surfels_guide_accuracy import cloth_video_scene, print_scores  # this folder's
 
 import fourd
 from fourd.methods.surfels import stream
-from fourd.metrics.scores import evaluate
 
 
 def main(scene: str, frames: int, resolution: int, use: int, window: int) -> None:
@@ -50,14 +49,7 @@ def main(scene: str, frames: int, resolution: int, use: int, window: int) -> Non
         started = time.perf_counter()
         result = fourd.reconstruct(scans, method="surfels", video_anchors=False, **settings)
         seconds = (time.perf_counter() - started) / use
-        report = evaluate(result, truth, samples=20000)
-        print(
-            f"{name}: {report['chamfer']:.4f} / {report['completeness_95']:.4f} / "
-            f"{report['correspondence_mean']:.4f} / {report['correspondence_last']:.4f}, "
-            f"{seconds:.2f} s/frame",
-            flush=True,
-        )
-        print("  " + " ".join(f"{v:.4f}" for v in report["per_frame"]["correspondence"]), flush=True)
+        print_scores(name, result, truth, seconds)
     stream._mesh_reference = carried
 
 
