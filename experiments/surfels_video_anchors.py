@@ -14,7 +14,8 @@ each source went (median / 90th / 99th percentile, in point spacings; the truth'
 spacing bounds what this can resolve); `CHECK=only` stops there. `SET=linked_tangential=0,...`
 sets other options of every run; `BASELINE=0` leaves out the run without anchors;
 `NEIGHBOURS=48` gives the colours' guide's Lucas-Kanade patches that many surfels (24 by
-default; the patch radius is `color_radius`).
+default; the patch radius is `color_radius`); `BLENDED=1` reads the guide's colour fields
+blended across their points (`surfels_guide_accuracy.BlendedField`).
 
 Answer: see benchmarks/METHODS.md, "The video's anchors in `surfels`".
 """
@@ -30,6 +31,7 @@ from scipy.spatial import cKDTree
 
 import fourd
 from fourd.appearance.photometric import photometric_shift
+from fourd.appearance.surface_color import FIELD_POINTS_PER_READ
 from fourd.bench.suite import PROTOCOL
 from fourd.cache import NO_CACHE
 from fourd.geometry.neighbors import point_spacing
@@ -60,6 +62,14 @@ def main(scene: str, frames: int, resolution: int, weights: list[float]) -> None
         color_guide.photometric_shift = functools.partial(
             photometric_shift, neighbours=int(os.environ["NEIGHBOURS"])
         )
+    if os.environ.get("BLENDED"):
+        from surfels_guide_accuracy import BlendedField  # this folder's
+
+        def blended(points, normals, colors, reads):
+            stride = max(1, len(points) // (FIELD_POINTS_PER_READ * max(1, int(reads))))
+            return BlendedField(points[::stride], normals[::stride], colors[::stride])
+
+        color_guide.field_for_reads = blended
     use = int(os.environ.get("USE", frames))
     if use < frames:
         truth = fourd.AnimatedMesh(truth.faces, truth.vertices[:use], truth.times[:use])
