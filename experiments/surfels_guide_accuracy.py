@@ -165,8 +165,8 @@ def lucas_kanade_floor(truth, samples, state, observed, args, where, diagonal) -
     fields = [ColorField(p, n, c) for p, n, c in zip(points, normals, colors, strict=True)]
     first = np.argmax(observed, axis=0) == 0
 
-    def targets(start, neighbours=24, radius=1.0, iterations=3, at=None):
-        at = first if at is None else at
+    def targets(start, neighbours=24, radius=1.0, iterations=3, truth_at=where, at=first):
+        """``start``'s targets against ``truth_at`` (positions [T, N, 3] both)."""
         reference = fields[0].sample(start[0])
         out = []
         for t in range(1, state.frames):
@@ -177,7 +177,7 @@ def lucas_kanade_floor(truth, samples, state, observed, args, where, diagonal) -
             )
             ok = np.isfinite(shift.uncertainty) & at
             weight = np.exp(-((shift.uncertainty[ok] / settings.scale) ** 2))
-            off = start[t][ok] + shift.shift[ok] - where[t][ok] if at is first else shift.shift[ok]
+            off = start[t][ok] + shift.shift[ok] - truth_at[t][ok]
             n = normals[t][normal][ok]
             off -= np.sum(off * n, axis=1, keepdims=True) * n
             out.append(np.sum(weight * np.linalg.norm(off, axis=1)) / weight.sum() / diagonal)
@@ -194,7 +194,8 @@ def lucas_kanade_floor(truth, samples, state, observed, args, where, diagonal) -
         binding = bind_to_surface(dense.points, truth.vertices[0], truth.faces, samples)
         moved = bound_positions(binding, truth.vertices, truth.faces)
         print(f"patches {factor} times as dense, from the truth: "
-              f"{targets(moved, at=np.ones(moved.shape[1], dtype=bool))}", flush=True)
+              f"{targets(moved, truth_at=moved, at=np.ones(moved.shape[1], dtype=bool))}",
+              flush=True)
     for t in (3, 6, state.frames - 1):
         # each surfel's tangential error, and its mean over its Lucas-Kanade patch
         normal = state.normals[t]

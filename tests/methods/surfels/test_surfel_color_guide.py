@@ -33,16 +33,22 @@ def _print(points):
     return 0.5 + 0.3 * np.c_[np.sin(k * x), np.sin(k * y), np.sin(k * (x - y) + 1.0)]
 
 
+def _plane(rng):
+    """Surfels on a grid of the plane z = 0 (positions, normals) and a noisy scan of it
+    (points, their normals)."""
+    grid = np.stack(np.meshgrid(np.linspace(-1, 1, 15), np.linspace(-1, 1, 15)), -1).reshape(-1, 2)
+    surfels = np.c_[grid, np.zeros(len(grid))]
+    normals = np.tile([0.0, 0.0, 1.0], (len(grid), 1))
+    points = np.c_[rng.uniform(-1.2, 1.2, (20000, 2)), rng.normal(scale=0.002, size=20000)]
+    return surfels, normals, points, np.tile([0.0, 0.0, 1.0], (len(points), 1))
+
+
 def _slid_plane(printed=True):
     """Two frames of the plane z = 0 scanned at the same points, the print slid by ``SLIDE``
     in frame 1; the surfels of both frames on one grid (they did not follow the slide)."""
     rng = np.random.default_rng(0)
-    grid = np.stack(np.meshgrid(np.linspace(-1, 1, 15), np.linspace(-1, 1, 15)), -1).reshape(-1, 2)
-    surfels = np.c_[grid, np.zeros(len(grid))]
-    normals = np.tile([0.0, 0.0, 1.0], (len(grid), 1))
+    surfels, normals, points, point_normals = _plane(rng)
     state = surfel_state(np.stack([surfels, surfels]), np.stack([normals, normals]))
-    points = np.c_[rng.uniform(-1.2, 1.2, (20000, 2)), rng.normal(scale=0.002, size=20000)]
-    point_normals = np.tile([0.0, 0.0, 1.0], (len(points), 1))
     colors = [_print(points), _print(points - SLIDE)] if printed else [np.full((len(points), 3), 0.6)] * 2
     colors = [np.clip(c + rng.normal(scale=0.01, size=c.shape), 0, 1) for c in colors]
     guides = color_guides(
@@ -109,13 +115,8 @@ def test_carried_reference_colours_guide_a_surfel_in_every_frame():
     """The streamed run's mesh surfels keep the reference colours of the window that first saw
     them: given frame 0's colours as carried, frame 1 alone (whose own colours would be the
     reference, and guide nothing) finds the slide."""
-    rng = np.random.default_rng(0)
-    grid = np.stack(np.meshgrid(np.linspace(-1, 1, 15), np.linspace(-1, 1, 15)), -1).reshape(-1, 2)
-    surfels = np.c_[grid, np.zeros(len(grid))]
-    normals = np.tile([0.0, 0.0, 1.0], (len(grid), 1))
+    surfels, normals, points, point_normals = _plane(np.random.default_rng(0))
     state = surfel_state(surfels[None], normals[None])
-    points = np.c_[rng.uniform(-1.2, 1.2, (20000, 2)), rng.normal(scale=0.002, size=20000)]
-    point_normals = np.tile([0.0, 0.0, 1.0], (len(points), 1))
     before, after = _print(points), _print(points - SLIDE)
     observed = np.ones((1, len(surfels)), dtype=bool)
     settings = GuideSettings(radius=3 * SPACING, scale=0.5 * SPACING)

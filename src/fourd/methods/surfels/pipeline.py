@@ -23,6 +23,7 @@ from fourd.geometry.surface_fit import fit_along_normals
 from fourd.methods.surfels.anchors import with_video_anchors
 from fourd.methods.surfels.assembly import Schedule, assemble, optimize_model
 from fourd.methods.surfels.color_guide import GuideSettings
+from fourd.methods.surfels.energy import Weights
 from fourd.methods.surfels.match import MatchOptions
 from fourd.methods.surfels.meshing import MeshingOptions, surfel_mesh
 from fourd.methods.surfels.model import Model, unsupported_pieces, without_surfels
@@ -145,8 +146,8 @@ def reconstruct(seq: PointCloudSequence, options: Options | None = None) -> Anim
 def final_optimisation(
     model: Model,
     frames: list,
-    weights,
-    match,
+    weights: Weights,
+    match: MatchOptions,
     options: Options,
     *,
     guide: GuideSettings | None,

@@ -182,7 +182,7 @@ def _run(source: FrameSource, output: Path, options: Options) -> StreamSummary:
                 tail_frames, frames = _with_anchors(tail_frames, frames, source, start)
                 # the merges' keys and the window's carry the video
                 keys = [stage_key(k, *salt) if k else "" for k in keys]
-            colors = guide_point_colors(seq, frames, options) if guide is not None else None
+            colors = guide_point_colors(seq, frames, options)
             if colors is not None:
                 frames = [frame._replace(colors=c) for frame, c in zip(frames, colors, strict=True)]
                 # the merges' keys and the window's carry the colours the guides come from
