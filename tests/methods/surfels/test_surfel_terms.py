@@ -255,6 +255,29 @@ def test_energy_with_kept_patterns_equals_a_fresh_assembly():
         assert abs(kept.hessian - fresh.hessian).max() <= 1e-13 * abs(fresh.hessian).max()
 
 
+def test_patterns_shared_between_other_columns_equal_a_fresh_assembly():
+    # the hole filling optimises other surfels in each frame of one topology and layout
+    state, graph, data = _problem(seed=4, frames=3)
+    weights = Weights(1.5, 0.7, 0.3, 0.2, 0.9, 0.4, 0.6, 0.25)
+    match = MatchOptions(tangential=0.2)
+    shared = {}
+    for step in range(3):
+        rng = np.random.default_rng(10 + step)
+        at = move(state, rng.normal(scale=0.05, size=layout(state).size))
+        columns = np.flatnonzero(rng.random(layout(state).size) < 0.3)
+        matches = associate(at, data, 0.15, match)
+        reused = total_energy(
+            at, graph, data, matches, weights, match, columns=columns, patterns={}, shared=shared
+        )
+        fresh = total_energy(at, graph, data, matches, weights, match, columns=columns)
+        assert set(shared) == {"smooth_position", "smooth_normal", "laplace", "rigid", "accel"}
+        assert all(pattern.shape[1] == layout(state).size for pattern in shared.values())
+        assert reused.value == fresh.value
+        assert np.allclose(reused.gradient, fresh.gradient, rtol=1e-13, atol=1e-13)
+        assert reused.hessian.shape == (len(columns), len(columns))
+        assert abs(reused.hessian - fresh.hessian).max() <= 1e-13 * abs(fresh.hessian).max()
+
+
 def test_overlapping_blocks_are_refused():
     blocks = Blocks(4, 6)
     blocks.add(np.array([0]), np.array([0]), np.ones((2, 3)))

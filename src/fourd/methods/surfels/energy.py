@@ -91,6 +91,7 @@ def total_energy(
     columns: np.ndarray | None = None,
     urshape: bool = False,
     patterns: dict | None = None,
+    shared: dict | None = None,
 ) -> Energy:
     """Eq. (3) with the association ``matches`` held fixed (default weights and options:
     :class:`Weights`, :class:`~.match.MatchOptions`).
@@ -106,11 +107,18 @@ def total_energy(
     ``patterns`` (a dict, empty at first) keeps the priors' Jacobian patterns
     (:class:`~.term.Pattern`, of ``columns`` only) between calls on the same topology,
     layout and ``columns``, so that later calls assemble values only; it must not outlive
-    them."""
+    them. ``shared`` (a dict, empty at first) keeps the same patterns of every column, for
+    calls on the same topology, layout and ``urshape`` with other ``columns`` (the hole
+    filling's frames, one after the other)."""
     w = weights or Weights()
     match = match or MatchOptions()
     d = derivatives
     kept = {} if patterns is None or not derivatives else patterns
+    size = layout(state).size
+    restrict = columns is not None and not np.array_equal(columns, np.arange(size))
+    for name, full in (shared or {}).items() if derivatives else ():
+        if name not in kept:
+            kept[name] = full.keep_columns(columns) if restrict else full
     parts = {}
     if w.match > 0:
         parts["match"] = match_term(state, data, matches, w.match, match, derivatives=d)
@@ -152,10 +160,10 @@ def total_energy(
     total = float(sum(values.values()))
     if not derivatives:
         return Energy(total, values, None, None)
-    size = layout(state).size
-    restrict = columns is not None and not np.array_equal(columns, np.arange(size))
     for name, part in parts.items():
         if name not in ASSOCIATED and name not in kept:
+            if shared is not None:
+                shared[name] = part.pattern
             kept[name] = part.pattern.keep_columns(columns) if restrict else part.pattern
     # one Jacobian of every term, so that J^T J is formed once (a sum of the terms' Hessians
     # allocates each partial sum)

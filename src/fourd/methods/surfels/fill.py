@@ -92,6 +92,8 @@ def fill_holes(
     normals = state.normals.copy()
     rotations = state.rotations.copy()
     count = state.count
+    # the priors' Jacobian patterns, the same for every window of one length
+    patterns: dict[int, dict] = {}
     for direction in (1, -1):
         order = range(1, state.frames) if direction > 0 else range(state.frames - 2, -1, -1)
         for t in order:
@@ -124,6 +126,7 @@ def fill_holes(
                 match,
                 options,
                 free=free_unknowns(layout(local), free, moving_rotation),
+                patterns=patterns.setdefault(len(window), {}),
             )
             positions[t] = result.state.positions[at]
             normals[t] = result.state.normals[at]

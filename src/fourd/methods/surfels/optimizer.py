@@ -88,6 +88,7 @@ def gauss_newton(
     *,
     free: np.ndarray | None = None,
     urshape: bool = False,
+    patterns: dict | None = None,
 ) -> Optimization:
     """Minimise eq. (3) from ``state``; the data term's scale is ``topology.radius``
     (defaults: :class:`~.energy.Weights`, :class:`~.match.MatchOptions`,
@@ -96,7 +97,10 @@ def gauss_newton(
     ``free`` (bool [:attr:`~.state.Layout.size`], see :func:`free_unknowns`) restricts the
     steps to those unknowns, the others held as boundary conditions (the assembly's
     alignment of one frame and its hole filling of new surfels only, sec. 3.2); None: all.
-    ``urshape``: frame 0 of ``state`` is the urshape (:func:`~.energy.total_energy`)."""
+    ``urshape``: frame 0 of ``state`` is the urshape (:func:`~.energy.total_energy`).
+    ``patterns`` (a dict, empty at first) carries the priors' Jacobian patterns to later calls
+    on the same topology, layout and ``urshape``, whatever their ``free``
+    (:func:`~.energy.total_energy`'s ``shared``)."""
     weights = weights or Weights()
     match = match or MatchOptions()
     options = options or GaussNewtonOptions()
@@ -106,7 +110,7 @@ def gauss_newton(
     columns = None if free is None else np.flatnonzero(free)
     matches = associate(state, data, topology.radius, match)
     # the topology and layout are fixed here, and so are the priors' Jacobian patterns
-    patterns = {}
+    kept = {}
 
     def derivatives_at(state, matches):
         return total_energy(
@@ -118,7 +122,8 @@ def gauss_newton(
             match,
             columns=columns,
             urshape=urshape,
-            patterns=patterns,
+            patterns=kept,
+            shared=patterns,
         )
 
     current = derivatives_at(state, matches)

@@ -3,8 +3,8 @@ and Gauss-Newton Hessian ``2 J^T J`` (sparse), from residuals and a sparse Jacob
 terms assemble from dense blocks.
 
 A term's Jacobian has the same sparsity pattern at every state of one topology and layout,
-so its :class:`Pattern` can be kept and handed back: the next assembly then only gathers the
-blocks' values into place (no indices built, nothing sorted).
+so its :class:`Pattern` can be kept and handed back: the next assembly then only scatters the
+blocks' values into place (no indices built, nothing sorted, no block copied whole).
 """
 
 from __future__ import annotations
@@ -22,21 +22,27 @@ class Pattern:
     same topology and layout).
 
     shape : (rows, columns)
-    order : int [nnz]
-        Entry ``k`` of the CSR values is entry ``order[k]`` of the blocks' values, flattened
-        and concatenated in the order they were added.
+    slots : tuple of int arrays
+        One per block, in the order they were added: where each of the block's values goes in
+        the CSR values, shaped like the block (``[..., m, b]``), or ``[..., k]`` where the
+        block's ``nonzero`` was one ``[m, b]`` mask with ``k`` entries set. An entry that is
+        not stored (left out by its mask, or its column by :meth:`keep_columns`) goes to
+        ``nnz``, a slot past the matrix's values.
+    masks : tuple of (bool [m, b] or None)
+        The mask that compressed each block's slots (None: not compressed).
     indices, indptr : int
         The CSR column indices (sorted in each row) and row pointers.
-    entries : int
-        How many values the blocks hold (more than ``nnz`` where structural zeros or columns
-        were left out).
     """
 
     shape: tuple[int, int]
-    order: np.ndarray
+    slots: tuple
+    masks: tuple
     indices: np.ndarray
     indptr: np.ndarray
-    entries: int
+
+    @property
+    def nnz(self) -> int:
+        return len(self.indices)
 
     def keep_columns(self, columns: np.ndarray) -> Pattern:
         """The pattern of the Jacobian's columns ``columns`` (int [k], sorted) only: the
@@ -47,26 +53,47 @@ class Pattern:
         renumbered = renumber[self.indices]
         kept = renumbered >= 0
         before = np.concatenate([[0], np.cumsum(kept)])
+        count = int(before[-1])
+        slot = np.full(self.nnz + 1, count, dtype=self.slots[0].dtype if self.slots else np.int64)
+        slot[: self.nnz][kept] = np.arange(count)
         return Pattern(
             (self.shape[0], len(columns)),
-            self.order[kept],
+            tuple(slot[s] for s in self.slots),
+            self.masks,
             renumbered[kept].astype(self.indices.dtype),
             before[self.indptr].astype(self.indptr.dtype),
-            self.entries,
         )
 
-    def matrix(self, values: np.ndarray) -> sp.csr_matrix:
-        """The Jacobian with the blocks' values ``values`` [nnz] (flattened, in add order)."""
-        if len(values) != self.entries:
+    def matrix(self, blocks: list[np.ndarray]) -> sp.csr_matrix:
+        """The Jacobian with the blocks' values ``blocks`` (each ``[..., m, b]``, broadcast
+        against its slots, in add order)."""
+        if len(blocks) != len(self.slots) or not all(
+            _fits(v, s, m) for v, s, m in zip(blocks, self.slots, self.masks, strict=True)
+        ):
             raise ValueError(
-                f"the blocks hold {len(values)} values, the pattern {self.entries}: "
-                "a pattern fits only the term, topology and layout it was made for"
+                "the blocks do not match the pattern's: a pattern fits only the term, topology "
+                "and layout it was made for"
             )
+        data = np.empty(self.nnz + 1)
+        for values, slots, mask in zip(blocks, self.slots, self.masks, strict=True):
+            data[slots] = values if mask is None else values[..., mask]
         # indices and indptr are shared between assemblies and never written: the products
         # of the optimiser only read them
-        jacobian = sp.csr_matrix((values[self.order], self.indices, self.indptr), shape=self.shape)
+        jacobian = sp.csr_matrix((data[: self.nnz], self.indices, self.indptr), shape=self.shape)
         jacobian.has_sorted_indices = True
         return jacobian
+
+
+def _fits(values: np.ndarray, slots: np.ndarray, mask: np.ndarray | None) -> bool:
+    """Whether a block's ``values`` [..., m, b] broadcast to its ``slots``."""
+    block = values.shape[-2:]
+    lead = slots.shape[:-1] if mask is not None else slots.shape[:-2]
+    if block != (mask.shape if mask is not None else slots.shape[-2:]):
+        return False
+    try:
+        return np.broadcast_shapes(values.shape[:-2], lead) == lead
+    except ValueError:
+        return False
 
 
 @dataclass(frozen=True)
@@ -111,11 +138,11 @@ class Blocks:
         self._pattern = pattern
         # 32-bit indices where they fit: the entries' indices are most of the memory
         self._index = np.int32 if max(rows, columns) < np.iinfo(np.int32).max else np.int64
+        self._values: list[np.ndarray] = []
         self._rows: list[np.ndarray] = []
         self._cols: list[np.ndarray] = []
-        self._numbers: list[np.ndarray] = []
-        self._values: list[np.ndarray] = []
-        self._entries = 0
+        # per block: its slots' shape, the stored entries among them (None: all) and its mask
+        self._layouts: list[tuple] = []
 
     def add(
         self,
@@ -129,30 +156,33 @@ class Blocks:
         against ``values``) marks the entries that can be nonzero at any state, the others
         being left out of the matrix (an identity block's off-diagonal); default all."""
         values = np.asarray(values, dtype=np.float64)
-        m, b = values.shape[-2:]
-        lead = np.broadcast_shapes(np.shape(row), np.shape(column), values.shape[:-2])
-        values = np.broadcast_to(values, (*lead, m, b))
-        first = self._entries
-        self._entries += values.size
-        self._values.append(values.ravel())
+        self._values.append(values)
         if self._pattern is not None:
             return
+        m, b = values.shape[-2:]
+        lead = np.broadcast_shapes(np.shape(row), np.shape(column), values.shape[:-2])
         index = self._index
         row = np.asarray(row, dtype=index)
         column = np.asarray(column, dtype=index)
-        row = np.broadcast_to(row, lead)[..., None, None] + np.arange(m, dtype=index)[:, None]
-        column = (
-            np.broadcast_to(column, lead)[..., None, None] + np.arange(b, dtype=index)[None, :]
-        )
-        rows = np.broadcast_to(row, values.shape).ravel()
-        columns = np.broadcast_to(column, values.shape).ravel()
-        numbers = np.arange(first, self._entries, dtype=np.int64)
-        if nonzero is not None:
-            kept = np.broadcast_to(np.asarray(nonzero, dtype=bool), values.shape).ravel()
-            rows, columns, numbers = rows[kept], columns[kept], numbers[kept]
+        rows = np.broadcast_to(row, lead)[..., None, None] + np.arange(m, dtype=index)[:, None]
+        cols = np.broadcast_to(column, lead)[..., None, None] + np.arange(b, dtype=index)[None, :]
+        shape = (*lead, m, b)
+        mask = kept = None
+        if nonzero is not None and np.ndim(nonzero) <= 2:
+            # one mask for every block: the slots keep its entries only
+            mask = np.broadcast_to(np.asarray(nonzero, dtype=bool), (m, b)).copy()
+            rows = np.broadcast_to(rows, shape)[..., mask].ravel()
+            cols = np.broadcast_to(cols, shape)[..., mask].ravel()
+            shape = (*lead, int(mask.sum()))
+        else:
+            rows = np.broadcast_to(rows, shape).ravel()
+            cols = np.broadcast_to(cols, shape).ravel()
+            if nonzero is not None:
+                kept = np.broadcast_to(np.asarray(nonzero, dtype=bool), shape).ravel()
+                rows, cols = rows[kept], cols[kept]
         self._rows.append(rows)
-        self._cols.append(columns)
-        self._numbers.append(numbers)
+        self._cols.append(cols)
+        self._layouts.append((shape, kept, mask))
 
     def pattern(self) -> Pattern:
         """The structure of the blocks added (the given pattern, if there was one)."""
@@ -161,23 +191,35 @@ class Blocks:
         rows = np.concatenate([np.zeros(0, self._index)] + self._rows)
         cols = np.concatenate([np.zeros(0, self._index)] + self._cols)
         count = len(rows)
-        number = np.int32 if self._entries < np.iinfo(np.int32).max else np.int64
-        numbers = np.concatenate([np.zeros(0, number)] + self._numbers).astype(number)
+        slot = np.int32 if count < np.iinfo(np.int32).max else np.int64
         # each entry carries its number through the conversion (sorted in each row)
+        numbers = np.arange(count, dtype=slot)
         structure = sp.coo_matrix((numbers, (rows, cols)), shape=self.shape).tocsr()
         if structure.nnz != count:
             raise ValueError("Jacobian blocks overlap: each entry must be added once")
+        where = np.empty(count, dtype=slot)
+        where[structure.data] = np.arange(count, dtype=slot)
+        slots, masks, start = [], [], 0
+        for shape, kept, mask in self._layouts:
+            stored = int(np.prod(shape)) if kept is None else int(kept.sum())
+            if kept is None:
+                slots.append(where[start : start + stored].reshape(shape))
+            else:
+                full = np.full(len(kept), count, dtype=slot)
+                full[kept] = where[start : start + stored]
+                slots.append(full.reshape(shape))
+            masks.append(mask)
+            start += stored
         self._pattern = Pattern(
-            self.shape, structure.data, structure.indices, structure.indptr, self._entries
+            self.shape, tuple(slots), tuple(masks), structure.indices, structure.indptr
         )
         self._rows.clear()
         self._cols.clear()
-        self._numbers.clear()
+        self._layouts.clear()
         return self._pattern
 
     def matrix(self) -> sp.csr_matrix:
-        values = np.concatenate([np.zeros(0)] + self._values)
-        self._values.clear()
+        values, self._values = self._values, []
         return self.pattern().matrix(values)
 
 
