@@ -100,7 +100,8 @@ def gauss_newton(
     ``urshape``: frame 0 of ``state`` is the urshape (:func:`~.energy.total_energy`).
     ``patterns`` (a dict, empty at first) carries the priors' Jacobian patterns to later calls
     on the same topology, layout and ``urshape``, whatever their ``free``
-    (:func:`~.energy.total_energy`'s ``shared``)."""
+    (:func:`~.energy.total_energy`'s ``shared``), and those of the last ``free``, for a call
+    with the same ``free``."""
     weights = weights or Weights()
     match = match or MatchOptions()
     options = options or GaussNewtonOptions()
@@ -111,6 +112,11 @@ def gauss_newton(
     matches = associate(state, data, topology.radius, match)
     # the topology and layout are fixed here, and so are the priors' Jacobian patterns
     kept = {}
+    if patterns is not None:
+        key = b"" if columns is None else columns.tobytes()
+        if patterns.get("columns") != key:
+            patterns["columns"], patterns["restricted"] = key, {}
+        kept = patterns["restricted"]
 
     def derivatives_at(state, matches):
         return total_energy(
@@ -123,7 +129,7 @@ def gauss_newton(
             columns=columns,
             urshape=urshape,
             patterns=kept,
-            shared=patterns,
+            shared=None if patterns is None else patterns.setdefault("full", {}),
         )
 
     current = derivatives_at(state, matches)
