@@ -14,6 +14,7 @@ from fourd.methods.surfels import (
     associate,
     build_topology,
     frame_data,
+    free_unknowns,
     gauss_newton,
     layout,
     sample_surfels,
@@ -81,6 +82,27 @@ def test_a_step_descends_and_the_preconditioners_agree_with_a_direct_solve():
     assert longer.energies[-1] < 0.9 * longer.energies[0]
     normals = np.linalg.norm(longer.state.normals, axis=-1)
     assert np.allclose(normals, 1.0, atol=1e-12)
+
+
+def test_patterns_carried_between_calls_leave_the_optimisation_as_it_was():
+    # the hole filling's calls: one topology and layout, the same or other free unknowns
+    state, graph, data = _random_problem(seed=2)
+    options = GaussNewtonOptions(iterations=3)
+    carried = {}
+    for chosen in (0, 1, 1):
+        free = np.zeros((state.frames, state.count), dtype=bool)
+        free[chosen + 1] = True
+        unknowns = free_unknowns(layout(state), free)
+        fresh = gauss_newton(state, graph, data, ALL_TERMS, options=options, free=unknowns)
+        reused = gauss_newton(
+            state, graph, data, ALL_TERMS, options=options, free=unknowns, patterns=carried
+        )
+        assert carried["columns"] == np.flatnonzero(unknowns).tobytes()
+        # the Hessians agree to rounding (summed in another order), which the conjugate
+        # gradients' tolerance (1e-6) carries into the steps
+        assert np.allclose(reused.energies, fresh.energies, rtol=1e-7, atol=0.0)
+        assert np.allclose(reused.state.positions, fresh.state.positions, rtol=0.0, atol=1e-6)
+        assert fresh.energies[-1] < fresh.energies[0]
 
 
 def test_data_alone_puts_surfels_on_the_plane_within_noise_over_root_n():
