@@ -24,6 +24,7 @@ from fourd.methods.surfels import (
     total_energy,
 )
 from fourd.methods.surfels.state import skew
+from fourd.methods.surfels.term import PatternCache
 
 ALL_TERMS = Weights(
     match=1.0,
@@ -88,7 +89,7 @@ def test_patterns_carried_between_calls_leave_the_optimisation_as_it_was():
     # the hole filling's calls: one topology and layout, the same or other free unknowns
     state, graph, data = _random_problem(seed=2)
     options = GaussNewtonOptions(iterations=3)
-    carried = {}
+    carried = PatternCache()
     for chosen in (0, 1, 1):
         free = np.zeros((state.frames, state.count), dtype=bool)
         free[chosen + 1] = True
@@ -97,7 +98,10 @@ def test_patterns_carried_between_calls_leave_the_optimisation_as_it_was():
         reused = gauss_newton(
             state, graph, data, ALL_TERMS, options=options, free=unknowns, patterns=carried
         )
-        assert carried["columns"] == np.flatnonzero(unknowns).tobytes()
+        assert carried.columns == np.flatnonzero(unknowns).tobytes()
+        assert set(carried.full) == set(carried.restricted) == {
+            "smooth_position", "smooth_normal", "laplace", "rigid", "accel"
+        }
         # the Hessians agree to rounding (summed in another order), which the conjugate
         # gradients' tolerance (1e-6) carries into the steps
         assert np.allclose(reused.energies, fresh.energies, rtol=1e-7, atol=0.0)

@@ -20,6 +20,7 @@ from fourd.methods.surfels.energy import Weights
 from fourd.methods.surfels.match import MatchOptions, frame_data
 from fourd.methods.surfels.optimizer import GaussNewtonOptions, free_unknowns, gauss_newton
 from fourd.methods.surfels.state import SurfelState, layout
+from fourd.methods.surfels.term import PatternCache
 from fourd.methods.surfels.topology import Topology
 
 #: Rounds of neighbour-to-neighbour prediction before a surfel with no known neighbour is
@@ -93,7 +94,7 @@ def fill_holes(
     rotations = state.rotations.copy()
     count = state.count
     # the priors' Jacobian patterns, the same for every window of one length
-    patterns: dict[int, dict] = {}
+    patterns: dict[int, PatternCache] = {}
     for direction in (1, -1):
         order = range(1, state.frames) if direction > 0 else range(state.frames - 2, -1, -1)
         for t in order:
@@ -126,7 +127,7 @@ def fill_holes(
                 match,
                 options,
                 free=free_unknowns(layout(local), free, moving_rotation),
-                patterns=patterns.setdefault(len(window), {}),
+                patterns=patterns.setdefault(len(window), PatternCache()),
             )
             positions[t] = result.state.positions[at]
             normals[t] = result.state.normals[at]

@@ -20,6 +20,7 @@ import scipy.sparse as sp
 from fourd.methods.surfels.energy import Weights, total_energy
 from fourd.methods.surfels.match import Data, MatchOptions, associate
 from fourd.methods.surfels.state import Layout, SurfelState, layout, retract
+from fourd.methods.surfels.term import PatternCache
 from fourd.methods.surfels.topology import Topology
 
 log = logging.getLogger("fourd.methods.surfels.optimizer")
@@ -88,7 +89,7 @@ def gauss_newton(
     *,
     free: np.ndarray | None = None,
     urshape: bool = False,
-    patterns: dict | None = None,
+    patterns: PatternCache | None = None,
 ) -> Optimization:
     """Minimise eq. (3) from ``state``; the data term's scale is ``topology.radius``
     (defaults: :class:`~.energy.Weights`, :class:`~.match.MatchOptions`,
@@ -98,10 +99,9 @@ def gauss_newton(
     steps to those unknowns, the others held as boundary conditions (the assembly's
     alignment of one frame and its hole filling of new surfels only, sec. 3.2); None: all.
     ``urshape``: frame 0 of ``state`` is the urshape (:func:`~.energy.total_energy`).
-    ``patterns`` (a dict, empty at first) carries the priors' Jacobian patterns to later calls
-    on the same topology, layout and ``urshape``, whatever their ``free``
-    (:func:`~.energy.total_energy`'s ``shared``), and those of the last ``free``, for a call
-    with the same ``free``."""
+    ``patterns`` carries the priors' Jacobian patterns to later calls on the same topology,
+    layout and ``urshape``, whatever their ``free``, and those of the last ``free``, for a call
+    with the same ``free`` (:class:`~.term.PatternCache`)."""
     weights = weights or Weights()
     match = match or MatchOptions()
     options = options or GaussNewtonOptions()
@@ -111,12 +111,7 @@ def gauss_newton(
     columns = None if free is None else np.flatnonzero(free)
     matches = associate(state, data, topology.radius, match)
     # the topology and layout are fixed here, and so are the priors' Jacobian patterns
-    kept = {}
-    if patterns is not None:
-        key = b"" if columns is None else columns.tobytes()
-        if patterns.get("columns") != key:
-            patterns["columns"], patterns["restricted"] = key, {}
-        kept = patterns["restricted"]
+    kept = {} if patterns is None else patterns.for_columns(columns)
 
     def derivatives_at(state, matches):
         return total_energy(
@@ -129,7 +124,7 @@ def gauss_newton(
             columns=columns,
             urshape=urshape,
             patterns=kept,
-            shared=None if patterns is None else patterns.setdefault("full", {}),
+            shared=None if patterns is None else patterns.full,
         )
 
     current = derivatives_at(state, matches)

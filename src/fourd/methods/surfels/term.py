@@ -84,6 +84,32 @@ class Pattern:
         return jacobian
 
 
+class PatternCache:
+    """The priors' Jacobian patterns kept between optimisations on one topology, layout and
+    urshape (the hole filling's frames, one after the other), whatever their free unknowns.
+
+    full : dict[str, Pattern]
+        Each term's pattern of every column (:func:`~.energy.total_energy`'s ``shared``).
+    restricted : dict[str, Pattern]
+        The same restricted to the last free columns (``total_energy``'s ``patterns``).
+    columns : bytes or None
+        Those columns' key (:meth:`for_columns`); None before the first call.
+    """
+
+    def __init__(self):
+        self.full: dict[str, Pattern] = {}
+        self.restricted: dict[str, Pattern] = {}
+        self.columns: bytes | None = None
+
+    def for_columns(self, columns: np.ndarray | None) -> dict[str, Pattern]:
+        """The restricted patterns for the free columns ``columns`` (int [k], sorted; None:
+        all), emptied when they are not the last call's."""
+        key = b"" if columns is None else np.asarray(columns, dtype=np.int64).tobytes()
+        if key != self.columns:
+            self.columns, self.restricted = key, {}
+        return self.restricted
+
+
 def _fits(values: np.ndarray, slots: np.ndarray, mask: np.ndarray | None) -> bool:
     """Whether a block's ``values`` [..., m, b] broadcast to its ``slots``."""
     block = values.shape[-2:]
