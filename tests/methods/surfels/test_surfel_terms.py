@@ -26,7 +26,7 @@ from fourd.methods.surfels import (
     total_energy,
 )
 from fourd.methods.surfels.state import skew
-from fourd.methods.surfels.term import Blocks
+from fourd.methods.surfels.term import Blocks, keep_columns
 
 
 def _problem(seed=0, frames=3, count=40):
@@ -84,6 +84,10 @@ def _terms(state, graph, data):
         "match_alignment": lambda s, d: match_term(
             s, data, alignment_matches, 1.5, aligned, derivatives=d
         ),
+        # the tangent plane only: no point-offset entries in the Jacobian
+        "match_plane": lambda s, d: match_term(
+            s, data, global_matches, 1.5, MatchOptions(), derivatives=d
+        ),
         "smooth_position": lambda s, d: smooth_position_term(s, graph, 0.7, derivatives=d),
         "smooth_normal": lambda s, d: smooth_normal_term(s, graph, 0.3, derivatives=d),
         "laplace": lambda s, d: laplace_term(s, graph, 0.2, derivatives=d),
@@ -101,6 +105,7 @@ def _terms(state, graph, data):
     [
         "match",
         "match_alignment",
+        "match_plane",
         "smooth_position",
         "smooth_normal",
         "laplace",
@@ -290,3 +295,16 @@ def test_overlapping_blocks_are_refused():
     blocks.add(np.array([0]), np.array([1]), np.ones((1, 1)))
     jacobian = blocks.matrix()
     assert jacobian.nnz == 3 and jacobian[0, 1] == 1.0 and jacobian[1, 1] == 1.0
+
+
+def test_kept_columns_of_a_jacobian_are_its_columns_renumbered():
+    state, graph, data = _problem(seed=4)
+    matches = associate(state, data, 0.15, MatchOptions(tangential=0.2))
+    jacobian = match_term(state, data, matches, 1.5, MatchOptions(tangential=0.2)).jacobian
+    columns = np.flatnonzero(np.random.default_rng(2).random(jacobian.shape[1]) < 0.4)
+    kept = keep_columns(jacobian, columns)
+    assert kept.shape == (jacobian.shape[0], len(columns))
+    assert kept.has_sorted_indices and np.all(np.diff(kept.indptr) >= 0)
+    np.testing.assert_array_equal(kept.toarray(), jacobian.toarray()[:, columns])
+    # every entry of the columns kept, none of the others
+    assert kept.nnz == jacobian[:, columns].nnz < jacobian.nnz

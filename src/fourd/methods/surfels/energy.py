@@ -15,6 +15,7 @@ from fourd.methods.surfels.match import Data, Matches, MatchOptions, match_term
 from fourd.methods.surfels.motion import accel_term, rigid_term
 from fourd.methods.surfels.smoothness import laplace_term, smooth_normal_term, smooth_position_term
 from fourd.methods.surfels.state import SurfelState, layout
+from fourd.methods.surfels.term import keep_columns
 from fourd.methods.surfels.topology import Topology
 
 #: Terms whose Jacobian pattern follows the state (their association), never kept.
@@ -171,14 +172,9 @@ def total_energy(
     jacobians = [sp.csr_matrix((0, size))] + [part.jacobian for part in parts.values()]
     parts.clear()
     if restrict:
-        columns = np.asarray(columns, dtype=np.int64)
-        select = sp.csr_matrix(
-            (np.ones(len(columns)), (columns, np.arange(len(columns)))),
-            shape=(size, len(columns)),
-        )
         # the priors assembled from kept patterns have their columns already
         jacobians = [
-            jacobian if jacobian.shape[1] == len(columns) else jacobian @ select
+            jacobian if jacobian.shape[1] == len(columns) else keep_columns(jacobian, columns)
             for jacobian in jacobians
         ]
     jacobian = sp.vstack(jacobians, format="csr")

@@ -31,12 +31,13 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.sparse as sp
 from scipy.spatial import cKDTree
 
 from fourd.methods.surfels.anchors import AnchorData
 from fourd.methods.surfels.color_guide import GuideData
 from fourd.methods.surfels.state import SurfelState, layout, tangent_basis
-from fourd.methods.surfels.term import Blocks, Term, term
+from fourd.methods.surfels.term import Term, term
 
 
 @dataclass(frozen=True)
@@ -220,15 +221,31 @@ def match_term(
     if not derivatives:
         return term(residuals, None, constant)
     lay = layout(state)
-    rows = 4 * np.arange(len(active))
-    blocks = Blocks(residuals.size, lay.size)
-    position = np.concatenate(
-        [-plane[:, None, None] * normals[:, None, :], -point[:, None, None] * np.eye(3)], axis=1
-    )
-    # the point offsets' rows are an identity block, absent without a tangential share
-    nonzero = np.concatenate([np.ones((1, 3), dtype=bool), np.eye(3, dtype=bool) & (beta > 0)])
-    blocks.add(rows, lay.position(frames, surfels), position, nonzero)
     basis = tangent_basis(state.normals)[frames, surfels]
     tilt = plane[:, None] * np.einsum("da,dab->db", offset, basis)
-    blocks.add(rows, lay.normal(frames, surfels), tilt[:, None, :])
-    return term(residuals, blocks, constant)
+    # each point's rows in CSR order, built directly (its association changes every step, so
+    # no pattern is kept): the plane's row on the surfel's position and normal offset, then,
+    # with a tangential share, the point offsets' identity on its position
+    position = lay.position(frames, surfels)
+    normal = lay.normal(frames, surfels)
+    entries = [-plane[:, None] * normals, tilt]
+    columns = [position[:, None] + np.arange(3), normal[:, None] + np.arange(2)]
+    if beta > 0:
+        entries.append(np.broadcast_to(-point[:, None], (len(active), 3)))
+        columns.append(position[:, None] + np.arange(3))
+    width = 8 if beta > 0 else 5
+    starts = width * np.arange(len(active))[:, None] + (
+        np.array([0, 5, 6, 7]) if beta > 0 else np.array([0, 5, 5, 5])
+    )
+    indptr = np.append(starts.ravel(), width * len(active))
+    index = np.int32 if max(lay.size, len(active) * width) < np.iinfo(np.int32).max else np.int64
+    jacobian = sp.csr_matrix(
+        (
+            np.concatenate(entries, axis=1).ravel(),
+            np.concatenate(columns, axis=1).astype(index).ravel(),
+            indptr.astype(index),
+        ),
+        shape=(residuals.size, lay.size),
+    )
+    jacobian.has_sorted_indices = True
+    return term(residuals, jacobian, constant)

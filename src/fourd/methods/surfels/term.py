@@ -47,21 +47,13 @@ class Pattern:
     def keep_columns(self, columns: np.ndarray) -> Pattern:
         """The pattern of the Jacobian's columns ``columns`` (int [k], sorted) only: the
         Jacobians it assembles are ``[rows, k]``."""
-        columns = np.asarray(columns, dtype=np.int64)
-        renumber = np.full(self.shape[1], -1, dtype=np.int64)
-        renumber[columns] = np.arange(len(columns))
-        renumbered = renumber[self.indices]
-        kept = renumbered >= 0
-        before = np.concatenate([[0], np.cumsum(kept)])
-        count = int(before[-1])
+        indices, indptr, kept = _renumbered(self.indices, self.indptr, self.shape[1], columns)
+        count = len(indices)
         slot = np.full(self.nnz + 1, count, dtype=self.slots[0].dtype if self.slots else np.int64)
         slot[: self.nnz][kept] = np.arange(count)
         return Pattern(
-            (self.shape[0], len(columns)),
-            tuple(slot[s] for s in self.slots),
-            self.masks,
-            renumbered[kept].astype(self.indices.dtype),
-            before[self.indptr].astype(self.indptr.dtype),
+            (self.shape[0], len(columns)), tuple(slot[s] for s in self.slots), self.masks,
+            indices, indptr,
         )
 
     def matrix(self, blocks: list[np.ndarray]) -> sp.csr_matrix:
@@ -108,6 +100,32 @@ class PatternCache:
         if key != self.columns:
             self.columns, self.restricted = key, {}
         return self.restricted
+
+
+def keep_columns(matrix: sp.csr_matrix, columns: np.ndarray) -> sp.csr_matrix:
+    """The columns ``columns`` (int [k], sorted) of ``matrix`` [R, n], as [R, k]: its entries
+    renumbered (a product with a selection matrix counts and gathers them twice)."""
+    indices, indptr, kept = _renumbered(matrix.indices, matrix.indptr, matrix.shape[1], columns)
+    kept_matrix = sp.csr_matrix(
+        (matrix.data[kept], indices, indptr), shape=(matrix.shape[0], len(columns))
+    )
+    kept_matrix.has_sorted_indices = matrix.has_sorted_indices
+    return kept_matrix
+
+
+def _renumbered(
+    indices: np.ndarray, indptr: np.ndarray, width: int, columns: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The CSR column ``indices`` and row pointers ``indptr`` of a [R, width] matrix, keeping
+    the columns ``columns`` (int [k], sorted) only, renumbered 0 .. k - 1; and which of the
+    entries are kept (bool [nnz])."""
+    columns = np.asarray(columns, dtype=np.int64)
+    renumber = np.full(width, -1, dtype=np.int64)
+    renumber[columns] = np.arange(len(columns))
+    renumbered = renumber[indices]
+    kept = renumbered >= 0
+    before = np.concatenate([[0], np.cumsum(kept)])
+    return renumbered[kept].astype(indices.dtype), before[indptr].astype(indptr.dtype), kept
 
 
 def _fits(values: np.ndarray, slots: np.ndarray, mask: np.ndarray | None) -> bool:
@@ -249,11 +267,16 @@ class Blocks:
         return self.pattern().matrix(values)
 
 
-def term(residuals: np.ndarray, blocks: Blocks | None, constant: float = 0.0) -> Term:
+def term(
+    residuals: np.ndarray, blocks: Blocks | sp.csr_matrix | None, constant: float = 0.0
+) -> Term:
     """The :class:`Term` of ``residuals`` [R] (any shape, flattened in C order) with the
-    Jacobian in ``blocks`` (None: value only); ``constant`` adds to the value."""
+    Jacobian in ``blocks``, or the Jacobian itself (csr_matrix [R, n], no pattern kept; None:
+    value only); ``constant`` adds to the value."""
     r = np.ascontiguousarray(residuals, dtype=np.float64).ravel()
     value = float(np.einsum("i,i->", r, r)) + float(constant)
     if blocks is None:
         return Term(value, r, None)
+    if sp.issparse(blocks):
+        return Term(value, r, blocks)
     return Term(value, r, blocks.matrix(), blocks.pattern())
