@@ -43,7 +43,8 @@ class GaussNewtonOptions:
     cg_iterations : int
         Most conjugate-gradient iterations per step.
     halvings : int
-        Most step halvings of the line search.
+        Most step halvings of the line search; a step that lowers the energy at none of the
+        scales down to ``2^-halvings`` ends the optimisation.
     """
 
     iterations: int = 30
