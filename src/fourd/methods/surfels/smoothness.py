@@ -90,14 +90,23 @@ def laplace_term(
     degrees = topology.degrees
     root = np.sqrt(weight)
     share = 1.0 / np.maximum(degrees, 1)
-    means = np.zeros_like(state.positions)
-    np.add.at(means, (slice(None), i), share[i][:, None] * state.positions[:, j])
+    # the neighbours' sums by bincount over (frame, surfel) bins (np.add.at took 20 ms of a
+    # 14-frame, 500-surfel evaluation): the same additions in the same order
+    frames, count = state.frames, state.count
+    bins = (np.arange(frames)[:, None] * count + i).ravel()
+    shared = share[i][:, None] * state.positions[:, j]
+    means = np.stack(
+        [
+            np.bincount(bins, weights=shared[..., c].ravel(), minlength=frames * count)
+            for c in range(3)
+        ],
+        axis=-1,
+    ).reshape(state.positions.shape)
     linked = (degrees > 0)[:, None]
     residuals = root * np.where(linked, state.positions - means, 0.0)
     if not derivatives:
         return term(residuals, None)
     lay = layout(state)
-    frames, count = state.frames, state.count
     t = np.arange(frames)[:, None]
     rows = 3 * (t * count + np.arange(count))
     eye = np.eye(3)
