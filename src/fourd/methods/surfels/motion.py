@@ -48,9 +48,12 @@ def rigid_term(
     i, j = topology.directed.T
     root, root_n = np.sqrt(weight), np.sqrt(normal_weight)
     origin = np.zeros(steps, dtype=np.int64) if urshape else np.arange(steps)
-    rotations = state.rotations[:, i]
-    before = state.positions[origin][:, i] - state.positions[origin][:, j]
-    after = state.positions[1:, i] - state.positions[1:, j]
+    # np.take keeps the gathered arrays in C order ([:, i] puts the edges outermost in memory,
+    # and every product on them then ran several times slower)
+    rotations = np.take(state.rotations, i, axis=1)
+    start, end = state.positions[origin], state.positions[1:]
+    before = np.take(start, i, axis=1) - np.take(start, j, axis=1)
+    after = np.take(end, i, axis=1) - np.take(end, j, axis=1)
     predicted = np.einsum("teab,teb->tea", rotations, before)
     edge_residuals = root * (predicted - after)
     turned = np.einsum("tsab,tsb->tsa", state.rotations, state.normals[origin])
