@@ -51,7 +51,9 @@ def best_of(run, repeats: int = 5) -> float:
     return min(times)
 
 
-def main() -> None:
+def step_system():
+    """The step-cost problem's first Gauss-Newton system: its state, Hessian and stacked
+    Jacobian."""
     state, topology, data, weights, match, options, kw = _load()
     columns = None if kw.get("free") is None else np.flatnonzero(kw["free"])
     matches = associate(state, data, topology.radius, match)
@@ -60,8 +62,12 @@ def main() -> None:
         state, topology, data, matches, weights, match, columns=columns,
         urshape=kw.get("urshape", False),
     )
-    hessian = energy.hessian
-    jacobian = recording.stacked
+    energy_module.sp = recording.module
+    return state, energy.hessian, recording.stacked
+
+
+def main() -> None:
+    state, hessian, jacobian = step_system()
     transposed = jacobian.T.tocsr()
     print(f"{state.frames} frames, {state.count} surfels, {hessian.shape[0]} unknowns")
     print(f"J {jacobian.shape[0]} rows, {jacobian.nnz} nonzeros; H {hessian.nnz} nonzeros")

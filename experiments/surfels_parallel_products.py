@@ -23,11 +23,7 @@ sys.path.insert(0, str(Path(__file__).parent))
 import numba  # noqa: E402
 import numpy as np  # noqa: E402
 import scipy.sparse as sp  # noqa: E402
-from surfels_matrix_free import _load, _Recording, best_of  # noqa: E402
-
-import fourd.methods.surfels.energy as energy_module  # noqa: E402
-from fourd.methods.surfels.energy import total_energy  # noqa: E402
-from fourd.methods.surfels.match import associate  # noqa: E402
+from surfels_matrix_free import best_of, step_system  # noqa: E402
 
 
 @numba.njit(cache=True, parallel=True, nogil=True)
@@ -95,15 +91,7 @@ def gram(transposed, jacobian):
     return sp.csr_matrix((hd, hi, hp), shape=(n, n))
 
 def main() -> None:
-    state, topology, data, weights, match, options, kw = _load()
-    columns = None if kw.get("free") is None else np.flatnonzero(kw["free"])
-    matches = associate(state, data, topology.radius, match)
-    recording = energy_module.sp = _Recording(energy_module.sp)
-    energy = total_energy(
-        state, topology, data, matches, weights, match, columns=columns,
-        urshape=kw.get("urshape", False),
-    )
-    hessian, jacobian = energy.hessian, recording.stacked
+    _, hessian, jacobian = step_system()
     print(f"{numba.get_num_threads()} threads; H {hessian.nnz} entries, J {jacobian.nnz}")
     p = np.random.default_rng(0).normal(size=hessian.shape[0])
     out = np.empty_like(p)
