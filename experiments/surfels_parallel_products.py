@@ -7,7 +7,7 @@ Run from the repository root, after ``experiments/surfels_step_cost.py capture``
     PYTHONPATH=src .venv/bin/python experiments/surfels_parallel_products.py
 
 Answer (2-core Intel Xeon, nothing else running, 2026-12-06 at ee7dce6; the step-cost problem:
-14 frames, 504 surfels, H 10.6 million entries): no. A product with H takes 7.99 ms in scipy
+14 frames, 504 surfels, H 9.16 million entries): no. A product with H takes 7.99 ms in scipy
 and 8.94 ms compiled on 2 threads (bit-identical); ``J^T J`` 0.21 s in scipy and 0.27 s
 compiled (a row-parallel Gustavson product with a dense accumulator per thread, both passes).
 Both are bound by memory bandwidth, which the two cores share; scipy stays.
