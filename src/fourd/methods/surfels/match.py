@@ -37,7 +37,7 @@ from scipy.spatial import cKDTree
 from fourd.methods.surfels.anchors import AnchorData
 from fourd.methods.surfels.color_guide import GuideData
 from fourd.methods.surfels.state import SurfelState, layout, tangent_basis
-from fourd.methods.surfels.term import Term, term
+from fourd.methods.surfels.term import Term, index_type, term
 
 
 @dataclass(frozen=True)
@@ -238,7 +238,7 @@ def match_term(
         np.array([0, 5, 6, 7]) if beta > 0 else np.array([0, 5, 5, 5])
     )
     indptr = np.append(starts.ravel(), width * len(active))
-    index = np.int32 if max(lay.size, len(active) * width) < np.iinfo(np.int32).max else np.int64
+    index = index_type(lay.size, len(active) * width)
     jacobian = sp.csr_matrix(
         (
             np.concatenate(entries, axis=1).ravel(),

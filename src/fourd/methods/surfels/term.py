@@ -131,6 +131,12 @@ def _renumbered(
     return renumbered[kept].astype(indices.dtype), before[indptr].astype(indptr.dtype), kept
 
 
+def index_type(*sizes: int) -> type:
+    """The integer type of sparse indices up to ``max(sizes)``: 32 bits where they fit (the
+    indices are most of a Jacobian's memory)."""
+    return np.int32 if max(sizes) < np.iinfo(np.int32).max else np.int64
+
+
 @numba.njit(cache=True, nogil=True)
 def _scatter(data: np.ndarray, slots: np.ndarray, values: np.ndarray) -> None:
     """``data[slots] = values`` (``slots`` and ``values`` flat, of one length)."""
@@ -190,8 +196,7 @@ class Blocks:
         if pattern is not None and pattern.shape[0] != rows:
             raise ValueError(f"the pattern has {pattern.shape[0]} rows, the blocks {rows}")
         self._pattern = pattern
-        # 32-bit indices where they fit: the entries' indices are most of the memory
-        self._index = np.int32 if max(rows, columns) < np.iinfo(np.int32).max else np.int64
+        self._index = index_type(rows, columns)
         self._values: list[np.ndarray] = []
         self._rows: list[np.ndarray] = []
         self._cols: list[np.ndarray] = []
@@ -245,7 +250,7 @@ class Blocks:
         rows = np.concatenate([np.zeros(0, self._index)] + self._rows)
         cols = np.concatenate([np.zeros(0, self._index)] + self._cols)
         count = len(rows)
-        slot = np.int32 if count < np.iinfo(np.int32).max else np.int64
+        slot = index_type(count)
         # each entry carries its number through the conversion (sorted in each row)
         numbers = np.arange(count, dtype=slot)
         structure = sp.coo_matrix((numbers, (rows, cols)), shape=self.shape).tocsr()
