@@ -308,3 +308,25 @@ def test_kept_columns_of_a_jacobian_are_its_columns_renumbered():
     np.testing.assert_array_equal(kept.toarray(), jacobian.toarray()[:, columns])
     # every entry of the columns kept, none of the others
     assert kept.nnz == jacobian[:, columns].nnz < jacobian.nnz
+
+
+def test_the_doublet_test_rejects_a_point_whose_surfels_nearest_point_is_far():
+    # one surfel at the origin per frame; the frames' points interleaved in the data, so each
+    # frame's points and their kept k-d tree are gathered, not sliced
+    state = surfel_state(np.zeros((2, 1, 3)), np.tile([0.0, 0.0, 1.0], (2, 1, 1)))
+    points = np.array([[0, 0, 0.01], [0, 0, 0.02], [0, 0, 1.0], [0, 0, 0.5]])
+    data = frame_data([points[:2], points[2:]])
+    data = type(data)(points[[0, 2, 1, 3]], data.frames[[0, 2, 1, 3]], data.weights)
+    np.testing.assert_array_equal(data.in_frame(0), [0, 2])
+    np.testing.assert_array_equal(data.in_frame(1), [1, 3])
+    assert data.in_frame(2).size == 0
+    assert data.tree(1) is data.tree(1)
+    np.testing.assert_array_equal(data.tree(1).data, points[[2, 3]])
+    # frame 1: the surfel's nearest point is 0.5 away from the point at 1.0, beyond eps_top
+    alignment = MatchOptions(regime="alignment", percentile=100.0)  # no point beyond the cutoff
+    matches = associate(state, data, 0.4, alignment)
+    np.testing.assert_array_equal(matches.surfels, 0)
+    np.testing.assert_array_equal(matches.active, [True, False, True, True])
+    # the same points again, association unchanged by the kept trees
+    again = associate(state, data, 0.4, alignment)
+    np.testing.assert_array_equal(again.active, matches.active)

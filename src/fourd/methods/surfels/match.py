@@ -29,6 +29,7 @@ Pauly, Mitra, Giesen, Gross, Guibas: Example-based 3D scan completion, SGP 2005 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 import scipy.sparse as sp
@@ -72,6 +73,28 @@ class Data:
             raise ValueError("data weights must be [D] and not negative")
         if self.normals is not None and self.normals.shape != (count, 3):
             raise ValueError("data normals must be [D, 3]")
+
+    def in_frame(self, frame: int) -> np.ndarray:
+        """The indices of frame ``frame``'s points, int64 [P_t] ascending (sorted into frames
+        once: every association asks)."""
+        return self._by_frame[frame] if frame < len(self._by_frame) else np.zeros(0, np.int64)
+
+    def tree(self, frame: int) -> cKDTree:
+        """The k-d tree of frame ``frame``'s points, built on first use and kept: the
+        alignment regime's doublet test asks at every association, and the points do not
+        move."""
+        if frame not in self._trees:
+            self._trees[frame] = cKDTree(self.points[self.in_frame(frame)])
+        return self._trees[frame]
+
+    @cached_property
+    def _by_frame(self) -> list[np.ndarray]:
+        order = np.argsort(self.frames, kind="stable")
+        return np.split(order, np.cumsum(np.bincount(self.frames))[:-1]) if len(order) else []
+
+    @cached_property
+    def _trees(self) -> dict[int, cKDTree]:
+        return {}
 
 
 def frame_data(
@@ -157,12 +180,12 @@ def associate(
     doublet = np.ones(len(data.points), dtype=bool)
     alignment = options.regime == "alignment"
     for t in range(state.frames):
-        here = np.flatnonzero(data.frames == t)
+        here = data.in_frame(t)
         if not len(here):
             continue
         _, surfels[here] = cKDTree(state.positions[t]).query(data.points[here], workers=-1)
         if alignment:
-            _, nearest = cKDTree(data.points[here]).query(state.positions[t], workers=-1)
+            _, nearest = data.tree(t).query(state.positions[t], workers=-1)
             back = data.points[here[nearest[surfels[here]]]]
             doublet[here] = (
                 np.linalg.norm(back - data.points[here], axis=1) <= options.doublet * scale
