@@ -160,7 +160,12 @@ def test_the_merges_are_kept_for_the_points_colours_they_were_guided_by(tmp_path
 def test_touching_spheres_are_not_glued_in_any_frame():
     from fourd.geometry.meshes import vertex_components
 
-    truth = synth.scene("touching-spheres", frames=3)
+    # the spheres 0.3 apart in frames 0 and 2 (beyond eps_top, 0.2 at this scan), touching at
+    # frame 1: each moves 0.15 a frame. The scene's default gap of 0.7 moves them 0.35 a frame
+    # (70% of their radius) at 3 frames, a motion the alignment loses: there a fifth of the
+    # surfels ended more than 0.14 off the truth and the two pieces hung on which of them the
+    # clipping kept (experiments/surfels_line_search.py)
+    truth = synth.scene("touching-spheres", frames=3, gap=0.3)
     scans = synth.scan(truth, resolution=128)
     anim = reconstruct(scans, method="surfels", **QUICK)
     for t in range(len(scans)):
@@ -168,16 +173,15 @@ def test_touching_spheres_are_not_glued_in_any_frame():
         _, labels = vertex_components(anim.faces, len(anim.vertices[t]))
         sizes = np.bincount(labels)
         big = np.argsort(sizes)[::-1][:2]
-        # two large pieces hold nearly everything (at this coarse scan a few crumbs of the
-        # meshing remain: measured 95% and 6 crumbs of 3-57 vertices at frame 0; the bench's
-        # standard scan has exactly two components in every frame)
+        # two large pieces hold nearly everything (at this coarse scan a crumb of the meshing
+        # remains: measured 3,315 + 1,755 vertices and a crumb of 37; the bench's standard
+        # scan has exactly two components in every frame)
         assert sizes[big].min() > 0.2 * len(labels) and sizes[big].sum() > 0.9 * len(labels), (
             t,
             sizes,
         )
-        # each lies on one sphere: none bridges the contact (at the contact frame a flap of
-        # one piece lies on the other sphere: 13 of 1,248 vertices measured, about eps_sampl
-        # off their own; 8 of 1,145 when the border clipping measured against the median)
+        # each lies on one sphere: none bridges the contact (a flap of one piece lies on the
+        # other sphere: 6-11 of its 3,315 vertices measured)
         nearest = truth_labels[cKDTree(truth.vertices[t]).query(anim.vertices[t])[1]]
         sides = [np.bincount(nearest[labels == piece], minlength=2) for piece in big]
         assert all(side.max() >= 0.98 * side.sum() for side in sides)
@@ -188,9 +192,13 @@ def test_the_fit_to_the_frames_brings_the_surface_onto_the_truth(tmp_path):
     truth = synth.scene("rigid-turn", frames=2, angle=6.0)
     scans = synth.scan(truth, resolution=64)
     cache = str(tmp_path)  # the second run resumes the merges
-    plain = reconstruct(scans, method="surfels", fit_frames=False, cache_dir=cache, **QUICK)
-    fitted = reconstruct(scans, method="surfels", cache_dir=cache, **QUICK)
-    assert fitted.faces.shape == plain.faces.shape
+    # the holes left open: which of them are small enough to close is measured on the moved
+    # vertices (measured: one more closed without the fit, 2,400 faces against 2,394)
+    options = dict(QUICK, cache_dir=cache, close_holes=0.0)
+    plain = reconstruct(scans, method="surfels", fit_frames=False, **options)
+    fitted = reconstruct(scans, method="surfels", **options)
+    # the fit moves the vertices only
+    np.testing.assert_array_equal(fitted.faces, plain.faces)
     spacing = point_spacing(scans.frames[0].points)
     for t in range(2):
         off = [
