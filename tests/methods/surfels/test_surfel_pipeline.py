@@ -37,6 +37,17 @@ def test_options_refuse_bad_values():
         Options(rigid=-1)
 
 
+def test_merges_of_another_revision_are_not_resumed(tmp_path, monkeypatch):
+    from fourd.cache import StageCache
+    from fourd.methods.surfels import pipeline
+
+    cache = StageCache(str(tmp_path))
+    before = pipeline.merge_keys(["frame"], Options(), cache)
+    assert pipeline.merge_keys(["frame"], Options(), cache) == before
+    monkeypatch.setattr(pipeline, "MERGES_REVISION", pipeline.MERGES_REVISION + 1)
+    assert pipeline.merge_keys(["frame"], Options(), cache) != before
+
+
 def test_one_frame_or_a_frame_outside_is_refused():
     rng = np.random.default_rng(0)
     frame = Frame(rng.normal(size=(500, 3)))

@@ -45,6 +45,12 @@ log = logging.getLogger("fourd.methods.surfels")
 #: or better (benchmarks/METHODS.md).
 ALIGN_TOLERANCE = 1e-3
 
+#: Part of every merge's cache key; raised when the merges give other results for the same
+#: options and data (fourd's version does not change with the code), so a cache folder from
+#: before is not resumed into a run of the new code. 2: the alignments' line search
+#: (:data:`ALIGN_TOLERANCE`).
+MERGES_REVISION = 2
+
 
 def reconstruct(seq: PointCloudSequence, options: Options | None = None) -> AnimatedMesh:
     """Animated mesh from a point-cloud sequence by the surfel-graph reconstruction of Wand
@@ -366,7 +372,7 @@ def merge_keys(keys: list[str], options: Options, cache: StageCache, *salt) -> l
     if options.urshape != "merges":  # the merges do not use it
         without = (*without, "urshape")
     values = option_values(options, without=without)
-    return [stage_key(key, values, *salt) for key in keys]
+    return [stage_key(key, values, MERGES_REVISION, *salt) for key in keys]
 
 
 def meshing_options(options: Options) -> MeshingOptions:
