@@ -67,7 +67,7 @@ class GaussNewtonOptions:
     def __post_init__(self):
         if self.preconditioner not in ("block", "jacobi"):
             raise ValueError(f"preconditioner must be block or jacobi, got {self.preconditioner!r}")
-        if self.line_search not in ("associated", "fixed"):
+        if self.line_search not in ("associated", "fixed", "checked"):
             raise ValueError(
                 f"line_search must be associated or fixed, got {self.line_search!r}"
             )
@@ -144,6 +144,7 @@ def gauss_newton(
 
     current = derivatives_at(state, matches)
     energies.append(current.value)
+    associated = current.value
     for iteration in range(options.iterations):
         step, count = solve_step(
             current.hessian,
@@ -156,7 +157,8 @@ def gauss_newton(
         cg_counts.append(count)
         accepted = None
         scale = 1.0
-        fixed = options.line_search == "fixed"
+        before = (state, matches)
+        fixed = options.line_search in ("fixed", "checked")
         for _ in range(options.halvings + 1):
             trial = retract(state, scale * step)
             again = matches if fixed else associate(trial, data, topology.radius, match)
@@ -176,8 +178,21 @@ def gauss_newton(
         if current.value - value <= options.tolerance * max(abs(current.value), 1e-300):
             converged = True
             break
+        if options.line_search == "checked":
+            # the step is kept only if the energy associated again fell too
+            again = associate(state, data, topology.radius, match)
+            value = total_energy(
+                state, topology, data, again, weights, match, derivatives=False, urshape=urshape
+            ).value
+            if value >= associated:
+                state, matches = before
+                energies[-1] = associated
+                converged = True
+                break
+            associated, matches = value, again
+            energies[-1] = value
         if iteration + 1 < options.iterations:
-            if fixed:
+            if options.line_search == "fixed":
                 matches = associate(state, data, topology.radius, match)
             # derivatives only where another step follows; the last Hessian is let go first, or
             # it would live beside the next one's Jacobians (a quarter of the peak memory)
