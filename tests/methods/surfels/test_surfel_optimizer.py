@@ -2,7 +2,6 @@
 at the noise of their data's mean, and a rigid motion is recovered as a rigid motion."""
 
 import numpy as np
-import pytest
 import scipy.sparse as sp
 import scipy.sparse.linalg as sla
 
@@ -84,26 +83,6 @@ def test_a_step_descends_and_the_preconditioners_agree_with_a_direct_solve():
     assert longer.energies[-1] < 0.9 * longer.energies[0]
     normals = np.linalg.norm(longer.state.normals, axis=-1)
     assert np.allclose(normals, 1.0, atol=1e-12)
-
-
-def test_the_fixed_line_search_descends_under_each_steps_association():
-    # the alignment regime, whose association switches points between trials
-    state, graph, data = _random_problem(seed=3)
-    data = frame_data(
-        [data.points[data.frames == t] for t in range(state.frames)],
-        weight=10.0,
-        normals=[np.tile([0.0, 0.0, 1.0], ((data.frames == t).sum(), 1)) for t in range(3)],
-    )
-    match = MatchOptions(regime="alignment", percentile=100.0)
-    options = GaussNewtonOptions(iterations=6, line_search="fixed", tolerance=0.0)
-    result = gauss_newton(state, graph, data, ALL_TERMS, match, options)
-    # every step lowers the energy under the association it started from: none is refused
-    assert len(result.cg_iterations) == 6 and result.energies[1] < result.energies[0]
-    final = associate(result.state, data, graph.radius, match)
-    value = total_energy(result.state, graph, data, final, ALL_TERMS, match, derivatives=False)
-    assert value.value < 0.9 * result.energies[0]
-    with pytest.raises(ValueError, match="line_search"):
-        GaussNewtonOptions(line_search="nearest")
 
 
 def test_patterns_carried_between_calls_leave_the_optimisation_as_it_was():

@@ -46,13 +46,6 @@ class GaussNewtonOptions:
     halvings : int
         Most step halvings of the line search; a step that lowers the energy at none of the
         scales down to ``2^-halvings`` ends the optimisation.
-    line_search : str
-        What the line search compares: ``"associated"``, the energy with the data associated
-        again at each trial; ``"fixed"``, the energy with the step's own association (the one
-        its Hessian linearised; the next step associates again). In the alignment regime the
-        cutoff and the doublet and normal tests turn points on and off between trials, each
-        worth ``omega tau^2``, and those jumps drown the step's decrease after its first
-        steps (benchmarks/METHODS.md).
     """
 
     iterations: int = 30
@@ -62,15 +55,10 @@ class GaussNewtonOptions:
     cg_tolerance: float = 1e-6
     cg_iterations: int = 500
     halvings: int = 12
-    line_search: str = "associated"
 
     def __post_init__(self):
         if self.preconditioner not in ("block", "jacobi"):
             raise ValueError(f"preconditioner must be block or jacobi, got {self.preconditioner!r}")
-        if self.line_search not in ("associated", "fixed", "checked"):
-            raise ValueError(
-                f"line_search must be associated or fixed, got {self.line_search!r}"
-            )
         if self.iterations < 0 or self.damping < 0 or self.halvings < 0:
             raise ValueError("iterations, damping and halvings must not be negative")
 
@@ -81,8 +69,7 @@ class Optimization:
 
     state : SurfelState
     energies : float64 [iterations + 1]
-        Energy before the first step and after each (with ``line_search="fixed"``, under
-        that step's association).
+        Energy before the first step and after each.
     cg_iterations : int64 [iterations]
     converged : bool
         The last step lowered the energy by less than the tolerance (or none could).
@@ -144,7 +131,6 @@ def gauss_newton(
 
     current = derivatives_at(state, matches)
     energies.append(current.value)
-    associated = current.value
     for iteration in range(options.iterations):
         step, count = solve_step(
             current.hessian,
@@ -157,11 +143,9 @@ def gauss_newton(
         cg_counts.append(count)
         accepted = None
         scale = 1.0
-        before = (state, matches)
-        fixed = options.line_search in ("fixed", "checked")
         for _ in range(options.halvings + 1):
             trial = retract(state, scale * step)
-            again = matches if fixed else associate(trial, data, topology.radius, match)
+            again = associate(trial, data, topology.radius, match)
             value = total_energy(
                 trial, topology, data, again, weights, match, derivatives=False, urshape=urshape
             ).value
@@ -178,22 +162,7 @@ def gauss_newton(
         if current.value - value <= options.tolerance * max(abs(current.value), 1e-300):
             converged = True
             break
-        if options.line_search == "checked":
-            # the step is kept only if the energy associated again fell too
-            again = associate(state, data, topology.radius, match)
-            value = total_energy(
-                state, topology, data, again, weights, match, derivatives=False, urshape=urshape
-            ).value
-            if value >= associated:
-                state, matches = before
-                energies[-1] = associated
-                converged = True
-                break
-            associated, matches = value, again
-            energies[-1] = value
         if iteration + 1 < options.iterations:
-            if options.line_search == "fixed":
-                matches = associate(state, data, topology.radius, match)
             # derivatives only where another step follows; the last Hessian is let go first, or
             # it would live beside the next one's Jacobians (a quarter of the peak memory)
             current = None

@@ -36,20 +36,12 @@ from fourd.sequence import PointCloudSequence
 
 log = logging.getLogger("fourd.methods.surfels")
 
-#: The alignments' Gauss-Newton: the line search under each step's own association, and a stop
-#: when a step lowers that energy by less than this fraction. Associated again at each trial,
-#: the alignment regime's cutoff and its doublet and normal tests switch points on and off,
-#: each worth ``omega tau^2``: after an alignment's first steps those switches outweigh a
-#: step's decrease (0.1% and less, against 0.2-1% moves) and the halvings searched for a scale
-#: where they fell well. Crane's alignments 60% faster; a streamed rigid turn tracked as well
-#: or better (benchmarks/METHODS.md).
-ALIGN_TOLERANCE = 1e-3
-
 #: Part of every merge's cache key; raised when the merges give other results for the same
 #: options and data (fourd's version does not change with the code), so a cache folder from
-#: before is not resumed into a run of the new code. 2: the alignments' line search
-#: (:data:`ALIGN_TOLERANCE`).
-MERGES_REVISION = 2
+#: before is not resumed into a run of the new code. 2: the alignments' line search under each
+#: step's own association (99bf033); 3: back to the associated line search
+#: (experiments/surfels_line_search.py).
+MERGES_REVISION = 3
 
 
 def reconstruct(seq: PointCloudSequence, options: Options | None = None) -> AnimatedMesh:
@@ -267,11 +259,7 @@ def assembly_schedule(options: Options, noise: float, sampling: float) -> Schedu
         sampling=sampling,
         weights=energy_weights(options, noise, sampling),
         align_data=options.align_data / noise**2,
-        align=dataclasses.replace(
-            solver_options(options, options.align_iterations),
-            line_search="fixed",
-            tolerance=ALIGN_TOLERANCE,
-        ),
+        align=solver_options(options, options.align_iterations),
         max_stretch=options.max_stretch,
         optimize=solver_options(options, options.iterations),
         fill=solver_options(options, options.fill_iterations),
