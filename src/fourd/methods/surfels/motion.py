@@ -20,7 +20,7 @@ from __future__ import annotations
 import numpy as np
 
 from fourd.geometry.rotations import best_rotations
-from fourd.methods.surfels.state import SurfelState, layout, skew, tangent_basis
+from fourd.methods.surfels.state import SurfelState, at_surfels, layout, skew, tangent_basis
 from fourd.methods.surfels.term import Blocks, Pattern, Term, term
 from fourd.methods.surfels.topology import Topology
 
@@ -48,12 +48,10 @@ def rigid_term(
     i, j = topology.directed.T
     root, root_n = np.sqrt(weight), np.sqrt(normal_weight)
     origin = np.zeros(steps, dtype=np.int64) if urshape else np.arange(steps)
-    # np.take keeps the gathered arrays in C order ([:, i] puts the edges outermost in memory,
-    # and every product on them then ran several times slower)
-    rotations = np.take(state.rotations, i, axis=1)
+    rotations = at_surfels(state.rotations, i)
     start, end = state.positions[origin], state.positions[1:]
-    before = np.take(start, i, axis=1) - np.take(start, j, axis=1)
-    after = np.take(end, i, axis=1) - np.take(end, j, axis=1)
+    before = at_surfels(start, i) - at_surfels(start, j)
+    after = at_surfels(end, i) - at_surfels(end, j)
     predicted = np.einsum("teab,teb->tea", rotations, before)
     edge_residuals = root * (predicted - after)
     turned = np.einsum("tsab,tsb->tsa", state.rotations, state.normals[origin])

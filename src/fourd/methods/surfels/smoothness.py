@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from fourd.methods.surfels.state import SurfelState, layout, tangent_basis
+from fourd.methods.surfels.state import SurfelState, at_surfels, layout, tangent_basis
 from fourd.methods.surfels.term import Blocks, Pattern, Term, term
 from fourd.methods.surfels.topology import Topology
 
@@ -33,10 +33,8 @@ def smooth_position_term(
     and directed edge, ``[T, 2E]``. ``weight`` in 1 / length^2 for a dimensionless energy."""
     i, j = topology.directed.T
     root = np.sqrt(weight)
-    # np.take keeps the gathered arrays in C order ([:, i] puts the edges outermost in memory,
-    # and every product on them then ran several times slower)
-    difference = np.take(state.positions, i, axis=1) - np.take(state.positions, j, axis=1)
-    normals = np.take(state.normals, i, axis=1)
+    difference = at_surfels(state.positions, i) - at_surfels(state.positions, j)
+    normals = at_surfels(state.normals, i)
     residuals = root * np.einsum("tea,tea->te", difference, normals)
     if not derivatives:
         return term(residuals, None)
@@ -46,7 +44,7 @@ def smooth_position_term(
     blocks = Blocks(residuals.size, lay.size, pattern)
     blocks.add(rows, lay.position(t, i), root * normals[..., None, :])
     blocks.add(rows, lay.position(t, j), -root * normals[..., None, :])
-    basis = np.take(tangent_basis(state.normals), i, axis=1)
+    basis = at_surfels(tangent_basis(state.normals), i)
     blocks.add(
         rows, lay.normal(t, i), root * np.einsum("tea,teab->teb", difference, basis)[..., None, :]
     )
@@ -65,7 +63,7 @@ def smooth_normal_term(
     directed edge, ``[T, 2E, 3]`` (dimensionless normals: ``weight`` carries the units)."""
     i, j = topology.directed.T
     root = np.sqrt(weight)
-    residuals = root * (np.take(state.normals, i, axis=1) - np.take(state.normals, j, axis=1))
+    residuals = root * (at_surfels(state.normals, i) - at_surfels(state.normals, j))
     if not derivatives:
         return term(residuals, None)
     lay = layout(state)
@@ -73,8 +71,8 @@ def smooth_normal_term(
     rows = 3 * np.arange(residuals.shape[0] * residuals.shape[1]).reshape(residuals.shape[:2])
     basis = tangent_basis(state.normals)
     blocks = Blocks(residuals.size, lay.size, pattern)
-    blocks.add(rows, lay.normal(t, i), root * np.take(basis, i, axis=1))
-    blocks.add(rows, lay.normal(t, j), -root * np.take(basis, j, axis=1))
+    blocks.add(rows, lay.normal(t, i), root * at_surfels(basis, i))
+    blocks.add(rows, lay.normal(t, j), -root * at_surfels(basis, j))
     return term(residuals, blocks)
 
 
@@ -96,7 +94,7 @@ def laplace_term(
     # 14-frame, 500-surfel evaluation): the same additions in the same order
     frames, count = state.frames, state.count
     bins = (np.arange(frames)[:, None] * count + i).ravel()
-    shared = share[i][:, None] * np.take(state.positions, j, axis=1)
+    shared = share[i][:, None] * at_surfels(state.positions, j)
     means = np.stack(
         [
             np.bincount(bins, weights=shared[..., c].ravel(), minlength=frames * count)

@@ -138,6 +138,14 @@ def tangent_basis(normals: np.ndarray) -> np.ndarray:
     return np.stack([u, np.cross(n, u)], axis=-1)
 
 
+def at_surfels(values: np.ndarray, surfels: np.ndarray) -> np.ndarray:
+    """``values[:, surfels]`` for per-frame arrays ``[T, S, ...]`` -> ``[T, len(surfels), ...]``,
+    in C order: the fancy index ``[:, surfels]`` puts the gathered axis outermost in memory, and
+    every product on the result then ran several times slower (a [14, 8,508, 3, 2] gather 1.19
+    ms and a product on it 3.13 ms, against 0.28 and 0.38 ms)."""
+    return np.take(values, surfels, axis=1)
+
+
 def skew(vectors: np.ndarray) -> np.ndarray:
     """Cross-product matrices [..., 3, 3] of ``vectors`` [..., 3]: ``skew(c) @ y = c x y``."""
     c = np.asarray(vectors, dtype=np.float64)
