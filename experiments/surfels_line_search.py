@@ -6,6 +6,7 @@ Run from the repository root::
 
     PYTHONPATH=src .venv/bin/python experiments/surfels_line_search.py capture
     PYTHONPATH=src .venv/bin/python experiments/surfels_line_search.py compare
+    PYTHONPATH=src .venv/bin/python experiments/surfels_line_search.py switches 0 17
 
 ``capture`` reconstructs the bench's crane (20 frames) and pickles every ``align_ranges``
 optimisation (38 calls); ``compare`` reruns them with each variant and prints the time, the
@@ -94,6 +95,38 @@ associated line search and 12 halvings. What would help: an energy without the s
 (a smooth cutoff instead of the percentile, the doublet and normal tests as weights that
 fade), so that a step's decrease is not drowned; not tried.
 
+What switches, measured (2026-12-07, twentieth session; ``switches`` prints every trial's
+energy against the step's, with the points whose nearest surfel or active flag differs from
+the step's association). Alignment 17, the fifth step: +4.4e-2 (620 nearest surfels
+changed, 133 points switched), +5.5e-2 (323, 80), +3.2e-3 (160, 34), +2.6e-3 (78, 20),
++4.1e-4 (41, 11), then -3.1e-3 (27, 5) accepted at 2^-5. Late steps end at trials where no
+nearest surfel changes and one point switches, +9e-4 of the energy each time (about 60 of
+65,284), until the scale is so small that nothing switches (-1.5e-6, accepted). So a single
+point switched by the doublet or normal test outweighs the late steps' whole decrease. Three
+more cures, each run on the 38 alignments (``compare``; the options existed in 5b1c0a0 only):
+
+| variant | time | steps | evaluations/step | final energy / 12 halvings' (median, min - max) | surfels moved (eps_sampl, median / max) |
+|---|---|---|---|---|---|
+| 12 halvings (default), same run | 63.9 s | 280 | 4.85 | 1 | 0 |
+| ``tau`` held at the call's first association (``hold``) | 56.4 s | 279 | 4.82 | 1.000 (1.000 - 1.000) | 0.000 / 0.000 |
+| the tests fading over +-20% of their thresholds (``fade 0.2 12``) | 62.9 s | 281 | 4.88 | 1.000 (0.980 - 1.000) | 0.000 / 0.004 |
+| the same at 3 halvings, fading over +-10/20/40% | 27.6-30.7 s | 199-202 | 1.86 | 1.000 (0.965 - 1.005) | 0.000 / 0.004-0.006 |
+| both energies over the points active in both associations (``common 12``) | 56.2 s | 429 | 1.93 | 1.019 (0.813 - 1.294) | 0.014 / 0.101 |
+| the same at 3 halvings | 47.8 s | 404 | 1.34 | 1.018 (0.813 - 1.294) | 0.014 / 0.101 |
+
+- Holding ``tau`` changes nothing: the switches' price is ``tau^2`` (the largest distance)
+  against a switched point's own ``rho^2``, not ``tau``'s changes from trial to trial.
+- Fading the tests makes each switch continuous but as steep (the share falls over a band the
+  trial steps cross at once, and the Gauss-Newton model does not see the share's slope): the
+  evaluations per step are unchanged.
+- Comparing over the points active in both takes the switches out of the decision: 1.93
+  evaluations a step, but it walks 50% more steps to the tolerance and ends where the fixed
+  association ended (the same 1.019 median, the same 0.813 - 1.294 range, 0.014 eps_sampl
+  from the default's surfels), the state that cost crane 10% on every score. Not benched.
+
+So the switches are not noise the search could simply ignore: the states the associated line
+search reaches by dodging them are the ones that track better. None adopted.
+
 The touching-spheres test's scene was the outlier: 3 frames of a gap of 0.7 move each sphere
 by 0.35 a frame (3.5 eps_sampl at 128 rays, 70% of its radius). At 12 halvings 20% of the
 assembled surfels lie more than 0.14 from the truth at frame 0 (40% more than 0.1 at the
@@ -141,7 +174,7 @@ def capture() -> None:
 
 def compare() -> None:
     import fourd.methods.surfels.optimizer as optimizer
-    from fourd.methods.surfels.match import associate
+    from fourd.methods.surfels.match import Matches, _squared_distance, associate
 
     calls = pickle.loads(PROBLEMS.read_bytes())
     evaluations = [0]
@@ -163,7 +196,26 @@ def compare() -> None:
         "halvings 3": {"halvings": 3},
         "halvings 2": {"halvings": 2},
     }
+    variants["hold 12"] = {"halvings": 12, "hold": True}
+    variants["hold 3"] = {"halvings": 3, "hold": True}
+    variants["common 12"] = {"halvings": 12, "line_search": "common"}
+    variants["common 3"] = {"halvings": 3, "line_search": "common"}
+    for fade in (0.1, 0.2, 0.4):
+        for halvings in (12, 3):
+            variants[f"fade {fade} {halvings}"] = {"halvings": halvings, "fade": fade}
     variants = {name: variants[name] for name in sys.argv[2:]} if sys.argv[2:] else variants
+    associated = optimizer.associate
+    held = {}
+
+    def holding(state, data, scale, match):
+        # tau held at the call's first association (at percentile 100 it only prices the
+        # points the doublet and normal tests reject)
+        matches = associated(state, data, scale, match)
+        if "tau" not in held:
+            held["tau"] = matches.cutoff
+            return matches
+        rho = np.sqrt(_squared_distance(state, data, matches.surfels, match.tangential))
+        return Matches(matches.surfels, matches.active & (rho <= held["tau"]), held["tau"])
     reference = None
     for name, change in variants.items():
         evaluations[0] = 0
@@ -172,8 +224,15 @@ def compare() -> None:
         states = []
         for args, kwargs in calls:
             args = list(args)
+            change = dict(change)
+            hold = change.pop("hold", False)
+            if "fade" in change:
+                args[4] = dataclasses.replace(args[4], fade=change.pop("fade"))
             args[5] = dataclasses.replace(args[5], **change)
+            optimizer.associate = holding if hold else associated
+            held.clear()
             result = optimizer.gauss_newton(*args, **kwargs)
+            optimizer.associate = associated
             steps += len(result.cg_iterations)
             states.append(result.state)
         elapsed = time.perf_counter() - started
@@ -200,5 +259,46 @@ def compare() -> None:
         )
 
 
+def switches() -> None:
+    import fourd.methods.surfels.optimizer as optimizer
+    from fourd.methods.surfels.match import associate
+
+    calls = pickle.loads(PROBLEMS.read_bytes())
+    events = []
+    energy = optimizer.total_energy
+
+    def associating(*args):
+        matches = associate(*args)
+        events.append(("association", matches))
+        return matches
+
+    def evaluating(*args, **kwargs):
+        result = energy(*args, **kwargs)
+        events.append(("energy", kwargs.get("derivatives", True), result.value, args[3]))
+        return result
+
+    optimizer.associate, optimizer.total_energy = associating, evaluating
+    for k in (int(a) for a in sys.argv[2:] or ("0", "17")):
+        events.clear()
+        args, kwargs = calls[k]
+        optimizer.gauss_newton(*args, **kwargs)
+        print(f"alignment {k}: relative change (nearest surfels changed, points switched)")
+        trials = []
+        for event in events:
+            if event[0] == "energy" and event[1]:
+                if trials:
+                    print("   ", " ".join(trials))
+                trials, current, matches = [], event[2], event[3]
+                print(f"  step from {current:.10g}")
+            elif event[0] == "energy":
+                again = event[3]
+                trials.append(
+                    f"{(event[2] - current) / current:+.2e}"
+                    f"({np.sum(again.surfels != matches.surfels)},"
+                    f"{np.sum(again.active != matches.active)})"
+                )
+        print("   ", " ".join(trials))
+
+
 if __name__ == "__main__":
-    {"capture": capture, "compare": compare}[sys.argv[1]]()
+    {"capture": capture, "compare": compare, "switches": switches}[sys.argv[1]]()
