@@ -103,7 +103,7 @@ changed, 133 points switched), +5.5e-2 (323, 80), +3.2e-3 (160, 34), +2.6e-3 (78
 nearest surfel changes and one point switches, +9e-4 of the energy each time (about 60 of
 65,284), until the scale is so small that nothing switches (-1.5e-6, accepted). So a single
 point switched by the doublet or normal test outweighs the late steps' whole decrease. Three
-more cures, each run on the 38 alignments (``compare``; the options existed in 5b1c0a0 only):
+more cures, each run on the 38 alignments (``compare``; the fade and common options exist in 802ea25 only):
 
 | variant | time | steps | evaluations/step | final energy / 12 halvings' (median, min - max) | surfels moved (eps_sampl, median / max) |
 |---|---|---|---|---|---|

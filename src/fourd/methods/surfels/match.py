@@ -130,10 +130,6 @@ class MatchOptions:
         Alignment: degrees between data and surfel normals beyond which a point is rejected.
     doublet : float
         Alignment: the doublet tolerance in ``eps_top``.
-    fade : float
-        Alignment: the normal and doublet tests' weights fall from 1 to 0 over this share of
-        their thresholds on either side (``max_angle (1 -+ fade)``, ``doublet (1 -+ fade)``), so a
-        step moves a point out gradually instead of switching it; 0: the paper's hard tests.
     """
 
     regime: str = "global"
@@ -141,15 +137,12 @@ class MatchOptions:
     percentile: float = 85.0
     max_angle: float = 45.0
     doublet: float = 1.0
-    fade: float = 0.0
 
     def __post_init__(self):
         if self.regime not in ("global", "alignment"):
             raise ValueError(f"regime must be global or alignment, got {self.regime!r}")
         if not 0 <= self.tangential <= 1 or not 0 < self.percentile <= 100:
             raise ValueError("need 0 <= tangential <= 1 and 0 < percentile <= 100")
-        if not 0 <= self.fade < 1:
-            raise ValueError(f"fade must lie in [0, 1), got {self.fade}")
 
 
 @dataclass(frozen=True)
@@ -162,15 +155,11 @@ class Matches:
         Points within the cutoff and passing the regime's tests.
     cutoff : float
         ``tau`` (input units).
-    share : float [D], optional
-        Each active point's weight in [0, 1] from the faded tests (:attr:`MatchOptions.fade`):
-        it counts ``share rho^2 + (1 - share) tau^2``; None: 1.
     """
 
     surfels: np.ndarray
     active: np.ndarray
     cutoff: float
-    share: np.ndarray | None = None
 
 
 def associate(
@@ -188,7 +177,7 @@ def associate(
     if data.frames.size and (data.frames.min() < 0 or data.frames.max() >= state.frames):
         raise ValueError(f"data frames must lie in 0..{state.frames - 1}")
     surfels = np.zeros(len(data.points), dtype=np.int64)
-    doublet = np.ones(len(data.points))
+    doublet = np.ones(len(data.points), dtype=bool)
     alignment = options.regime == "alignment"
     for t in range(state.frames):
         here = data.in_frame(t)
@@ -198,36 +187,23 @@ def associate(
         if alignment:
             _, nearest = data.tree(t).query(state.positions[t], workers=-1)
             back = data.points[here[nearest[surfels[here]]]]
-            doublet[here] = _passing(
-                np.linalg.norm(back - data.points[here], axis=1), options.doublet * scale,
-                options.fade,
+            doublet[here] = (
+                np.linalg.norm(back - data.points[here], axis=1) <= options.doublet * scale
             )
     rho = np.sqrt(_squared_distance(state, data, surfels, options.tangential))
-    if not alignment:
+    if alignment:
+        cutoff = float(np.percentile(rho, options.percentile)) if len(rho) else 0.0
+        active = (rho <= cutoff) & doublet
+        if data.normals is not None:
+            normals = state.normals[data.frames, surfels]
+            cosine = np.einsum("da,da->d", data.normals, normals) / np.maximum(
+                np.linalg.norm(data.normals, axis=1) * np.linalg.norm(normals, axis=1), 1e-300
+            )
+            active &= cosine >= np.cos(np.radians(options.max_angle))
+    else:
         cutoff = float(scale)
-        return Matches(surfels, rho <= cutoff, cutoff)
-    cutoff = float(np.percentile(rho, options.percentile)) if len(rho) else 0.0
-    share = doublet
-    if data.normals is not None:
-        normals = state.normals[data.frames, surfels]
-        cosine = np.einsum("da,da->d", data.normals, normals) / np.maximum(
-            np.linalg.norm(data.normals, axis=1) * np.linalg.norm(normals, axis=1), 1e-300
-        )
-        if options.fade == 0:
-            share = share * (cosine >= np.cos(np.radians(options.max_angle)))
-        else:
-            angle = np.degrees(np.arccos(np.clip(cosine, -1.0, 1.0)))
-            share = share * _passing(angle, options.max_angle, options.fade)
-    active = (rho <= cutoff) & (share > 0)
-    return Matches(surfels, active, cutoff, share if options.fade > 0 else None)
-
-
-def _passing(value: np.ndarray, threshold: float, fade: float) -> np.ndarray:
-    """1 where ``value <= threshold (1 - fade)``, 0 beyond ``threshold (1 + fade)``, linear
-    between (fade 0: a hard test, ``value <= threshold``)."""
-    if fade == 0:
-        return (value <= threshold).astype(np.float64)
-    return np.clip((threshold * (1 + fade) - value) / (2 * fade * threshold), 0.0, 1.0)
+        active = rho <= cutoff
+    return Matches(surfels, active, cutoff)
 
 
 def _squared_distance(state, data, surfels, tangential):
@@ -254,10 +230,6 @@ def match_term(
     beta = options.tangential
     active = np.flatnonzero(matches.active)
     omega = weight * data.weights[active]
-    faded = 0.0
-    if matches.share is not None:
-        faded = float(np.sum(omega * (1.0 - matches.share[active])))
-        omega = omega * matches.share[active]
     frames, surfels = data.frames[active], matches.surfels[active]
     offset = data.points[active] - state.positions[frames, surfels]
     normals = state.normals[frames, surfels]
@@ -268,7 +240,7 @@ def match_term(
         axis=1,
     )
     inactive = ~matches.active
-    constant = (weight * float(np.sum(data.weights[inactive])) + faded) * matches.cutoff**2
+    constant = weight * float(np.sum(data.weights[inactive])) * matches.cutoff**2
     if not derivatives:
         return term(residuals, None, constant)
     lay = layout(state)

@@ -19,7 +19,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from fourd.methods.surfels.energy import Weights, total_energy
-from fourd.methods.surfels.match import Data, Matches, MatchOptions, associate, match_term
+from fourd.methods.surfels.match import Data, MatchOptions, associate
 from fourd.methods.surfels.state import Layout, SurfelState, layout, retract
 from fourd.methods.surfels.term import PatternCache
 from fourd.methods.surfels.topology import Topology
@@ -46,11 +46,6 @@ class GaussNewtonOptions:
     halvings : int
         Most step halvings of the line search; a step that lowers the energy at none of the
         scales down to ``2^-halvings`` ends the optimisation.
-    line_search : str
-        ``"associated"``: a trial's energy with the data associated again, against the
-        current energy; ``"common"``: both counting only the points active in both
-        associations (the others priced alike), so points the tests switch between the two do
-        not decide the step.
     """
 
     iterations: int = 30
@@ -60,11 +55,8 @@ class GaussNewtonOptions:
     cg_tolerance: float = 1e-6
     cg_iterations: int = 500
     halvings: int = 12
-    line_search: str = "associated"
 
     def __post_init__(self):
-        if self.line_search not in ("associated", "common"):
-            raise ValueError(f"line_search must be associated or common, got {self.line_search!r}")
         if self.preconditioner not in ("block", "jacobi"):
             raise ValueError(f"preconditioner must be block or jacobi, got {self.preconditioner!r}")
         if self.iterations < 0 or self.damping < 0 or self.halvings < 0:
@@ -151,23 +143,13 @@ def gauss_newton(
         cg_counts.append(count)
         accepted = None
         scale = 1.0
-        if options.line_search == "common":
-            matched = match_term(state, data, matches, weights.match, match, derivatives=False)
         for _ in range(options.halvings + 1):
             trial = retract(state, scale * step)
             again = associate(trial, data, topology.radius, match)
-            reference, counted = current.value, again
-            if options.line_search == "common":
-                both = again.active & matches.active
-                counted = Matches(again.surfels, both, matches.cutoff, again.share)
-                reference += match_term(
-                    state, data, Matches(matches.surfels, both, matches.cutoff, matches.share),
-                    weights.match, match, derivatives=False,
-                ).value - matched.value
             value = total_energy(
-                trial, topology, data, counted, weights, match, derivatives=False, urshape=urshape
+                trial, topology, data, again, weights, match, derivatives=False, urshape=urshape
             ).value
-            if value < reference:
+            if value < current.value:
                 accepted = trial
                 break
             scale *= 0.5
@@ -176,14 +158,8 @@ def gauss_newton(
             break
         # the accepted trial's association and energy are the next step's start
         state, matches = accepted, again
-        decrease = reference - value
-        if counted is not again:  # the energy itself, every point priced by its own test
-            value += (
-                match_term(state, data, again, weights.match, match, derivatives=False).value
-                - match_term(state, data, counted, weights.match, match, derivatives=False).value
-            )
         energies.append(value)
-        if decrease <= options.tolerance * max(abs(reference), 1e-300):
+        if current.value - value <= options.tolerance * max(abs(current.value), 1e-300):
             converged = True
             break
         if iteration + 1 < options.iterations:
