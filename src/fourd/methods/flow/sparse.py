@@ -246,9 +246,11 @@ def strong_pattern(A: sp.spmatrix, theta: float) -> tuple[np.ndarray, np.ndarray
     (``remove_diagonal`` through COO, the transpose with values). With
     :func:`strong_values`, what its direct interpolation takes (after ``C.multiply(A)``,
     another copy)."""
+    # the three calls of _strong_rows take one signature (each other is another compile)
     indptr = np.zeros(A.shape[0] + 1, np.int64)
     no_data = np.empty(0, A.dtype)
-    _strong_rows(*_unsigned_pattern(A), A.data, theta, indptr, indptr[:0], no_data, 0)
+    no_indices = np.empty(0, A.indices.dtype)
+    _strong_rows(*_unsigned_pattern(A), A.data, theta, indptr, no_indices, no_data, 0)
     np.cumsum(indptr, out=indptr)
     indices = np.empty(indptr[-1], A.indices.dtype)
     _strong_rows(*_unsigned_pattern(A), A.data, theta, indptr, indices, no_data, 1)
@@ -259,6 +261,8 @@ def strong_values(A: sp.spmatrix, theta: float, indptr: np.ndarray, indices: np.
     """``A``'s values [nnz] at the strong pattern ``(indptr, indices)`` of
     :func:`strong_pattern` (the same ``A`` and ``theta``)."""
     data = np.empty(len(indices), A.dtype)
+    indptr = np.asarray(indptr, dtype=np.int64)
+    indices = np.asarray(indices, dtype=A.indices.dtype)
     _strong_rows(*_unsigned_pattern(A), A.data, theta, indptr, indices, data, 2)
     return data
 
