@@ -38,10 +38,19 @@ Answer (2-core Intel Xeon at 2.3 GHz, numba 0.68.1, nothing else running, 2026-1
   callee into the loop's module and LLVM optimises it again there. Reverted; results were
   bit-identical.
 
+- **Kept (701bac2): ``_strong_rows``' three calls take one signature** (``strong_pattern``
+  passed an int64 array where ``strong_values`` passes the matrix's index type, and the stored
+  pattern's index pointer in that type): with a fresh cache ``test_amg.py`` and
+  ``test_sparse.py`` compile it twice (the suite's two matrix types) where the suite compiled it
+  six times, about 3.5 s each; a flow run pays one compile instead of three. The other kernels
+  with several specializations (``_csr_multiply_add`` 4, ``_csr_transpose_multiply`` 3,
+  ``_normal_residual`` 3) take float32 and float64 operands on purpose; ``projector_sums._sums``
+  (3) differs only in read-only inputs.
+
 So the compile is spread over many kernels and no single restructuring removes a large share;
 it is paid once per machine (``cache=True``), but CI and every new user pay it in full. What
-could: fewer specializations (one index type for ``_strong_rows``' three calls), or a compile
-step at install time; not done.
+could: a compile step at install time or at the first run of the CLI, with progress shown;
+not done.
 """
 
 from __future__ import annotations
