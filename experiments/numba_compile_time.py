@@ -26,8 +26,9 @@ Answer (2-core Intel Xeon at 2.3 GHz, numba 0.68.1, nothing else running, 2026-1
   kernels over 1 s. Whichever test first runs a method pays its compile: the exact-anchors test
   (``tests/appearance/test_anchor_guide.py``) takes 128-164 s in CI, of which 137 s compiling,
   and 17 s with the cache warm.
-- **A first ``kinematic`` run** (the scene above): 106-128 s, about 90 s of it compiling
-  (three runs; compile times move by 10-15% between runs). The compile includes numba's shape
+- **A first ``kinematic`` run** (the scene above, ``kinematic``): 96.9 s, of which 91.4 s
+  compiling (outermost compiles); the same run with the cache warm, 5.6 s. Earlier runs with
+  other timers took 106-128 s: compile times move by 10-15% between runs. The compile includes numba's shape
   errors for array slice assignments (``raise_with_shape_context``, its string formatting: 9 s
   for 5 signatures) and the parallel loops' own passes.
 - **Tried: the body of ``_fit_cells``' parallel loop moved into a plain function** (the loop
