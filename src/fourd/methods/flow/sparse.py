@@ -246,7 +246,7 @@ def strong_pattern(A: sp.spmatrix, theta: float) -> tuple[np.ndarray, np.ndarray
     (``remove_diagonal`` through COO, the transpose with values). With
     :func:`strong_values`, what its direct interpolation takes (after ``C.multiply(A)``,
     another copy)."""
-    # the three calls of _strong_rows take one signature (each other is another compile)
+    # the three calls of _strong_rows take one signature (each other signature is a compile)
     indptr = np.zeros(A.shape[0] + 1, np.int64)
     no_data = np.empty(0, A.dtype)
     no_indices = np.empty(0, A.indices.dtype)
