@@ -14,7 +14,7 @@ prints each kernel's compile time (callees included, so nested kernels count twi
 second loads this file as a pytest plugin and writes the outermost compile time per kernel and
 per test to ``$COMPILE_OUT`` (``/tmp/numba-compile.json`` by default).
 
-Answer (2-core Intel Xeon at 2.3 GHz, numba 0.68.1, nothing else running, 2026-12-07 at
+Answer (2-core AMD EPYC at 2.45 GHz, numba 0.68.1, nothing else running, 2026-12-07 at
 79bbd24):
 
 - **The suite** spent 236 s compiling in its own process (outermost compiles; subprocesses
