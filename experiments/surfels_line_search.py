@@ -93,7 +93,7 @@ association loses crane's scores, and the search among the switches, though it m
 noise, finds states of lower energy that track better. Not adopted; the alignments keep the
 associated line search and 12 halvings. What would help: an energy without the switches
 (a smooth cutoff instead of the percentile, the doublet and normal tests as weights that
-fade), so that a step's decrease is not drowned; not tried.
+fade), so that a step's decrease is not drowned; not tried then (the next session's below).
 
 What switches, measured (2026-12-07, twentieth session; ``switches`` prints every trial's
 energy against the step's, with the points whose nearest surfel or active flag differs from
