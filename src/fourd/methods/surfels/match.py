@@ -183,13 +183,14 @@ def associate(
         here = data.in_frame(t)
         if not len(here):
             continue
-        _, surfels[here] = cKDTree(state.positions[t]).query(data.points[here], workers=-1)
+        points = data.points[here]
+        _, found = cKDTree(state.positions[t]).query(points, workers=-1)
+        surfels[here] = found
         if alignment:
+            # the tree holds this frame's points in the order of ``here``
             _, nearest = data.tree(t).query(state.positions[t], workers=-1)
-            back = data.points[here[nearest[surfels[here]]]]
-            doublet[here] = (
-                np.linalg.norm(back - data.points[here], axis=1) <= options.doublet * scale
-            )
+            back = points[nearest[found]]
+            doublet[here] = np.linalg.norm(back - points, axis=1) <= options.doublet * scale
     rho = np.sqrt(_squared_distance(state, data, surfels, options.tangential))
     if alignment:
         cutoff = float(np.percentile(rho, options.percentile)) if len(rho) else 0.0

@@ -128,8 +128,9 @@ def fit_rotations(
     positions = np.asarray(positions, dtype=np.float64)
     i, j = topology.directed.T
     origin = np.zeros(len(positions) - 1, dtype=np.int64) if urshape else np.arange(len(positions) - 1)
-    before = positions[origin][:, i] - positions[origin][:, j]
-    after = positions[1:, i] - positions[1:, j]
+    start, end = positions[origin], positions[1:]
+    before = at_surfels(start, i) - at_surfels(start, j)
+    after = at_surfels(end, i) - at_surfels(end, j)
     covariances = np.zeros((len(positions) - 1, topology.count, 3, 3))
     np.add.at(covariances, (slice(None), i), before[..., :, None] * after[..., None, :])
     rotations = best_rotations(covariances.reshape(-1, 3, 3)).reshape(covariances.shape)
