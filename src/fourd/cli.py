@@ -15,6 +15,7 @@ import tomllib
 from pathlib import Path
 
 from fourd.cache import counting_resumes
+from fourd.compile_notice import listen_for_compiles, stop_listening
 from fourd.errors import InputError
 from fourd.jsonable import jsonable
 
@@ -734,8 +735,12 @@ def main(argv: list[str] | None = None) -> int:
     # SIGTERM stops the run as Ctrl-C does (handlers can only be set in the main thread)
     in_main_thread = threading.current_thread() is threading.main_thread()
     previous = signal.signal(signal.SIGTERM, _terminate) if in_main_thread else None
+    compiles = listen_for_compiles(log)
     try:
-        return args.func(args)
+        status = args.func(args)
+        if summary := compiles.summary():
+            log.info(summary)
+        return status
     except (KeyboardInterrupt, Terminated) as error:
         return _interrupted(args, error)
     except InputError as error:
@@ -758,6 +763,7 @@ def main(argv: list[str] | None = None) -> int:
         os.dup2(devnull, sys.stdout.fileno())
         return 0
     finally:
+        stop_listening(compiles)
         if in_main_thread:
             signal.signal(signal.SIGTERM, signal.SIG_DFL if previous is None else previous)
 
