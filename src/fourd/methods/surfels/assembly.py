@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import dataclasses
 import logging
+from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
 from typing import NamedTuple
 
 import numpy as np
@@ -372,6 +373,27 @@ def _first_frame(model: Model) -> Model:
     )
 
 
+def merge_plan(count: int) -> list[tuple[int, int]]:
+    """The merges that join ``count`` consecutive models pairwise, level by level (sec. 3.2
+    "Iteration"; the last model of a level with an odd count waits for the next): merge ``k``
+    joins nodes ``a`` and ``b``, nodes ``0 .. count - 1`` being the models and ``count + k``
+    merge ``k``'s result; the last merge's is the whole range.
+
+    >>> merge_plan(5)
+    [(0, 1), (2, 3), (5, 6), (7, 4)]
+    """
+    plan, level = [], list(range(count))
+    while len(level) > 1:
+        merged = []
+        for k in range(0, len(level) - 1, 2):
+            plan.append((level[k], level[k + 1]))
+            merged.append(count + len(plan) - 1)
+        if len(level) % 2:
+            merged.append(level[-1])
+        level = merged
+    return plan
+
+
 def assemble(
     models: list[Model],
     frames: list,
@@ -380,34 +402,59 @@ def assemble(
     progress=None,
     cache: StageCache = NO_CACHE,
     keys: list[str] | None = None,
+    workers: int = 1,
 ) -> tuple[Model, str]:
     """Merge adjacent ``models`` (consecutive ranges, e.g. one seed model per frame) pairwise,
-    level by level, until one spans them all (sec. 3.2 "Iteration"); ``progress`` is called
-    with the number of merges done after each. With a ``cache`` and one key per model, each
-    merged model is kept there under the hash of its two parts' keys and the schedule, so a
-    rerun resumes after the last finished merge. Returns the model and its key."""
-    models = list(models)
+    level by level, until one spans them all (sec. 3.2 "Iteration", :func:`merge_plan`);
+    ``progress`` is called with the number of merges done after each. With a ``cache`` and
+    one key per model, each merged model is kept there under the hash of its two parts' keys
+    and the schedule, so a rerun resumes after the last finished merge. Returns the model and
+    its key.
+
+    ``workers`` merges run side by side in threads, each as soon as its two parts are there
+    (beyond the paper, which merged one after another). A merge depends on its two parts
+    alone, so the result is the same for any ``workers``; the threads overlap what one merge
+    leaves single-threaded (scipy's sparse products, the Python between kernels). An
+    interrupted run stops after the merges already running."""
     keys = list(keys) if keys is not None else [""] * len(models)
-    while len(models) > 1:
-        merged, merged_keys = [], []
-        for k in range(0, len(models) - 1, 2):
-            key = stage_key(keys[k], keys[k + 1], schedule) if cache.enabled else ""
-            arrays, resumed = cached(
-                cache,
-                "surfels-merge",
-                key,
-                lambda a=models[k], b=models[k + 1]: pack_model(merge(a, b, frames, schedule)),
-            )
-            if resumed:
-                report_resumed(
-                    log, f"the merge of frames {models[k].start}-{models[k + 1].stop - 1}"
-                )
-            merged.append(unpack_model(arrays))
-            merged_keys.append(key)
-            if progress is not None:
-                progress(1)
-        if len(models) % 2:
-            merged.append(models[-1])
-            merged_keys.append(keys[-1])
-        models, keys = merged, merged_keys
-    return models[0], keys[0]
+    plan = merge_plan(len(models))
+    for a, b in plan:
+        keys.append(stage_key(keys[a], keys[b], schedule) if cache.enabled else "")
+    nodes: dict[int, Model] = dict(enumerate(models))
+
+    def run(k: int, left: Model, right: Model) -> Model:
+        arrays, resumed = cached(
+            cache,
+            "surfels-merge",
+            keys[len(models) + k],
+            lambda: pack_model(merge(left, right, frames, schedule)),
+        )
+        if resumed:
+            report_resumed(log, f"the merge of frames {left.start}-{right.stop - 1}")
+        return unpack_model(arrays)
+
+    def finished(k: int, model: Model) -> None:
+        a, b = plan[k]
+        del nodes[a], nodes[b]
+        nodes[len(models) + k] = model
+        if progress is not None:
+            progress(1)
+
+    if workers <= 1:
+        for k in range(len(plan)):
+            finished(k, run(k, *(nodes[n] for n in plan[k])))
+        return nodes[len(models) + len(plan) - 1 if plan else 0], keys[-1]
+    waiting, running = list(range(len(plan))), {}
+    with ThreadPoolExecutor(max_workers=workers, thread_name_prefix="surfels-merge") as pool:
+        try:
+            while waiting or running:
+                for k in [k for k in waiting if set(plan[k]) <= nodes.keys()]:
+                    running[pool.submit(run, k, *(nodes[n] for n in plan[k]))] = k
+                    waiting.remove(k)
+                done, _ = wait(running, return_when=FIRST_COMPLETED)
+                for future in sorted(done, key=running.get):
+                    finished(running.pop(future), future.result())
+        except BaseException:
+            pool.shutdown(wait=True, cancel_futures=True)
+            raise
+    return nodes[len(models) + len(plan) - 1 if plan else 0], keys[-1]

@@ -3,6 +3,7 @@ give (:func:`energy_weights`)."""
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 
 from fourd.animation import AnimatedMesh
@@ -204,6 +205,10 @@ class Options:
         Folder where each preprocessed frame and each merged model are kept, keyed by the
         input data and the options that act on them; a rerun resumes after the last finished
         merge (``fourd reconstruct --cache``). None: nothing is kept.
+    workers : int
+        Merges of the assembly run side by side in this many threads, each as soon as its two
+        parts are there (:func:`.assembly.assemble`): the same result for any count. 0: one
+        per core, at most 2 (more were not measured); 1: one after another.
     window : int
         0: one model over the whole sequence (the paper). N: the capture assembled N frames
         at a time, each window merged onto the last frames of the one before with those held
@@ -261,6 +266,7 @@ class Options:
     reference: int = 0
     normals_k: int = 16
     cache_dir: str | None = None
+    workers: int = 0
     window: int = 0
 
     def __post_init__(self):
@@ -318,6 +324,7 @@ class Options:
             "final_iterations",
             "cg_iterations",
             "min_piece",
+            "workers",
             "window",
         ):
             if getattr(self, name) < 0:
@@ -330,6 +337,12 @@ class Options:
             )
         if self.normals_k < 3:
             raise ValueError(f"normals_k must be at least 3, got {self.normals_k}")
+
+
+def merge_workers(options: Options) -> int:
+    """The threads that run the assembly's merges (``options.workers``; 0: one per core, at
+    most 2)."""
+    return options.workers or max(1, min(2, os.cpu_count() or 1))
 
 
 def energy_weights(

@@ -28,7 +28,7 @@ from fourd.methods.surfels.match import MatchOptions
 from fourd.methods.surfels.meshing import MeshingOptions, surfel_mesh
 from fourd.methods.surfels.model import Model, unsupported_pieces, without_surfels
 from fourd.methods.surfels.optimizer import GaussNewtonOptions
-from fourd.methods.surfels.options import MIN_FRAMES, Options, energy_weights
+from fourd.methods.surfels.options import MIN_FRAMES, Options, energy_weights, merge_workers
 from fourd.methods.surfels.part_search import PartSearch
 from fourd.methods.surfels.seeds import FramePoints, prepare_frame, seed_model
 from fourd.progress import progress
@@ -92,7 +92,8 @@ def reconstruct(seq: PointCloudSequence, options: Options | None = None) -> Anim
     seed_keys = merge_keys(keys, options, cache, *salt)
     with progress(total=len(seeds) - 1, desc="surfels: merging", unit="merge") as bar:
         model, _ = assemble(
-            seeds, frames, schedule, progress=bar.update, cache=cache, keys=seed_keys
+            seeds, frames, schedule, progress=bar.update, cache=cache, keys=seed_keys,
+            workers=merge_workers(options),
         )
     merged = _time.perf_counter()
     if options.final_iterations:
@@ -348,6 +349,7 @@ NOT_IN_MERGES = (
     "final_iterations",
     "color_rounds",
     "window",
+    "workers",
 )
 
 

@@ -69,7 +69,7 @@ from fourd.methods.surfels.model import (
     unpack_model,
     unsupported_pieces,
 )
-from fourd.methods.surfels.options import MIN_FRAMES, Options, energy_weights
+from fourd.methods.surfels.options import MIN_FRAMES, Options, energy_weights, merge_workers
 from fourd.methods.surfels.pipeline import (
     MESH_ONLY,
     assembly_schedule,
@@ -162,7 +162,7 @@ def _run(source: FrameSource, output: Path, options: Options) -> StreamSummary:
     noise = options.noise or spacing
     schedule = assembly_schedule(options, noise, sampling)
     final = energy_weights(options, noise, sampling, final=True)
-    values = option_values(options, without=("window", *MESH_ONLY))
+    values = option_values(options, without=("window", "workers", *MESH_ONLY))
     anchored = options.video_anchors and source.video is not None
     salt = (source.video.fingerprint(),) if anchored else ()
     guide = guide_settings(options, sampling)
@@ -300,7 +300,9 @@ def _window_model(
         stage_key(k, "streamed", index) if k else ""
         for index, k in enumerate(merge_keys(keys, options, cache), start=past)
     ]
-    model, _ = assemble(seeds, local, schedule, cache=cache, keys=seed_keys)
+    model, _ = assemble(
+        seeds, local, schedule, cache=cache, keys=seed_keys, workers=merge_workers(options)
+    )
     if tail is not None:
         onto = schedule._replace(guide=guide) if schedule.guide is not None else schedule
         model = merge(tail, model, local, onto, held=held, kept=kept)
