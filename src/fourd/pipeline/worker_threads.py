@@ -17,6 +17,7 @@ from __future__ import annotations
 import contextlib
 import os
 
+import numba
 from threadpoolctl import threadpool_limits
 
 #: The environment variables the thread pools of numpy's BLAS, OpenMP and numba read at start.
@@ -56,3 +57,13 @@ def one_blas_thread():
     what is computed there is the same in any process, whatever its thread pools."""
     with threadpool_limits(limits=1, user_api="blas"):
         yield
+
+
+def concurrent_kernels_safe() -> bool:
+    """Whether numba's threading layer (chosen at the first parallel kernel) lets two threads
+    of this process run parallel kernels at once: ``tbb`` and ``omp`` do, ``workqueue`` aborts
+    the process. False before any parallel kernel has run."""
+    try:
+        return numba.threading_layer() in ("tbb", "omp")
+    except ValueError:  # no parallel kernel has run yet
+        return False

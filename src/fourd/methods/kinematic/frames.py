@@ -7,7 +7,6 @@ from __future__ import annotations
 import logging
 from concurrent.futures import ThreadPoolExecutor
 
-import numba
 import numpy as np
 
 from fourd.cache import NO_CACHE, StageCache, report_resumed, stage_key
@@ -23,6 +22,7 @@ from fourd.methods.kinematic.options import (
     PREPARE_THREADS,
     Options,
 )
+from fourd.pipeline.worker_threads import concurrent_kernels_safe
 from fourd.progress import progress
 from fourd.sequence import PointCloudSequence
 
@@ -64,7 +64,7 @@ def prepare_frames(seq: PointCloudSequence, options: Options, cache: StageCache 
         # the first alone: numba picks its threading layer at the first parallel kernel
         keep(todo[0], _prepare_frame(frames[todo[0]], options))
     rest = todo[1:]
-    if len(rest) <= 1 or not _concurrent_kernels_safe():
+    if len(rest) <= 1 or not concurrent_kernels_safe():
         for i in rest:
             keep(i, _prepare_frame(frames[i], options))
     else:
@@ -136,15 +136,6 @@ def frame_key(frame, options: Options) -> str:
         STAGE, frame.points, frame.normals, frame.sensors, options.outlier_factor,
         options.normals_k, OUTLIER_NEIGHBOURS,
     )
-
-
-def _concurrent_kernels_safe() -> bool:
-    """Whether numba's threading layer (chosen at the first parallel kernel) lets two threads
-    run parallel kernels at once: ``tbb`` and ``omp`` do, ``workqueue`` aborts the process."""
-    try:
-        return numba.threading_layer() in ("tbb", "omp")
-    except ValueError:  # no parallel kernel has run yet
-        return False
 
 
 def _prepare_frame(frame, options: Options):

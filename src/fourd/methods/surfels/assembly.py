@@ -45,6 +45,7 @@ from fourd.methods.surfels.resample import redundant_surfels
 from fourd.methods.surfels.state import SurfelState, layout
 from fourd.methods.surfels.topology import build_topology
 from fourd.methods.surfels.urshape import fit_urshape
+from fourd.pipeline.worker_threads import concurrent_kernels_safe
 
 log = logging.getLogger("fourd.methods.surfels.assembly")
 
@@ -414,8 +415,9 @@ def assemble(
     ``workers`` merges run side by side in threads, each as soon as its two parts are there
     (beyond the paper, which merged one after another). A merge depends on its two parts
     alone, so the result is the same for any ``workers``; the threads overlap what one merge
-    leaves single-threaded (scipy's sparse products, the Python between kernels). An
-    interrupted run stops after the merges already running."""
+    leaves single-threaded (scipy's sparse products, the Python between kernels). One after
+    another where numba's threading layer cannot run two parallel kernels at once
+    (``workqueue``). An interrupted run stops after the merges already running."""
     keys = list(keys) if keys is not None else [""] * len(models)
     plan = merge_plan(len(models))
     for a, b in plan:
@@ -440,7 +442,7 @@ def assemble(
         if progress is not None:
             progress(1)
 
-    if workers <= 1:
+    if workers <= 1 or not concurrent_kernels_safe():
         for k in range(len(plan)):
             finished(k, run(k, *(nodes[n] for n in plan[k])))
         return nodes[len(models) + len(plan) - 1 if plan else 0], keys[-1]
