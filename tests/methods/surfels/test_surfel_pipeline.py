@@ -48,6 +48,37 @@ def test_merges_of_another_revision_are_not_resumed(tmp_path, monkeypatch):
     assert pipeline.merge_keys(["frame"], Options(), cache) != before
 
 
+def test_frames_side_by_side_are_prepared_and_seeded_as_one_after_another():
+    """The per-frame stages on two threads give each frame's result to the last bit, in the
+    frames' order, and a frame without a surface still names itself."""
+    from fourd.cache import NO_CACHE
+    from fourd.methods.surfels import pipeline
+    from fourd.pipeline.worker_threads import concurrent_kernels_safe
+
+    scans = synth.scan(synth.scene("rigid-turn", frames=4, angle=12.0), resolution=48)
+    spacing = point_spacing(scans.frames[0].points)
+    runs = []
+    for workers in (1, 2):
+        options = Options(workers=workers, **QUICK)
+        frames, keys = pipeline.prepare_frames(scans.frames, spacing, options, NO_CACHE)
+        schedule = pipeline.assembly_schedule(options, spacing, options.sampling * spacing)
+        seeds = pipeline.seed_models(frames, range(4), options.sampling * spacing, schedule, options)
+        runs.append((frames, seeds))
+    assert concurrent_kernels_safe()  # so the second run's threads ran
+    (frames_one, seeds_one), (frames_two, seeds_two) = runs
+    for frame_a, seed_a, frame_b, seed_b in zip(frames_one, seeds_one, frames_two, seeds_two, strict=True):
+        np.testing.assert_array_equal(frame_a.points, frame_b.points)
+        np.testing.assert_array_equal(frame_a.normals, frame_b.normals)
+        assert seed_a.start == seed_b.start
+        np.testing.assert_array_equal(seed_a.state.positions, seed_b.state.positions)
+        np.testing.assert_array_equal(seed_a.topology.edges, seed_b.topology.edges)
+    assert [seed.start for seed in seeds_two] == [0, 1, 2, 3]
+    empty = Frame(np.random.default_rng(0).uniform(-1, 1, (40, 3)))  # no surface, only noise
+    with pytest.raises(InputError, match="frame 2 has no smooth surface"):
+        pipeline.prepare_frames([*scans.frames[:2], empty, scans.frames[3]], spacing,
+                                Options(workers=2), NO_CACHE)
+
+
 def test_one_frame_or_a_frame_outside_is_refused():
     rng = np.random.default_rng(0)
     frame = Frame(rng.normal(size=(500, 3)))

@@ -206,9 +206,10 @@ class Options:
         input data and the options that act on them; a rerun resumes after the last finished
         merge (``fourd reconstruct --cache``). None: nothing is kept.
     workers : int
-        Merges of the assembly run side by side in this many threads, each as soon as its two
-        parts are there (:func:`.assembly.assemble`): the same result for any count. 0: one
-        per core, at most 2 (more were not measured); 1: one after another.
+        Threads that run the assembly's merges side by side, each as soon as its two parts are
+        there (:func:`.assembly.assemble`), and the frames' preprocessing and seeds: the same
+        result for any count, at the cost of the working sets held at once. 0: one per core,
+        at most 2 (more were not measured); 1: one after another.
     window : int
         0: one model over the whole sequence (the paper). N: the capture assembled N frames
         at a time, each window merged onto the last frames of the one before with those held
@@ -339,9 +340,9 @@ class Options:
             raise ValueError(f"normals_k must be at least 3, got {self.normals_k}")
 
 
-def merge_workers(options: Options) -> int:
-    """The threads that run the assembly's merges (``options.workers``; 0: one per core, at
-    most 2)."""
+def worker_threads(options: Options) -> int:
+    """The threads that run the merges and the per-frame stages side by side
+    (``options.workers``; 0: one per core, at most 2)."""
     return options.workers or max(1, min(2, os.cpu_count() or 1))
 
 

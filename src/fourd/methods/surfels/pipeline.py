@@ -10,6 +10,7 @@ from __future__ import annotations
 import dataclasses
 import logging
 import time as _time
+from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
@@ -28,9 +29,10 @@ from fourd.methods.surfels.match import MatchOptions
 from fourd.methods.surfels.meshing import MeshingOptions, surfel_mesh
 from fourd.methods.surfels.model import Model, unsupported_pieces, without_surfels
 from fourd.methods.surfels.optimizer import GaussNewtonOptions
-from fourd.methods.surfels.options import MIN_FRAMES, Options, energy_weights, merge_workers
+from fourd.methods.surfels.options import MIN_FRAMES, Options, energy_weights, worker_threads
 from fourd.methods.surfels.part_search import PartSearch
 from fourd.methods.surfels.seeds import FramePoints, prepare_frame, seed_model
+from fourd.pipeline.worker_threads import concurrent_kernels_safe
 from fourd.progress import progress
 from fourd.sequence import PointCloudSequence
 
@@ -93,7 +95,7 @@ def reconstruct(seq: PointCloudSequence, options: Options | None = None) -> Anim
     with progress(total=len(seeds) - 1, desc="surfels: merging", unit="merge") as bar:
         model, _ = assemble(
             seeds, frames, schedule, progress=bar.update, cache=cache, keys=seed_keys,
-            workers=merge_workers(options),
+            workers=worker_threads(options),
         )
     merged = _time.perf_counter()
     if options.final_iterations:
@@ -208,9 +210,11 @@ def prepare_frames(
     """Each of ``frames`` (:class:`~fourd.sequence.Frame`, the first one frame ``first`` of
     the sequence) preprocessed (:func:`.seeds.prepare_frame`: outliers, tensor voting,
     normals) at point spacing ``spacing``, each kept in ``cache``; with their cache keys.
-    Raises :class:`InputError` for a frame without a smooth surface region."""
-    prepared, keys = [], []
-    for index, f in enumerate(progress(frames, desc="surfels: preprocessing"), start=first):
+    Frames run side by side on ``options.workers`` threads (:func:`frame_by_frame`). Raises
+    :class:`InputError` for a frame without a smooth surface region."""
+
+    def prepare(item) -> tuple[FramePoints, str]:
+        index, f = item
         key = (
             stage_key(
                 f.points, f.normals, f.sensors, spacing, options.tensor_ratio, options.normals_k
@@ -219,15 +223,43 @@ def prepare_frames(
             else ""
         )
         arrays, resumed = cached(
-            cache, "surfels-frame", key, lambda f=f: _prepared(f, spacing, options)
+            cache, "surfels-frame", key, lambda: _prepared(f, spacing, options)
         )
         if resumed:
             report_resumed(log, f"frame {index}'s preprocessing")
         if len(arrays["points"]) < 10:
             raise InputError(f"frame {index} has no smooth surface region to start from")
-        prepared.append(FramePoints(arrays["points"], arrays["normals"]))
-        keys.append(key)
-    return prepared, keys
+        return FramePoints(arrays["points"], arrays["normals"]), key
+
+    done = frame_by_frame(
+        prepare, list(enumerate(frames, start=first)), worker_threads(options),
+        "surfels: preprocessing",
+    )
+    return [frame for frame, _ in done], [key for _, key in done]
+
+
+def frame_by_frame(function, items: list, workers: int, desc: str) -> list:
+    """``[function(item) for item in items]`` with a progress bar (``desc``), on ``workers``
+    threads side by side: each item's result depends on that item alone, so it is the same
+    either way. The first item runs alone (numba chooses its threading layer at the first
+    parallel kernel), the rest one after another where that layer cannot run two threads'
+    parallel kernels at once (``workqueue``)."""
+    results = []
+    with progress(total=len(items), desc=desc) as bar:
+        for item in items[:1]:
+            results.append(function(item))
+            bar.update(1)
+        rest = items[1:]
+        if workers > 1 and len(rest) > 1 and concurrent_kernels_safe():
+            with ThreadPoolExecutor(max_workers=workers) as pool:
+                for result in pool.map(function, rest):
+                    results.append(result)
+                    bar.update(1)
+        else:
+            for item in rest:
+                results.append(function(item))
+                bar.update(1)
+    return results
 
 
 def _prepared(frame, spacing: float, options: Options) -> dict:
@@ -287,9 +319,12 @@ def seed_models(
     frames: list[FramePoints], indices, sampling: float, schedule: Schedule, options: Options
 ) -> list[Model]:
     """One seed model per frame (:func:`.seeds.seed_model`), frame ``indices[k]`` of the
-    assembly's frame list for ``frames[k]``."""
-    return [
-        seed_model(
+    assembly's frame list for ``frames[k]``; side by side on ``options.workers`` threads
+    (:func:`frame_by_frame`)."""
+
+    def seed(item) -> Model:
+        frame, index = item
+        return seed_model(
             frame,
             index,
             sampling=sampling,
@@ -298,10 +333,11 @@ def seed_models(
             match=MatchOptions(tangential=options.tangential),
             geodesic=options.geodesic,
         )
-        for frame, index in zip(
-            progress(frames, desc="surfels: seed regions"), indices, strict=True
-        )
-    ]
+
+    return frame_by_frame(
+        seed, list(zip(frames, indices, strict=True)), worker_threads(options),
+        "surfels: seed regions",
+    )
 
 
 def closed_mesh(mesh: AnimatedMesh, options: Options) -> AnimatedMesh:

@@ -63,6 +63,8 @@ def prepare_frame(
     of the frame (sec. 3.2)."""
     points = np.asarray(points, dtype=np.float64)
     inliers = remove_outliers(points, spacing=spacing).inliers
+    if inliers.sum() < 3:  # nothing left to vote on; the pipeline names the frame
+        return FramePoints(points[inliers], np.zeros((int(inliers.sum()), 3)))
     votes = tensor_voting(points[inliers], spacing=spacing, max_ratio=max_ratio)
     keep = np.flatnonzero(inliers)[votes.keep]
     if len(keep) < 3:

@@ -69,7 +69,7 @@ from fourd.methods.surfels.model import (
     unpack_model,
     unsupported_pieces,
 )
-from fourd.methods.surfels.options import MIN_FRAMES, Options, energy_weights, merge_workers
+from fourd.methods.surfels.options import MIN_FRAMES, Options, energy_weights, worker_threads
 from fourd.methods.surfels.pipeline import (
     MESH_ONLY,
     assembly_schedule,
@@ -301,7 +301,7 @@ def _window_model(
         for index, k in enumerate(merge_keys(keys, options, cache), start=past)
     ]
     model, _ = assemble(
-        seeds, local, schedule, cache=cache, keys=seed_keys, workers=merge_workers(options)
+        seeds, local, schedule, cache=cache, keys=seed_keys, workers=worker_threads(options)
     )
     if tail is not None:
         onto = schedule._replace(guide=guide) if schedule.guide is not None else schedule
