@@ -16,6 +16,8 @@ from __future__ import annotations
 
 import contextlib
 import os
+from collections.abc import Callable, Iterable, Iterator
+from concurrent.futures import ThreadPoolExecutor
 
 import numba
 from threadpoolctl import threadpool_limits
@@ -67,3 +69,21 @@ def concurrent_kernels_safe() -> bool:
         return numba.threading_layer() in ("tbb", "omp")
     except ValueError:  # no parallel kernel has run yet
         return False
+
+
+def map_in_threads(function: Callable, items: Iterable, workers: int) -> Iterator:
+    """``function(item)`` for each of ``items``, yielded in the items' order, on ``workers``
+    threads side by side where numba's threading layer allows it
+    (:func:`concurrent_kernels_safe`; else one after another). The first item runs alone, as
+    numba picks its layer at the first parallel kernel. For a ``function`` whose result
+    depends on its item alone (a per-frame stage) the results are the same either way."""
+    items = list(items)
+    for item in items[:1]:
+        yield function(item)
+    rest = items[1:]
+    if workers > 1 and len(rest) > 1 and concurrent_kernels_safe():
+        with ThreadPoolExecutor(max_workers=workers) as pool:
+            yield from pool.map(function, rest)
+    else:
+        for item in rest:
+            yield function(item)

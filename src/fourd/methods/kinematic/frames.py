@@ -5,7 +5,6 @@ function of one frame and the options), each frame kept in the cache when there 
 from __future__ import annotations
 
 import logging
-from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
@@ -22,7 +21,7 @@ from fourd.methods.kinematic.options import (
     PREPARE_THREADS,
     Options,
 )
-from fourd.pipeline.worker_threads import concurrent_kernels_safe
+from fourd.pipeline.worker_threads import map_in_threads
 from fourd.progress import progress
 from fourd.sequence import PointCloudSequence
 
@@ -60,18 +59,9 @@ def prepare_frames(seq: PointCloudSequence, options: Options, cache: StageCache 
         if keys is not None:
             cache.save(STAGE, keys[i], {"points": result[0], "normals": result[1]})
 
-    if todo:
-        # the first alone: numba picks its threading layer at the first parallel kernel
-        keep(todo[0], _prepare_frame(frames[todo[0]], options))
-    rest = todo[1:]
-    if len(rest) <= 1 or not concurrent_kernels_safe():
-        for i in rest:
-            keep(i, _prepare_frame(frames[i], options))
-    else:
-        with ThreadPoolExecutor(max_workers=PREPARE_THREADS) as pool:
-            done = pool.map(lambda i: _prepare_frame(frames[i], options), rest)
-            for i, result in zip(rest, done, strict=True):
-                keep(i, result)
+    done = map_in_threads(lambda i: _prepare_frame(frames[i], options), todo, PREPARE_THREADS)
+    for i, result in zip(todo, done, strict=True):
+        keep(i, result)
     return [p for p, _ in prepared], [n for _, n in prepared]
 
 

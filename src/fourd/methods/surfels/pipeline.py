@@ -10,7 +10,6 @@ from __future__ import annotations
 import dataclasses
 import logging
 import time as _time
-from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
@@ -32,7 +31,7 @@ from fourd.methods.surfels.optimizer import GaussNewtonOptions
 from fourd.methods.surfels.options import MIN_FRAMES, Options, energy_weights, worker_threads
 from fourd.methods.surfels.part_search import PartSearch
 from fourd.methods.surfels.seeds import FramePoints, prepare_frame, seed_model
-from fourd.pipeline.worker_threads import concurrent_kernels_safe
+from fourd.pipeline.worker_threads import map_in_threads
 from fourd.progress import progress
 from fourd.sequence import PointCloudSequence
 
@@ -240,26 +239,10 @@ def prepare_frames(
 
 def frame_by_frame(function, items: list, workers: int, desc: str) -> list:
     """``[function(item) for item in items]`` with a progress bar (``desc``), on ``workers``
-    threads side by side: each item's result depends on that item alone, so it is the same
-    either way. The first item runs alone (numba chooses its threading layer at the first
-    parallel kernel), the rest one after another where that layer cannot run two threads'
-    parallel kernels at once (``workqueue``)."""
-    results = []
-    with progress(total=len(items), desc=desc) as bar:
-        for item in items[:1]:
-            results.append(function(item))
-            bar.update(1)
-        rest = items[1:]
-        if workers > 1 and len(rest) > 1 and concurrent_kernels_safe():
-            with ThreadPoolExecutor(max_workers=workers) as pool:
-                for result in pool.map(function, rest):
-                    results.append(result)
-                    bar.update(1)
-        else:
-            for item in rest:
-                results.append(function(item))
-                bar.update(1)
-    return results
+    threads side by side (:func:`fourd.pipeline.worker_threads.map_in_threads`): each item's
+    result depends on that item alone, so it is the same either way."""
+    done = map_in_threads(function, items, workers)
+    return list(progress(done, total=len(items), desc=desc))
 
 
 def _prepared(frame, spacing: float, options: Options) -> dict:
