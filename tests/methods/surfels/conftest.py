@@ -30,3 +30,27 @@ def still_bumpy_scans():
 
     scans.height = bumpy_height
     return scans
+
+
+@pytest.fixture
+def quick_seeds():
+    """``quick_seeds(frames, sampling, quick)``: the seed models of ``frames`` (scans at point
+    spacing 0.02, e.g. :func:`still_bumpy_scans`' ones) at ``eps_sampl`` ``sampling``, and the
+    merges' :class:`~fourd.methods.surfels.assembly.Schedule`, every optimisation with the
+    Gauss-Newton options ``quick``."""
+    from fourd.methods.surfels.assembly import Schedule
+    from fourd.methods.surfels.match import MatchOptions
+    from fourd.methods.surfels.options import Options, energy_weights
+    from fourd.methods.surfels.seeds import seed_model
+
+    def seeds(frames, sampling, quick):
+        spacing = 0.02
+        weights = energy_weights(Options(), spacing, sampling)
+        match = MatchOptions(tangential=0.05)
+        models = [
+            seed_model(f, t, sampling=sampling, weights=weights, gauss_newton_options=quick, match=match)
+            for t, f in enumerate(frames)
+        ]
+        return models, Schedule(sampling, weights, 1 / spacing**2, 1.5, quick, quick, quick, match)
+
+    return seeds

@@ -203,31 +203,25 @@ def test_a_seed_keeps_a_thin_tube_round_when_its_sides_are_not_neighbours(geodes
         assert round_ < 0.86 and uncovered > 0.05
 
 
-def test_merges_side_by_side_give_the_merges_one_after_another(still_bumpy_scans, tmp_path, monkeypatch):
+def test_merges_side_by_side_give_the_merges_one_after_another(still_bumpy_scans, quick_seeds, tmp_path,
+                                                               monkeypatch):
     """Five frames assembled with two threads (merges as their parts are ready) and with one
     (level by level): the same model to the last bit, and a rerun with a cache resumes every
     merge that the threads kept."""
     import fourd.methods.surfels.assembly as assembly
     from fourd.cache import StageCache
-    from fourd.methods.surfels.assembly import assemble, merge_plan
+    from fourd.methods.surfels.assembly import assemble
+    from fourd.pipeline.merge_tree import merge_tree
 
     frames = still_bumpy_scans(5, np.random.default_rng(8), 0.004)
-    spacing = 0.02
-    sampling = 6 * spacing
-    weights = energy_weights(Options(), spacing, sampling)
     quick = GaussNewtonOptions(iterations=2, cg_tolerance=1e-3, cg_iterations=20)
-    match = MatchOptions(tangential=0.05)
-    seeds = [
-        seed_model(f, t, sampling=sampling, weights=weights, gauss_newton_options=quick, match=match)
-        for t, f in enumerate(frames)
-    ]
-    schedule = Schedule(sampling, weights, 1 / spacing**2, 1.5, quick, quick, quick, match)
+    seeds, schedule = quick_seeds(frames, 6 * 0.02, quick)
     keys = [f"frame{t}" for t in range(5)]
     cache = StageCache(tmp_path)
     done = []
     one, _ = assemble(seeds, frames, schedule, keys=keys, workers=1)
     two, key_two = assemble(seeds, frames, schedule, keys=keys, workers=2, cache=cache, progress=done.append)
-    assert len(done) == len(merge_plan(5)) == 4
+    assert len(done) == len(merge_tree(5)) == 4
     assert (one.start, one.state.frames, two.start, two.state.frames) == (0, 5, 0, 5)
     for a, b in [(one.state.positions, two.state.positions), (one.state.normals, two.state.normals),
                  (one.state.rotations, two.state.rotations), (one.topology.edges, two.topology.edges),

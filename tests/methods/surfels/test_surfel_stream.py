@@ -16,11 +16,8 @@ from fourd.geometry.neighbors import point_spacing
 from fourd.geometry.rotations import procrustes
 from fourd.methods import reconstruct
 from fourd.methods.surfels import GaussNewtonOptions, Options, reconstruct_streamed
-from fourd.methods.surfels.assembly import Schedule, merge, optimize_model
-from fourd.methods.surfels.match import MatchOptions
-from fourd.methods.surfels.options import energy_weights
+from fourd.methods.surfels.assembly import merge, optimize_model
 from fourd.methods.surfels.pipeline import prepare_frames
-from fourd.methods.surfels.seeds import seed_model
 from fourd.methods.surfels.stream import _with_anchors
 from fourd.metrics.scores import evaluate
 from fourd.sequence import Frame, PointCloudSequence
@@ -29,19 +26,12 @@ QUICK = dict(cg_iterations=50, iterations=3, final_iterations=2)
 
 
 def test_a_merge_onto_a_held_past_keeps_its_frames_and_all_its_surfels_in_order(
-    still_bumpy_scans,
+    still_bumpy_scans, quick_seeds
 ):
     frames = still_bumpy_scans(3, np.random.default_rng(3))
-    spacing = 0.02
-    sampling = 4 * spacing
-    weights = energy_weights(Options(), spacing, sampling)
+    sampling = 4 * 0.02
     quick = GaussNewtonOptions(iterations=3, cg_tolerance=1e-3, cg_iterations=50)
-    match = MatchOptions(tangential=0.05)
-    seeds = [
-        seed_model(f, t, sampling=sampling, weights=weights, gauss_newton_options=quick, match=match)
-        for t, f in enumerate(frames)
-    ]
-    schedule = Schedule(sampling, weights, 1 / spacing**2, 1.5, quick, quick, quick, match)
+    seeds, schedule = quick_seeds(frames, sampling, quick)
     past = merge(seeds[0], seeds[1], frames, schedule)
     count = past.state.count
     merged = merge(past, seeds[2], frames, schedule, held=1, kept=count)
@@ -57,7 +47,7 @@ def test_a_merge_onto_a_held_past_keeps_its_frames_and_all_its_surfels_in_order(
     # 1.11 with nothing held)
     assert merged.state.count <= 1.3 * count
     with pytest.raises(ValueError, match="held"):
-        optimize_model(past, frames, weights, quick, match, urshape="rest", held=1)
+        optimize_model(past, frames, schedule.weights, quick, schedule.match, urshape="rest", held=1)
 
 
 def test_a_short_window_or_another_reference_is_refused(tmp_path):

@@ -66,6 +66,7 @@ from fourd.methods.assembly.merge_map import MergeMap, load_map, map_key, save_m
 from fourd.methods.assembly.options import Options
 from fourd.methods.assembly.pair import cross_parameterize_pair
 from fourd.methods.assembly.registration import register_by_laplacian
+from fourd.pipeline.merge_tree import merge_tree
 from fourd.pipeline.worker_threads import one_blas_thread, threads_per_worker
 
 log = logging.getLogger("fourd.methods.assembly.hierarchy")
@@ -336,40 +337,6 @@ def _test_replacements(union: _Union, paste: Paste, placed, region, drop, option
         return union, paste, len(replaced)
     kept_new = keep[count:]
     return _keep(union, keep), paste._replace(target=paste.target[kept_new], patch=paste.patch[kept_new]), len(replaced)
-
-
-def merge_tree(count: int, *, onto: bool = False) -> list[tuple[int, int]]:
-    """The merges of the hierarchy over ``count`` blocks, level by level: pairs of node ids,
-    ``0 .. count - 1`` the blocks and ``count + k`` the result of the ``k``-th merge (an odd
-    last node waits for the next level).
-
-    With ``onto``, block 0 is a result made before (the frames so far of a run in windows,
-    :mod:`~fourd.methods.assembly.stream`): a hierarchy over the other blocks, merged onto it
-    last.
-
-    >>> merge_tree(5)
-    [(0, 1), (2, 3), (5, 6), (7, 4)]
-    >>> merge_tree(4, onto=True)
-    [(1, 2), (4, 3), (0, 5)]
-    """
-    merges: list[tuple[int, int]] = []
-
-    def hierarchy(level: list[int]) -> int:
-        while len(level) > 1:
-            following = []
-            for i in range(0, len(level) - 1, 2):
-                merges.append((level[i], level[i + 1]))
-                following.append(count + len(merges) - 1)
-            if len(level) % 2:
-                following.append(level[-1])
-            level = following
-        return level[0]
-
-    if onto and count > 1:
-        merges.append((0, hierarchy(list(range(1, count)))))
-    else:
-        hierarchy(list(range(count)))
-    return merges
 
 
 def _merge_as_ready(blocks: list[Block], options: Options, pool: MergePool | None, on_merge,

@@ -45,6 +45,7 @@ from fourd.methods.surfels.resample import redundant_surfels
 from fourd.methods.surfels.state import SurfelState, layout
 from fourd.methods.surfels.topology import build_topology
 from fourd.methods.surfels.urshape import fit_urshape
+from fourd.pipeline.merge_tree import merge_tree
 from fourd.pipeline.worker_threads import concurrent_kernels_safe
 
 log = logging.getLogger("fourd.methods.surfels.assembly")
@@ -374,27 +375,6 @@ def _first_frame(model: Model) -> Model:
     )
 
 
-def merge_plan(count: int) -> list[tuple[int, int]]:
-    """The merges that join ``count`` consecutive models pairwise, level by level (sec. 3.2
-    "Iteration"; the last model of a level with an odd count waits for the next): merge ``k``
-    joins nodes ``a`` and ``b``, nodes ``0 .. count - 1`` being the models and ``count + k``
-    merge ``k``'s result; the last merge's is the whole range.
-
-    >>> merge_plan(5)
-    [(0, 1), (2, 3), (5, 6), (7, 4)]
-    """
-    plan, level = [], list(range(count))
-    while len(level) > 1:
-        merged = []
-        for k in range(0, len(level) - 1, 2):
-            plan.append((level[k], level[k + 1]))
-            merged.append(count + len(plan) - 1)
-        if len(level) % 2:
-            merged.append(level[-1])
-        level = merged
-    return plan
-
-
 def assemble(
     models: list[Model],
     frames: list,
@@ -406,7 +386,7 @@ def assemble(
     workers: int = 1,
 ) -> tuple[Model, str]:
     """Merge adjacent ``models`` (consecutive ranges, e.g. one seed model per frame) pairwise,
-    level by level, until one spans them all (sec. 3.2 "Iteration", :func:`merge_plan`);
+    level by level, until one spans them all (sec. 3.2 "Iteration", :func:`fourd.pipeline.merge_tree.merge_tree`);
     ``progress`` is called with the number of merges done after each. With a ``cache`` and
     one key per model, each merged model is kept there under the hash of its two parts' keys
     and the schedule, so a rerun resumes after the last finished merge. Returns the model and
@@ -419,7 +399,7 @@ def assemble(
     another where numba's threading layer cannot run two parallel kernels at once
     (``workqueue``). An interrupted run stops after the merges already running."""
     keys = list(keys) if keys is not None else [""] * len(models)
-    plan = merge_plan(len(models))
+    plan = merge_tree(len(models))
     for a, b in plan:
         keys.append(stage_key(keys[a], keys[b], schedule) if cache.enabled else "")
     nodes: dict[int, Model] = dict(enumerate(models))
