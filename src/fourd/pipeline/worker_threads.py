@@ -1,4 +1,5 @@
-"""Thread pools of worker processes sized to share the machine.
+"""Thread pools of worker processes sized to share the machine, and threads side by side in
+this process.
 
 A worker process started while the environment asks nothing loads its BLAS, OpenMP and numba
 thread pools one thread per core; two such workers on a 2-core machine then run four
@@ -10,6 +11,10 @@ Work that runs in a worker or in this process must not depend on where it ran, n
 workers there are: OpenBLAS's results depend on its thread count (``assembly``'s maps on 5
 crane frames, ``workers=2``: two runs apart by up to 0.03 in a vertex, identical with one BLAS
 thread). Such work runs inside :func:`one_blas_thread`.
+
+Within one process, work runs side by side in threads (:func:`map_in_threads`; ``surfels``'
+merges, ``kinematic``'s and ``surfels``' per-frame stages) where numba's threading layer lets
+two threads run parallel kernels at once (:func:`concurrent_kernels_safe`).
 """
 
 from __future__ import annotations

@@ -35,6 +35,9 @@ def test_options_refuse_bad_values():
         Options(sampling=0)
     with pytest.raises(ValueError, match="rigid"):
         Options(rigid=-1)
+    for workers in (-1, 1.5):
+        with pytest.raises(ValueError, match="workers"):
+            Options(workers=workers)
 
 
 def test_merges_of_another_revision_are_not_resumed(tmp_path, monkeypatch):

@@ -330,6 +330,8 @@ class Options:
         ):
             if getattr(self, name) < 0:
                 raise ValueError(f"{name} must not be negative")
+        if int(self.workers) != self.workers:
+            raise ValueError(f"workers must be a whole number (0: one per core), got {self.workers!r}")
         if self.color_rounds < 1:
             raise ValueError(f"color_rounds must be at least 1, got {self.color_rounds}")
         if self.urshape not in URSHAPE_STAGES:
