@@ -77,3 +77,20 @@ class _Fixed:
 
     def parse_args(self, argv):
         return self.args
+
+
+def test_a_message_while_a_progress_bar_is_drawn_gets_a_line_of_its_own(capsys):
+    """The compile notice (or any message) logged in the middle of a stage's bar is not
+    appended to the bar's line."""
+    import re
+
+    from fourd.progress import progress
+
+    cli._configure_logging(quiet=False)
+    with progress(total=3, desc="working") as bar:
+        bar.update(1)
+        logging.getLogger("fourd.test_compile_notice").info(FIRST_COMPILE)
+        bar.update(2)
+    err = capsys.readouterr().err
+    assert "working" in err
+    assert FIRST_COMPILE in re.split(r"[\r\n]", err)

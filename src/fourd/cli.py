@@ -18,6 +18,7 @@ from fourd.cache import counting_resumes
 from fourd.compile_notice import listen_for_compiles, stop_listening
 from fourd.errors import InputError
 from fourd.jsonable import jsonable
+from fourd.progress import progress_write
 
 log = logging.getLogger("fourd.cli")
 
@@ -77,7 +78,8 @@ def _read_config(path: str | None) -> tuple[str | None, dict]:
 
 
 class _StderrHandler(logging.StreamHandler):
-    """Writes to whatever ``sys.stderr`` is at the time of each message."""
+    """Writes to whatever ``sys.stderr`` is at the time of each message, on a line of its own
+    when a progress bar is drawn there (the bar is cleared, then drawn again below)."""
 
     @property
     def stream(self):
@@ -86,6 +88,12 @@ class _StderrHandler(logging.StreamHandler):
     @stream.setter
     def stream(self, value):
         pass
+
+    def emit(self, record):
+        try:
+            progress_write(self.format(record), file=sys.stderr)
+        except Exception:
+            self.handleError(record)
 
 
 def _configure_logging(quiet: bool, verbose: bool = False) -> None:

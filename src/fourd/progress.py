@@ -23,3 +23,9 @@ def progress(iterable: Iterable | None = None, *, desc: str = "", total: int | N
         leave=False,
         dynamic_ncols=True,
     )
+
+
+def progress_write(text: str, file=None) -> None:
+    """Write ``text`` and a newline to ``file`` (stderr) below the progress bars drawn there,
+    not into the line of one."""
+    tqdm.write(text, file=file)
