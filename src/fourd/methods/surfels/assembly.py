@@ -403,6 +403,7 @@ def assemble(
     for a, b in plan:
         keys.append(stage_key(keys[a], keys[b], schedule) if cache.enabled else "")
     nodes: dict[int, Model] = dict(enumerate(models))
+    root = len(models) + len(plan) - 1 if plan else 0
 
     def run(k: int, left: Model, right: Model) -> Model:
         arrays, resumed = cached(
@@ -425,7 +426,7 @@ def assemble(
     if workers <= 1 or not concurrent_kernels_safe():
         for k in range(len(plan)):
             finished(k, run(k, *(nodes[n] for n in plan[k])))
-        return nodes[len(models) + len(plan) - 1 if plan else 0], keys[-1]
+        return nodes[root], keys[-1]
     waiting, running = list(range(len(plan))), {}
     with ThreadPoolExecutor(max_workers=workers, thread_name_prefix="surfels-merge") as pool:
         try:
@@ -439,4 +440,4 @@ def assemble(
         except BaseException:
             pool.shutdown(wait=True, cancel_futures=True)
             raise
-    return nodes[len(models) + len(plan) - 1 if plan else 0], keys[-1]
+    return nodes[root], keys[-1]

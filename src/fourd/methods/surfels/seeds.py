@@ -63,8 +63,9 @@ def prepare_frame(
     of the frame (sec. 3.2)."""
     points = np.asarray(points, dtype=np.float64)
     inliers = remove_outliers(points, spacing=spacing).inliers
-    if inliers.sum() < 3:  # nothing left to vote on; the pipeline names the frame
-        return FramePoints(points[inliers], np.zeros((int(inliers.sum()), 3)))
+    if np.count_nonzero(inliers) < 3:  # nothing left to vote on; the pipeline names the frame
+        kept = points[inliers]
+        return FramePoints(kept, np.zeros_like(kept))
     votes = tensor_voting(points[inliers], spacing=spacing, max_ratio=max_ratio)
     keep = np.flatnonzero(inliers)[votes.keep]
     if len(keep) < 3:
