@@ -8,8 +8,6 @@ import scipy.sparse as sp
 
 from fourd.methods.flow.sparse import (
     csr_from_entries,
-    csr_product,
-    galerkin_product,
     principal_submatrix,
     strong_pattern,
     strong_values,
@@ -59,55 +57,21 @@ def test_csr_from_entries_matches_scipy_coo():
         csr_from_entries(np.array([300]), np.array([0]), np.ones(1), (300, 200))
 
 
-def test_csr_product_matches_scipy():
-    """The parallel sparse product: the same matrix as scipy's, also with empty rows and
-    columns, mixed precisions and more rows than one chunk each."""
-    rng = np.random.default_rng(0)
-    a = sp.random(3000, 400, density=0.01, random_state=1, format="csr")
-    b = sp.random(400, 2500, density=0.02, random_state=2, format="csr").astype(np.float32)
-    a = sp.csr_matrix(a.multiply(rng.random(a.shape[0])[:, None] > 0.2))  # empty rows
-    a.eliminate_zeros()
-    product = csr_product(a, b)
-    expected = (a @ b).tocsr()
-    assert product.shape == expected.shape and product.dtype == np.float64
-    assert abs(product - expected).max() <= 1e-6 * abs(expected).max()
-    assert product.nnz == expected.nnz  # random data: no cancellation to an explicit zero
-    symmetric = csr_product(b.T, b)
-    assert symmetric.dtype == np.float32
-    assert abs(symmetric - (b.T @ b)).max() <= 1e-5 * abs(symmetric).max()
-    assert csr_product(sp.csr_matrix((5, 4)), sp.csr_matrix((4, 3))).nnz == 0
-    with pytest.raises(ValueError, match="do not match"):
-        csr_product(a, a)
-    addend = sp.random(2500, 2500, density=0.001, random_state=3, format="csr")
-    fused = csr_product(b.T, b, add=addend)
-    assert abs(fused - (b.T @ b + addend)).max() <= 1e-5 * abs(fused).max()
-    with pytest.raises(ValueError, match="addend"):
-        csr_product(b.T, b, add=a)
-
-
-def test_galerkin_product_strong_connections_and_transpose_pattern_match_scipy():
-    """The set-up kernels of the V-cycle's hierarchy: ``R A P`` without ``A P``, the
-    classical strong connections (pyamg's pattern less the diagonal, A's values, columns
-    increasing) and a values-free transpose."""
+def test_strong_connections_and_transpose_pattern_match_scipy():
+    """The set-up kernels of the V-cycle's hierarchy: the classical strong connections
+    (pyamg's pattern less the diagonal, A's values, columns increasing), the truncation and a
+    values-free transpose."""
     from pyamg.strength import classical_strength_of_connection
 
     rng = np.random.default_rng(1)
     a = sp.random(600, 600, density=0.02, random_state=4, format="csr")
     a = (a + a.T + sp.diags(rng.random(600) + 1.0)).tocsr()
     a.indices = a.indices.copy()
-    for i in range(0, 600, 7):  # unsorted rows, as csr_product gives them
+    for i in range(0, 600, 7):  # unsorted rows, as the parallel products give them
         a.indices[a.indptr[i] : a.indptr[i + 1]] = a.indices[a.indptr[i] : a.indptr[i + 1]][::-1]
         a.data[a.indptr[i] : a.indptr[i + 1]] = a.data[a.indptr[i] : a.indptr[i + 1]][::-1]
     a.has_sorted_indices = False
     p = sp.random(600, 90, density=0.03, random_state=5, format="csr")
-    product = galerkin_product(p.T, a, p)
-    expected = (p.T @ a @ p).tocsr()
-    assert product.shape == (90, 90)
-    assert abs(product - expected).max() <= 1e-12 * abs(expected).max()
-    assert galerkin_product(sp.csr_matrix((3, 5)), sp.csr_matrix((5, 5)), sp.csr_matrix((5, 3))).nnz == 0
-    with pytest.raises(ValueError, match="do not match"):
-        galerkin_product(p, a, p)
-
     strong_indptr, strong_indices = strong_pattern(a, 0.25)
     strong = sp.csr_matrix(
         (strong_values(a, 0.25, strong_indptr, strong_indices), strong_indices, strong_indptr),

@@ -103,12 +103,6 @@ def test_products_match_scipy():
     P = sp.random(300, 40, density=0.1, random_state=2, format="csr", dtype=np.float32)
     x = rng.standard_normal(300)
     assert np.allclose(sweeps.transpose_multiply(P, x), P.T @ x, rtol=0, atol=1e-12 * 300)
-    out = rng.standard_normal(300)
-    expected = out - 2.0 * (P @ x[:40])
-    sweeps.multiply_add(P, x[:40], out, -2.0)
-    assert np.allclose(out, expected, rtol=0, atol=1e-10)
-    with pytest.raises(ValueError, match="CSR"):
-        sweeps.multiply_add(P.tocsc(), x[:40], out)
 
 
 def test_parallel_v_cycle_is_symmetric_and_the_solve_as_good():

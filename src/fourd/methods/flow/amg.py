@@ -17,17 +17,16 @@ from pyamg import amg_core
 from pyamg.multilevel import MultilevelSolver
 from pyamg.relaxation.smoothing import change_smoothers
 
+from fourd.geometry.sparse_products import galerkin_product, multiply_add, unsigned
 from fourd.methods.flow import sweeps
 from fourd.methods.flow.sparse import (
     drop_weak_entries,
-    galerkin_product,
     principal_submatrix,
     strong_pattern,
     strong_values,
     submatrix,
     transpose_pattern,
     truncate_rows,
-    unsigned,
     used_columns,
 )
 
@@ -60,8 +59,9 @@ def _multilevel(levels: list, A: sp.csr_matrix) -> MultilevelSolver:
 
 def _level(A: sp.csr_matrix, P: sp.csr_matrix, coarse_drop: float = 0.0):
     """One level of a hierarchy and the next coarser matrix, the Galerkin product ``P^T A P``
-    (on all cores, without ``A P``: :func:`.sparse.galerkin_product`), its weak entries
-    lumped onto its diagonal if ``coarse_drop`` > 0 (:func:`.sparse.drop_weak_entries`)."""
+    (on all cores, without ``A P``:
+    :func:`~fourd.geometry.sparse_products.galerkin_product`), its weak entries lumped onto
+    its diagonal if ``coarse_drop`` > 0 (:func:`.sparse.drop_weak_entries`)."""
     level = MultilevelSolver.Level()
     # the restriction is P's transpose as a view, not a second copy of P
     level.A, level.P, level.R = A, P, P.T
@@ -347,12 +347,12 @@ def v_cycle(
         coarse_x = ml.coarse_solver(ml.levels[-1].A, coarse_rhs)
     else:
         coarse_x = _cycle(ml, 1, coarse_rhs)
-    sweeps.multiply_add(level.P, coarse_x, x)
+    multiply_add(level.P, coarse_x, x)
     if finest.CT is None:
         y[:] = C.T @ x
     else:
         y.fill(0)
-        sweeps.multiply_add(finest.CT, x, y)
+        multiply_add(finest.CT, x, y)
     _symmetric_sweeps(finest, x, y, b)
     return x
 
@@ -394,13 +394,13 @@ def _cycle(ml: MultilevelSolver, depth: int, rhs: np.ndarray) -> np.ndarray:
     level.presmoother(level.A, x, rhs)
     residual = _work(ml, depth, "residual", len(rhs), rhs.dtype, zero=False)
     residual[:] = rhs
-    sweeps.multiply_add(level.A, x, residual, -1.0)
+    multiply_add(level.A, x, residual, -1.0)
     coarse_rhs = _restrict(ml, depth, residual)
     if depth == len(ml.levels) - 2:
         coarse_x = ml.coarse_solver(ml.levels[-1].A, coarse_rhs)
     else:
         coarse_x = _cycle(ml, depth + 1, coarse_rhs)
-    sweeps.multiply_add(level.P, coarse_x, x)
+    multiply_add(level.P, coarse_x, x)
     level.postsmoother(level.A, x, rhs)
     return x
 

@@ -10,9 +10,7 @@ import numba
 import numpy as np
 import scipy.sparse as sp
 
-from fourd.methods.flow.sparse import (
-    unsigned,
-)
+from fourd.geometry.sparse_products import unsigned
 
 
 def minres_inplace(apply_K, apply_M, b: np.ndarray, x: np.ndarray, *, rtol: float,

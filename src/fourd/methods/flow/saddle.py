@@ -48,7 +48,7 @@ import pyamg
 import scipy.sparse as sp
 from scipy.sparse.linalg import LinearOperator, cg, spilu
 
-from fourd.methods.flow import sweeps
+from fourd.geometry.sparse_products import csr_product, multiply_add
 from fourd.methods.flow.amg import (
     _AMG_SETUP,
     amg_hierarchy,
@@ -59,9 +59,6 @@ from fourd.methods.flow.amg import (
     v_cycle,
 )
 from fourd.methods.flow.krylov import minres_inplace
-from fourd.methods.flow.sparse import (
-    csr_product,
-)
 
 log = logging.getLogger("fourd.methods.flow.saddle")
 
@@ -118,7 +115,7 @@ def _saddle_apply(A, B, BT, softness: float, z: np.ndarray, out: np.ndarray) -> 
     transpose, e.g. the view ``B.T``); returns ``out``. Never assembled: a third copy of
     ``A`` and ``B`` (squash-ball at resolution 64, 7.9 million unknowns and 2.3 million
     constraints: peak memory 6.48 -> 5.79 GB at a00735a). CSR ``A``, ``B`` and ``BT`` are
-    applied on all cores (:func:`.sweeps.multiply_add`)."""
+    applied on all cores (:func:`~fourd.geometry.sparse_products.multiply_add`)."""
     n = A.shape[0]
     u, multipliers = z[:n], z[n:]
     top, bottom = out[:n], out[n:]
@@ -126,7 +123,7 @@ def _saddle_apply(A, B, BT, softness: float, z: np.ndarray, out: np.ndarray) -> 
     bottom.fill(0)
     for matrix, vector, into in ((A, u, top), (BT, multipliers, top), (B, u, bottom)):
         if sp.issparse(matrix) and matrix.format == "csr":
-            sweeps.multiply_add(matrix, vector, into)
+            multiply_add(matrix, vector, into)
         else:
             into += matrix @ vector
     if softness:

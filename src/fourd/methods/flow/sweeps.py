@@ -24,7 +24,7 @@ import numba
 import numpy as np
 import scipy.sparse as sp
 
-from fourd.methods.flow.sparse import unsigned
+from fourd.geometry.sparse_products import unsigned
 
 #: Blocks of slices to aim for: two of each colour, one per core of the 2-core target
 #: machine. Within a block the rows are swept in their own order, through its slices one
@@ -241,22 +241,6 @@ def csr_sweep(A: sp.csr_matrix, x: np.ndarray, rhs: np.ndarray, order: Schedule,
     colours = [(0, order.colour_start), (order.colour_start, blocks)]
     for first, last in colours if forward else colours[::-1]:
         _csr_sweep_blocks(*arrays, first, last, forward)
-
-
-@numba.njit(cache=True, parallel=True)
-def _csr_multiply_add(indptr, indices, data, x, out, scale):
-    for i in numba.prange(len(out)):
-        total = 0.0
-        for p in range(indptr[i], indptr[i + 1]):
-            total += data[p] * x[indices[p]]
-        out[i] += scale * total
-
-
-def multiply_add(A: sp.csr_matrix, x: np.ndarray, out: np.ndarray, scale: float = 1.0) -> None:
-    """``out += scale * A @ x`` for CSR ``A``, rows in parallel (``out`` in place)."""
-    if A.format != "csr":
-        raise ValueError(f"multiply_add needs a CSR matrix, got {A.format}")
-    _csr_multiply_add(unsigned(A.indptr), unsigned(A.indices), A.data, x, out, scale)
 
 
 #: Row chunks of :func:`transpose_multiply`, a fixed number so that its sums do not depend

@@ -1,0 +1,88 @@
+"""The parallel sparse products (:mod:`fourd.geometry.sparse_products`) against scipy."""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+import pytest
+import scipy.sparse as sp
+
+from fourd.geometry.sparse_products import csr_product, galerkin_product, multiply_add
+
+
+def test_csr_product_matches_scipy():
+    """The parallel sparse product: the same matrix as scipy's, also with empty rows and
+    columns, mixed precisions and more rows than one chunk each."""
+    rng = np.random.default_rng(0)
+    a = sp.random(3000, 400, density=0.01, random_state=1, format="csr")
+    b = sp.random(400, 2500, density=0.02, random_state=2, format="csr").astype(np.float32)
+    a = sp.csr_matrix(a.multiply(rng.random(a.shape[0])[:, None] > 0.2))  # empty rows
+    a.eliminate_zeros()
+    product = csr_product(a, b)
+    expected = (a @ b).tocsr()
+    assert product.shape == expected.shape and product.dtype == np.float64
+    assert abs(product - expected).max() <= 1e-6 * abs(expected).max()
+    assert product.nnz == expected.nnz  # random data: no cancellation to an explicit zero
+    symmetric = csr_product(b.T, b)
+    assert symmetric.dtype == np.float32
+    assert abs(symmetric - (b.T @ b)).max() <= 1e-5 * abs(symmetric).max()
+    assert csr_product(sp.csr_matrix((5, 4)), sp.csr_matrix((4, 3))).nnz == 0
+    with pytest.raises(ValueError, match="do not match"):
+        csr_product(a, a)
+    addend = sp.random(2500, 2500, density=0.001, random_state=3, format="csr")
+    fused = csr_product(b.T, b, add=addend)
+    assert abs(fused - (b.T @ b + addend)).max() <= 1e-5 * abs(fused).max()
+    with pytest.raises(ValueError, match="addend"):
+        csr_product(b.T, b, add=a)
+
+
+def test_galerkin_product_matches_scipy():
+    """``R A P`` without ``A P``, on a symmetric ``A`` whose rows are partly unsorted."""
+    rng = np.random.default_rng(1)
+    a = sp.random(600, 600, density=0.02, random_state=4, format="csr")
+    a = (a + a.T + sp.diags(rng.random(600) + 1.0)).tocsr()
+    a.indices = a.indices.copy()
+    for i in range(0, 600, 7):  # unsorted rows, as csr_product gives them
+        a.indices[a.indptr[i] : a.indptr[i + 1]] = a.indices[a.indptr[i] : a.indptr[i + 1]][::-1]
+        a.data[a.indptr[i] : a.indptr[i + 1]] = a.data[a.indptr[i] : a.indptr[i + 1]][::-1]
+    a.has_sorted_indices = False
+    p = sp.random(600, 90, density=0.03, random_state=5, format="csr")
+    product = galerkin_product(p.T, a, p)
+    expected = (p.T @ a @ p).tocsr()
+    assert product.shape == (90, 90)
+    assert abs(product - expected).max() <= 1e-12 * abs(expected).max()
+    assert galerkin_product(sp.csr_matrix((3, 5)), sp.csr_matrix((5, 5)), sp.csr_matrix((5, 3))).nnz == 0
+    with pytest.raises(ValueError, match="do not match"):
+        galerkin_product(p, a, p)
+
+
+def test_products_do_not_depend_on_the_number_of_threads():
+    """Each row is summed by one thread in one order: the same bits on one core and on all."""
+    b = sp.random(2000, 1500, density=0.01, random_state=6, format="csr")
+    x = np.random.default_rng(2).standard_normal(1500)
+    runs = []
+    previous = numba.get_num_threads()
+    try:
+        for threads in (1, previous):
+            numba.set_num_threads(threads)
+            product = csr_product(b.T.tocsr(), b)
+            out = np.zeros(2000)
+            multiply_add(b, x, out)
+            runs.append((product, out))
+    finally:
+        numba.set_num_threads(previous)
+    (one, out_one), (all_, out_all) = runs
+    assert np.array_equal(one.indptr, all_.indptr) and np.array_equal(one.indices, all_.indices)
+    assert np.array_equal(one.data, all_.data) and np.array_equal(out_one, out_all)
+
+
+def test_multiply_add_matches_scipy():
+    rng = np.random.default_rng(1)
+    P = sp.random(300, 40, density=0.1, random_state=2, format="csr", dtype=np.float32)
+    x = rng.standard_normal(300)
+    out = rng.standard_normal(300)
+    expected = out - 2.0 * (P @ x[:40])
+    multiply_add(P, x[:40], out, -2.0)
+    assert np.allclose(out, expected, rtol=0, atol=1e-10)
+    with pytest.raises(ValueError, match="CSR"):
+        multiply_add(P.tocsc(), x[:40], out)
