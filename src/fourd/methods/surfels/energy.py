@@ -9,6 +9,7 @@ from dataclasses import dataclass, fields
 import numpy as np
 import scipy.sparse as sp
 
+from fourd.geometry.sparse_products import csr_product
 from fourd.methods.surfels.anchors import anchor_term
 from fourd.methods.surfels.color_guide import guide_term
 from fourd.methods.surfels.match import Data, Matches, MatchOptions, match_term
@@ -181,6 +182,8 @@ def total_energy(
     del jacobians
     transposed = jacobian.T.tocsr()
     gradient = 2.0 * (transposed @ residuals)
-    hessian = transposed @ jacobian
+    # on all cores (scipy's product runs on one): the top merges and the final optimisation
+    # run alone
+    hessian = csr_product(transposed, jacobian)
     hessian.data *= 2.0
     return Energy(total, values, gradient, hessian)
