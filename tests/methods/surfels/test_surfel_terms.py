@@ -330,3 +330,33 @@ def test_the_doublet_test_rejects_a_point_whose_surfels_nearest_point_is_far():
     # the same points again, association unchanged by the kept trees
     again = associate(state, data, 0.4, alignment)
     np.testing.assert_array_equal(again.active, matches.active)
+
+
+def test_an_association_from_the_one_before_is_the_nearest_surfel():
+    """The warm start of a step's association (``previous``): every point gets the surfel a
+    k-d tree gives, whether its previous surfel is still near, has moved off, or is far (the
+    grid's bound too wide: the k-d tree answers those)."""
+    from scipy.spatial import cKDTree
+
+    from fourd.methods.surfels.match import nearest_from
+
+    state, graph, data = _problem(seed=3, frames=3, count=60)
+    before = associate(state, data, 0.15)
+    rng = np.random.default_rng(4)
+    moved = type(state)(
+        state.positions + rng.normal(scale=0.05, size=state.positions.shape),
+        state.normals,
+        state.rotations,
+    )
+    for options in (MatchOptions(), MatchOptions(regime="alignment")):
+        fresh = associate(moved, data, 0.15, options)
+        warm = associate(moved, data, 0.15, options, previous=before)
+        np.testing.assert_array_equal(warm.surfels, fresh.surfels)
+        np.testing.assert_array_equal(warm.active, fresh.active)
+    positions = rng.uniform(-1, 1, (300, 3))
+    points = rng.uniform(-1.5, 1.5, (2000, 3))
+    # guesses near, random and one far corner for all: the bounds span from a cell to the box
+    for guess in (cKDTree(positions + 0.01).query(points)[1], rng.integers(300, size=2000),
+                  np.full(2000, np.argmax(positions.sum(axis=1)))):
+        found = nearest_from(positions, points, guess, 0.1)
+        np.testing.assert_array_equal(found, cKDTree(positions).query(points)[1])

@@ -31,10 +31,12 @@ from __future__ import annotations
 from dataclasses import dataclass
 from functools import cached_property
 
+import numba
 import numpy as np
 import scipy.sparse as sp
 from scipy.spatial import cKDTree
 
+from fourd.geometry.neighbors import bucket_grid, nearest_within
 from fourd.methods.surfels.anchors import AnchorData
 from fourd.methods.surfels.color_guide import GuideData
 from fourd.methods.surfels.state import SurfelState, layout, tangent_basis
@@ -163,7 +165,12 @@ class Matches:
 
 
 def associate(
-    state: SurfelState, data: Data, scale: float, options: MatchOptions | None = None
+    state: SurfelState,
+    data: Data,
+    scale: float,
+    options: MatchOptions | None = None,
+    *,
+    previous: Matches | None = None,
 ) -> Matches:
     """Nearest surfel of every data point in its frame, and which points count.
 
@@ -172,6 +179,10 @@ def associate(
     scale : float
         ``eps_top`` (input units): the global cutoff and the doublet tolerance's unit.
     options : MatchOptions, optional
+    previous : Matches, optional
+        An association of the same data with the same surfels at a nearby state (the
+        optimiser's state before a step): each point's nearest surfel is then searched only
+        as far as its previous one now lies (:func:`nearest_from`), with the same result.
     """
     options = options or MatchOptions()
     if data.frames.size and (data.frames.min() < 0 or data.frames.max() >= state.frames):
@@ -184,7 +195,10 @@ def associate(
         if not len(here):
             continue
         points = data.points[here]
-        _, found = cKDTree(state.positions[t]).query(points, workers=-1)
+        if previous is not None and len(previous.surfels) == len(data.points):
+            found = nearest_from(state.positions[t], points, previous.surfels[here], scale)
+        else:
+            _, found = cKDTree(state.positions[t]).query(points, workers=-1)
         surfels[here] = found
         if alignment:
             # the tree holds this frame's points in the order of ``here``
@@ -207,13 +221,59 @@ def associate(
     return Matches(surfels, active, cutoff)
 
 
+def nearest_from(
+    positions: np.ndarray, points: np.ndarray, guess: np.ndarray, cell: float
+) -> np.ndarray:
+    """The nearest of ``positions`` [S, 3] to each of ``points`` [P, 3] (int64 [P]), searched
+    on a grid of ``cell`` (input units) only as far as each point's ``guess`` [P] (an index
+    into ``positions``) lies: the nearest is no farther. Exact, as a k-d tree's query (ties
+    aside), and several times faster where the guesses are near (a step's association
+    from the one before: crane's 16-frame merge, 229,375 points against 1,398 surfels a
+    frame, 59 ms in a k-d tree); points whose guess is far go to a k-d tree."""
+    guess = np.asarray(guess, dtype=np.int64)
+    offset = points - positions[guess]
+    # a hair past the guess, so that rounding cannot leave it outside its own bound
+    bounds = np.sqrt(np.einsum("pa,pa->p", offset, offset)) * (1.0 + 1e-9) + 1e-300
+    grid, origin, side = bucket_grid(positions, cell)
+    found, unsearched = nearest_within(grid, origin, side, points, bounds)
+    missing = found < 0
+    found[missing & ~unsearched] = guess[missing & ~unsearched]
+    if unsearched.any():
+        _, found[unsearched] = cKDTree(positions).query(points[unsearched], workers=-1)
+    return found
+
+
 def _squared_distance(state, data, surfels, tangential):
     """``rho^2`` [D] of every data point to its surfel (normals made unit)."""
-    offset = data.points - state.positions[data.frames, surfels]
-    normals = state.normals[data.frames, surfels]
-    normals = normals / np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-300)
-    along = np.einsum("da,da->d", offset, normals)
-    return (1.0 - tangential) * along**2 + tangential * np.einsum("da,da->d", offset, offset)
+    out = np.empty(len(data.points))
+    _rho_squared(
+        np.ascontiguousarray(data.points, dtype=np.float64),
+        np.asarray(data.frames, dtype=np.int64),
+        np.asarray(surfels, dtype=np.int64),
+        np.ascontiguousarray(state.positions, dtype=np.float64),
+        np.ascontiguousarray(state.normals, dtype=np.float64),
+        float(tangential),
+        out,
+    )
+    return out
+
+
+@numba.njit(cache=True, nogil=True)
+def _rho_squared(points, frames, surfels, positions, normals, tangential, out):
+    """:func:`_squared_distance` in one pass (numpy's gathers and temporaries took 18 ms for
+    crane's 16-frame merge, 229,375 points), in numpy's order of operations."""
+    for d in range(len(points)):
+        f = frames[d]
+        s = surfels[d]
+        o0 = points[d, 0] - positions[f, s, 0]
+        o1 = points[d, 1] - positions[f, s, 1]
+        o2 = points[d, 2] - positions[f, s, 2]
+        n0 = normals[f, s, 0]
+        n1 = normals[f, s, 1]
+        n2 = normals[f, s, 2]
+        length = max(np.sqrt(n0 * n0 + n1 * n1 + n2 * n2), 1e-300)
+        along = o0 * (n0 / length) + o1 * (n1 / length) + o2 * (n2 / length)
+        out[d] = (1.0 - tangential) * along**2 + tangential * (o0 * o0 + o1 * o1 + o2 * o2)
 
 
 def match_term(

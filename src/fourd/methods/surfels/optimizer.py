@@ -146,7 +146,7 @@ def gauss_newton(
         scale = 1.0
         for _ in range(options.halvings + 1):
             trial = retract(state, scale * step)
-            again = associate(trial, data, topology.radius, match)
+            again = associate(trial, data, topology.radius, match, previous=matches)
             value = total_energy(
                 trial, topology, data, again, weights, match, derivatives=False, urshape=urshape
             ).value
