@@ -7,7 +7,12 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
-from fourd.geometry.sparse_products import csr_product, galerkin_product, multiply_add
+from fourd.geometry.sparse_products import (
+    csr_product,
+    galerkin_product,
+    multiply_add,
+    symmetric_multiply,
+)
 
 
 def test_csr_product_matches_scipy():
@@ -86,3 +91,30 @@ def test_multiply_add_matches_scipy():
     assert np.allclose(out, expected, rtol=0, atol=1e-10)
     with pytest.raises(ValueError, match="CSR"):
         multiply_add(P.tocsc(), x[:40], out)
+
+
+def test_the_upper_triangle_of_a_symmetric_product_and_its_multiplication():
+    """``a.T @ a`` kept on and above the diagonal, and the symmetric product read from it: the
+    whole matrix's, on one core and on all to the last bit."""
+    a = sp.random(3000, 700, density=0.01, random_state=7, format="csr")
+    full = (a.T @ a).tocsr()
+    upper = csr_product(a.T.tocsr(), a, upper=True)
+    assert sp.tril(upper, k=-1).nnz == 0
+    assert abs(upper - sp.triu(full)).max() <= 1e-12 * abs(full).max()
+    added = csr_product(a.T.tocsr(), a, add=sp.eye(700, format="csr") * 3.0, upper=True)
+    assert abs(added - sp.triu(full + 3.0 * sp.eye(700))).max() <= 1e-12 * abs(full).max()
+    x = np.random.default_rng(3).standard_normal(700)
+    results = []
+    previous = numba.get_num_threads()
+    try:
+        for threads in (1, previous):
+            numba.set_num_threads(threads)
+            results.append(symmetric_multiply(upper, x))
+    finally:
+        numba.set_num_threads(previous)
+    assert np.array_equal(results[0], results[1])
+    assert np.allclose(results[0], full @ x, rtol=0, atol=1e-12 * abs(full @ x).max())
+    out = np.empty(700)
+    assert symmetric_multiply(upper, x, out) is out and np.array_equal(out, results[0])
+    with pytest.raises(ValueError, match="square"):
+        symmetric_multiply(upper, x[:10])

@@ -3,6 +3,7 @@
 
 import numpy as np
 import pytest
+import scipy.sparse as sp
 
 from fourd.methods.surfels import (
     AnchorData,
@@ -181,7 +182,10 @@ def test_energy_sums_its_terms():
     ]
     assert total.value == pytest.approx(sum(p.value for p in parts), rel=1e-12)
     assert np.allclose(total.gradient, sum(p.gradient for p in parts), rtol=1e-10, atol=1e-12)
-    assert abs(total.hessian - sum(p.hessian for p in parts)).max() < 1e-10
+    # the energy keeps the Hessian's upper triangle, the diagonal included
+    full = sum(p.hessian for p in parts)
+    assert abs(total.hessian - sp.triu(full)).max() < 1e-10
+    assert sp.tril(total.hessian, k=-1).nnz == 0
     assert set(total.terms) == {
         "match",
         "smooth_position",

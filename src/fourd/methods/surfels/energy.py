@@ -72,7 +72,9 @@ class Energy:
         Value of each term included (``match``, ``smooth_position``, ..., ``accel``).
     gradient : float64 [n] or None
     hessian : csr_matrix [n, n] or None
-        Gauss-Newton approximation (sum of ``2 J^T J``).
+        Gauss-Newton approximation (sum of ``2 J^T J``), its entries on and above the
+        diagonal only (the rest by symmetry: half the memory, and the conjugate gradients'
+        products read half, :func:`~fourd.geometry.sparse_products.symmetric_multiply`).
     """
 
     value: float
@@ -184,6 +186,6 @@ def total_energy(
     gradient = 2.0 * (transposed @ residuals)
     # on all cores (scipy's product runs on one): the top merges and the final optimisation
     # run alone
-    hessian = csr_product(transposed, jacobian)
+    hessian = csr_product(transposed, jacobian, upper=True)
     hessian.data *= 2.0
     return Energy(total, values, gradient, hessian)

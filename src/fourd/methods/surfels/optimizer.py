@@ -18,7 +18,7 @@ import numba
 import numpy as np
 import scipy.sparse as sp
 
-from fourd.geometry.sparse_products import multiply_add
+from fourd.geometry.sparse_products import multiply_add, symmetric_multiply
 from fourd.methods.surfels.energy import Weights, total_energy
 from fourd.methods.surfels.match import Data, MatchOptions, associate
 from fourd.methods.surfels.state import Layout, SurfelState, layout, retract
@@ -186,7 +186,8 @@ def solve_step(
 ) -> tuple[np.ndarray, int]:
     """The damped Gauss-Newton step ``-(H + damping diag H)^-1 g`` [n] by preconditioned CG,
     over the unknowns the energy depends on (and, given ``free`` bool [n], only those; the
-    others stay 0), and the CG iteration count.
+    others stay 0), and the CG iteration count. ``hessian`` holds ``H``'s entries on and
+    above the diagonal (:class:`~.energy.Energy`).
 
     With ``columns`` (int [k], sorted), ``hessian`` [k, k] and ``gradient`` [k] are already
     restricted to those unknowns of the layout (:func:`~.energy.total_energy` ``columns``).
@@ -229,14 +230,15 @@ def conjugate_gradients(
     tolerance: float,
     iterations: int,
 ) -> tuple[np.ndarray, int]:
-    """Preconditioned conjugate gradients for ``matrix x = rhs`` from ``x = 0``, stopping at
+    """Preconditioned conjugate gradients for ``matrix x = rhs`` (``matrix`` symmetric,
+    given by its entries on and above the diagonal) from ``x = 0``, stopping at
     ``|r| <= tolerance |rhs|`` or after ``iterations``; the solution and the iterations run.
     A plain loop of sparse products and ``einsum`` dots: scipy's ``cg`` spent 2.7 ms per
     iteration on its own bookkeeping against 0.5 ms for the product on a merge of 1,300
     surfels, and a threaded BLAS ``x @ x`` of 30,000 entries took 18 ms on the loaded 2-core
     machine against 14 us for ``einsum``. The products run on all cores
-    (:func:`~fourd.geometry.sparse_products.multiply_add`; scipy's on one), with the same
-    result on any number of them."""
+    (:func:`~fourd.geometry.sparse_products.symmetric_multiply` and ``multiply_add``;
+    scipy's on one), with the same result on any number of them."""
     x = np.zeros_like(rhs)
     r = rhs.copy()
     goal = tolerance * np.sqrt(_dot(rhs, rhs))
@@ -249,8 +251,7 @@ def conjugate_gradients(
     done = 0
     while done < iterations:
         done += 1
-        q.fill(0.0)
-        multiply_add(matrix, p, q)
+        symmetric_multiply(matrix, p, q)
         curvature = _dot(p, q)
         if curvature <= 0.0:
             break
@@ -274,7 +275,8 @@ def _dot(a: np.ndarray, b: np.ndarray) -> float:
 
 
 def _block_jacobi(system: sp.csr_matrix, free: np.ndarray, lay: Layout) -> sp.csr_matrix:
-    """Inverse diagonal blocks of ``system`` (rows and columns ``free`` of the full layout):
+    """Inverse diagonal blocks of ``system`` (rows and columns ``free`` of the full layout; its
+    entries on and above the diagonal, or all):
     one block per unknown (3 position, 2 normal offset or 3 rotation entries), restricted to
     its free entries."""
     unknown = np.empty(lay.size, dtype=np.int64)
@@ -307,13 +309,15 @@ def _block_jacobi(system: sp.csr_matrix, free: np.ndarray, lay: Layout) -> sp.cs
 
 @numba.njit(cache=True, nogil=True)
 def _diagonal_blocks(indptr, indices, data, owner, group, member, blocks):
-    """``blocks[group[r], member[r], member[c]] = system[r, c]`` for every stored entry of a
-    CSR system whose row ``r`` and column ``c`` belong to one unknown (``owner``)."""
+    """``blocks[group[r], member[r], member[c]] = system[r, c]``, and its mirror, for every
+    stored entry of a symmetric CSR system whose row ``r`` and column ``c`` belong to one
+    unknown (``owner``)."""
     for row in range(len(indptr) - 1):
         for k in range(indptr[row], indptr[row + 1]):
             column = indices[k]
             if owner[column] == owner[row]:
                 blocks[group[row], member[row], member[column]] = data[k]
+                blocks[group[row], member[column], member[row]] = data[k]
 
 
 def free_unknowns(
