@@ -9,6 +9,7 @@ import scipy.sparse as sp
 
 from fourd.geometry.sparse_products import (
     csr_product,
+    csr_transpose,
     galerkin_product,
     multiply_add,
     symmetric_multiply,
@@ -118,3 +119,20 @@ def test_the_upper_triangle_of_a_symmetric_product_and_its_multiplication():
     assert symmetric_multiply(upper, x, out) is out and np.array_equal(out, results[0])
     with pytest.raises(ValueError, match="square"):
         symmetric_multiply(upper, x[:10])
+
+
+def test_the_transpose_is_scipys():
+    """Rows of increasing columns, the same arrays as ``a.T.tocsr()``, also with empty rows
+    and columns and rows that are not sorted."""
+    a = sp.random(5000, 900, density=0.004, random_state=8, format="csr")
+    a = sp.csr_matrix(a.multiply(np.arange(5000)[:, None] % 7 != 0))
+    a.indices[a.indptr[3] : a.indptr[4]] = a.indices[a.indptr[3] : a.indptr[4]][::-1]
+    a.has_sorted_indices = False
+    transposed = csr_transpose(a)
+    expected = a.T.tocsr()
+    expected.sort_indices()
+    assert transposed.shape == (900, 5000) and transposed.has_sorted_indices
+    assert np.array_equal(transposed.indptr, expected.indptr)
+    assert np.array_equal(transposed.indices, expected.indices)
+    assert np.array_equal(transposed.data, expected.data)
+    assert csr_transpose(sp.csr_matrix((0, 4))).shape == (4, 0)

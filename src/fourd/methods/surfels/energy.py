@@ -9,7 +9,7 @@ from dataclasses import dataclass, fields
 import numpy as np
 import scipy.sparse as sp
 
-from fourd.geometry.sparse_products import csr_product
+from fourd.geometry.sparse_products import csr_product, csr_transpose
 from fourd.methods.surfels.anchors import anchor_term
 from fourd.methods.surfels.color_guide import guide_term
 from fourd.methods.surfels.match import Data, Matches, MatchOptions, match_term
@@ -182,7 +182,7 @@ def total_energy(
         ]
     jacobian = sp.vstack(jacobians, format="csr")
     del jacobians
-    transposed = jacobian.T.tocsr()
+    transposed = csr_transpose(jacobian)
     gradient = 2.0 * (transposed @ residuals)
     # on all cores (scipy's product runs on one): the top merges and the final optimisation
     # run alone
