@@ -125,10 +125,29 @@ def _renumbered(
     columns = np.asarray(columns, dtype=np.int64)
     renumber = np.full(width, -1, dtype=np.int64)
     renumber[columns] = np.arange(len(columns))
-    renumbered = renumber[indices]
-    kept = renumbered >= 0
-    before = np.concatenate([[0], np.cumsum(kept)])
-    return renumbered[kept].astype(indices.dtype), before[indptr].astype(indptr.dtype), kept
+    kept_indices = np.empty(len(indices), dtype=indices.dtype)
+    kept_indptr = np.empty(len(indptr), dtype=indptr.dtype)
+    kept = np.empty(len(indices), dtype=bool)
+    count = _renumber(indices, indptr, renumber, kept_indices, kept_indptr, kept)
+    return kept_indices[:count].copy(), kept_indptr, kept
+
+
+@numba.njit(cache=True, nogil=True)
+def _renumber(indices, indptr, renumber, kept_indices, kept_indptr, kept):
+    """:func:`_renumbered` in one pass over the entries (numpy's gather, mask, cumulative
+    sum and compaction took 7 of crane's 130 s, every hole filling frame's columns); returns
+    the kept entries' count."""
+    count = 0
+    kept_indptr[0] = 0
+    for row in range(len(indptr) - 1):
+        for k in range(indptr[row], indptr[row + 1]):
+            column = renumber[indices[k]]
+            kept[k] = column >= 0
+            if column >= 0:
+                kept_indices[count] = column
+                count += 1
+        kept_indptr[row + 1] = count
+    return count
 
 
 def index_type(*sizes: int) -> type:
