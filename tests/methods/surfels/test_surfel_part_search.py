@@ -80,3 +80,48 @@ def test_the_alignment_follows_the_part_the_search_found():
     search = PartSearch(6 * SAMPLING, SAMPLING, 6 * SAMPLING, 0.2)
     assert _aligned_limb(search) < 0.25 * SAMPLING  # measured: 0.04
     assert _aligned_limb(None) > SAMPLING  # nearest points alone leave it behind (measured 5.0)
+
+
+def test_each_parts_offset_is_the_first_best_of_the_translation_grid():
+    """:func:`part_offsets` (every translation's surfels at once, on a grid of the points)
+    against the search it replaced, one k-d tree query per translation in the grid's order,
+    the first best kept; a part whose points lie at a known offset finds that offset."""
+    from scipy.spatial import cKDTree
+
+    from fourd.methods.surfels.part_search import MAX_ANGLE, part_offsets
+
+    rng = np.random.default_rng(0)
+    points = rng.uniform(0, 1, (20000, 3))
+    point_normals = rng.normal(size=(20000, 3))
+    point_normals /= np.linalg.norm(point_normals, axis=1, keepdims=True)
+    positions = rng.uniform(0.2, 0.8, (1500, 3))
+    normals = rng.normal(size=(1500, 3))
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    label = rng.integers(0, 7, 1500)
+    tree = cKDTree(points)
+    step, reach = 0.02, 0.12
+    steps = int(np.floor(reach / step))
+    axis = np.arange(-steps, steps + 1) * step
+    grid = np.stack(np.meshgrid(axis, axis, axis, indexing="ij"), axis=-1).reshape(-1, 3)
+    length = np.linalg.norm(grid, axis=1)
+    grid = grid[np.argsort(length, kind="stable")]
+    grid = grid[np.linalg.norm(grid, axis=1) <= reach + 1e-9 * step]
+    best, expected = np.full(7, -1.0), np.zeros((7, 3))
+    for offset in grid:
+        distance, nearest = tree.query(positions + offset, distance_upper_bound=0.5 * step)
+        near = np.isfinite(distance)
+        near[near] = np.einsum(
+            "ij,ij->i", normals[near], point_normals[nearest[near]]
+        ) >= np.cos(np.radians(MAX_ANGLE))
+        score = np.bincount(label, weights=near, minlength=7)
+        better = score > best
+        best[better], expected[better] = score[better], offset
+    np.testing.assert_array_equal(part_offsets(positions, normals, label, tree, point_normals,
+                                               step, reach), expected)
+    # one part's surfels are the points moved back by a grid offset: that offset is its best
+    shift = np.array([0.04, -0.02, 0.06])
+    part = positions[label == 3]
+    mine = np.r_[points, part + shift]
+    found = part_offsets(part, normals[label == 3], np.zeros(len(part), dtype=np.int64),
+                         cKDTree(mine), np.r_[point_normals, normals[label == 3]], step, reach)
+    np.testing.assert_allclose(found[0], shift, atol=1e-12)

@@ -32,10 +32,13 @@ from scipy.sparse.csgraph import dijkstra
 from scipy.spatial import cKDTree
 
 from fourd.geometry.icp import rigid_icp
+from fourd.geometry.neighbors import bucket_grid, nearest_within
 from fourd.methods.surfels.topology import Topology, sample_surfels
 
 #: Normals of a surfel and its data point agree within this many degrees.
 MAX_ANGLE = 45.0
+#: Queries per batch of :func:`part_offsets`' translations (memory: 40 bytes each).
+OFFSET_QUERIES = 1_000_000
 #: Parts with fewer surfels are not searched (a rigid fit needs a few).
 MIN_PART = 6
 
@@ -145,14 +148,32 @@ def part_offsets(
     order = np.argsort(length, kind="stable")
     grid = grid[order[length[order] <= reach + 1e-9 * step]]
     parts = int(label.max()) + 1
-    best = np.full(parts, -1.0)
-    offsets = np.zeros((parts, 3))
-    for offset in grid:
-        near = _near_data(positions + offset, normals, tree, data_normals, 0.5 * step)
-        score = np.bincount(label, weights=near, minlength=parts)
-        better = score > best
-        best[better], offsets[better] = score[better], offset
-    return offsets
+    # every offset's surfels at once on a grid of the points (a k-d tree query per offset
+    # took 4.4 of crane's 130 s): the nearest point within step / 2, its normal agreeing
+    buckets, origin, side = bucket_grid(tree.data, 0.5 * step)
+    score = np.zeros((len(grid), parts))
+    chunk = max(1, OFFSET_QUERIES // max(1, len(positions)))
+    cosine = np.cos(np.radians(MAX_ANGLE))
+    for first in range(0, len(grid), chunk):
+        shifts = grid[first : first + chunk]
+        queries = (positions[None, :, :] + shifts[:, None, :]).reshape(-1, 3)
+        bounds = np.full(len(queries), 0.5 * step)
+        nearest, unsearched = nearest_within(buckets, origin, side, queries, bounds)
+        if unsearched.any():
+            distance, found = tree.query(queries[unsearched], distance_upper_bound=0.5 * step)
+            nearest[unsearched] = np.where(np.isfinite(distance), found, -1)
+        hit = np.flatnonzero(nearest >= 0)
+        surfel = hit % len(positions)
+        near = np.zeros(len(queries))
+        near[hit] = np.einsum("ij,ij->i", normals[surfel], data_normals[nearest[hit]]) >= cosine
+        which = np.repeat(np.arange(len(shifts)), len(positions)) * parts + np.tile(
+            label, len(shifts)
+        )
+        score[first : first + len(shifts)] = np.bincount(
+            which, weights=near, minlength=len(shifts) * parts
+        ).reshape(len(shifts), parts)
+    # the first offset of the best score, the grid being by increasing length
+    return grid[np.argmax(score, axis=0)]
 
 
 def part_search(
