@@ -89,7 +89,9 @@ class _Enough(Exception):
     pass
 
 
-def capture() -> None:
+def capture_merges(ranges: list, path: Path) -> None:
+    """Pickle into ``path`` the inputs (left, right, frames, schedule) of the bench's crane
+    merges whose ``(left.start, right.stop)`` are in ``ranges``, stopping the run there."""
     import fourd
     import fourd.methods.surfels.assembly as assembly
 
@@ -97,10 +99,10 @@ def capture() -> None:
     merge, kept = assembly.merge, []
 
     def keep(left, right, frames, schedule, **kwargs):
-        if (left.start, right.stop) in KEPT:
+        if (left.start, right.stop) in ranges:
             kept.append((left, right, frames, schedule))
-            if len(kept) == len(KEPT):
-                PAIRS.write_bytes(pickle.dumps(kept))
+            if len(kept) == len(ranges):
+                path.write_bytes(pickle.dumps(kept))
                 raise _Enough
         return merge(left, right, frames, schedule, **kwargs)
 
@@ -108,7 +110,13 @@ def capture() -> None:
     try:
         fourd.reconstruct(scans, method="surfels", workers=1)
     except _Enough:
-        print(f"{len(kept)} merges kept in {PAIRS}")
+        print(f"{len(kept)} merges kept in {path}")
+    finally:
+        assembly.merge = merge
+
+
+def capture() -> None:
+    capture_merges(KEPT, PAIRS)
 
 
 def pair(mode: str) -> None:

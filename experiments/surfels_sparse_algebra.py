@@ -41,37 +41,18 @@ import time
 from pathlib import Path
 
 import numpy as np
+from surfels_side_by_side import capture_merges
 
 MERGE = Path("/tmp/surfels_sparse_algebra_merge.pkl")
 SYSTEM = Path("/tmp/surfels_sparse_algebra_system.pkl")
 
 
-class _Enough(Exception):
-    pass
-
-
 def capture() -> None:
-    import fourd
-    import fourd.methods.surfels.assembly as assembly
     import fourd.methods.surfels.energy as energy
     import fourd.methods.surfels.optimizer as optimizer
-    from fourd.bench.suite import BenchScene, scan_scene
+    from fourd.methods.surfels.assembly import merge
 
-    scans = scan_scene(BenchScene("crane", frames=20, options={"start": 0, "step": 2}))[1]
-    merge = assembly.merge
-
-    def keep(left, right, frames, schedule, **kwargs):
-        if (left.start, right.stop) == (0, 16):
-            MERGE.write_bytes(pickle.dumps((left, right, frames, schedule)))
-            raise _Enough
-        return merge(left, right, frames, schedule, **kwargs)
-
-    assembly.merge = keep
-    try:
-        fourd.reconstruct(scans, method="surfels", workers=1)
-    except _Enough:
-        pass
-    assembly.merge = merge
+    capture_merges([(0, 16)], MERGE)
     kept: dict = {}
     product, associate = energy.csr_product, optimizer.associate
 
@@ -87,7 +68,7 @@ def capture() -> None:
         return associate(state, data, scale, match, **kwargs)
 
     energy.csr_product, optimizer.associate = keep_product, keep_association
-    merge(*pickle.loads(MERGE.read_bytes()))
+    merge(*pickle.loads(MERGE.read_bytes())[0])
     SYSTEM.write_bytes(pickle.dumps(kept))
     print(f"kept {MERGE} and {SYSTEM}")
 
@@ -95,7 +76,7 @@ def capture() -> None:
 def time_merge() -> None:
     from fourd.methods.surfels.assembly import merge
 
-    job = pickle.loads(MERGE.read_bytes())
+    job = pickle.loads(MERGE.read_bytes())[0]
     for _ in range(2):
         started = time.perf_counter()
         merge(*job)

@@ -95,6 +95,16 @@ def csr_product(
     return _triple_product(identity, a, b, add, dtype, a.indptr + add.indptr, upper)
 
 
+@numba.njit(cache=True, inline="always")
+def _new_column(col, row, marker, upper):
+    """1 when column ``col`` is new to ``row`` (marked now) and kept (``upper``: ``col >=
+    row``), else 0."""
+    if (upper and col < row) or marker[col] == row:
+        return 0
+    marker[col] = row
+    return 1
+
+
 @numba.njit(cache=True, parallel=True)
 def _triple_lengths(
     r_indptr, r_indices, a_indptr, a_indices, p_indptr, p_indices, d_indptr, d_indices,
@@ -107,23 +117,13 @@ def _triple_lengths(
         for row in range(bounds[c], bounds[c + 1]):
             count = 0
             for dd in range(d_indptr[row], d_indptr[row + 1]):
-                col = d_indices[dd]
-                if upper and col < row:
-                    continue
-                if marker[col] != row:
-                    marker[col] = row
-                    count += 1
+                count += _new_column(d_indices[dd], row, marker, upper)
             for ii in range(r_indptr[row], r_indptr[row + 1]):
                 i = r_indices[ii]
                 for kk in range(a_indptr[i], a_indptr[i + 1]):
                     k = a_indices[kk]
                     for pp in range(p_indptr[k], p_indptr[k + 1]):
-                        col = p_indices[pp]
-                        if upper and col < row:
-                            continue
-                        if marker[col] != row:
-                            marker[col] = row
-                            count += 1
+                        count += _new_column(p_indices[pp], row, marker, upper)
             lengths[row] = count
     return lengths
 
