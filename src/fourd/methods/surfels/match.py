@@ -261,7 +261,8 @@ def _squared_distance(state, data, surfels, tangential):
 @numba.njit(cache=True, nogil=True)
 def _rho_squared(points, frames, surfels, positions, normals, tangential, out):
     """:func:`_squared_distance` in one pass (numpy's gathers and temporaries took 18 ms for
-    crane's 16-frame merge, 229,375 points), in numpy's order of operations."""
+    crane's 16-frame merge, 229,375 points, against 2.5 ms here; the dot products summed in
+    order, where numpy's ``einsum`` rounds differently by up to 1e-18)."""
     for d in range(len(points)):
         f = frames[d]
         s = surfels[d]
