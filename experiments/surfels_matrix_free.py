@@ -52,8 +52,8 @@ def best_of(run, repeats: int = 5) -> float:
 
 
 def step_system():
-    """The step-cost problem's first Gauss-Newton system: its state, Hessian and stacked
-    Jacobian."""
+    """The step-cost problem's first Gauss-Newton system: its state, whole Hessian and
+    stacked Jacobian."""
     state, topology, data, weights, match, options, kw = _load()
     columns = None if kw.get("free") is None else np.flatnonzero(kw["free"])
     matches = associate(state, data, topology.radius, match)
@@ -63,7 +63,9 @@ def step_system():
         urshape=kw.get("urshape", False),
     )
     energy_module.sp = recording.module
-    return state, energy.hessian, recording.stacked
+    # the energy keeps the Hessian's upper triangle (since d08e99a): the whole matrix here
+    upper = energy.hessian
+    return state, (upper + recording.module.triu(upper, k=1).T).tocsr(), recording.stacked
 
 
 def main() -> None:

@@ -11,6 +11,11 @@ Answer (2-core Intel Xeon, nothing else running, 2026-12-06 at ee7dce6; the step
 and 8.94 ms compiled on 2 threads (bit-identical); ``J^T J`` 0.21 s in scipy and 0.27 s
 compiled (a row-parallel Gustavson product with a dense accumulator per thread, both passes).
 Both are bound by memory bandwidth, which the two cores share; scipy stays.
+
+Later (2026-12-07, a 2-core AMD EPYC compiled for ``znver4``, on crane's 8 + 8 merge): there
+the row-parallel product gained 24.3 -> 18.1 ms, ``J^T J`` about twice, and the Hessian's
+upper triangle alone (half the bytes) 8.8 ms; ``surfels`` uses all three
+(``fourd.geometry.sparse_products``, ``experiments/surfels_sparse_algebra.py``).
 """
 
 from __future__ import annotations
