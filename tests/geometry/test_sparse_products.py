@@ -8,6 +8,7 @@ import pytest
 import scipy.sparse as sp
 
 from fourd.geometry.sparse_products import (
+    SYMMETRIC_CHUNKS,
     csr_product,
     csr_transpose,
     galerkin_product,
@@ -62,22 +63,32 @@ def test_galerkin_product_matches_scipy():
         galerkin_product(p, a, p)
 
 
-def test_products_do_not_depend_on_the_number_of_threads():
-    """Each row is summed by one thread in one order: the same bits on one core and on all."""
-    b = sp.random(2000, 1500, density=0.01, random_state=6, format="csr")
-    x = np.random.default_rng(2).standard_normal(1500)
-    runs = []
+def _on_one_thread_and_all(run):
+    """``run()``'s results with one numba thread and with all of them."""
+    results = []
     previous = numba.get_num_threads()
     try:
         for threads in (1, previous):
             numba.set_num_threads(threads)
-            product = csr_product(b.T.tocsr(), b)
-            out = np.zeros(2000)
-            multiply_add(b, x, out)
-            runs.append((product, out))
+            results.append(run())
     finally:
         numba.set_num_threads(previous)
-    (one, out_one), (all_, out_all) = runs
+    return results
+
+
+def _product_and_multiplication(b, x):
+    out = np.zeros(b.shape[0])
+    multiply_add(b, x, out)
+    return csr_product(b.T.tocsr(), b), out
+
+
+def test_products_do_not_depend_on_the_number_of_threads():
+    """Each row is summed by one thread in one order: the same bits on one core and on all."""
+    b = sp.random(2000, 1500, density=0.01, random_state=6, format="csr")
+    x = np.random.default_rng(2).standard_normal(1500)
+    (one, out_one), (all_, out_all) = _on_one_thread_and_all(
+        lambda: _product_and_multiplication(b, x)
+    )
     assert np.array_equal(one.indptr, all_.indptr) and np.array_equal(one.indices, all_.indices)
     assert np.array_equal(one.data, all_.data) and np.array_equal(out_one, out_all)
 
@@ -105,18 +116,16 @@ def test_the_upper_triangle_of_a_symmetric_product_and_its_multiplication():
     added = csr_product(a.T.tocsr(), a, add=sp.eye(700, format="csr") * 3.0, upper=True)
     assert abs(added - sp.triu(full + 3.0 * sp.eye(700))).max() <= 1e-12 * abs(full).max()
     x = np.random.default_rng(3).standard_normal(700)
-    results = []
-    previous = numba.get_num_threads()
-    try:
-        for threads in (1, previous):
-            numba.set_num_threads(threads)
-            results.append(symmetric_multiply(upper, x))
-    finally:
-        numba.set_num_threads(previous)
+    results = _on_one_thread_and_all(lambda: symmetric_multiply(upper, x))
     assert np.array_equal(results[0], results[1])
     assert np.allclose(results[0], full @ x, rtol=0, atol=1e-12 * abs(full @ x).max())
     out = np.empty(700)
     assert symmetric_multiply(upper, x, out) is out and np.array_equal(out, results[0])
+    # work rows handed in, full of earlier values: the same product
+    partial = np.full((SYMMETRIC_CHUNKS, 700), 7.0)
+    assert np.array_equal(symmetric_multiply(upper, x, None, partial), results[0])
+    with pytest.raises(ValueError, match="partial"):
+        symmetric_multiply(upper, x, None, partial[:, :10])
     with pytest.raises(ValueError, match="square"):
         symmetric_multiply(upper, x[:10])
 

@@ -18,7 +18,7 @@ import numba
 import numpy as np
 import scipy.sparse as sp
 
-from fourd.geometry.sparse_products import multiply_add, symmetric_multiply
+from fourd.geometry.sparse_products import SYMMETRIC_CHUNKS, multiply_add, symmetric_multiply
 from fourd.methods.surfels.energy import Weights, total_energy
 from fourd.methods.surfels.match import Data, MatchOptions, associate
 from fourd.methods.surfels.state import Layout, SurfelState, layout, retract
@@ -247,11 +247,13 @@ def conjugate_gradients(
     z = preconditioner @ r
     p = z.copy()
     q = np.empty_like(rhs)
+    # the product's work rows, allocated once for every iteration
+    partial = np.empty((SYMMETRIC_CHUNKS, len(rhs)))
     rz = _dot(r, z)
     done = 0
     while done < iterations:
         done += 1
-        symmetric_multiply(matrix, p, q)
+        symmetric_multiply(matrix, p, q, partial)
         curvature = _dot(p, q)
         if curvature <= 0.0:
             break
