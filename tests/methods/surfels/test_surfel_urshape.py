@@ -12,6 +12,9 @@ from fourd.methods.surfels import (
     build_topology,
     fit_urshape,
     frame_data,
+    free_unknowns,
+    gauss_newton,
+    layout,
     surfel_mesh,
     surfel_state,
     with_urshape,
@@ -126,3 +129,33 @@ def test_an_urshape_fitted_alone_leaves_the_trajectories_as_they_were():
     relative = fit.urshape.rotations[2, right] @ fit.urshape.rotations[0, right].swapaxes(1, 2)
     turned = np.degrees(np.arccos(np.clip((np.trace(relative, axis1=1, axis2=2) - 1) / 2, -1, 1)))
     assert np.median(np.abs(turned - 40.0)) < 2.0
+
+
+def test_an_urshape_fitted_alone_is_the_one_the_data_would_give():
+    """Held trajectories make the data and acceleration constants, which the fit leaves out:
+    the steps are those of the whole energy."""
+    truth, normals, data = _folding_sheet(3)
+    topology = build_topology(truth, 2.2 * SPACING, reference=0, max_stretch=None)
+    state = surfel_state(truth, normals, fit_rotations(truth, topology))
+    weights = energy_weights(Options(), NOISE, SPACING)
+    match = MatchOptions(tangential=0.05)
+    options = GaussNewtonOptions(iterations=2, cg_tolerance=1e-3, cg_iterations=50)
+    fit = fit_urshape(
+        state, topology, frame_data(data), weights, match, options, joint=False
+    )
+    joined = with_urshape(state, Urshape(truth[0], normals[0], np.zeros((3, 273, 3, 3))))
+    joined = surfel_state(
+        joined.positions, joined.normals, fit_rotations(joined.positions, topology, urshape=True)
+    )
+    surfels = np.zeros((4, 273), dtype=bool)
+    surfels[0] = True
+    free = free_unknowns(layout(joined), surfels, np.ones((3, 273), dtype=bool))
+    shifted = frame_data([np.zeros((0, 3))] + list(data))
+    whole = gauss_newton(
+        joined, topology, shifted, weights, match, options, free=free, urshape=True
+    )
+    assert len(whole.cg_iterations) == len(fit.optimization.cg_iterations) == 2
+    assert np.allclose(fit.urshape.positions, whole.state.positions[0], atol=1e-9 * SPACING)
+    assert np.allclose(fit.urshape.rotations, whole.state.rotations, atol=1e-9)
+    # the data's share is a constant: the two energies differ by it alone
+    assert np.ptp(whole.energies - fit.optimization.energies) < 1e-9 * whole.energies[0]
