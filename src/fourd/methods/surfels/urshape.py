@@ -109,7 +109,7 @@ def fit_urshape(
         free = free_unknowns(layout(joined), surfels, rotations)
         # with the trajectories held, the data, anchors, guides and acceleration are
         # constants: left out, the steps are the same and each line-search trial no longer
-        # associates every frame's data (crane's final urshape: 5.3-6.3 -> 4.4-5.4 s)
+        # associates every frame's data (benchmarks/METHODS.md)
         shifted = _no_data()
         weights = replace(weights or Weights(), accel=0.0, accel_normal=0.0)
     result = gauss_newton(
