@@ -122,11 +122,14 @@ def _near_data(positions, normals, tree, data_normals, within):
     """Bool [S]: a data point lies within ``within`` of each surfel, its normal agreeing."""
     distance, nearest = tree.query(positions, distance_upper_bound=within)
     near = np.isfinite(distance)
-    near[near] = (
-        np.einsum("ij,ij->i", normals[near], data_normals[nearest[near]])
-        >= np.cos(np.radians(MAX_ANGLE))
-    )
+    near[near] = _agree(normals[near], data_normals[nearest[near]])
     return near
+
+
+def _agree(normals: np.ndarray, data_normals: np.ndarray) -> np.ndarray:
+    """Bool [N]: each of ``normals`` [N, 3] within :data:`MAX_ANGLE` of its ``data_normals``
+    [N, 3] (unit)."""
+    return np.einsum("ij,ij->i", normals, data_normals) >= np.cos(np.radians(MAX_ANGLE))
 
 
 def part_offsets(
@@ -153,7 +156,6 @@ def part_offsets(
     buckets, origin, side = bucket_grid(tree.data, 0.5 * step)
     score = np.zeros((len(grid), parts))
     chunk = max(1, OFFSET_QUERIES // max(1, len(positions)))
-    cosine = np.cos(np.radians(MAX_ANGLE))
     for first in range(0, len(grid), chunk):
         shifts = grid[first : first + chunk]
         queries = (positions[None, :, :] + shifts[:, None, :]).reshape(-1, 3)
@@ -165,7 +167,7 @@ def part_offsets(
         hit = np.flatnonzero(nearest >= 0)
         surfel = hit % len(positions)
         near = np.zeros(len(queries))
-        near[hit] = np.einsum("ij,ij->i", normals[surfel], data_normals[nearest[hit]]) >= cosine
+        near[hit] = _agree(normals[surfel], data_normals[nearest[hit]])
         which = np.repeat(np.arange(len(shifts)), len(positions)) * parts + np.tile(
             label, len(shifts)
         )

@@ -23,7 +23,7 @@ from typing import NamedTuple
 import numpy as np
 
 from fourd.methods.surfels.energy import Weights
-from fourd.methods.surfels.match import Data, MatchOptions
+from fourd.methods.surfels.match import Data, MatchOptions, frame_data
 from fourd.methods.surfels.motion import fit_rotations
 from fourd.methods.surfels.optimizer import (
     GaussNewtonOptions,
@@ -110,7 +110,7 @@ def fit_urshape(
         # with the trajectories held, the data, anchors, guides and acceleration are
         # constants: left out, the steps are the same and each line-search trial no longer
         # associates every frame's data (benchmarks/METHODS.md)
-        shifted = _no_data()
+        shifted = frame_data([np.zeros((0, 3))])
         weights = replace(weights or Weights(), accel=0.0, accel_normal=0.0)
     result = gauss_newton(
         joined, topology, shifted, weights, match, options, free=free, urshape=True
@@ -124,11 +124,6 @@ def fit_urshape(
     return UrshapeFit(
         trajectories, Urshape(fitted.positions[0], fitted.normals[0], reach), result
     )
-
-
-def _no_data() -> Data:
-    """Data without points."""
-    return Data(np.zeros((0, 3)), np.zeros(0, np.int64), np.zeros(0), np.zeros((0, 3)))
 
 
 def with_urshape(state: SurfelState, urshape: Urshape) -> SurfelState:
