@@ -1,14 +1,19 @@
 """Gauss-Newton on the surfel energy: steps descend, data alone puts surfels on a noisy plane
 at the noise of their data's mean, and a rigid motion is recovered as a rigid motion."""
 
+from dataclasses import replace
+
 import numpy as np
+import pytest
 import scipy.sparse as sp
 import scipy.sparse.linalg as sla
 
 from fourd.geometry.normals import estimate_normals
 from fourd.geometry.rotations import procrustes
 from fourd.methods.surfels import (
+    AnchorData,
     GaussNewtonOptions,
+    GuideData,
     MatchOptions,
     Weights,
     associate,
@@ -101,7 +106,7 @@ def test_patterns_carried_between_calls_leave_the_optimisation_as_it_was():
             state, graph, data, ALL_TERMS, options=options, free=unknowns, patterns=carried
         )
         assert carried.columns == np.flatnonzero(unknowns).tobytes()
-        assert set(carried.full) == set(carried.restricted) == {
+        assert {name for name, _ in carried.full} == set(carried.restricted) == {
             "smooth_position", "smooth_normal", "laplace", "rigid", "accel"
         }
         # the Hessians agree to rounding (summed in another order), which the conjugate
@@ -203,3 +208,41 @@ def test_a_rigid_motion_is_recovered_as_rigid():
         assert error <= 0.5 and fit.rms <= noise
         assert drift.max() <= 0.05 * sampling
         assert np.percentile(local, 95) <= 0.75 and local.max() <= 2.0
+
+
+def test_a_local_optimisation_lowers_the_whole_energy_by_what_it_reports():
+    # free surfels of one frame: the data of the other frames and the priors' rows away from
+    # it are left out as constants, so the decrease it reports is the whole energy's
+    state, graph, data = _random_problem(seed=3, frames=4)
+    moving = np.zeros((state.frames, state.count), dtype=bool)
+    moving[2, ::2] = True
+    free = free_unknowns(layout(state), moving)
+    result = gauss_newton(
+        state, graph, data, ALL_TERMS, options=GaussNewtonOptions(iterations=4), free=free
+    )
+    assert len(result.cg_iterations) >= 2
+
+    def whole(at):
+        return total_energy(at, graph, data, associate(at, data, graph.radius), ALL_TERMS).value
+
+    assert result.energies[0] < 0.5 * whole(state)
+    drop = whole(state) - whole(result.state)
+    assert drop > 0
+    assert drop == pytest.approx(result.energies[0] - result.energies[-1], rel=1e-9)
+    held = ~moving
+    assert np.array_equal(result.state.positions[held], state.positions[held])
+
+
+def test_the_data_of_some_frames_keeps_their_points_anchors_and_guides():
+    points = [np.full((k + 1, 3), float(k)) for k in range(3)]
+    anchors = AnchorData(np.array([0, 1, 1]), np.zeros((3, 3)), np.ones((3, 3)), np.ones(3))
+    guides = GuideData(np.array([0, 2]), np.array([4, 5]), np.zeros((2, 3)), np.ones(2))
+    data = replace(frame_data(points, anchors=anchors), guides=guides)
+    assert data.of_frames(np.ones(3, dtype=bool)) is data
+    last = data.of_frames(np.array([False, False, True]))
+    assert last.frames.tolist() == [2, 2, 2] and np.all(last.points == 2.0)
+    assert last.anchors.frames.tolist() == [1, 1]
+    assert last.guides.surfels.tolist() == [5]
+    first = data.of_frames(np.array([True, False, False]))
+    assert first.anchors.frames.tolist() == [0] and first.guides.surfels.tolist() == [4]
+    assert data.of_frames(np.zeros(3, dtype=bool)).anchors is None

@@ -26,6 +26,8 @@ from fourd.methods.surfels import (
     surfel_state,
     total_energy,
 )
+from fourd.methods.surfels.energy import prior_reach
+from fourd.methods.surfels.optimizer import free_unknowns
 from fourd.methods.surfels.state import skew
 from fourd.methods.surfels.term import Blocks, keep_columns
 
@@ -279,12 +281,61 @@ def test_patterns_shared_between_other_columns_equal_a_fresh_assembly():
             at, graph, data, matches, weights, match, columns=columns, patterns={}, shared=shared
         )
         fresh = total_energy(at, graph, data, matches, weights, match, columns=columns)
-        assert set(shared) == {"smooth_position", "smooth_normal", "laplace", "rigid", "accel"}
+        assert {name for name, _ in shared} == {
+            "smooth_position", "smooth_normal", "laplace", "rigid", "accel"
+        }
         assert all(pattern.shape[1] == layout(state).size for pattern in shared.values())
         assert reused.value == fresh.value
         assert np.allclose(reused.gradient, fresh.gradient, rtol=1e-13, atol=1e-13)
         assert reused.hessian.shape == (len(columns), len(columns))
         assert abs(reused.hessian - fresh.hessian).max() <= 1e-13 * abs(fresh.hessian).max()
+
+
+@pytest.mark.parametrize("urshape", [False, True])
+def test_a_local_energy_leaves_out_only_the_priors_rows_that_touch_nothing_free(urshape):
+    # the hole filling moves some surfels of one frame, the urshape's fit frame 0 and every
+    # rotation: the rows that touch neither are constants, left out
+    state, graph, data = _problem(seed=6, frames=6)
+    empty = frame_data([np.zeros((0, 3))])
+    matches = associate(state, empty, 0.15)
+    weights = Weights(0.0, 0.7, 0.3, 0.2, 0.9, 0.4, 0.6, 0.25)
+    lay = layout(state)
+    moving = np.zeros((state.frames, state.count), dtype=bool)
+    if urshape:
+        moving[0] = True
+        rotations = np.ones((state.frames - 1, state.count), dtype=bool)
+    else:
+        # no rotation free: the rigidity's steps reach the frame through its positions
+        moving[2, ::3] = True
+        rotations = np.zeros((state.frames - 1, state.count), dtype=bool)
+    free = free_unknowns(lay, moving, rotations)
+    columns = np.flatnonzero(free)
+    reach = prior_reach(lay, columns, urshape=urshape)
+    if urshape:
+        assert reach.frames.tolist() == [0] and reach.steps is None
+        assert reach.centres.tolist() == []
+    else:
+        assert reach.frames.tolist() == [2] and reach.steps.tolist() == [1, 2]
+        assert reach.centres.tolist() == [1, 2, 3]
+
+    def energies(at):
+        whole = total_energy(at, graph, empty, matches, weights, urshape=urshape)
+        local = total_energy(at, graph, empty, matches, weights, columns=columns, urshape=urshape)
+        return whole, local
+
+    whole, local = energies(state)
+    assert local.value < 0.9 * whole.value
+    assert ("accel" in local.terms) != urshape
+    full = whole.hessian + sp.triu(whole.hessian, k=1).T
+    restricted = sp.triu(full[columns][:, columns])
+    assert abs(local.hessian - restricted).max() <= 1e-12 * abs(restricted).max()
+    assert np.allclose(local.gradient, whole.gradient[columns], rtol=0.0, atol=1e-12)
+    # a step of the free unknowns changes both by the same amount
+    step = np.where(free, np.random.default_rng(7).normal(scale=0.05, size=lay.size), 0.0)
+    moved_whole, moved_local = energies(move(state, step))
+    assert moved_whole.value - moved_local.value == pytest.approx(
+        whole.value - local.value, rel=1e-12
+    )
 
 
 def test_overlapping_blocks_are_refused():

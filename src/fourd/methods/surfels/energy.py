@@ -15,7 +15,7 @@ from fourd.methods.surfels.color_guide import guide_term
 from fourd.methods.surfels.match import Data, Matches, MatchOptions, match_term
 from fourd.methods.surfels.motion import accel_term, rigid_term
 from fourd.methods.surfels.smoothness import laplace_term, smooth_normal_term, smooth_position_term
-from fourd.methods.surfels.state import SurfelState, layout
+from fourd.methods.surfels.state import Layout, SurfelState, layout, moving_frames
 from fourd.methods.surfels.term import keep_columns
 from fourd.methods.surfels.topology import Topology
 
@@ -106,7 +106,11 @@ def total_energy(
 
     ``columns`` (int [k], sorted unknowns of the layout) restricts the gradient [k] and
     Hessian [k, k] to those unknowns (the others held fixed): the Jacobians lose the other
-    columns before ``J^T J`` is formed, which is what makes a local optimisation cheap.
+    columns before ``J^T J`` is formed, which is what makes a local optimisation cheap. The
+    priors then leave out their frames, steps and triples of frames that touch none of those
+    unknowns (:func:`prior_reach`): constants, so the value is eq. (3) up to a constant (the
+    data of frames that do not move is the caller's to leave out, as
+    :func:`~.optimizer.gauss_newton` does).
 
     ``patterns`` (a dict, empty at first) keeps the priors' Jacobian patterns
     (:class:`~.term.Pattern`, of ``columns`` only) between calls on the same topology,
@@ -118,28 +122,46 @@ def total_energy(
     match = match or MatchOptions()
     d = derivatives
     kept = {} if patterns is None or not derivatives else patterns
-    size = layout(state).size
-    restrict = columns is not None and not np.array_equal(columns, np.arange(size))
-    for name, full in (shared or {}).items() if derivatives else ():
-        if name not in kept:
+    lay = layout(state)
+    restrict = columns is not None and not np.array_equal(columns, np.arange(lay.size))
+    reach = prior_reach(lay, columns if restrict else None, urshape=urshape)
+
+    def pattern(name: str):
+        # the pattern of these columns, else made from the one of every column kept for
+        # other columns with the same reach
+        if name not in kept and derivatives and shared and (name, reach.key) in shared:
+            full = shared[name, reach.key]
             kept[name] = full.keep_columns(columns) if restrict else full
+        return kept.get(name)
+
     parts = {}
     if w.match > 0:
         parts["match"] = match_term(state, data, matches, w.match, match, derivatives=d)
     surface = topology.along_surface  # the shape priors' neighbours
-    if w.smooth_position > 0:
+    if w.smooth_position > 0 and _any(reach.frames):
         parts["smooth_position"] = smooth_position_term(
-            state, surface, w.smooth_position, derivatives=d, pattern=kept.get("smooth_position")
+            state,
+            surface,
+            w.smooth_position,
+            derivatives=d,
+            pattern=pattern("smooth_position"),
+            frames=reach.frames,
         )
-    if w.smooth_normal > 0:
+    if w.smooth_normal > 0 and _any(reach.frames):
         parts["smooth_normal"] = smooth_normal_term(
-            state, surface, w.smooth_normal, derivatives=d, pattern=kept.get("smooth_normal")
+            state,
+            surface,
+            w.smooth_normal,
+            derivatives=d,
+            pattern=pattern("smooth_normal"),
+            frames=reach.frames,
         )
-    if w.laplace > 0:
+    if w.laplace > 0 and _any(reach.frames):
         parts["laplace"] = laplace_term(
-            state, surface, w.laplace, derivatives=d, pattern=kept.get("laplace")
+            state, surface, w.laplace, derivatives=d, pattern=pattern("laplace"),
+            frames=reach.frames,
         )
-    if (w.rigid > 0 or w.rigid_normal > 0) and state.frames > 1:
+    if (w.rigid > 0 or w.rigid_normal > 0) and state.frames > 1 and _any(reach.steps):
         parts["rigid"] = rigid_term(
             state,
             topology,
@@ -147,7 +169,8 @@ def total_energy(
             w.rigid_normal,
             derivatives=d,
             urshape=urshape,
-            pattern=kept.get("rigid"),
+            pattern=pattern("rigid"),
+            steps=reach.steps,
         )
     if w.anchor > 0 and data.anchors is not None and state.frames > 1:
         parts["anchor"] = anchor_term(
@@ -156,9 +179,19 @@ def total_energy(
     if w.guide > 0 and data.guides is not None:
         parts["guide"] = guide_term(state, data.guides, w.guide, derivatives=d)
     first = 1 if urshape else 0
-    if (w.accel > 0 or w.accel_normal > 0) and state.frames - first > 2:
+    if (
+        (w.accel > 0 or w.accel_normal > 0)
+        and state.frames - first > 2
+        and _any(reach.centres)
+    ):
         parts["accel"] = accel_term(
-            state, w.accel, w.accel_normal, derivatives=d, first=first, pattern=kept.get("accel")
+            state,
+            w.accel,
+            w.accel_normal,
+            derivatives=d,
+            first=first,
+            pattern=pattern("accel"),
+            centres=reach.centres,
         )
     values = {name: part.value for name, part in parts.items()}
     total = float(sum(values.values()))
@@ -167,12 +200,12 @@ def total_energy(
     for name, part in parts.items():
         if name not in ASSOCIATED and name not in kept:
             if shared is not None:
-                shared[name] = part.pattern
+                shared[name, reach.key] = part.pattern
             kept[name] = part.pattern.keep_columns(columns) if restrict else part.pattern
     # one Jacobian of every term, so that J^T J is formed once (a sum of the terms' Hessians
     # allocates each partial sum)
     residuals = np.concatenate([np.zeros(0)] + [part.residuals for part in parts.values()])
-    jacobians = [sp.csr_matrix((0, size))] + [part.jacobian for part in parts.values()]
+    jacobians = [sp.csr_matrix((0, lay.size))] + [part.jacobian for part in parts.values()]
     parts.clear()
     if restrict:
         # the priors assembled from kept patterns have their columns already
@@ -189,3 +222,53 @@ def total_energy(
     hessian = csr_product(transposed, jacobian, upper=True)
     hessian.data *= 2.0
     return Energy(total, values, gradient, hessian)
+
+
+@dataclass(frozen=True)
+class PriorReach:
+    """Where the priors touch the moving unknowns (:func:`prior_reach`); None: everywhere.
+
+    frames : int [F] or None
+        The frames of the shape priors (eq. 6-8).
+    steps : int [K] or None
+        The steps of the rigidity prior (eq. 9).
+    centres : int [C] or None
+        The middle frames of the acceleration prior's triples (eq. 10).
+    key : bytes
+        The three, for the patterns kept between calls (``total_energy``'s ``shared``).
+    """
+
+    frames: np.ndarray | None
+    steps: np.ndarray | None
+    centres: np.ndarray | None
+    key: bytes
+
+
+def prior_reach(lay: Layout, columns: np.ndarray | None, *, urshape: bool = False) -> PriorReach:
+    """The frames, steps and triples of frames whose priors' rows touch one of the unknowns
+    ``columns`` (int [k] of ``lay``; None: all); the other rows depend on held unknowns
+    alone. A frame moves when one of its positions or normal offsets does; a rigidity step
+    when its rotation or either frame it joins (the urshape for every step, with
+    ``urshape``) does; a triple when any of its three frames does."""
+    if columns is None:
+        return PriorReach(None, None, None, b"")
+    frames, steps = moving_frames(lay, columns)
+    origin = np.zeros(len(steps), dtype=np.int64) if urshape else np.arange(len(steps))
+    steps = steps | frames[origin] | frames[1:]
+    middle = np.arange(2 if urshape else 1, lay.frames - 1)
+    centres = frames[middle - 1] | frames[middle] | frames[middle + 1]
+    reach = [
+        None if np.all(touched) else indices[touched]
+        for touched, indices in (
+            (frames, np.arange(lay.frames)),
+            (steps, np.arange(len(steps))),
+            (centres, middle),
+        )
+    ]
+    key = b"|".join(b"all" if r is None else r.tobytes() for r in reach)
+    return PriorReach(*reach, key)
+
+
+def _any(indices: np.ndarray | None) -> bool:
+    """Whether a reach (:class:`PriorReach`) holds anything: None is all."""
+    return indices is None or len(indices) > 0

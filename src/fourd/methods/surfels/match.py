@@ -28,7 +28,7 @@ Pauly, Mitra, Giesen, Gross, Guibas: Example-based 3D scan completion, SGP 2005 
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields, replace
 from functools import cached_property
 
 import numba
@@ -76,6 +76,28 @@ class Data:
         if self.normals is not None and self.normals.shape != (count, 3):
             raise ValueError("data normals must be [D, 3]")
 
+    def of_frames(self, frames: np.ndarray) -> Data:
+        """The points of the frames true in ``frames`` (bool [T]) only, with the anchors of
+        the pairs that join one of them and the guides in one (frame indices unchanged);
+        ``self`` when that is everything."""
+        frames = np.asarray(frames, dtype=bool)
+        points = frames[self.frames]
+        anchors = guides = None
+        if self.anchors is not None:
+            anchors = frames[self.anchors.frames] | frames[self.anchors.frames + 1]
+        if self.guides is not None:
+            guides = frames[self.guides.frames]
+        if all(keep is None or keep.all() for keep in (points, anchors, guides)):
+            return self
+        return Data(
+            self.points[points],
+            self.frames[points],
+            self.weights[points],
+            None if self.normals is None else self.normals[points],
+            None if anchors is None or not anchors.any() else _kept(self.anchors, anchors),
+            None if guides is None or not guides.any() else _kept(self.guides, guides),
+        )
+
     def in_frame(self, frame: int) -> np.ndarray:
         """The indices of frame ``frame``'s points, int64 [P_t] ascending (sorted into frames
         once: every association asks)."""
@@ -97,6 +119,11 @@ class Data:
     @cached_property
     def _trees(self) -> dict[int, cKDTree]:
         return {}
+
+
+def _kept(rows, keep: np.ndarray):
+    """``rows`` (a dataclass of arrays, one row each) with the rows true in ``keep`` only."""
+    return replace(rows, **{field.name: getattr(rows, field.name)[keep] for field in fields(rows)})
 
 
 def frame_data(

@@ -21,7 +21,7 @@ import scipy.sparse as sp
 from fourd.geometry.sparse_products import SYMMETRIC_CHUNKS, multiply_add, symmetric_multiply
 from fourd.methods.surfels.energy import Weights, total_energy
 from fourd.methods.surfels.match import Data, MatchOptions, associate
-from fourd.methods.surfels.state import Layout, SurfelState, layout, retract
+from fourd.methods.surfels.state import Layout, SurfelState, layout, moving_frames, retract
 from fourd.methods.surfels.term import PatternCache
 from fourd.methods.surfels.topology import Topology
 
@@ -70,7 +70,8 @@ class Optimization:
 
     state : SurfelState
     energies : float64 [iterations + 1]
-        Energy before the first step and after each.
+        Energy before the first step and after each; with ``free``, of the terms' parts that
+        touch a free unknown (eq. 3 up to a constant).
     cg_iterations : int64 [iterations]
     converged : bool
         The last step lowered the energy by less than the tolerance (or none could).
@@ -101,7 +102,9 @@ def gauss_newton(
     ``free`` (bool [:attr:`~.state.Layout.size`], see :func:`free_unknowns`) restricts the
     steps to those unknowns, the others held as boundary conditions (the assembly's
     alignment of one frame and its hole filling of new surfels only, sec. 3.2); None: all.
-    ``urshape``: frame 0 of ``state`` is the urshape (:func:`~.energy.total_energy`).
+    The data of frames that do not move and the priors' rows that touch no free unknown are
+    then left out (constants, :func:`~.energy.prior_reach`), so a local optimisation costs
+    what moves. ``urshape``: frame 0 of ``state`` is the urshape (:func:`~.energy.total_energy`).
     ``patterns`` carries the priors' Jacobian patterns to later calls on the same topology,
     layout and ``urshape``, whatever their ``free``, and those of the last ``free``, for a call
     with the same ``free`` (:class:`~.term.PatternCache`)."""
@@ -112,6 +115,10 @@ def gauss_newton(
     cg_counts = []
     converged = False
     columns = None if free is None else np.flatnonzero(free)
+    if columns is not None and match.regime == "global":
+        # the data of frames that do not move adds a constant (the alignment regime's cutoff,
+        # a percentile of every distance, couples the frames)
+        data = data.of_frames(moving_frames(layout(state), columns)[0])
     matches = associate(state, data, topology.radius, match)
     # the topology and layout are fixed here, and so are the priors' Jacobian patterns
     kept = {} if patterns is None else patterns.for_columns(columns)
@@ -148,7 +155,15 @@ def gauss_newton(
             trial = retract(state, scale * step)
             again = associate(trial, data, topology.radius, match, previous=matches)
             value = total_energy(
-                trial, topology, data, again, weights, match, derivatives=False, urshape=urshape
+                trial,
+                topology,
+                data,
+                again,
+                weights,
+                match,
+                derivatives=False,
+                columns=columns,
+                urshape=urshape,
             ).value
             if value < current.value:
                 accepted = trial

@@ -125,6 +125,18 @@ def layout(state: SurfelState) -> Layout:
     return Layout(state.frames, state.count)
 
 
+def moving_frames(lay: Layout, columns: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Which frames have a position or normal offset among the unknowns ``columns`` (int [k]
+    of ``lay``), bool [T], and which steps a rotation vector, bool [T - 1]."""
+    free = np.zeros(lay.size, dtype=bool)
+    free[np.asarray(columns, dtype=np.int64)] = True
+    t, s = lay.frames, lay.count
+    frames = free[: lay.normals_start].reshape(t, s * 3).any(axis=1)
+    frames |= free[lay.normals_start : lay.rotations_start].reshape(t, s * 2).any(axis=1)
+    steps = free[lay.rotations_start :].reshape(max(t - 1, 0), s * 3).any(axis=1)
+    return frames, steps
+
+
 def tangent_basis(normals: np.ndarray) -> np.ndarray:
     """Orthonormal tangent vectors ``(t_u, t_v)`` of eq. (11) as the columns of [..., 3, 2],
     a smooth function of the normal direction [..., 3] away from the x axis."""

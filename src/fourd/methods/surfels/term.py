@@ -83,8 +83,9 @@ class PatternCache:
     """The priors' Jacobian patterns kept between optimisations on one topology, layout and
     urshape (the hole filling's frames, one after the other), whatever their free unknowns.
 
-    full : dict[str, Pattern]
-        Each term's pattern of every column (:func:`~.energy.total_energy`'s ``shared``).
+    full : dict[tuple[str, bytes], Pattern]
+        Each term's pattern of every column, by the term's name and the reach of the free
+        columns it was made for (:func:`~.energy.total_energy`'s ``shared``).
     restricted : dict[str, Pattern]
         The same restricted to the last free columns (``total_energy``'s ``patterns``).
     columns : bytes or None
@@ -92,7 +93,7 @@ class PatternCache:
     """
 
     def __init__(self):
-        self.full: dict[str, Pattern] = {}
+        self.full: dict[tuple[str, bytes], Pattern] = {}
         self.restricted: dict[str, Pattern] = {}
         self.columns: bytes | None = None
 

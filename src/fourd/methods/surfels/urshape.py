@@ -23,7 +23,7 @@ from typing import NamedTuple
 import numpy as np
 
 from fourd.methods.surfels.energy import Weights
-from fourd.methods.surfels.match import Data, MatchOptions, frame_data
+from fourd.methods.surfels.match import Data, MatchOptions
 from fourd.methods.surfels.motion import fit_rotations
 from fourd.methods.surfels.optimizer import (
     GaussNewtonOptions,
@@ -88,30 +88,24 @@ def fit_urshape(
     docstring). ``data`` holds the points of ``state``'s frames (frame indices
     ``0 .. T - 1``); ``weights``, ``match`` and ``options`` as for
     :func:`~.optimizer.gauss_newton`. ``joint`` False holds the trajectories: only the
-    urshape and its rotations move (the rest shape of trajectories taken as final), and the
-    optimisation's energies leave out the terms that are then constants (the data, anchors,
-    guides and acceleration)."""
+    urshape and its rotations move (the rest shape of trajectories taken as final; the
+    optimisation then leaves out the data, the acceleration and the frames' shape priors,
+    constants)."""
     positions = np.concatenate([state.positions[:1], state.positions])
     normals = np.concatenate([state.normals[:1], state.normals])
     joined = SurfelState(positions, normals, fit_rotations(positions, topology, urshape=True))
+    shifted = replace(
+        data,
+        frames=data.frames + 1,
+        anchors=None if data.anchors is None else data.anchors.shifted(1),
+        guides=None if data.guides is None else data.guides.shifted(1),
+    )
     free = None
-    if joint:
-        shifted = replace(
-            data,
-            frames=data.frames + 1,
-            anchors=None if data.anchors is None else data.anchors.shifted(1),
-            guides=None if data.guides is None else data.guides.shifted(1),
-        )
-    else:
+    if not joint:
         surfels = np.zeros((joined.frames, joined.count), dtype=bool)
         surfels[0] = True
         rotations = np.ones((joined.frames - 1, joined.count), dtype=bool)
         free = free_unknowns(layout(joined), surfels, rotations)
-        # with the trajectories held, the data, anchors, guides and acceleration are
-        # constants: left out, the steps are the same and each line-search trial no longer
-        # associates every frame's data (benchmarks/METHODS.md)
-        shifted = frame_data([np.zeros((0, 3))])
-        weights = replace(weights or Weights(), accel=0.0, accel_normal=0.0)
     result = gauss_newton(
         joined, topology, shifted, weights, match, options, free=free, urshape=True
     )
