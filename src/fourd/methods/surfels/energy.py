@@ -138,29 +138,21 @@ def total_energy(
     if w.match > 0:
         parts["match"] = match_term(state, data, matches, w.match, match, derivatives=d)
     surface = topology.along_surface  # the shape priors' neighbours
-    if w.smooth_position > 0 and _any(reach.frames):
-        parts["smooth_position"] = smooth_position_term(
-            state,
-            surface,
-            w.smooth_position,
-            derivatives=d,
-            pattern=pattern("smooth_position"),
-            frames=reach.frames,
-        )
-    if w.smooth_normal > 0 and _any(reach.frames):
-        parts["smooth_normal"] = smooth_normal_term(
-            state,
-            surface,
-            w.smooth_normal,
-            derivatives=d,
-            pattern=pattern("smooth_normal"),
-            frames=reach.frames,
-        )
-    if w.laplace > 0 and _any(reach.frames):
-        parts["laplace"] = laplace_term(
-            state, surface, w.laplace, derivatives=d, pattern=pattern("laplace"),
-            frames=reach.frames,
-        )
+    shape_priors = (
+        ("smooth_position", smooth_position_term),
+        ("smooth_normal", smooth_normal_term),
+        ("laplace", laplace_term),
+    )
+    for name, prior in shape_priors:
+        if getattr(w, name) > 0 and _any(reach.frames):
+            parts[name] = prior(
+                state,
+                surface,
+                getattr(w, name),
+                derivatives=d,
+                pattern=pattern(name),
+                frames=reach.frames,
+            )
     if (w.rigid > 0 or w.rigid_normal > 0) and state.frames > 1 and _any(reach.steps):
         parts["rigid"] = rigid_term(
             state,
@@ -179,19 +171,10 @@ def total_energy(
     if w.guide > 0 and data.guides is not None:
         parts["guide"] = guide_term(state, data.guides, w.guide, derivatives=d)
     first = 1 if urshape else 0
-    if (
-        (w.accel > 0 or w.accel_normal > 0)
-        and state.frames - first > 2
-        and _any(reach.centres)
-    ):
+    if (w.accel > 0 or w.accel_normal > 0) and state.frames - first > 2 and _any(reach.centres):
         parts["accel"] = accel_term(
-            state,
-            w.accel,
-            w.accel_normal,
-            derivatives=d,
-            first=first,
-            pattern=pattern("accel"),
-            centres=reach.centres,
+            state, w.accel, w.accel_normal, derivatives=d, first=first,
+            pattern=pattern("accel"), centres=reach.centres,
         )
     values = {name: part.value for name, part in parts.items()}
     total = float(sum(values.values()))
