@@ -217,14 +217,18 @@ class PriorReach:
         The steps of the rigidity prior (eq. 9).
     centres : int [C] or None
         The middle frames of the acceleration prior's triples (eq. 10).
-    key : bytes
-        The three, for the patterns kept between calls (``total_energy``'s ``shared``).
     """
 
     frames: np.ndarray | None
     steps: np.ndarray | None
     centres: np.ndarray | None
-    key: bytes
+
+    @property
+    def key(self) -> bytes:
+        """The three, for the patterns kept between calls (``total_energy``'s ``shared``)."""
+        return b"|".join(
+            b"all" if r is None else r.tobytes() for r in (self.frames, self.steps, self.centres)
+        )
 
 
 def prior_reach(lay: Layout, columns: np.ndarray | None, *, urshape: bool = False) -> PriorReach:
@@ -234,7 +238,7 @@ def prior_reach(lay: Layout, columns: np.ndarray | None, *, urshape: bool = Fals
     when its rotation or either frame it joins (the urshape for every step, with
     ``urshape``) does; a triple when any of its three frames does."""
     if columns is None:
-        return PriorReach(None, None, None, b"")
+        return PriorReach(None, None, None)
     frames, steps = moving_frames(lay, columns)
     origin = np.zeros(len(steps), dtype=np.int64) if urshape else np.arange(len(steps))
     steps = steps | frames[origin] | frames[1:]
@@ -248,8 +252,7 @@ def prior_reach(lay: Layout, columns: np.ndarray | None, *, urshape: bool = Fals
             (centres, middle),
         )
     ]
-    key = b"|".join(b"all" if r is None else r.tobytes() for r in reach)
-    return PriorReach(*reach, key)
+    return PriorReach(*reach)
 
 
 def _any(indices: np.ndarray | None) -> bool:
