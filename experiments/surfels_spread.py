@@ -5,8 +5,9 @@ commit scores differently on another machine or numpy build. Earlier notes call 
 "within the spread" without a measured spread; this measures it on one environment.
 
 Each run reconstructs the bench's scan of a scene with every point moved by a random offset of
-``SCALE`` times the scene's diagonal (seeded; run 0 unmoved), far below the scan's noise but
-far above rounding, and scores it as ``fourd bench`` does (same samples and seed).
+1e-9 times the scene's diagonal (seeded; run 0 unmoved; ``fourd.bench.spread.moved_scans``),
+far below the scan's noise but far above rounding, and scores it as ``fourd bench`` does (same
+samples and seed). ``fourd bench --spread N`` now makes such rows itself.
 
 Run from the repository root::
 
@@ -19,7 +20,6 @@ frame 0.0154-0.0229. benchmarks/METHODS.md, "How far rounding alone moves the sc
 
 from __future__ import annotations
 
-import dataclasses
 import json
 import sys
 import time
@@ -27,35 +27,20 @@ import time
 import numpy as np
 
 import fourd
+from fourd.bench.spread import moved_scans
 from fourd.bench.suite import SAMPLES, scan_scene, select_scenes
 from fourd.metrics.scores import evaluate
 
-#: The offsets' scale, a fraction of the scene's diagonal.
-SCALE = 1e-9
 KEYS = ("chamfer", "completeness_95", "correspondence_mean", "correspondence_last", "jitter")
-
-
-def moved(scans, seed: int, scale: float):
-    """``scans`` with every point moved by ``N(0, scale)`` (input units) per coordinate."""
-    if seed == 0:
-        return scans
-    rng = np.random.default_rng(seed)
-    frames = [
-        dataclasses.replace(f, points=f.points + rng.normal(scale=scale, size=f.points.shape))
-        for f in scans.frames
-    ]
-    return dataclasses.replace(scans, frames=tuple(frames))
 
 
 def main(scene: str, runs: int) -> None:
     (bench_scene,) = select_scenes([scene], quick=False)
     truth, scans = scan_scene(bench_scene, 0)
-    points = np.concatenate([f.points for f in scans.frames])
-    diagonal = float(np.linalg.norm(np.ptp(points, axis=0)))
     rows = []
     for seed in range(runs):
         started = time.perf_counter()
-        result = fourd.reconstruct(moved(scans, seed, SCALE * diagonal), method="surfels")
+        result = fourd.reconstruct(moved_scans(scans, seed), method="surfels")
         seconds = time.perf_counter() - started
         metrics = evaluate(result, truth, samples=SAMPLES, seed=0)
         row = {key: float(metrics[key]) for key in KEYS}

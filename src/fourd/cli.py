@@ -373,7 +373,7 @@ def cmd_bench(args) -> int:
         log.info("wrote %s", output)
         return 0
     run_bench(methods=args.methods, scenes=args.scenes, quick=args.quick, repeats=args.repeats,
-              output=output, baselines=args.baselines, seed=args.seed, timeout=args.timeout,
+              spread=args.spread, output=output, baselines=args.baselines, seed=args.seed, timeout=args.timeout,
               appearance=args.appearance, video=args.video)
     log.info("wrote %s", output)
     return 0
@@ -646,6 +646,10 @@ def build_parser() -> argparse.ArgumentParser:
                         "rewrites the tracked record)")
     p.add_argument("--quick", action="store_true", help="a tiny run that exercises the whole path")
     p.add_argument("--repeats", type=int, default=1, help="timing repeats (median reported)")
+    p.add_argument("--spread", type=int, default=1, metavar="N",
+                   help="N runs per row on the scans moved by seeded offsets of 1e-9 of their "
+                        "diagonal (the first unmoved): each score their median, ranges in the "
+                        ".json (how far rounding alone moves a method's scores)")
     p.add_argument("--baselines", action="store_true",
                    help="add the peers of BASELINES.md (needs the `baselines` extra: open3d)")
     p.add_argument("--seed", type=int, default=0)

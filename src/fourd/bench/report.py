@@ -64,11 +64,28 @@ def _row(label: str, metrics: dict, made: dict | None = None) -> str:
     return f"| {label} | " + " | ".join(cells) + " |"
 
 
+def _spread_line(label: str, metrics: dict) -> str:
+    """``"- surfels over 5 moved runs: Chamfer 0.0034-0.0038, ..."``: the ranges of a row's
+    scores (:func:`fourd.bench.spread.combined_metrics`)."""
+    ranges = [
+        f"{title} {format_cell(low, kind)}-{format_cell(high, kind)}"
+        for title, key, kind in COLUMNS
+        if key in metrics["spread"]
+        for low, high in [metrics["spread"][key]]
+    ]
+    seconds = metrics["spread"].get("seconds_per_frame")
+    return (f"\n- {label} over {metrics.get('runs', '?')} moved runs: " + ", ".join(ranges)
+            + ("" if seconds is None else f"; s/frame {seconds[0]:.2f}-{seconds[1]:.2f}") + ".")
+
+
 def _made(made: dict | None) -> str:
-    """``"abc1234, 3 runs"``: the commit and repeats a row was measured with; ``"—"`` for rows
-    from before rows kept it (the run history names their commits)."""
+    """``"abc1234, 3 runs"``: the commit and repeats a row was measured with (``"abc1234,
+    median of 5 moved runs"``: its scores the medians of ``fourd bench --spread 5``); ``"—"``
+    for rows from before rows kept it (the run history names their commits)."""
     if not made:
         return "—"
+    if made.get("spread", 1) > 1:
+        return f"{made['commit']}, median of {made['spread']} moved runs"
     return f"{made['commit']}, {made['repeats']} run{'s' if made['repeats'] != 1 else ''}"
 
 
@@ -102,6 +119,12 @@ def format_markdown(report: dict, plots: dict[str, Path] | None = None, base: Pa
         "memory of the process that ran it, at the end of its first run.",
         f"- Total wall time of this run: {report.get('wall_seconds', 0):.0f} s.",
     ]
+    if any((row.get("made") or {}).get("spread", 1) > 1
+           for entry in report["scenes"].values() for row in entry.get("rows", {}).values()):
+        lines.append("- Rows \"median of N moved runs\" (`fourd bench --spread N`): each score the "
+                     "median of N runs on the scans moved by seeded offsets of 1e-9 of their "
+                     "diagonal, the first unmoved (how far rounding alone moves them); their "
+                     "ranges under the scene's table.")
     if report.get("notes"):
         lines.append("- How each row was made (commit, repeats, what changed): the run history at the end.")
     lines += ["", "## Summary", "",
@@ -142,6 +165,8 @@ def format_markdown(report: dict, plots: dict[str, Path] | None = None, base: Pa
                              + f" {_made(row.get('made'))} |")
             else:
                 lines.append(_row(label, row["metrics"], row.get("made")))
+        lines += [_spread_line(label, row["metrics"]) for label, row in entry["rows"].items()
+                  if (row.get("metrics") or {}).get("spread")]
         if plots and name in plots:
             relative = os.path.relpath(plots[name], base) if base else plots[name]
             lines += ["", f"![{name}: accuracy, completeness and correspondence error per frame]({relative})"]

@@ -32,6 +32,7 @@ import numpy as np
 from fourd.bench.case import run_case
 from fourd.bench.machine import machine_info
 from fourd.bench.report import plots_dir, portable_name, write_report
+from fourd.bench.spread import combined_metrics, moved_scans
 from fourd.bench.suite import (
     PEERS,
     PROTOCOL,
@@ -82,6 +83,7 @@ def run_bench(
     scenes=None,
     quick: bool = False,
     repeats: int = 1,
+    spread: int = 1,
     output: str | os.PathLike | None = None,
     baselines: bool = False,
     seed: int = 0,
@@ -102,6 +104,10 @@ def run_bench(
         A CI-sized run: 4 frames, coarse cameras, fewer metric samples.
     repeats : int
         Reconstructions per case; the wall time is their median.
+    spread : int
+        Runs per case on scans moved far below their noise (:mod:`fourd.bench.spread`; run
+        0 unmoved): every score the median over them, with its range (``spread`` in the
+        row's metrics); 1: the scans as they are, once.
     output : path, optional
         The Markdown report; ``.json`` beside it and PNG plots in ``plots/`` beside it
         (``<stem>-plots/`` when the file is not named ``BENCHMARKS.md``). Default:
@@ -127,8 +133,9 @@ def run_bench(
         ``wall_seconds``, and ``paths`` (the files written).
     """
     repeats = int(repeats)
-    if repeats < 1:
-        raise InputError(f"repeats must be at least 1, got {repeats}")
+    spread = int(spread)
+    if repeats < 1 or spread < 1:
+        raise InputError(f"repeats and spread must be at least 1, got {repeats} and {spread}")
     chosen_scenes = select_scenes(scenes, quick)
     if appearance is not None or video:
         chosen_scenes = [
@@ -156,6 +163,7 @@ def run_bench(
             "peers": list(peers),
             "quick": quick,
             "repeats": repeats,
+            "spread": spread,
             "seed": seed,
             "samples": samples,
             "protocol": PROTOCOL,
@@ -169,10 +177,12 @@ def run_bench(
              + [("baseline", fn, label) for label, fn in peers.items()]]
     bar = progress(total=len(cases), desc="bench", unit="case")
     for bench_scene in chosen_scenes:
+        made = {"commit": machine["commit"], "date": machine["date"], "repeats": repeats}
+        if spread > 1:
+            made["spread"] = spread
         entry = _run_scene(bench_scene, chosen_methods, peers, samples=samples, seed=seed,
-                           repeats=repeats, timeout=timeout, isolate=isolate, bar=bar,
-                           sheets=plots_dir(output),
-                           made={"commit": machine["commit"], "date": machine["date"], "repeats": repeats})
+                           repeats=repeats, spread=spread, timeout=timeout, isolate=isolate,
+                           bar=bar, sheets=plots_dir(output), made=made)
         report["scenes"][bench_scene.key] = entry
     bar.close()
     report["wall_seconds"] = time.perf_counter() - started
@@ -181,9 +191,10 @@ def run_bench(
 
 
 def _run_scene(bench_scene: BenchScene, methods, peers, *, samples, seed, repeats, timeout, isolate, bar,
-               sheets: Path | None = None, made: dict | None = None) -> dict:
-    """Scan one scene and run every method and peer on it. ``made`` (commit, date, repeats) is
-    kept with each row, so a row merged into another report still says where it came from."""
+               sheets: Path | None = None, made: dict | None = None, spread: int = 1) -> dict:
+    """Scan one scene and run every method and peer on it. ``made`` (commit, date, repeats,
+    spread) is kept with each row, so a row merged into another report still says where it
+    came from."""
     entry = {"settings": asdict(bench_scene), "rows": {}}
     try:
         truth, scans = scan_scene(bench_scene, seed)
@@ -200,7 +211,8 @@ def _run_scene(bench_scene: BenchScene, methods, peers, *, samples, seed, repeat
         for kind, name, label in [("method", m, m) for m in methods] + [("baseline", fn, lb) for lb, fn in peers.items()]:
             bar.set_postfix_str(f"{bench_scene.key} / {label}")
             _run_row(entry, bench_scene, truth, scans, kind, name, label, Path(scene_files), samples=samples, seed=seed,
-                     repeats=repeats, timeout=timeout, isolate=isolate, sheets=sheets, made=made)
+                     repeats=repeats, spread=spread, timeout=timeout, isolate=isolate, sheets=sheets,
+                     made=made)
             bar.update(1)
     return entry
 
@@ -219,8 +231,10 @@ def _with_scene_files(spec: str, bench_scene: BenchScene, folder: Path) -> str:
 
 
 def _run_row(entry, bench_scene, truth, scans, kind, name, label, scene_files, *, samples, seed, repeats, timeout,
-             isolate, sheets, made) -> None:
-    """One method's (or peer's) row of the scene, into ``entry["rows"][label]``."""
+             isolate, sheets, made, spread: int = 1) -> None:
+    """One method's (or peer's) row of the scene, into ``entry["rows"][label]``: with
+    ``spread`` > 1 the median of as many runs on moved scans (:mod:`fourd.bench.spread`), the
+    contact sheet of the unmoved one."""
     log.info("bench: %s on %s (%d frames)", label, bench_scene.key, len(scans))
     try:
         name = _with_scene_files(name, bench_scene, scene_files) if kind == "method" else name
@@ -228,24 +242,32 @@ def _run_row(entry, bench_scene, truth, scans, kind, name, label, scene_files, *
         log.warning("bench: %s", error)
         entry["rows"][label] = {"error": str(error), "made": made}
         return
-    case = run_case(kind, name, scans, repeats=repeats, timeout=timeout, isolate=isolate)
-    if "error" in case:
-        log.warning("bench: %s failed on %s: %s", label, bench_scene.key, case["error"])
-        entry["rows"][label] = {"error": case["error"], "made": made}
-        return
-    per_frame = statistics.median(case["seconds"]) / len(scans)
-    timing = {"seconds_per_frame": per_frame, "seconds": case["seconds"],
-              "peak_memory_mb": case["peak_mb"], "start_memory_mb": case["start_mb"],
-              "peak_memory_all_runs_mb": case.get("peak_all_mb", case["peak_mb"])}
-    try:
-        metrics = evaluate(case["result"], truth, samples=samples, seed=seed, timing=timing,
-                           folds=bench_scene.name in GARMENT_SCENES)
-        metrics.update(case.get("diagnostics") or {})
-        entry["rows"][label] = {"metrics": metrics, "made": made}
-    except Exception as error:  # noqa: BLE001
-        entry["rows"][label] = {"error": f"evaluation failed: {type(error).__name__}: {error}", "made": made}
+    runs, first = [], None
+    for run in range(spread):
+        if spread > 1:
+            log.info("bench: %s on %s, run %d of %d", label, bench_scene.key, run + 1, spread)
+        case = run_case(kind, name, moved_scans(scans, run), repeats=repeats, timeout=timeout,
+                        isolate=isolate)
+        if "error" in case:
+            log.warning("bench: %s failed on %s: %s", label, bench_scene.key, case["error"])
+            entry["rows"][label] = {"error": case["error"], "made": made}
+            return
+        per_frame = statistics.median(case["seconds"]) / len(scans)
+        timing = {"seconds_per_frame": per_frame, "seconds": case["seconds"],
+                  "peak_memory_mb": case["peak_mb"], "start_memory_mb": case["start_mb"],
+                  "peak_memory_all_runs_mb": case.get("peak_all_mb", case["peak_mb"])}
+        try:
+            metrics = evaluate(case["result"], truth, samples=samples, seed=seed, timing=timing,
+                               folds=bench_scene.name in GARMENT_SCENES)
+            metrics.update(case.get("diagnostics") or {})
+        except Exception as error:  # noqa: BLE001
+            entry["rows"][label] = {"error": f"evaluation failed: {type(error).__name__}: {error}", "made": made}
+            return
+        runs.append(metrics)
+        first = case["result"] if first is None else first
+    entry["rows"][label] = {"metrics": runs[0] if spread == 1 else combined_metrics(runs), "made": made}
     if sheets is not None:
-        entry["rows"][label]["sheet"] = _contact_sheet(case["result"], truth, sheets, bench_scene.key, label)
+        entry["rows"][label]["sheet"] = _contact_sheet(first, truth, sheets, bench_scene.key, label)
 
 
 def _contact_sheet(result, truth, folder: Path, scene: str, label: str) -> str | None:
