@@ -40,7 +40,7 @@ def test_moved_scans_move_every_point_by_a_seeded_offset_far_below_the_noise():
 
 def test_the_combined_row_holds_each_scores_median_and_range():
     runs = [
-        {"chamfer": c, "jitter": j, "per_frame": [c] * 2, "closed": flag,
+        {"chamfer": c, "jitter": j, "per_frame": [c] * 2, "closed": flag, "frames": 20,
          "timing": {"seconds_per_frame": s, "seconds": [s * 4], "peak_memory_mb": m}}
         for c, j, flag, s, m in [
             (0.003, 0.7, True, 2.0, 900.0), (0.005, 0.9, False, 3.0, 950.0),
@@ -51,8 +51,9 @@ def test_the_combined_row_holds_each_scores_median_and_range():
     assert row["chamfer"] == pytest.approx(0.004) and row["spread"]["chamfer"] == [0.003, 0.005]
     # a run without a value leaves it out of the median
     assert row["jitter"] == pytest.approx(0.8) and row["spread"]["jitter"] == [0.7, 0.9]
-    # the curves and flags are the unmoved run's
+    # the curves, flags and numbers that do not move are the unmoved run's
     assert row["per_frame"] == [0.003, 0.003] and row["closed"] is True
+    assert row["frames"] == 20 and isinstance(row["frames"], int) and "frames" not in row["spread"]
     assert row["timing"]["seconds_per_frame"] == 2.0 and row["timing"]["peak_memory_mb"] == 950.0
     assert row["timing"]["seconds"] == [8.0, 12.0, 4.0]
     assert row["spread"]["seconds_per_frame"] == [1.0, 3.0] and row["runs"] == 3

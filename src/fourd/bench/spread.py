@@ -42,14 +42,14 @@ def _number(value) -> bool:
 
 def combined_metrics(runs: list[dict]) -> dict:
     """One row's metrics from those of several runs of it (``runs[0]`` on the unmoved scans):
-    every number the median over the runs, with ``spread`` {key: [min, max]}; the rest (the
-    per-frame curves) of run 0; the timing's seconds per frame the median, its peak memory the
-    largest."""
+    every number that differs between the runs the median over them, with ``spread`` {key:
+    [min, max]}; the rest (the numbers that do not, the per-frame curves) of run 0; the
+    timing's seconds per frame the median, its peak memory the largest."""
     first = runs[0]
     metrics, spread = {}, {}
     for key, value in first.items():
         values = [run.get(key) for run in runs]
-        if _number(value) and all(_number(v) for v in values):
+        if _number(value) and all(_number(v) for v in values) and len(set(values)) > 1:
             finite = [float(v) for v in values if np.isfinite(v)]
             metrics[key] = statistics.median(finite) if finite else float(value)
             if finite:
