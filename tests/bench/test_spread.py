@@ -56,6 +56,7 @@ def test_the_combined_row_holds_each_scores_median_and_range():
     assert row["frames"] == 20 and isinstance(row["frames"], int) and "frames" not in row["spread"]
     assert row["timing"]["seconds_per_frame"] == 2.0 and row["timing"]["peak_memory_mb"] == 950.0
     assert row["timing"]["seconds"] == [8.0, 12.0, 4.0]
+    assert row["timing"]["peak_memory_all_runs_mb"] == 950.0
     assert row["spread"]["seconds_per_frame"] == [1.0, 3.0] and row["runs"] == 3
 
 

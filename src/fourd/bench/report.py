@@ -74,7 +74,7 @@ def _spread_line(label: str, metrics: dict) -> str:
         for low, high in [metrics["spread"][key]]
     ]
     seconds = metrics["spread"].get("seconds_per_frame")
-    return (f"\n- {label} over {metrics.get('runs', '?')} moved runs: " + ", ".join(ranges)
+    return (f"- {label} over {metrics.get('runs', '?')} moved runs: " + ", ".join(ranges)
             + ("" if seconds is None else f"; s/frame {seconds[0]:.2f}-{seconds[1]:.2f}") + ".")
 
 
@@ -165,8 +165,9 @@ def format_markdown(report: dict, plots: dict[str, Path] | None = None, base: Pa
                              + f" {_made(row.get('made'))} |")
             else:
                 lines.append(_row(label, row["metrics"], row.get("made")))
-        lines += [_spread_line(label, row["metrics"]) for label, row in entry["rows"].items()
-                  if (row.get("metrics") or {}).get("spread")]
+        for label, row in entry["rows"].items():
+            if (row.get("metrics") or {}).get("spread"):
+                lines += ["", _spread_line(label, row["metrics"])]
         if plots and name in plots:
             relative = os.path.relpath(plots[name], base) if base else plots[name]
             lines += ["", f"![{name}: accuracy, completeness and correspondence error per frame]({relative})"]

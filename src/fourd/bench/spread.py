@@ -24,8 +24,7 @@ def moved_scans(scans, run: int, scale: float = SCALE):
     ``N(0, scale * diagonal)`` per coordinate, seeded by ``run``; run 0 is ``scans`` itself."""
     if run == 0:
         return scans
-    points = np.concatenate([frame.points for frame in scans.frames])
-    diagonal = float(np.linalg.norm(np.ptp(points, axis=0))) if len(points) else 0.0
+    diagonal = scans.diagonal()
     rng = np.random.default_rng(run)
     frames = tuple(
         dataclasses.replace(
@@ -44,7 +43,7 @@ def combined_metrics(runs: list[dict]) -> dict:
     """One row's metrics from those of several runs of it (``runs[0]`` on the unmoved scans):
     every number that differs between the runs the median over them, with ``spread`` {key:
     [min, max]}; the rest (the numbers that do not, the per-frame curves) of run 0; the
-    timing's seconds per frame the median, its peak memory the largest."""
+    timing's seconds per frame the median, its peak memories the largest."""
     first = runs[0]
     metrics, spread = {}, {}
     for key, value in first.items():
@@ -63,6 +62,9 @@ def combined_metrics(runs: list[dict]) -> dict:
             "seconds_per_frame": statistics.median(t["seconds_per_frame"] for t in timings),
             "seconds": [s for t in timings for s in t.get("seconds", [])],
             "peak_memory_mb": max(t["peak_memory_mb"] for t in timings),
+            "peak_memory_all_runs_mb": max(
+                t.get("peak_memory_all_runs_mb", t["peak_memory_mb"]) for t in timings
+            ),
         }
         seconds = [t["seconds_per_frame"] for t in timings]
         spread["seconds_per_frame"] = [min(seconds), max(seconds)]
