@@ -245,6 +245,12 @@ def test_a_pattern_from_another_term_is_refused():
     assert accel.shape[0] == terms["laplace"](state, None).pattern.shape[0]
     with pytest.raises(ValueError, match="pattern fits only"):
         terms["laplace"](state, accel)
+    # the rigidity's pattern without the normals' blocks, and another term's
+    without_normals = rigid_term(state, graph, 0.9, 0.0).pattern
+    with pytest.raises(ValueError, match="pattern fits only"):
+        terms["rigid"](state, without_normals)
+    with pytest.raises(ValueError, match="pattern fits only"):
+        terms["rigid"](state, accel)
 
 
 def test_energy_with_kept_patterns_equals_a_fresh_assembly():

@@ -18,10 +18,11 @@ Horn: Closed-form solution of absolute orientation using unit quaternions, JOSA 
 
 from __future__ import annotations
 
+import numba
 import numpy as np
 
 from fourd.geometry.rotations import best_rotations
-from fourd.methods.surfels.state import SurfelState, at_surfels, layout, skew, tangent_basis
+from fourd.methods.surfels.state import SurfelState, at_surfels, layout, tangent_basis
 from fourd.methods.surfels.term import Blocks, Pattern, Term, term
 from fourd.methods.surfels.topology import Topology
 
@@ -48,47 +49,148 @@ def rigid_term(
     (sec. 3.2, "Global Optimization and the Urshape")."""
     lay = layout(state)
     i, j = topology.directed.T
-    root, root_n = np.sqrt(weight), np.sqrt(normal_weight)
-    if steps is None:
-        step = np.arange(state.frames - 1)
-        turns, end, end_normals = state.rotations, state.positions[1:], state.normals[1:]
-    else:
-        step = np.asarray(steps, dtype=np.int64)
-        turns, end, end_normals = (
-            state.rotations[step], state.positions[step + 1], state.normals[step + 1]
-        )
+    step = (
+        np.arange(state.frames - 1) if steps is None else np.asarray(steps, dtype=np.int64)
+    )
     count = len(step)
     origin = np.zeros(count, dtype=np.int64) if urshape else step
-    rotations = at_surfels(turns, i)
-    start = state.positions[origin]
-    before = at_surfels(start, i) - at_surfels(start, j)
-    after = at_surfels(end, i) - at_surfels(end, j)
-    predicted = np.einsum("teab,teb->tea", rotations, before)
-    edge_residuals = root * (predicted - after)
-    turned = np.einsum("tsab,tsb->tsa", turns, state.normals[origin])
-    normal_residuals = root_n * (turned - end_normals)
+    with_normals = normal_weight > 0 and count > 0
+    if derivatives and pattern is None:
+        pattern = _rigid_pattern(lay, i, j, step, origin, with_normals)
+    if derivatives and not _rigid_fits(pattern, count, len(i), state.count, with_normals):
+        raise ValueError(
+            "the blocks do not match the pattern's: a pattern fits only the term, topology "
+            "and layout it was made for"
+        )
+    edge_residuals = np.empty((count, len(i), 3))
+    normal_residuals = np.empty((count, state.count, 3))
+    data = np.empty(pattern.nnz + 1 if derivatives else 0)
+    basis = tangent_basis(state.normals) if derivatives and with_normals else _NO_BASIS
+    slots = pattern.slots if derivatives else _NO_SLOTS
+    _rigid_fill(
+        state.positions, state.normals, state.rotations, basis, step, origin,
+        i.astype(np.int64), j.astype(np.int64), np.sqrt(weight), np.sqrt(normal_weight),
+        edge_residuals, normal_residuals, data, *_padded(slots), derivatives, with_normals,
+    )
     residuals = np.concatenate([edge_residuals.ravel(), normal_residuals.ravel()])
     if not derivatives:
         return term(residuals, None)
-    blocks = Blocks(residuals.size, lay.size, pattern)
-    t = step[:, None]
-    o = origin[:, None]
+    return term(residuals, pattern.jacobian(data), pattern=pattern)
+
+
+_NO_BASIS = np.zeros((0, 0, 3, 2))
+_NO_SLOTS = ()
+
+
+def _padded(slots: tuple) -> tuple:
+    """The eight slot arrays :func:`_rigid_fill` takes: the rigidity's five blocks, then the
+    normals' three (empty ones where the pattern has none)."""
+    shapes = ((0, 0, 6), (0, 0, 3, 3), (0, 0, 3, 3), (0, 0, 3), (0, 0, 3), (0, 0, 6),
+              (0, 0, 3, 2), (0, 0, 3, 2))
+    dtype = slots[0].dtype if slots else np.int64
+    return tuple(slots) + tuple(np.zeros(shape, dtype) for shape in shapes[len(slots):])
+
+
+def _rigid_pattern(lay, i, j, step, origin, with_normals: bool) -> Pattern:
+    """The Jacobian's structure of :func:`rigid_term`: per step and directed edge the rotation
+    (its cross-product matrix, off the diagonal), both surfels' positions at the origin frame
+    (3 x 3) and at the end frame (the diagonal); per step and surfel, with the normals, the
+    rotation and the normal offsets at both frames (3 x 2)."""
+    count, surfels = len(step), np.arange(lay.count)
+    rows_count = 3 * count * (len(i) + lay.count)
+    blocks = Blocks(rows_count, lay.size)
+    t, o = step[:, None], origin[:, None]
     rows = 3 * np.arange(count * len(i)).reshape(count, len(i))
-    eye = np.eye(3)
-    diagonal = eye.astype(bool)
-    blocks.add(rows, lay.rotation(t, i), -root * skew(predicted), ~diagonal)
-    blocks.add(rows, lay.position(o, i), root * rotations)
-    blocks.add(rows, lay.position(o, j), -root * rotations)
-    blocks.add(rows, lay.position(t + 1, i), -root * eye, diagonal)
-    blocks.add(rows, lay.position(t + 1, j), root * eye, diagonal)
-    if normal_weight > 0 and count > 0:
-        surfels = np.arange(state.count)
-        rows = edge_residuals.size + 3 * (np.arange(count)[:, None] * state.count + surfels)
-        basis = tangent_basis(state.normals)
-        blocks.add(rows, lay.rotation(t, surfels), -root_n * skew(turned), ~diagonal)
-        blocks.add(rows, lay.normal(o, surfels), root_n * turns @ basis[origin])
-        blocks.add(rows, lay.normal(t + 1, surfels), -root_n * basis[step + 1])
-    return term(residuals, blocks)
+    full, diagonal = np.ones((3, 3)), np.eye(3)
+    blocks.add(rows, lay.rotation(t, i), full, ~diagonal.astype(bool))
+    blocks.add(rows, lay.position(o, i), full)
+    blocks.add(rows, lay.position(o, j), full)
+    blocks.add(rows, lay.position(t + 1, i), full, diagonal.astype(bool))
+    blocks.add(rows, lay.position(t + 1, j), full, diagonal.astype(bool))
+    if with_normals:
+        rows = 3 * count * len(i) + 3 * (np.arange(count)[:, None] * lay.count + surfels)
+        tangent = np.ones((3, 2))
+        blocks.add(rows, lay.rotation(t, surfels), full, ~diagonal.astype(bool))
+        blocks.add(rows, lay.normal(o, surfels), tangent)
+        blocks.add(rows, lay.normal(t + 1, surfels), tangent)
+    return blocks.pattern()
+
+
+def _rigid_fits(pattern: Pattern, count: int, edges: int, surfels: int, with_normals: bool) -> bool:
+    """Whether ``pattern`` has the blocks :func:`_rigid_pattern` makes for these sizes."""
+    shapes = [(count, edges, 6), (count, edges, 3, 3), (count, edges, 3, 3), (count, edges, 3),
+              (count, edges, 3)]
+    if with_normals:
+        shapes += [(count, surfels, 6), (count, surfels, 3, 2), (count, surfels, 3, 2)]
+    return [s.shape for s in pattern.slots] == shapes
+
+
+@numba.njit(cache=True, parallel=True, nogil=True)
+def _rigid_fill(
+    positions, normals, rotations, basis, step, origin, i, j, root, root_n,
+    edge_residuals, normal_residuals, data,
+    s_turn, s_start_i, s_start_j, s_end_i, s_end_j, s_normal_turn, s_normal_start,
+    s_normal_end, derivatives, with_normals,
+):
+    """:func:`rigid_term`'s residuals and, with ``derivatives``, its Jacobian's values
+    written straight into the CSR values ``data`` at the pattern's slots (one pass; the
+    blocks gathered, multiplied and scattered by numpy took three times as long)."""
+    edges = len(i)
+    for k in numba.prange(len(step) * edges):
+        t, e = k // edges, k % edges
+        a, b = i[e], j[e]
+        s, o = step[t], origin[t]
+        turn = rotations[s, a]
+        predicted = np.empty(3)
+        for r in range(3):
+            total = 0.0
+            for c in range(3):
+                total += turn[r, c] * (positions[o, a, c] - positions[o, b, c])
+            predicted[r] = total
+            edge_residuals[t, e, r] = root * (
+                total - (positions[s + 1, a, r] - positions[s + 1, b, r])
+            )
+        if derivatives:
+            _skew_into(data, s_turn[t, e], predicted, root)
+            for r in range(3):
+                for c in range(3):
+                    data[s_start_i[t, e, r, c]] = root * turn[r, c]
+                    data[s_start_j[t, e, r, c]] = -root * turn[r, c]
+                data[s_end_i[t, e, r]] = -root
+                data[s_end_j[t, e, r]] = root
+    surfels = normals.shape[1]
+    for k in numba.prange(len(step) * surfels):
+        t, a = k // surfels, k % surfels
+        s, o = step[t], origin[t]
+        turn = rotations[s, a]
+        turned = np.empty(3)
+        for r in range(3):
+            total = 0.0
+            for c in range(3):
+                total += turn[r, c] * normals[o, a, c]
+            turned[r] = total
+            normal_residuals[t, a, r] = root_n * (total - normals[s + 1, a, r])
+        if derivatives and with_normals:
+            _skew_into(data, s_normal_turn[t, a], turned, root_n)
+            for r in range(3):
+                for c in range(2):
+                    total = 0.0
+                    for m in range(3):
+                        total += turn[r, m] * basis[o, a, m, c]
+                    data[s_normal_start[t, a, r, c]] = root_n * total
+                    data[s_normal_end[t, a, r, c]] = -root_n * basis[s + 1, a, r, c]
+
+
+@numba.njit(cache=True, inline="always")
+def _skew_into(data, slots, vector, root):
+    """``-root skew(vector)`` (:func:`~.state.skew`) off its diagonal, row by row, at ``slots``
+    [6] (eq. 12: the derivative of ``(I + C) A x`` by the rotation vector of ``C``)."""
+    data[slots[0]] = root * vector[2]
+    data[slots[1]] = -root * vector[1]
+    data[slots[2]] = -root * vector[2]
+    data[slots[3]] = root * vector[0]
+    data[slots[4]] = root * vector[1]
+    data[slots[5]] = -root * vector[0]
 
 
 def accel_term(

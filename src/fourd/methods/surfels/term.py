@@ -72,6 +72,11 @@ class Pattern:
             values = values if mask is None else values[..., mask]
             # a compiled loop: numpy's broadcasting assignment took 2.5 times as long
             _scatter(data, slots.reshape(-1), np.broadcast_to(values, slots.shape).reshape(-1))
+        return self.jacobian(data)
+
+    def jacobian(self, data: np.ndarray) -> sp.csr_matrix:
+        """The Jacobian whose CSR values are ``data`` [nnz + 1] (filled at the slots; the last
+        entry takes the values of entries not stored)."""
         # indices and indptr are shared between assemblies and never written: the products
         # of the optimiser only read them
         jacobian = sp.csr_matrix((data[: self.nnz], self.indices, self.indptr), shape=self.shape)
@@ -303,15 +308,19 @@ class Blocks:
 
 
 def term(
-    residuals: np.ndarray, blocks: Blocks | sp.csr_matrix | None, constant: float = 0.0
+    residuals: np.ndarray,
+    blocks: Blocks | sp.csr_matrix | None,
+    constant: float = 0.0,
+    *,
+    pattern: Pattern | None = None,
 ) -> Term:
     """The :class:`Term` of ``residuals`` [R] (any shape, flattened in C order) with the
-    Jacobian in ``blocks``, or the Jacobian itself (csr_matrix [R, n], no pattern kept; None:
-    value only); ``constant`` adds to the value."""
+    Jacobian in ``blocks``, or the Jacobian itself (csr_matrix [R, n], with the ``pattern``
+    it was filled from, if any; None: value only); ``constant`` adds to the value."""
     r = np.ascontiguousarray(residuals, dtype=np.float64).ravel()
     value = float(np.einsum("i,i->", r, r)) + float(constant)
     if blocks is None:
         return Term(value, r, None)
     if sp.issparse(blocks):
-        return Term(value, r, blocks)
+        return Term(value, r, blocks, pattern)
     return Term(value, r, blocks.matrix(), blocks.pattern())
