@@ -234,51 +234,6 @@ def test_a_kept_pattern_assembles_the_jacobian_of_another_state(name):
     assert abs(narrow - fresh[:, columns]).max() == 0.0
 
 
-def _rigid_pattern_by_blocks(state, graph, steps, urshape, with_normals):
-    """The rigidity's Jacobian structure assembled and sorted by the generic blocks."""
-    lay = layout(state)
-    i, j = graph.directed.T
-    count = len(steps)
-    origin = np.zeros(count, dtype=np.int64) if urshape else steps
-    blocks = Blocks(3 * count * (len(i) + lay.count), lay.size)
-    t, o = steps[:, None], origin[:, None]
-    rows = 3 * np.arange(count * len(i)).reshape(count, len(i))
-    full, eye = np.ones((3, 3)), np.eye(3, dtype=bool)
-    blocks.add(rows, lay.rotation(t, i), full, ~eye)
-    blocks.add(rows, lay.position(o, i), full)
-    blocks.add(rows, lay.position(o, j), full)
-    blocks.add(rows, lay.position(t + 1, i), full, eye)
-    blocks.add(rows, lay.position(t + 1, j), full, eye)
-    if with_normals:
-        surfels = np.arange(lay.count)
-        rows = 3 * count * len(i) + 3 * (np.arange(count)[:, None] * lay.count + surfels)
-        blocks.add(rows, lay.rotation(t, surfels), full, ~eye)
-        blocks.add(rows, lay.normal(o, surfels), np.ones((3, 2)))
-        blocks.add(rows, lay.normal(t + 1, surfels), np.ones((3, 2)))
-    return blocks.pattern()
-
-
-@pytest.mark.parametrize("urshape", [False, True])
-@pytest.mark.parametrize("normal_weight", [0.0, 0.4])
-@pytest.mark.parametrize("steps", [None, [1, 3]])
-def test_the_rigidity_writes_the_pattern_the_generic_blocks_sort(urshape, normal_weight, steps):
-    state, graph, _ = _problem(frames=5)
-    every = np.arange(state.frames - 1)
-    direct = rigid_term(
-        state, graph, 0.9, normal_weight, urshape=urshape,
-        steps=None if steps is None else np.array(steps),
-    ).pattern
-    reference = _rigid_pattern_by_blocks(
-        state, graph, every if steps is None else np.array(steps), urshape, normal_weight > 0
-    )
-    assert direct.shape == reference.shape
-    assert np.array_equal(direct.indptr, reference.indptr)
-    assert np.array_equal(direct.indices, reference.indices)
-    assert len(direct.slots) == len(reference.slots) == (8 if normal_weight > 0 else 5)
-    for ours, theirs in zip(direct.slots, reference.slots, strict=True):
-        assert ours.shape == theirs.shape and np.array_equal(ours, theirs)
-
-
 def test_a_pattern_from_another_term_is_refused():
     state, graph, _ = _problem(frames=4)
     terms = _prior_terms(graph)

@@ -23,7 +23,7 @@ import numpy as np
 
 from fourd.geometry.rotations import best_rotations
 from fourd.methods.surfels.state import SurfelState, at_surfels, layout, tangent_basis
-from fourd.methods.surfels.term import Blocks, Pattern, Term, index_type, term
+from fourd.methods.surfels.term import Blocks, Pattern, Term, term
 from fourd.methods.surfels.topology import Topology
 
 
@@ -92,116 +92,28 @@ def _padded(slots: tuple) -> tuple:
 
 
 def _rigid_pattern(lay, i, j, step, origin, with_normals: bool) -> Pattern:
-    """The Jacobian's structure of :func:`rigid_term`, the blocks' slots in the order
-    :func:`_rigid_fill` takes them: per step and directed edge the rotation (its
-    cross-product matrix off the diagonal, ``[K, E, 6]``), both surfels' positions at the
-    origin frame (``[K, E, 3, 3]`` twice) and at the end frame (the diagonal, ``[K, E, 3]``
-    twice); per step and surfel, with the normals, the rotation (``[K, S, 6]``) and the normal
-    offsets at both frames (``[K, S, 3, 2]`` twice). Every row's entries are known, so they
-    are written in column order directly (:class:`~.term.Blocks` sorted them all)."""
-    count, edges, surfels = len(step), len(i), lay.count
-    rows = 3 * count * (edges + surfels)
-    nnz = 30 * count * edges + (18 * count * surfels if with_normals else 0)
-    index, slot = index_type(rows, lay.size, nnz), index_type(nnz + 1)
-    indices = np.empty(nnz, dtype=index)
-    indptr = np.empty(rows + 1, dtype=index)
-    slots = (
-        np.empty((count, edges, 6), slot),
-        np.empty((count, edges, 3, 3), slot),
-        np.empty((count, edges, 3, 3), slot),
-        np.empty((count, edges, 3), slot),
-        np.empty((count, edges, 3), slot),
-    )
+    """The Jacobian's structure of :func:`rigid_term`: per step and directed edge the rotation
+    (its cross-product matrix, off the diagonal), both surfels' positions at the origin frame
+    (3 x 3) and at the end frame (the diagonal); per step and surfel, with the normals, the
+    rotation and the normal offsets at both frames (3 x 2)."""
+    count, surfels = len(step), np.arange(lay.count)
+    rows_count = 3 * count * (len(i) + lay.count)
+    blocks = Blocks(rows_count, lay.size)
+    t, o = step[:, None], origin[:, None]
+    rows = 3 * np.arange(count * len(i)).reshape(count, len(i))
+    full, diagonal = np.ones((3, 3)), np.eye(3)
+    blocks.add(rows, lay.rotation(t, i), full, ~diagonal.astype(bool))
+    blocks.add(rows, lay.position(o, i), full)
+    blocks.add(rows, lay.position(o, j), full)
+    blocks.add(rows, lay.position(t + 1, i), full, diagonal.astype(bool))
+    blocks.add(rows, lay.position(t + 1, j), full, diagonal.astype(bool))
     if with_normals:
-        slots += (
-            np.empty((count, surfels, 6), slot),
-            np.empty((count, surfels, 3, 2), slot),
-            np.empty((count, surfels, 3, 2), slot),
-        )
-    _rigid_structure(
-        np.asarray(i, dtype=np.int64), np.asarray(j, dtype=np.int64), step, origin, surfels,
-        lay.normals_start, lay.rotations_start, with_normals, indices, indptr, *_padded(slots),
-    )
-    masks = (~np.eye(3, dtype=bool), None, None, np.eye(3, dtype=bool), np.eye(3, dtype=bool))
-    masks += (~np.eye(3, dtype=bool), None, None) if with_normals else ()
-    return Pattern((rows, lay.size), slots, masks, indices, indptr)
-
-
-@numba.njit(cache=True, parallel=True, nogil=True)
-def _rigid_structure(
-    i, j, step, origin, surfels, normals_start, rotations_start, with_normals, indices,
-    indptr, s_turn, s_start_i, s_start_j, s_end_i, s_end_j, s_normal_turn, s_normal_start,
-    s_normal_end,
-):
-    """:func:`_rigid_pattern`'s CSR columns, row pointers and slots. An edge row holds ten
-    entries: the four position groups (two of 3 columns at the origin frame, two of 1 at the
-    end frame, in the order of their first columns; the layout puts positions before
-    normals before rotations), then the rotation's two. A normal row holds six: the origin
-    frame's offsets, the end frame's, the rotation's two."""
-    edges = len(i)
-    edge_entries = 30 * len(step) * edges
-    indptr[0] = 0
-    for k in numba.prange(len(step) * edges):
-        t, e = k // edges, k % edges
-        a, b, s, o = i[e], j[e], step[t], origin[t]
-        starts_k = np.empty(4, dtype=np.int64)
-        starts_k[0] = (o * surfels + a) * 3
-        starts_k[1] = (o * surfels + b) * 3
-        starts_k[2] = ((s + 1) * surfels + a) * 3
-        starts_k[3] = ((s + 1) * surfels + b) * 3
-        order = np.argsort(starts_k)
-        for r in range(3):
-            row = 3 * k + r
-            at = 10 * row
-            for g in order:
-                if g < 2:
-                    for c in range(3):
-                        indices[at] = starts_k[g] + c
-                        if g == 0:
-                            s_start_i[t, e, r, c] = at
-                        else:
-                            s_start_j[t, e, r, c] = at
-                        at += 1
-                else:
-                    indices[at] = starts_k[g] + r
-                    if g == 2:
-                        s_end_i[t, e, r] = at
-                    else:
-                        s_end_j[t, e, r] = at
-                    at += 1
-            _turn_entries(indices, s_turn[t, e], at, rotations_start + (s * surfels + a) * 3, r)
-            indptr[row + 1] = 10 * row + 10
-    for k in numba.prange(len(step) * surfels):
-        t, a = k // surfels, k % surfels
-        s, o = step[t], origin[t]
-        for r in range(3):
-            row = 3 * (len(step) * edges + k) + r
-            if not with_normals:
-                indptr[row + 1] = edge_entries
-                continue
-            at = edge_entries + 6 * (3 * k + r)
-            for c in range(2):
-                indices[at + c] = normals_start + (o * surfels + a) * 2 + c
-                s_normal_start[t, a, r, c] = at + c
-                indices[at + 2 + c] = normals_start + ((s + 1) * surfels + a) * 2 + c
-                s_normal_end[t, a, r, c] = at + 2 + c
-            _turn_entries(
-                indices, s_normal_turn[t, a], at + 4, rotations_start + (s * surfels + a) * 3, r
-            )
-            indptr[row + 1] = at + 6
-
-
-@numba.njit(cache=True, inline="always")
-def _turn_entries(indices, slots, at, first, r):
-    """The rotation vector's two columns in row ``r`` of a cross-product matrix (all but
-    ``r``), written at ``at`` and ``at + 1``, their slots in the mask's row-major order
-    (:func:`_skew_into`)."""
-    m = 0
-    for c in range(3):
-        if c != r:
-            indices[at + m] = first + c
-            slots[2 * r + m] = at + m
-            m += 1
+        rows = 3 * count * len(i) + 3 * (np.arange(count)[:, None] * lay.count + surfels)
+        tangent = np.ones((3, 2))
+        blocks.add(rows, lay.rotation(t, surfels), full, ~diagonal.astype(bool))
+        blocks.add(rows, lay.normal(o, surfels), tangent)
+        blocks.add(rows, lay.normal(t + 1, surfels), tangent)
+    return blocks.pattern()
 
 
 def _rigid_fits(pattern: Pattern, count: int, edges: int, surfels: int, with_normals: bool) -> bool:
