@@ -141,14 +141,10 @@ def _rigid_fill(
         a, b = i[e], j[e]
         s, o = step[t], origin[t]
         turn = rotations[s, a]
-        predicted = np.empty(3)
+        predicted = _turned(turn, positions[o, a] - positions[o, b])
         for r in range(3):
-            total = 0.0
-            for c in range(3):
-                total += turn[r, c] * (positions[o, a, c] - positions[o, b, c])
-            predicted[r] = total
             edge_residuals[t, e, r] = root * (
-                total - (positions[s + 1, a, r] - positions[s + 1, b, r])
+                predicted[r] - (positions[s + 1, a, r] - positions[s + 1, b, r])
             )
         if derivatives:
             _skew_into(data, s_turn[t, e], predicted, root)
@@ -163,13 +159,9 @@ def _rigid_fill(
         t, a = k // surfels, k % surfels
         s, o = step[t], origin[t]
         turn = rotations[s, a]
-        turned = np.empty(3)
+        turned = _turned(turn, normals[o, a])
         for r in range(3):
-            total = 0.0
-            for c in range(3):
-                total += turn[r, c] * normals[o, a, c]
-            turned[r] = total
-            normal_residuals[t, a, r] = root_n * (total - normals[s + 1, a, r])
+            normal_residuals[t, a, r] = root_n * (turned[r] - normals[s + 1, a, r])
         if derivatives and with_normals:
             _skew_into(data, s_normal_turn[t, a], turned, root_n)
             for r in range(3):
@@ -179,6 +171,18 @@ def _rigid_fill(
                         total += turn[r, m] * basis[o, a, m, c]
                     data[s_normal_start[t, a, r, c]] = root_n * total
                     data[s_normal_end[t, a, r, c]] = -root_n * basis[s + 1, a, r, c]
+
+
+@numba.njit(cache=True, inline="always")
+def _turned(turn, vector):
+    """``turn @ vector`` (3 x 3 by [3]), summed in column order."""
+    out = np.empty(3)
+    for r in range(3):
+        total = 0.0
+        for c in range(3):
+            total += turn[r, c] * vector[c]
+        out[r] = total
+    return out
 
 
 @numba.njit(cache=True, inline="always")
