@@ -12,6 +12,7 @@ import scipy.sparse as sp
 from fourd.geometry.sparse_products import csr_product, csr_transpose
 from fourd.methods.surfels.anchors import anchor_term
 from fourd.methods.surfels.color_guide import guide_term
+from fourd.methods.surfels.hessian import planned_derivatives
 from fourd.methods.surfels.match import Data, Matches, MatchOptions, match_term
 from fourd.methods.surfels.motion import accel_term, rigid_term
 from fourd.methods.surfels.smoothness import laplace_term, smooth_normal_term, smooth_position_term
@@ -21,6 +22,10 @@ from fourd.methods.surfels.topology import Topology
 
 #: Terms whose Jacobian pattern follows the state (their association), never kept.
 ASSOCIATED = ("match", "anchor", "guide")
+
+#: The key of the Hessian's kept structure among ``total_energy``'s ``patterns``
+#: (:class:`~.hessian.HessianPlan`).
+HESSIAN_PLAN = "hessian"
 
 
 @dataclass(frozen=True)
@@ -115,7 +120,8 @@ def total_energy(
     ``patterns`` (a dict, empty at first) keeps the priors' Jacobian patterns
     (:class:`~.term.Pattern`, of ``columns`` only) between calls on the same topology,
     layout and ``columns``, so that later calls assemble values only; it must not outlive
-    them. ``shared`` (a dict, empty at first) keeps the same patterns of every column, for
+    them. With the data term and no other associated one, it keeps the Hessian's structure
+    too (:class:`~.hessian.HessianPlan`, under :data:`HESSIAN_PLAN`). ``shared`` (a dict, empty at first) keeps the same patterns of every column, for
     calls on the same topology, layout and ``urshape`` with other ``columns`` (the hole
     filling's frames, one after the other)."""
     w = weights or Weights()
@@ -185,19 +191,41 @@ def total_energy(
             if shared is not None:
                 shared[name, reach.key] = part.pattern
             kept[name] = part.pattern.keep_columns(columns) if restrict else part.pattern
+    jacobians = {name: part.jacobian for name, part in parts.items()}
+    if restrict:
+        # the priors assembled from kept patterns have their columns already
+        for name, jacobian in jacobians.items():
+            if jacobian.shape[1] != len(columns):
+                jacobians[name] = keep_columns(jacobian, columns)
+    priors = [name for name in parts if name not in ASSOCIATED]
+    if patterns is not None and priors and [n for n in parts if n in ASSOCIATED] == ["match"]:
+        # the data term's rows within their surfels' blocks, the priors' patterns kept: the
+        # Hessian's structure is kept between the calls too
+        data_jacobian, data_residuals = jacobians["match"], parts["match"].residuals
+        prior_jacobians = [jacobians[name] for name in priors]
+        prior_residuals = np.concatenate([parts[name].residuals for name in priors])
+        # the list passed is the priors' Jacobians' last reference (let go once read)
+        parts.clear()
+        jacobians.clear()
+        planned = planned_derivatives(
+            data_jacobian,
+            data_residuals,
+            prior_jacobians,
+            prior_residuals,
+            tuple(kept[name] for name in priors),
+            kept.get(HESSIAN_PLAN),
+            lay,
+            columns if restrict else None,
+        )
+        gradient, hessian, kept[HESSIAN_PLAN] = planned
+        return Energy(total, values, gradient, hessian)
     # one Jacobian of every term, so that J^T J is formed once (a sum of the terms' Hessians
     # allocates each partial sum)
     residuals = np.concatenate([np.zeros(0)] + [part.residuals for part in parts.values()])
-    jacobians = [sp.csr_matrix((0, lay.size))] + [part.jacobian for part in parts.values()]
+    width = len(columns) if restrict else lay.size
+    jacobian = sp.vstack([sp.csr_matrix((0, width))] + list(jacobians.values()), format="csr")
     parts.clear()
-    if restrict:
-        # the priors assembled from kept patterns have their columns already
-        jacobians = [
-            jacobian if jacobian.shape[1] == len(columns) else keep_columns(jacobian, columns)
-            for jacobian in jacobians
-        ]
-    jacobian = sp.vstack(jacobians, format="csr")
-    del jacobians
+    jacobians.clear()
     transposed = csr_transpose(jacobian)
     gradient = 2.0 * (transposed @ residuals)
     # on all cores (scipy's product runs on one): the top merges and the final optimisation

@@ -92,17 +92,18 @@ class PatternCache:
         Each term's pattern of every column, by the term's name and the reach of the free
         columns it was made for (:func:`~.energy.total_energy`'s ``shared``).
     restricted : dict[str, Pattern]
-        The same restricted to the last free columns (``total_energy``'s ``patterns``).
+        The same restricted to the last free columns (``total_energy``'s ``patterns``), and
+        the structure of their Hessian (:class:`~.hessian.HessianPlan`).
     columns : bytes or None
         Those columns' key (:meth:`for_columns`); None before the first call.
     """
 
     def __init__(self):
         self.full: dict[tuple[str, bytes], Pattern] = {}
-        self.restricted: dict[str, Pattern] = {}
+        self.restricted: dict = {}
         self.columns: bytes | None = None
 
-    def for_columns(self, columns: np.ndarray | None) -> dict[str, Pattern]:
+    def for_columns(self, columns: np.ndarray | None) -> dict:
         """The restricted patterns for the free columns ``columns`` (int [k], sorted; None:
         all), emptied when they are not the last call's."""
         key = b"" if columns is None else np.asarray(columns, dtype=np.int64).tobytes()
