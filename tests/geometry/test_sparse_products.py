@@ -145,3 +145,27 @@ def test_the_transpose_is_scipys():
     assert np.array_equal(transposed.indices, expected.indices)
     assert np.array_equal(transposed.data, expected.data)
     assert csr_transpose(sp.csr_matrix((0, 4))).shape == (4, 0)
+
+
+def test_row_lengths_of_an_earlier_product_give_the_same_product():
+    """The row lengths of a product of the same patterns, values aside: the same matrix,
+    entry for entry; lengths of another product are refused."""
+    rng = np.random.default_rng(7)
+    j = sp.random(600, 90, density=0.04, random_state=4, format="csr")
+    addend = sp.random(90, 90, density=0.05, random_state=5, format="csr")
+    first = csr_product(j.T, j, add=addend, upper=True)
+    # other values, the same patterns
+    j.data = rng.normal(size=j.nnz)
+    addend.data = rng.normal(size=addend.nnz)
+    fresh = csr_product(j.T, j, add=addend, upper=True)
+    reused = csr_product(j.T, j, add=addend, upper=True, row_lengths=np.diff(first.indptr))
+    assert np.array_equal(reused.indptr, fresh.indptr)
+    assert np.array_equal(reused.indices, fresh.indices)
+    assert np.array_equal(reused.data, fresh.data)
+    expected = sp.triu(j.T @ j + addend)
+    assert abs(reused - expected).max() <= 1e-12 * abs(expected).max()
+    other = sp.random(600, 90, density=0.04, random_state=6, format="csr")
+    with pytest.raises(ValueError, match="row_lengths are not this product's"):
+        csr_product(other.T, other, upper=True, row_lengths=np.diff(first.indptr))
+    with pytest.raises(ValueError, match="row_lengths must have shape"):
+        csr_product(j.T, j, row_lengths=np.ones(3, dtype=np.int64))
