@@ -102,14 +102,15 @@ def planned_derivatives(
         blocks = data_blocks(lay, columns)
         stacked = sp.vstack(prior_jacobians, format="csr")
         # the transposition carries each entry's number: its values later come by a gather
+        # (32-bit numbers where they fit: a fresh 64-bit array of crane's 27 million took 19 ms)
+        number = np.int32 if stacked.nnz < np.iinfo(np.int32).max else np.int64
         numbers = sp.csr_matrix(
-            (np.arange(stacked.nnz, dtype=np.int64), stacked.indices, stacked.indptr),
+            (np.arange(stacked.nnz, dtype=number), stacked.indices, stacked.indptr),
             shape=stacked.shape,
         )
         transposed = csr_transpose(numbers)
-        order = transposed.data.astype(np.int32 if stacked.nnz < 2**31 else np.int64)
         plan = HessianPlan(
-            tuple(patterns), _structure(stacked), _structure(transposed), order,
+            tuple(patterns), _structure(stacked), _structure(transposed), transposed.data,
             _structure(blocks),
         )
         del stacked, numbers, transposed
