@@ -19,7 +19,7 @@ import numba
 import numpy as np
 import scipy.sparse as sp
 
-from fourd.geometry.sparse_products import csr_product, csr_transpose
+from fourd.geometry.sparse_products import csr_product, csr_transpose, multiply_add
 from fourd.methods.surfels.state import Layout
 
 
@@ -134,8 +134,10 @@ def planned_derivatives(
         row_lengths=plan.row_lengths,
     )
     hessian.data *= 2.0
-    gradient = transposed @ prior_residuals
-    gradient += data_transposed @ data_residuals
+    # on all cores, each entry summed in scipy's order
+    gradient = np.zeros(transposed.shape[0])
+    multiply_add(transposed, prior_residuals, gradient)
+    multiply_add(data_transposed, data_residuals, gradient)
     gradient *= 2.0
     if plan.row_lengths is None:
         plan = replace(plan, row_lengths=np.diff(hessian.indptr))
