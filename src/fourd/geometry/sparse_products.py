@@ -2,8 +2,8 @@
 
 :func:`csr_product` and :func:`galerkin_product` are Gustavson's row-by-row product (of
 ``R A P + D``, :func:`_triple_product`), rows split into chunks that run in parallel; each
-thread keeps one dense marker of the output columns. Two passes: the row lengths, then the
-entries. Column indices within a row come in first-touch order (not sorted), as from scipy.
+thread keeps one dense marker of the output columns. Two passes: the row lengths (skipped
+when an earlier product of the same patterns gave them), then the entries. Column indices within a row come in first-touch order (not sorted), as from scipy.
 Every row is summed by one thread in a fixed order, so the results do not depend on the
 number of cores. :func:`multiply_add` is the matrix-vector product, rows in parallel, and
 :func:`symmetric_multiply` that of a symmetric matrix stored as its upper triangle.

@@ -121,9 +121,10 @@ def total_energy(
     (:class:`~.term.Pattern`, of ``columns`` only) between calls on the same topology,
     layout and ``columns``, so that later calls assemble values only; it must not outlive
     them. With the data term and no other associated one, it keeps the Hessian's structure
-    too (:class:`~.hessian.HessianPlan`, under :data:`HESSIAN_PLAN`). ``shared`` (a dict, empty at first) keeps the same patterns of every column, for
-    calls on the same topology, layout and ``urshape`` with other ``columns`` (the hole
-    filling's frames, one after the other)."""
+    too (:class:`~.hessian.HessianPlan`, under :data:`HESSIAN_PLAN`). ``shared`` (a dict,
+    empty at first) keeps the same patterns of every column, for calls on the same
+    topology, layout and ``urshape`` with other ``columns`` (the hole filling's frames, one
+    after the other)."""
     w = weights or Weights()
     match = match or MatchOptions()
     d = derivatives

@@ -82,12 +82,18 @@ _NO_BASIS = np.zeros((0, 0, 3, 2))
 _NO_SLOTS = ()
 
 
+#: The shapes of the slots of :func:`_rigid_pattern`'s blocks after their leading ``[steps,
+#: edges]`` (the rigidity's five) and ``[steps, surfels]`` (the normals' three), in add order:
+#: a rotation's six off-diagonal entries, 3 x 3 positions, a diagonal's three, 3 x 2 offsets.
+_EDGE_BLOCKS = ((6,), (3, 3), (3, 3), (3,), (3,))
+_NORMAL_BLOCKS = ((6,), (3, 2), (3, 2))
+
+
 def _padded(slots: tuple) -> tuple:
     """The eight slot arrays :func:`_rigid_fill` takes: the rigidity's five blocks, then the
     normals' three (empty ones where the pattern has none)."""
-    shapes = ((0, 0, 6), (0, 0, 3, 3), (0, 0, 3, 3), (0, 0, 3), (0, 0, 3), (0, 0, 6),
-              (0, 0, 3, 2), (0, 0, 3, 2))
     dtype = slots[0].dtype if slots else np.int64
+    shapes = [(0, 0, *block) for block in _EDGE_BLOCKS + _NORMAL_BLOCKS]
     return tuple(slots) + tuple(np.zeros(shape, dtype) for shape in shapes[len(slots):])
 
 
@@ -118,10 +124,9 @@ def _rigid_pattern(lay, i, j, step, origin, with_normals: bool) -> Pattern:
 
 def _rigid_fits(pattern: Pattern, count: int, edges: int, surfels: int, with_normals: bool) -> bool:
     """Whether ``pattern`` has the blocks :func:`_rigid_pattern` makes for these sizes."""
-    shapes = [(count, edges, 6), (count, edges, 3, 3), (count, edges, 3, 3), (count, edges, 3),
-              (count, edges, 3)]
+    shapes = [(count, edges, *block) for block in _EDGE_BLOCKS]
     if with_normals:
-        shapes += [(count, surfels, 6), (count, surfels, 3, 2), (count, surfels, 3, 2)]
+        shapes += [(count, surfels, *block) for block in _NORMAL_BLOCKS]
     return [s.shape for s in pattern.slots] == shapes
 
 
