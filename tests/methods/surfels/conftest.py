@@ -3,6 +3,7 @@
 import numpy as np
 import pytest
 
+from fourd.methods.surfels import build_topology, frame_data, surfel_state
 from fourd.methods.surfels.seeds import FramePoints
 
 
@@ -54,3 +55,26 @@ def quick_seeds():
         return models, Schedule(sampling, weights, 1 / spacing**2, 1.5, quick, quick, quick, match)
 
     return seeds
+
+
+@pytest.fixture
+def random_surfel_problem():
+    """``problem(seed=0, frames=3, count=60)``: a noisy surfel state of ``count`` surfels
+    over ``frames`` frames around a wavy sheet, its topology (radius 0.5) and 200 noisy
+    points of the sheet per frame (weight 10), as ``(state, topology, data)``."""
+
+    def problem(seed=0, frames=3, count=60):
+        rng = np.random.default_rng(seed)
+        uv = rng.uniform(-1, 1, (count, 2))
+        base = np.c_[uv, 0.2 * np.sin(2 * uv[:, 0])]
+        positions = base + rng.normal(scale=0.03, size=(frames, count, 3))
+        normals = np.array([0.0, 0.0, 1.0]) + rng.normal(scale=0.2, size=(frames, count, 3))
+        state = surfel_state(positions, normals)
+        graph = build_topology(positions, 0.5, max_stretch=None)
+        points = [
+            base[rng.integers(count, size=200)] + rng.normal(scale=0.05, size=(200, 3))
+            for _ in range(frames)
+        ]
+        return state, graph, frame_data(points, weight=10.0)
+
+    return problem

@@ -8,33 +8,15 @@ import scipy.sparse as sp
 from fourd.methods.surfels import (
     MatchOptions,
     associate,
-    build_topology,
-    frame_data,
     laplace_term,
     layout,
     match_term,
     move,
     rigid_term,
-    surfel_state,
 )
 from fourd.methods.surfels.hessian import data_blocks, planned_derivatives
 from fourd.methods.surfels.state import Layout
 from fourd.methods.surfels.term import keep_columns
-
-
-def _problem(frames=3, count=30):
-    rng = np.random.default_rng(1)
-    uv = rng.uniform(-1, 1, (count, 2))
-    base = np.c_[uv, 0.2 * uv[:, 0] * uv[:, 1]]
-    positions = base + rng.normal(scale=0.03, size=(frames, count, 3))
-    normals = np.array([0.0, 0.0, 1.0]) + rng.normal(scale=0.2, size=(frames, count, 3))
-    state = surfel_state(positions, normals)
-    graph = build_topology(positions, 0.6, max_stretch=None)
-    points = [
-        base[rng.integers(count, size=90)] + rng.normal(scale=0.05, size=(90, 3))
-        for _ in range(frames)
-    ]
-    return state, graph, frame_data(points)
 
 
 def test_the_data_blocks_are_each_surfels_position_and_normal_offset_in_each_frame():
@@ -66,8 +48,10 @@ def test_the_data_blocks_are_each_surfels_position_and_normal_offset_in_each_fra
 
 
 @pytest.mark.parametrize("restricted", [False, True])
-def test_a_kept_structure_gives_the_stacked_jacobians_gradient_and_hessian(restricted):
-    state, graph, data = _problem()
+def test_a_kept_structure_gives_the_stacked_jacobians_gradient_and_hessian(
+    restricted, random_surfel_problem
+):
+    state, graph, data = random_surfel_problem(seed=1, count=30)
     lay = layout(state)
     rng = np.random.default_rng(2)
     columns = np.flatnonzero(rng.random(lay.size) < 0.6) if restricted else None
@@ -106,8 +90,8 @@ def test_a_kept_structure_gives_the_stacked_jacobians_gradient_and_hessian(restr
     assert not plan.fits(other)
 
 
-def test_a_data_row_outside_its_surfels_block_is_refused():
-    state, graph, data = _problem()
+def test_a_data_row_outside_its_surfels_block_is_refused(random_surfel_problem):
+    state, graph, data = random_surfel_problem(seed=1, count=30)
     lay = layout(state)
     prior = laplace_term(state, graph, 0.3)
     # a row that ties two surfels' positions

@@ -50,23 +50,8 @@ def _rotation(vector):
     return np.eye(3) + np.sin(angle) * k + (1 - np.cos(angle)) * k @ k
 
 
-def _random_problem(seed=0, frames=3, count=60):
-    rng = np.random.default_rng(seed)
-    uv = rng.uniform(-1, 1, (count, 2))
-    base = np.c_[uv, 0.2 * np.sin(2 * uv[:, 0])]
-    positions = base + rng.normal(scale=0.03, size=(frames, count, 3))
-    normals = np.array([0.0, 0.0, 1.0]) + rng.normal(scale=0.2, size=(frames, count, 3))
-    state = surfel_state(positions, normals)
-    graph = build_topology(positions, 0.5, max_stretch=None)
-    points = [
-        base[rng.integers(count, size=200)] + rng.normal(scale=0.05, size=(200, 3))
-        for _ in range(frames)
-    ]
-    return state, graph, frame_data(points, weight=10.0)
-
-
-def test_a_step_descends_and_the_preconditioners_agree_with_a_direct_solve():
-    state, graph, data = _random_problem()
+def test_a_step_descends_and_the_preconditioners_agree_with_a_direct_solve(random_surfel_problem):
+    state, graph, data = random_surfel_problem()
     matches = associate(state, data, graph.radius)
     at = total_energy(state, graph, data, matches, ALL_TERMS)
     options = GaussNewtonOptions(cg_tolerance=1e-10, cg_iterations=5000)
@@ -93,9 +78,9 @@ def test_a_step_descends_and_the_preconditioners_agree_with_a_direct_solve():
     assert np.allclose(normals, 1.0, atol=1e-12)
 
 
-def test_patterns_carried_between_calls_leave_the_optimisation_as_it_was():
+def test_patterns_carried_between_calls_leave_the_optimisation_as_it_was(random_surfel_problem):
     # the hole filling's calls: one topology and layout, the same or other free unknowns
-    state, graph, data = _random_problem(seed=2)
+    state, graph, data = random_surfel_problem(seed=2)
     options = GaussNewtonOptions(iterations=3)
     carried = PatternCache()
     for chosen in (0, 1, 1):
@@ -211,10 +196,10 @@ def test_a_rigid_motion_is_recovered_as_rigid():
         assert np.percentile(local, 95) <= 0.75 and local.max() <= 2.0
 
 
-def test_a_local_optimisation_lowers_the_whole_energy_by_what_it_reports():
+def test_a_local_optimisation_lowers_the_whole_energy_by_what_it_reports(random_surfel_problem):
     # free surfels of one frame: the data of the other frames and the priors' rows away from
     # it are left out as constants, so the decrease it reports is the whole energy's
-    state, graph, data = _random_problem(seed=3, frames=4)
+    state, graph, data = random_surfel_problem(seed=3, frames=4)
     moving = np.zeros((state.frames, state.count), dtype=bool)
     moving[2, ::2] = True
     free = free_unknowns(layout(state), moving)
