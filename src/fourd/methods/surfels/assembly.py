@@ -231,9 +231,12 @@ def merge(
     *,
     held: int = 0,
     kept: int = 0,
+    optimise: bool = True,
 ) -> Model:
     """Merge two adjacent ranges (``left.stop == right.start``) into one model over both
-    (sec. 3.2: align, stitch, fill holes, resample, optimise).
+    (sec. 3.2: align, stitch, fill holes, resample, optimise). With ``optimise`` false the
+    merged model is returned before its global optimisation (the last merge, when a final
+    pass optimises every frame next).
 
     For the streamed run (:mod:`.stream`), where the left range is the past: its first
     ``held`` frames are held in the global optimisation, and its first ``kept`` surfels are
@@ -349,6 +352,8 @@ def merge(
         len(topology.edges),
     )
     model = Model(resampled, topology, left.start, observed[:, keep])
+    if not optimise:
+        return model
     if held:
         return optimize_model(
             model, frames, schedule.weights, schedule.optimize, schedule.match, held=held,
@@ -384,13 +389,15 @@ def assemble(
     cache: StageCache = NO_CACHE,
     keys: list[str] | None = None,
     workers: int = 1,
+    optimise_last: bool = True,
 ) -> tuple[Model, str]:
     """Merge adjacent ``models`` (consecutive ranges, e.g. one seed model per frame) pairwise,
     level by level, until one spans them all (sec. 3.2 "Iteration", :func:`fourd.pipeline.merge_tree.merge_tree`);
     ``progress`` is called with the number of merges done after each. With a ``cache`` and
     one key per model, each merged model is kept there under the hash of its two parts' keys
     and the schedule, so a rerun resumes after the last finished merge. Returns the model and
-    its key.
+    its key. With ``optimise_last`` false the last merge skips its global optimisation
+    (:func:`merge`), for a caller whose final pass optimises every frame next.
 
     ``workers`` merges run side by side in threads, each as soon as its two parts are there
     (beyond the paper, which merged one after another). A merge depends on its two parts
@@ -400,8 +407,9 @@ def assemble(
     (``workqueue``). An interrupted run stops after the merges already running."""
     keys = list(keys) if keys is not None else [""] * len(models)
     plan = merge_tree(len(models))
-    for a, b in plan:
-        keys.append(stage_key(keys[a], keys[b], schedule) if cache.enabled else "")
+    for k, (a, b) in enumerate(plan):
+        last = () if optimise_last or k < len(plan) - 1 else ("not optimised",)
+        keys.append(stage_key(keys[a], keys[b], schedule, *last) if cache.enabled else "")
     nodes: dict[int, Model] = dict(enumerate(models))
     root = len(models) + len(plan) - 1 if plan else 0
 
@@ -410,7 +418,12 @@ def assemble(
             cache,
             "surfels-merge",
             keys[len(models) + k],
-            lambda: pack_model(merge(left, right, frames, schedule)),
+            lambda: pack_model(
+                merge(
+                    left, right, frames, schedule,
+                    optimise=optimise_last or k < len(plan) - 1,
+                )
+            ),
         )
         if resumed:
             report_resumed(log, f"the merge of frames {left.start}-{right.stop - 1}")

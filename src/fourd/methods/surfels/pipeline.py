@@ -95,6 +95,7 @@ def reconstruct(seq: PointCloudSequence, options: Options | None = None) -> Anim
         model, _ = assemble(
             seeds, frames, schedule, progress=bar.update, cache=cache, keys=seed_keys,
             workers=worker_threads(options),
+            optimise_last=options.last_merge_optimised or not options.final_iterations,
         )
     merged = _time.perf_counter()
     if options.final_iterations:
