@@ -233,3 +233,28 @@ def test_merges_side_by_side_give_the_merges_one_after_another(still_bumpy_scans
     again, key_again = assemble(seeds, frames, schedule, keys=keys, workers=2, cache=cache)
     assert not merges and key_again == key_two
     np.testing.assert_array_equal(again.state.positions, two.state.positions)
+
+
+def test_the_last_merge_can_leave_its_optimisation_to_a_final_pass(still_bumpy_scans, quick_seeds, tmp_path,
+                                                                   monkeypatch):
+    """With ``optimise_last`` false the lower merges are the same (resumed from the cache under
+    the same keys) and the last merge returns its model before the global optimisation: the
+    same surfels and graph, the positions as the hole filling and resampling left them, under
+    a key of its own."""
+    import fourd.methods.surfels.assembly as assembly
+    from fourd.cache import StageCache
+    from fourd.methods.surfels.assembly import assemble
+
+    frames = still_bumpy_scans(4, np.random.default_rng(9), 0.004)
+    quick = GaussNewtonOptions(iterations=2, cg_tolerance=1e-3, cg_iterations=20)
+    seeds, schedule = quick_seeds(frames, 6 * 0.02, quick)
+    keys = [f"frame{t}" for t in range(4)]
+    cache = StageCache(tmp_path)
+    optimised, key = assemble(seeds, frames, schedule, keys=keys, cache=cache)
+    calls = []
+    monkeypatch.setattr(assembly, "merge", lambda *args, **kwargs: calls.append(kwargs) or merge(*args, **kwargs))
+    unoptimised, key_unoptimised = assemble(seeds, frames, schedule, keys=keys, cache=cache, optimise_last=False)
+    assert calls == [{"optimise": False}] and key_unoptimised != key
+    np.testing.assert_array_equal(unoptimised.topology.edges, optimised.topology.edges)
+    moved = np.linalg.norm(unoptimised.state.positions - optimised.state.positions, axis=-1)
+    assert moved.max() > 1e-4

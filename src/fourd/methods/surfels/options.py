@@ -118,7 +118,7 @@ class Options:
         The last merge ends with its global optimisation of every frame, as the paper does;
         false: with a final pass, that pass starts from the merged model straight away (the
         merges' optimisation keeps the next level's resampling at ``eps_sampl``, and after
-        the last merge no resampling follows).
+        the last merge no resampling follows). Streamed windows always optimise theirs.
     urshape : str
         When the urshape is computed (sec. 3.2, :mod:`.urshape`): ``"final"`` optimised with
         the trajectories after the final global optimisation; ``"merges"`` as the paper does,
@@ -248,7 +248,7 @@ class Options:
     fill_iterations: int = 2
     merge_reach: int = 0
     final_iterations: int = 4
-    last_merge_optimised: bool = True
+    last_merge_optimised: bool = False
     urshape: str = "rest"
     cg_tolerance: float = 1e-3
     cg_iterations: int = 50
