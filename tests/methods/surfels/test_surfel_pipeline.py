@@ -210,9 +210,13 @@ def test_touching_spheres_are_not_glued_in_any_frame():
     # (70% of their radius) at 3 frames, a motion the alignment loses: there a fifth of the
     # surfels ended more than 0.14 off the truth and the two pieces hung on which of them the
     # clipping kept (experiments/surfels_line_search.py)
+    # 4 final steps, at least the merges' 3: the final pass then stands in for the last
+    # merge's optimisation (last_merge_optimised false). 2 steps from the unoptimised merge
+    # left the spheres one piece (2,356 of its 7,324 vertices on the other sphere), which is
+    # why a shorter final pass keeps the last merge's optimisation
     truth = synth.scene("touching-spheres", frames=3, gap=0.3)
     scans = synth.scan(truth, resolution=128)
-    anim = reconstruct(scans, method="surfels", **QUICK)
+    anim = reconstruct(scans, method="surfels", **{**QUICK, "final_iterations": 4})
     for t in range(len(scans)):
         _, truth_labels = vertex_components(truth.faces, len(truth.vertices[t]))
         _, labels = vertex_components(anim.faces, len(anim.vertices[t]))

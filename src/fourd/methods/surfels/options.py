@@ -116,9 +116,11 @@ class Options:
         pass, and no urshape unless the merges computed one).
     last_merge_optimised : bool
         The last merge ends with its global optimisation of every frame, as the paper does;
-        false: with a final pass, that pass starts from the merged model straight away (the
-        merges' optimisation keeps the next level's resampling at ``eps_sampl``, and after
-        the last merge no resampling follows). Streamed windows always optimise theirs.
+        false: when the final pass has at least ``iterations`` steps, it starts from the
+        merged model straight away (the merges' optimisation keeps the next level's
+        resampling at ``eps_sampl``, and after the last merge no resampling follows; a
+        shorter final pass left touching-spheres' filled surfels glued across the contact).
+        Streamed windows always optimise theirs.
     urshape : str
         When the urshape is computed (sec. 3.2, :mod:`.urshape`): ``"final"`` optimised with
         the trajectories after the final global optimisation; ``"merges"`` as the paper does,

@@ -91,11 +91,13 @@ def reconstruct(seq: PointCloudSequence, options: Options | None = None) -> Anim
     seeds = seed_models(frames, range(len(frames)), sampling, schedule, options)
     prepared = _time.perf_counter()
     seed_keys = merge_keys(keys, options, cache, *salt)
+    # the final pass stands in for the last merge's optimisation only when at least as long
+    final_instead = options.final_iterations >= max(options.iterations, 1)
     with progress(total=len(seeds) - 1, desc="surfels: merging", unit="merge") as bar:
         model, _ = assemble(
             seeds, frames, schedule, progress=bar.update, cache=cache, keys=seed_keys,
             workers=worker_threads(options),
-            optimise_last=options.last_merge_optimised or not options.final_iterations,
+            optimise_last=options.last_merge_optimised or not final_instead,
         )
     merged = _time.perf_counter()
     if options.final_iterations:
