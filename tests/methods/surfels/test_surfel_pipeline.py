@@ -51,6 +51,33 @@ def test_merges_of_another_revision_are_not_resumed(tmp_path, monkeypatch):
     assert pipeline.merge_keys(["frame"], Options(), cache) != before
 
 
+@pytest.mark.parametrize(
+    "options, optimised",
+    [
+        ({}, False),  # the defaults: 4 final steps stand in for the last merge's 4
+        ({"final_iterations": 2}, True),  # a shorter final pass does not
+        ({"final_iterations": 0}, True),  # nor does none
+        ({"last_merge_optimised": True}, True),  # the paper's way
+    ],
+)
+def test_the_final_pass_stands_in_for_the_last_merges_optimisation_only_when_as_long(
+    monkeypatch, options, optimised
+):
+    from fourd.methods.surfels import pipeline
+
+    class Assembled(Exception):
+        pass
+
+    def assemble(*args, optimise_last, **kwargs):
+        raise Assembled(optimise_last)
+
+    monkeypatch.setattr(pipeline, "assemble", assemble)
+    scans = synth.scan(synth.scene("rigid-turn", frames=2), resolution=32)
+    with pytest.raises(Assembled) as caught:
+        pipeline.reconstruct(scans, Options(**options))
+    assert caught.value.args == (optimised,)
+
+
 def test_frames_side_by_side_are_prepared_and_seeded_as_one_after_another():
     """The per-frame stages on two threads give each frame's result to the last bit, in the
     frames' order, and a frame without a surface still names itself."""

@@ -407,9 +407,10 @@ def assemble(
     (``workqueue``). An interrupted run stops after the merges already running."""
     keys = list(keys) if keys is not None else [""] * len(models)
     plan = merge_tree(len(models))
+    optimised = [optimise_last or k < len(plan) - 1 for k in range(len(plan))]
     for k, (a, b) in enumerate(plan):
-        last = () if optimise_last or k < len(plan) - 1 else ("not optimised",)
-        keys.append(stage_key(keys[a], keys[b], schedule, *last) if cache.enabled else "")
+        salt = () if optimised[k] else ("not optimised",)
+        keys.append(stage_key(keys[a], keys[b], schedule, *salt) if cache.enabled else "")
     nodes: dict[int, Model] = dict(enumerate(models))
     root = len(models) + len(plan) - 1 if plan else 0
 
@@ -418,12 +419,7 @@ def assemble(
             cache,
             "surfels-merge",
             keys[len(models) + k],
-            lambda: pack_model(
-                merge(
-                    left, right, frames, schedule,
-                    optimise=optimise_last or k < len(plan) - 1,
-                )
-            ),
+            lambda: pack_model(merge(left, right, frames, schedule, optimise=optimised[k])),
         )
         if resumed:
             report_resumed(log, f"the merge of frames {left.start}-{right.stop - 1}")
