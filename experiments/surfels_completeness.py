@@ -113,7 +113,9 @@ THRESHOLD = 0.01
 SAMPLES = 20000
 
 
-def model_of(scans, options):
+def seeded(scans, options):
+    """The pipeline's steps up to the seeds: (cache, frames, merge keys, spacing, eps_sampl,
+    noise, schedule, seed models)."""
     cache = StageCache(options.cache_dir)
     spacing = point_spacing(scans.frames[0].points)
     sampling = options.sampling * spacing
@@ -121,7 +123,15 @@ def model_of(scans, options):
     frames, keys = sp.prepare_frames(scans.frames, spacing, options, cache)
     schedule = sp.assembly_schedule(options, noise, sampling)
     seeds = sp.seed_models(frames, range(len(frames)), sampling, schedule, options)
-    model, _ = assemble(seeds, frames, schedule, cache=cache, keys=sp.merge_keys(keys, options, cache))
+    keys = sp.merge_keys(keys, options, cache)
+    return cache, frames, keys, spacing, sampling, noise, schedule, seeds
+
+
+def model_of(scans, options):
+    cache, frames, keys, spacing, sampling, noise, schedule, seeds = seeded(scans, options)
+    model, _ = assemble(
+        seeds, frames, schedule, cache=cache, keys=keys, optimise_last=options.last_merge_optimised
+    )
     model = optimize_model(
         model,
         frames,

@@ -42,9 +42,8 @@ import sys
 import numpy as np
 from normal_fit import scans_of
 from scipy.spatial import cKDTree
+from surfels_completeness import seeded
 
-from fourd.cache import StageCache
-from fourd.geometry.neighbors import point_spacing
 from fourd.methods.surfels import pipeline as sp
 from fourd.methods.surfels.assembly import assemble
 from fourd.methods.surfels.options import Options, energy_weights
@@ -67,18 +66,11 @@ def main(labels) -> None:
     for label in labels:
         _, scans = scans_of(label)
         options = Options(cache_dir=f"{CACHE}/{label}")
-        cache = StageCache(options.cache_dir)
-        spacing = point_spacing(scans.frames[0].points)
-        sampling = options.sampling * spacing
-        noise = options.noise or spacing
-        frames, keys = sp.prepare_frames(scans.frames, spacing, options, cache)
-        schedule = sp.assembly_schedule(options, noise, sampling)
-        seeds = sp.seed_models(frames, range(len(frames)), sampling, schedule, options)
+        cache, frames, keys, _, sampling, noise, schedule, seeds = seeded(scans, options)
         weights = energy_weights(options, noise, sampling, final=True)
         for optimised in (True, False):
             model, _ = assemble(
-                seeds, frames, schedule, cache=cache, keys=sp.merge_keys(keys, options, cache),
-                optimise_last=optimised,
+                seeds, frames, schedule, cache=cache, keys=keys, optimise_last=optimised,
             )
             final = sp.final_optimisation(
                 model, frames, weights, schedule.match, options, guide=None, urshape="rest"

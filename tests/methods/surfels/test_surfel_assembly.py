@@ -203,6 +203,15 @@ def test_a_seed_keeps_a_thin_tube_round_when_its_sides_are_not_neighbours(geodes
         assert round_ < 0.86 and uncovered > 0.05
 
 
+def _quick_assembly(still_bumpy_scans, quick_seeds, count, seed):
+    """``count`` scans of the still bumpy surface, their seeds with 2 quick Gauss-Newton steps,
+    the schedule and a key per frame."""
+    frames = still_bumpy_scans(count, np.random.default_rng(seed), 0.004)
+    quick = GaussNewtonOptions(iterations=2, cg_tolerance=1e-3, cg_iterations=20)
+    seeds, schedule = quick_seeds(frames, 6 * 0.02, quick)
+    return frames, seeds, schedule, [f"frame{t}" for t in range(count)]
+
+
 def test_merges_side_by_side_give_the_merges_one_after_another(still_bumpy_scans, quick_seeds, tmp_path,
                                                                monkeypatch):
     """Five frames assembled with two threads (merges as their parts are ready) and with one
@@ -213,10 +222,7 @@ def test_merges_side_by_side_give_the_merges_one_after_another(still_bumpy_scans
     from fourd.methods.surfels.assembly import assemble
     from fourd.pipeline.merge_tree import merge_tree
 
-    frames = still_bumpy_scans(5, np.random.default_rng(8), 0.004)
-    quick = GaussNewtonOptions(iterations=2, cg_tolerance=1e-3, cg_iterations=20)
-    seeds, schedule = quick_seeds(frames, 6 * 0.02, quick)
-    keys = [f"frame{t}" for t in range(5)]
+    frames, seeds, schedule, keys = _quick_assembly(still_bumpy_scans, quick_seeds, 5, 8)
     cache = StageCache(tmp_path)
     done = []
     one, _ = assemble(seeds, frames, schedule, keys=keys, workers=1)
@@ -245,10 +251,7 @@ def test_the_last_merge_can_leave_its_optimisation_to_a_final_pass(still_bumpy_s
     from fourd.cache import StageCache
     from fourd.methods.surfels.assembly import assemble
 
-    frames = still_bumpy_scans(4, np.random.default_rng(9), 0.004)
-    quick = GaussNewtonOptions(iterations=2, cg_tolerance=1e-3, cg_iterations=20)
-    seeds, schedule = quick_seeds(frames, 6 * 0.02, quick)
-    keys = [f"frame{t}" for t in range(4)]
+    frames, seeds, schedule, keys = _quick_assembly(still_bumpy_scans, quick_seeds, 4, 9)
     cache = StageCache(tmp_path)
     optimised, key = assemble(seeds, frames, schedule, keys=keys, cache=cache)
     calls = []
