@@ -78,6 +78,18 @@ def test_the_final_pass_stands_in_for_the_last_merges_optimisation_only_when_as_
     assert caught.value.args == (optimised,)
 
 
+def test_the_lower_merges_keys_do_not_depend_on_the_last_merges_way(tmp_path):
+    """Only the last merge depends on ``last_merge_optimised`` (its key is salted in
+    ``assemble``), so switching it resumes every lower merge."""
+    from fourd.cache import StageCache
+    from fourd.methods.surfels import pipeline
+
+    cache = StageCache(str(tmp_path))
+    keys = [pipeline.merge_keys(["frame"], Options(**o), cache) for o in
+            ({}, {"last_merge_optimised": True}, {"final_iterations": 2}, {"iterations": 2})]
+    assert keys[0] == keys[1] == keys[2] != keys[3]
+
+
 def test_frames_side_by_side_are_prepared_and_seeded_as_one_after_another():
     """The per-frame stages on two threads give each frame's result to the last bit, in the
     frames' order, and a frame without a surface still names itself."""

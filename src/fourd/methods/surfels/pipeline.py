@@ -363,12 +363,14 @@ MESH_ONLY = (
     "reference",
 )
 
-#: Options that do not act on the merges (the cache keys of the merged models leave them out).
+#: Options that do not act on the merges (the cache keys of the merged models leave them out;
+#: the last merge's key says itself when that merge is left to the final pass).
 NOT_IN_MERGES = (
     *MESH_ONLY,
     "final_rigid",
     "final_accel",
     "final_iterations",
+    "last_merge_optimised",
     "color_rounds",
     "window",
     "workers",
