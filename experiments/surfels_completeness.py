@@ -269,6 +269,16 @@ def main(label: str, clips) -> None:
           np.percentile(rel, [10, 50, 90], axis=0).round(2).tolist())
 
 
+def bunching(surfels, points, sampling):
+    """The ``surfels`` [n, 3] against one frame's ``points`` [m, 3]: (share of the points
+    farther than 0.75 eps_sampl from any surfel, nearest-surfel distance's 5th / 25th / 50th
+    percentiles in eps_sampl)."""
+    tree = cKDTree(surfels)
+    uncovered = np.mean(tree.query(points)[0] > 0.75 * sampling)
+    nearest = tree.query(surfels, k=2)[0][:, 1] / sampling
+    return uncovered, np.percentile(nearest, [5, 25, 50])
+
+
 def seed_bunching(label: str, tangentials) -> None:
     """Frame 0's seed at each tangential data share: nearest-surfel distances (5th / 25th /
     50th percentile, in eps_sampl) and the share of its points farther than 0.75 eps_sampl
@@ -282,10 +292,8 @@ def seed_bunching(label: str, tangentials) -> None:
         options = Options(tangential=tangential)
         schedule = sp.assembly_schedule(options, options.noise or spacing, sampling)
         seed = sp.seed_models(frames, [0], sampling, schedule, options)[0]
-        p = seed.state.positions[0]
-        nearest = cKDTree(p).query(p, k=2)[0][:, 1] / sampling
-        uncovered = np.mean(cKDTree(p).query(frames[0].points)[0] > 0.75 * sampling)
-        print(f"tangential {tangential}: nearest surfel {np.percentile(nearest, [5, 25, 50]).round(2)} "
+        uncovered, nearest = bunching(seed.state.positions[0], frames[0].points, sampling)
+        print(f"tangential {tangential}: nearest surfel {nearest.round(2)} "
               f"eps_sampl, points farther than 0.75 eps_sampl {uncovered:.3f}", flush=True)
 
 

@@ -41,8 +41,7 @@ import sys
 
 import numpy as np
 from normal_fit import scans_of
-from scipy.spatial import cKDTree
-from surfels_completeness import seeded
+from surfels_completeness import bunching, seeded
 
 from fourd.methods.surfels import pipeline as sp
 from fourd.methods.surfels.assembly import assemble
@@ -55,10 +54,8 @@ def coverage(state, frames, sampling):
     """Median over frames of (uncovered share, nearest-surfel 5/25/50th pct in eps_sampl)."""
     rows = []
     for t, frame in enumerate(frames):
-        surfels = state.positions[t]
-        uncovered = np.mean(cKDTree(surfels).query(frame.points)[0] > 0.75 * sampling)
-        nearest = cKDTree(surfels).query(surfels, k=2)[0][:, 1] / sampling
-        rows.append([uncovered, *np.percentile(nearest, [5, 25, 50])])
+        uncovered, nearest = bunching(state.positions[t], frame.points, sampling)
+        rows.append([uncovered, *nearest])
     return np.median(np.array(rows), axis=0)
 
 
